@@ -1,0 +1,64 @@
+"""3-sigma clamping of the physical parameters between subperiods (paper, Methodology).
+
+After a window, the latest estimate p* and the spread sigma_p of the parameter trajectory
+in that window define the box [p* - 3 sigma_p, p* + 3 sigma_p] for the next window.
+Taken literally a flat (converged or stuck) trajectory gives a box of zero width that
+locks in whatever the first window found, so ``min_rel_width`` puts a floor under the half
+width (0 reproduces the paper), and the box never leaves the parameter's physical bounds.
+"""
+
+from __future__ import annotations
+
+import lightning as L
+import torch
+
+from pidyn.params import clip_to_bounds
+
+
+class ParameterClamp(L.Callback):
+    """Clamp physical parameters into the box computed from the previous window."""
+
+    def __init__(self, n_sigma: float = 3.0, min_rel_width: float = 0.0, tail_fraction: float = 1.0) -> None:
+        self.n_sigma, self.min_rel_width, self.tail_fraction = n_sigma, min_rel_width, tail_fraction
+        self.bounds: dict[str, tuple[float, float]] = {}
+        self.triggered = 0
+
+    def update_from_trajectory(self, names: list[str], traj: torch.Tensor, latest: dict[str, float]) -> None:
+        """Set the next window's box from this window's trajectory (rows: iterations)."""
+        if traj.numel() == 0:
+            return
+        start = int((1 - self.tail_fraction) * traj.shape[0])
+        sigma = traj[start:].std(0, unbiased=traj.shape[0] - start > 1)
+        self.bounds = {}
+        for i, n in enumerate(names):
+            p = latest[n]
+            half = max(self.n_sigma * float(sigma[i]), self.min_rel_width * abs(p))
+            self.bounds[n] = (p - half, p + half)
+
+    @torch.no_grad()
+    def apply(self, pl_module: L.LightningModule) -> int:
+        """Project the parameters into the box; returns how many were moved."""
+        if not self.bounds:
+            return 0
+        params = pl_module.net.params
+        vals = params.as_floats()
+        moved = {}
+        for n, (lo, hi) in self.bounds.items():
+            v = vals[n]
+            if v < lo or v > hi:
+                moved[n] = clip_to_bounds(params.spec(n), min(max(v, lo), hi))
+        if moved:
+            params.set_values(moved)
+            self.triggered += len(moved)
+        return len(moved)
+
+    def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx) -> None:  # noqa: D102
+        if getattr(pl_module, "phase", None) == "identify":
+            self.apply(pl_module)
+
+    def state_dict(self) -> dict:
+        return {"bounds": self.bounds, "triggered": self.triggered}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.bounds = {k: tuple(v) for k, v in state.get("bounds", {}).items()}
+        self.triggered = state.get("triggered", 0)

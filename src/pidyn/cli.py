@@ -1,0 +1,28 @@
+"""Console entry points (``train.py`` at the repository root is a shim to ``train_main``)."""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+
+import hydra
+from omegaconf import DictConfig
+
+CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
+log = logging.getLogger("pidyn")
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="train")
+def train_main(cfg: DictConfig) -> float | None:
+    from pidyn.tasks.train import train
+
+    try:
+        metrics = train(cfg)
+    except (ValueError, FileNotFoundError, RuntimeError) as exc:
+        log.error("%s: %s", type(exc).__name__, exc)
+        if cfg.get("raise_errors", False):
+            raise
+        sys.exit(2)
+    value = metrics.get(cfg.get("optimized_metric", "max_error_pct"))
+    return float(value) if value is not None else None

@@ -1,0 +1,160 @@
+"""Ground-motion records in SI units and the transformations used to make unseen excitations."""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, replace
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+from scipy import signal
+
+from pidyn.excitation.at2 import G, AT2FormatError, read_at2
+
+RECORDS_PACKAGE = "pidyn.excitation.records"
+
+#: Short names for the shipped records (files in ``pidyn/excitation/records``).
+SHIPPED = {
+    "el_centro": "ELCENTRO1940_RSN6_IMPVALL.I_I-ELC180.AT2",
+    "el_centro_peer2000": "ELCENTRO1940_PEER2000_IELC180.AT2",
+    "el_centro_peknold": "ELCENTRO1940_NS_PEKNOLD_dt0.02.AT2",
+    "kobe": "KOBE1995_RSN1106_KOBE_KJM000.AT2",
+    "kobe_090": "KOBE1995_RSN1106_KOBE_KJM090.AT2",
+    "taft": "TAFT1952_RSN15_KERN_TAF021.AT2",
+    "san_fernando": "SANFERNANDO1971_RSN77_SFERN_PUL164.AT2",
+    "tabas": "TABAS1978_RSN140_TABAS_FER-L1.AT2",
+    "loma_prieta": "LOMAPRIETA1989_RSN753_LOMAP_CLS000.AT2",
+    "landers": "LANDERS1992_RSN879_LANDERS_LCN260.AT2",
+    "northridge": "NORTHRIDGE1994_RSN1084_NORTHR_SCS052.AT2",
+    "kocaeli": "KOCAELI1999_RSN1162_KOCAELI_GYN000.AT2",
+    "chichi": "CHICHI1999_RSN1512_CHICHI_TCU078-E.AT2",
+}
+
+
+@dataclass(frozen=True)
+class GroundMotion:
+    """A uniformly sampled ground acceleration ``acc`` (m/s^2) with step ``dt`` (s).
+
+    Transformations return new objects, so one loaded record can feed many experiments.
+    """
+
+    name: str
+    dt: float
+    acc: np.ndarray
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        acc = np.asarray(self.acc, dtype=np.float64)
+        if acc.ndim != 1 or acc.size < 2:
+            raise ValueError(f"ground motion '{self.name}': need a 1-D series of >= 2 samples")
+        if not np.all(np.isfinite(acc)):
+            k = int(np.flatnonzero(~np.isfinite(acc))[0])
+            raise ValueError(f"ground motion '{self.name}': sample {k} is not finite")
+        if not (np.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"ground motion '{self.name}': dt={self.dt} must be positive")
+        object.__setattr__(self, "acc", acc)
+
+    @property
+    def t(self) -> np.ndarray:
+        return np.arange(self.acc.size) * self.dt
+
+    @property
+    def duration(self) -> float:
+        return (self.acc.size - 1) * self.dt
+
+    @property
+    def pga(self) -> float:
+        return float(np.max(np.abs(self.acc)))
+
+    def scaled(self, factor: float) -> GroundMotion:
+        """Amplitude scaling (the usual way to make a record stronger or weaker)."""
+        return replace(self, acc=self.acc * factor, name=_tag(self.name, f"x{factor:g}"))
+
+    def stretched(self, factor: float) -> GroundMotion:
+        """Time stretching: the same samples played ``factor`` times slower (dt * factor)."""
+        if factor <= 0:
+            raise ValueError(f"stretch factor must be positive, got {factor}")
+        return replace(self, dt=self.dt * factor, name=_tag(self.name, f"t{factor:g}"))
+
+    def truncated(self, duration: float | None) -> GroundMotion:
+        """Keep the first ``duration`` seconds (None keeps all)."""
+        if duration is None or duration >= self.duration:
+            return self
+        n = int(round(duration / self.dt)) + 1
+        return replace(self, acc=self.acc[:n])
+
+    def resampled(self, dt: float) -> GroundMotion:
+        """Resample to step ``dt``: linear interpolation up, anti-aliased polyphase down."""
+        if np.isclose(dt, self.dt, rtol=1e-9):
+            return self
+        if dt < self.dt:
+            t_new = np.arange(0.0, self.duration + 1e-12, dt)
+            return replace(self, dt=dt, acc=np.interp(t_new, self.t, self.acc))
+        ratio = dt / self.dt
+        frac = _rational(ratio)
+        if frac is None:
+            raise ValueError(f"cannot downsample dt={self.dt} to dt={dt}: ratio {ratio:g} not rational")
+        up, down = frac
+        acc = signal.resample_poly(self.acc, up, down)
+        return replace(self, dt=dt, acc=acc)
+
+    def __call__(self, t: np.ndarray | float) -> np.ndarray:
+        """Linear interpolation, zero outside the record (the ground is at rest)."""
+        return np.interp(t, self.t, self.acc, left=0.0, right=0.0)
+
+
+def _tag(name: str, tag: str) -> str:
+    return f"{name}_{tag}"
+
+
+def _rational(x: float, max_den: int = 64) -> tuple[int, int] | None:
+    from fractions import Fraction
+
+    f = Fraction(x).limit_denominator(max_den)
+    if abs(float(f) - x) > 1e-9 * x:
+        return None
+    return f.denominator, f.numerator
+
+
+def load_record(name_or_path: str | Path) -> GroundMotion:
+    """Load a shipped record by short name (see ``SHIPPED``) or any AT2 file by path."""
+    key = str(name_or_path)
+    if key in SHIPPED:
+        ref = resources.files(RECORDS_PACKAGE).joinpath(SHIPPED[key])
+        with resources.as_file(ref) as path:
+            rec = read_at2(path)
+        return GroundMotion(name=key, dt=rec.dt, acc=rec.acc_g * G, source=rec.title)
+    path = Path(key)
+    if not path.exists():
+        raise AT2FormatError(
+            f"{path}: no such file, and not a shipped record name (choose from {sorted(SHIPPED)})"
+        )
+    rec = read_at2(path)
+    return GroundMotion(name=path.stem, dt=rec.dt, acc=rec.acc_g * G, source=rec.title)
+
+
+def record_index() -> list[dict[str, str]]:
+    """Metadata of the shipped records (event, station, PGA, provenance, checksum)."""
+    ref = resources.files(RECORDS_PACKAGE).joinpath("index.csv")
+    with ref.open("r", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+def prepare(
+    record: str | Path,
+    scale: float = 1.0,
+    stretch: float = 1.0,
+    duration: float | None = None,
+    dt: float | None = None,
+) -> GroundMotion:
+    """Load a record and apply, in order: resampling, truncation, stretching, scaling."""
+    gm = load_record(record)
+    if dt is not None:
+        gm = gm.resampled(dt)
+    gm = gm.truncated(duration)
+    if stretch != 1.0:
+        gm = gm.stretched(stretch)
+    if scale != 1.0:
+        gm = gm.scaled(scale)
+    return gm

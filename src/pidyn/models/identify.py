@@ -1,0 +1,242 @@
+"""Sequential identification over subperiods (paper, Methodology), resumable.
+
+For each window: map the networks to the window, supervised pretraining of the RPN,
+transfer-learning initialisation of the LNN with the (z0 - x0) offset, an optional
+least-squares initialisation of the parameters the motion residual is linear in, then
+joint physics + data training under the clamp and early-stopping callbacks. A fresh
+Trainer runs every (window, phase) and the LightningModule is carried over, so callback
+and loop state never leak between windows. After each window the estimate is fused with
+the previous ones (or simply carried, as in the paper) and the state is written to
+``subperiod_state.json`` plus a checkpoint, from which an interrupted run resumes.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import lightning as L
+import torch
+
+from pidyn.callbacks.clamp import ParameterClamp
+from pidyn.callbacks.early_stopping import ParameterEarlyStopping
+from pidyn.data.datamodule import SubperiodDataModule
+from pidyn.data.windows import Window
+from pidyn.models.fusion import InformationFusion, residual_information
+from pidyn.models.lit_module import PIDynNetModule
+from pidyn.params import from_raw
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Schedule:
+    """How much work each window gets and how windows hand over to each other."""
+
+    pretrain_iters: int = 1000  # supervised-only iterations before the first window
+    pretrain_iters_window: int = 1000  # the same before every later window (its local time is new)
+    max_iters: int = 1500  # physics + data iterations per window
+    ls_init: str = "first"  # least-squares init of linear parameters: none | first | every
+    skip_uninformative: bool = True  # skip windows below data.min_peak_fraction of the peak response
+    fusion: str = "information"  # information | last (paper: carry the last window's values)
+    max_windows: int | None = None
+    transfer_lnn: bool = True  # LNN <- RPN after pretraining (paper's transfer-learning init)
+
+
+@dataclass
+class WindowResult:
+    index: int
+    t0: float
+    t1: float
+    iterations: int
+    seconds: float
+    estimate: dict[str, float]
+    fused: dict[str, float]
+    losses: dict[str, float]
+    stopped_early: bool
+    clamp_bounds: dict[str, list[float]] = field(default_factory=dict)
+
+
+class SubperiodIdentifier:
+    """Runs the window sequence; ``trainer_factory(**overrides)`` builds a fresh Trainer."""
+
+    def __init__(
+        self,
+        module: PIDynNetModule,
+        datamodule: SubperiodDataModule,
+        trainer_factory: Callable[..., L.Trainer],
+        schedule: Schedule,
+        clamp: ParameterClamp | None,
+        early_stopping: ParameterEarlyStopping | None,
+        run_dir: str | Path,
+        extra_callbacks: list[L.Callback] | None = None,
+    ) -> None:
+        self.module, self.dm, self.make_trainer = module, datamodule, trainer_factory
+        self.schedule, self.clamp, self.early_stopping = schedule, clamp, early_stopping
+        self.extra_callbacks = list(extra_callbacks or [])
+        self.run_dir = Path(run_dir)
+        self.ckpt_dir = self.run_dir / "checkpoints"
+        self.state_path = self.run_dir / "subperiod_state.json"
+        self.fusion = InformationFusion()
+        self.results: list[WindowResult] = []
+        self.trajectory: list[dict[str, Any]] = []  # (iteration, time, values) for figures
+
+    # ------------------------------------------------------------------ state
+    def save_state(self, next_window: int) -> None:
+        self.ckpt_dir.mkdir(parents=True, exist_ok=True)
+        ckpt = self.ckpt_dir / "last.pt"
+        torch.save(
+            {
+                "module": self.module.state_dict(),
+                "fusion": self.fusion.state_dict(),
+                "clamp": self.clamp.state_dict() if self.clamp else None,
+                "next_window": next_window,
+            },
+            ckpt.with_suffix(".tmp"),
+        )
+        ckpt.with_suffix(".tmp").replace(ckpt)
+        state = {
+            "next_window": next_window,
+            "n_windows": len(self.dm.windows),
+            "iteration": int(self.module.iteration),
+            "checkpoint": str(ckpt.relative_to(self.run_dir)),
+            "windows": [r.__dict__ for r in self.results],
+            "trajectory": self.trajectory,
+        }
+        tmp = self.state_path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(state, indent=1))
+        tmp.replace(self.state_path)
+
+    def try_resume(self) -> int:
+        """Restore from ``subperiod_state.json`` if present; returns the next window index."""
+        if not self.state_path.exists():
+            return 0
+        state = json.loads(self.state_path.read_text())
+        blob = torch.load(self.run_dir / state["checkpoint"], weights_only=False)
+        self.module.load_state_dict(blob["module"])
+        self.fusion.load_state_dict(blob["fusion"])
+        if self.clamp and blob.get("clamp"):
+            self.clamp.load_state_dict(blob["clamp"])
+        self.results = [WindowResult(**r) for r in state["windows"]]
+        self.trajectory = state.get("trajectory", [])
+        log.info("resuming at window %d of %d (iteration %d)", state["next_window"], state["n_windows"], state["iteration"])
+        return int(state["next_window"])
+
+    # ------------------------------------------------------------------ phases
+    def _fit(self, w: Window, phase: str, iters: int, physics: bool, callbacks: list[L.Callback]) -> None:
+        self.module.start(w, phase, iters)  # type: ignore[arg-type]
+        inner = self.module.inner_steps
+        self.dm.activate(w.index, iters, inner, physics)
+        trainer = self.make_trainer(max_steps=-1, callbacks=callbacks + self.extra_callbacks)
+        trainer.fit(self.module, datamodule=self.dm)
+
+    def run(self, resume: bool = True) -> list[WindowResult]:
+        start = self.try_resume() if resume else 0
+        sch = self.schedule
+        net = self.module.net
+        windows = self.dm.windows
+        todo = [w for w in windows if (w.informative or not sch.skip_uninformative)]
+        if sch.max_windows is not None:
+            todo = todo[: sch.max_windows]
+        if not todo:
+            raise ValueError("no informative window: lower data.min_peak_fraction or check the record")
+        z_end: torch.Tensor | None = None
+        if start > 0 and net.lnn is not None:
+            z_end = torch.tensor(self.results[-1].__dict__.get("z_end", [0.0]))
+        first_done = start > 0
+        for w in todo:
+            if w.index < start:
+                continue
+            t_start = time.perf_counter()
+            it0 = int(self.module.iteration)
+            net.enter_window(w)
+            pre = sch.pretrain_iters if not first_done else sch.pretrain_iters_window
+            if pre > 0:
+                self._fit(w, "pretrain", pre, physics=False, callbacks=[])
+            if net.lnn is not None and sch.transfer_lnn:
+                net.transfer_rpn_to_lnn()
+                with torch.no_grad():
+                    x0 = net.rpn.taylor(torch.tensor([w.t0], dtype=w.t_pool.dtype), order=0)[0][0]
+                z0 = z_end if z_end is not None else x0[:1] * 0  # at rest before the record
+                net.set_latent_offset(z0, x0[:1])
+            if sch.ls_init == "every" or (sch.ls_init == "first" and not first_done):
+                est = net.least_squares_init(w.t_pool, w.f_pool)
+                log.info("window %d: least-squares init %s", w.index, {k: f"{v:.5g}" for k, v in est.items()})
+            cbs: list[L.Callback] = []
+            if self.clamp is not None:
+                cbs.append(self.clamp)
+            if self.early_stopping is not None:
+                cbs.append(self.early_stopping)
+            self._fit(w, "identify", sch.max_iters, physics=True, callbacks=cbs)
+            stopped = bool(self.early_stopping and self.early_stopping.stopped_at is not None)
+            names = net.params.trainable_names
+            estimate = net.params.as_floats()
+            traj = self.module.trajectory_values()
+            if self.clamp is not None:
+                self.clamp.update_from_trajectory(names, traj, estimate)
+            # per-iteration trajectory (thinned) for the convergence figure
+            dt_it = (w.t1 - w.t0) / max(len(traj), 1)
+            for j in range(0, len(traj), max(1, len(traj) // 50)):
+                self.trajectory.append(
+                    {"iteration": it0 + j, "t": w.t0 + j * dt_it, **{n: float(traj[j, i]) for i, n in enumerate(names)}}
+                )
+            if sch.fusion == "information":
+                info = residual_information(net, w.t_pool, w.f_pool)
+                theta = self.fusion.add(net.params.raw_vector(names).detach(), info)
+                with torch.no_grad():
+                    for i, n in enumerate(names):
+                        net.params.raw[n].copy_(theta[i])
+            fused = net.params.as_floats()
+            self.trajectory.append({"iteration": int(self.module.iteration), "t": w.t1, **{n: fused[n] for n in names}})
+            if net.lnn is not None:
+                z_end = net.latent_state_at(w.t1).detach()
+            res = WindowResult(
+                index=w.index, t0=w.t0, t1=w.t1,
+                iterations=int(self.module.iteration) - it0,
+                seconds=time.perf_counter() - t_start,
+                estimate={n: estimate[n] for n in names},
+                fused={n: fused[n] for n in names},
+                losses=dict(self.module.last_losses),
+                stopped_early=stopped,
+                clamp_bounds={k: list(v) for k, v in (self.clamp.bounds.items() if self.clamp else [])},
+            )
+            if z_end is not None:
+                res.__dict__["z_end"] = z_end.tolist()
+            self.results.append(res)
+            first_done = True
+            self._report(res)
+            self._log_window(res)
+            self.save_state(next_window=w.index + 1)
+        return self.results
+
+    def _report(self, r: WindowResult) -> None:
+        truth = self.module.net.params.truths()
+        parts = []
+        for n, v in r.fused.items():
+            e = f" ({100 * abs(v - truth[n]) / abs(truth[n]):.2f}%)" if truth.get(n) else ""
+            parts.append(f"{n}={v:.5g}{e}")
+        log.info(
+            "window %d [%.1f-%.1f s] %d it, %.1f s%s: %s",
+            r.index, r.t0, r.t1, r.iterations, r.seconds, " (early stop)" if r.stopped_early else "", ", ".join(parts),
+        )
+
+    def _log_window(self, r: WindowResult) -> None:
+        from pidyn.models.lit_module import _tensorboard
+
+        tb = _tensorboard(self.module.logger) if self.module._trainer is not None else None
+        if tb is None:
+            return
+        step = int(self.module.iteration)
+        tb.add_scalar("subperiod/index", r.index, step)
+        tb.add_scalar("subperiod/t_end", r.t1, step)
+        for n, v in r.fused.items():
+            tb.add_scalar(f"params_fused/{n}", v, step)
+
+
+def raw_to_values(module: PIDynNetModule, raw: torch.Tensor) -> dict[str, float]:
+    names = module.net.params.trainable_names
+    return {n: float(from_raw(module.net.params.spec(n), raw[i])) for i, n in enumerate(names)}

@@ -1,0 +1,160 @@
+"""Lightning wrapper: drives the PIDynNet core through one subperiod and one phase.
+
+Manual optimisation with ``inner_steps`` Adam steps per ``training_step`` keeps
+Lightning's per-step overhead small for a network this size (see ``make bench``).
+A fresh Trainer runs each (window, phase); this module, carried across them, keeps a
+global iteration counter so TensorBoard shows one continuous run.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal
+
+import lightning as L
+import torch
+
+from pidyn.data.windows import Window
+from pidyn.models.pidynnet import PIDynNet
+
+Phase = Literal["pretrain", "identify", "finetune"]
+
+
+class PIDynNetModule(L.LightningModule):
+    """Trains RPN/LNN and physical parameters on the current window.
+
+    Args:
+        net: the PIDynNet core.
+        loss_weights: weight per named loss term (``physics/motion``, ``data/x``, ...);
+            unlisted terms weigh 1.
+        lr_net, lr_phys: Adam learning rates for network weights and (raw) physical parameters.
+        lr_decay: factor by which both rates decay over a window's iteration budget.
+        inner_steps: optimiser steps per Lightning ``training_step``.
+        log_every: iterations between TensorBoard scalars.
+    """
+
+    def __init__(
+        self,
+        net: PIDynNet,
+        loss_weights: dict[str, float] | None = None,
+        lr_net: float = 1e-3,
+        lr_pretrain: float = 3e-3,
+        lr_phys: float = 1e-2,
+        lr_decay: float = 0.1,
+        inner_steps: int = 10,
+        log_every: int = 50,
+    ) -> None:
+        super().__init__()
+        self.automatic_optimization = False
+        self.net = net
+        self.loss_weights = dict(loss_weights or {})
+        self.lr_net, self.lr_pretrain, self.lr_phys, self.lr_decay = lr_net, lr_pretrain, lr_phys, lr_decay
+        self.inner_steps = inner_steps
+        self.log_every = log_every
+        self.phase: Phase = "identify"
+        self.window: Window | None = None
+        self.budget = 1000  # iterations planned for the current fit (sets the LR decay)
+        self.register_buffer("iteration", torch.zeros((), dtype=torch.long))
+        self.window_iteration = 0
+        self.trajectory: list[torch.Tensor] = []  # raw physical parameters, one row per iteration
+        self.last_losses: dict[str, float] = {}
+
+    # ------------------------------------------------------------ configuration
+    def start(self, window: Window, phase: Phase, budget: int) -> None:
+        self.window, self.phase, self.budget = window, phase, max(int(budget), 1)
+        self.window_iteration = 0
+        self.trajectory = []
+
+    def configure_optimizers(self) -> Any:
+        if self.phase == "pretrain":
+            opt = torch.optim.Adam(self.net.net_parameters(), lr=self.lr_pretrain)
+        elif self.phase == "finetune":
+            opt = torch.optim.Adam(self.net.net_parameters(), lr=self.lr_net)
+        else:
+            groups = [{"params": self.net.net_parameters(), "lr": self.lr_net, "name": "net"}]
+            phys = self.net.physical_parameters()
+            if phys:
+                groups.append({"params": phys, "lr": self.lr_phys, "weight_decay": 0.0, "name": "phys"})
+            opt = torch.optim.Adam(groups)
+        decay = self.lr_decay
+        budget = self.budget
+        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda i: decay ** min(i / budget, 1.0))
+        return [opt], [sched]
+
+    # ------------------------------------------------------------ training
+    def losses(self, t_c: torch.Tensor | None, f_c: torch.Tensor | None) -> dict[str, torch.Tensor]:
+        assert self.window is not None
+        out: dict[str, torch.Tensor] = {}
+        if self.phase != "finetune":
+            out.update(self.net.data_losses(self.window))
+        if self.phase != "pretrain":
+            assert t_c is not None and f_c is not None
+            out.update(self.net.physics_losses(t_c, f_c))
+        return out
+
+    def total(self, losses: dict[str, torch.Tensor]) -> torch.Tensor:
+        return sum(self.loss_weights.get(k, 1.0) * v for k, v in losses.items())  # type: ignore[return-value]
+
+    def training_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> None:
+        opt = self.optimizers()
+        sched = self.lr_schedulers()
+        t_c, f_c = batch.get("t"), batch.get("f")
+        k_steps = t_c.shape[0] if t_c is not None else self.inner_steps
+        for k in range(k_steps):
+            losses = self.losses(None if t_c is None else t_c[k], None if f_c is None else f_c[k])
+            loss = self.total(losses)
+            opt.zero_grad(set_to_none=True)
+            self.manual_backward(loss)
+            opt.step()
+            sched.step()
+            self.iteration += 1
+            self.window_iteration += 1
+            if self.phase == "identify":
+                self.trajectory.append(self.net.params.raw_vector().detach().clone())
+        self.last_losses = {k: float(v.detach()) for k, v in losses.items()}
+        self.last_losses["total"] = float(loss.detach())
+        if not math.isfinite(self.last_losses["total"]):
+            raise FloatingPointError(
+                f"loss became {self.last_losses['total']} in window {self.window.index if self.window else '?'} "
+                f"({self.phase}, iteration {self.window_iteration}); lower the learning rates"
+            )
+        self.log("loss", self.last_losses["total"], prog_bar=True, on_step=True, logger=False)
+        if self.phase == "identify":
+            for name, v in self.net.params.as_floats().items():
+                if self.net.params.spec(name).trainable:
+                    self.log(name, v, prog_bar=True, on_step=True, logger=False)
+        if int(self.iteration) % self.log_every < k_steps:
+            self._tb_scalars()
+
+    def _tb_scalars(self) -> None:
+        tb = _tensorboard(self.logger)
+        if tb is None:
+            return
+        step = int(self.iteration)
+        for k, v in self.last_losses.items():
+            tb.add_scalar(f"{self.phase}/loss_{k}".replace("/loss_physics/", "/physics_").replace("/loss_data/", "/data_"), v, step)
+        if self.phase == "identify":
+            truths = self.net.params.truths()
+            for name, v in self.net.params.as_floats().items():
+                if not self.net.params.spec(name).trainable:
+                    continue
+                tb.add_scalar(f"params/{name}", v, step)
+                if truths[name]:
+                    tb.add_scalar(f"params_relerr/{name}", abs(v - truths[name]) / abs(truths[name]), step)
+
+    def trajectory_values(self) -> torch.Tensor:
+        """Physical-value trajectory of the trainable parameters in this fit, (iters, n)."""
+        if not self.trajectory:
+            return torch.empty(0, len(self.net.params.trainable_names))
+        from pidyn.params import from_raw
+
+        raw = torch.stack(self.trajectory)
+        specs = [self.net.params.spec(n) for n in self.net.params.trainable_names]
+        return torch.stack([from_raw(s, raw[:, i]) for i, s in enumerate(specs)], dim=1)
+
+
+def _tensorboard(logger: Any) -> Any:
+    if logger is None:
+        return None
+    exp = getattr(logger, "experiment", None)
+    return exp if hasattr(exp, "add_scalar") else None

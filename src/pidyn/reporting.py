@@ -1,0 +1,90 @@
+"""What a run leaves behind: identified parameters with errors, metrics, figures."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+
+def param_table(values: dict[str, float], truths: dict[str, float | None], units: dict[str, str]) -> dict:
+    out = {}
+    for n, v in values.items():
+        row: dict[str, Any] = {"value": float(v), "unit": units.get(n, "")}
+        t = truths.get(n)
+        if t is not None:
+            row["truth"] = float(t)
+            row["error_pct"] = float(100 * abs(v - t) / abs(t)) if t != 0 else None
+        out[n] = row
+    return out
+
+
+def write_yaml(path: Path, data: dict) -> None:
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+
+
+def write_json(path: Path, data: dict) -> None:
+    path.write_text(json.dumps(data, indent=2, default=float))
+
+
+def nrmse(pred: np.ndarray, true: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((pred - true) ** 2)) / max(np.std(true), 1e-300))
+
+
+def plot_convergence(path: Path, trajectory: list[dict], truths: dict[str, float | None], windows: list[dict],
+                     title: str = "") -> None:
+    """Parameter estimates over record time with window boundaries (cf. paper Figure 3)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = [k for k in trajectory[0] if k not in ("iteration", "t")] if trajectory else []
+    if not names:
+        return
+    fig, axes = plt.subplots(len(names), 2, figsize=(10, 2.2 * len(names)), squeeze=False, sharex=True)
+    t = np.array([p["t"] for p in trajectory])
+    for i, n in enumerate(names):
+        v = np.array([p[n] for p in trajectory])
+        ax, axe = axes[i]
+        ax.plot(t, v, lw=1, label="PIDynNet")
+        if truths.get(n) is not None:
+            ax.axhline(truths[n], color="k", ls="--", lw=0.8, label="truth")
+            axe.semilogy(t, 100 * np.abs(v - truths[n]) / abs(truths[n]) + 1e-6, lw=1)
+            axe.set_ylabel(f"|err| {n} (%)")
+        ax.set_ylabel(n)
+        for w in windows:
+            ax.axvline(w["t1"], color="0.85", lw=0.6)
+            axe.axvline(w["t1"], color="0.85", lw=0.6)
+        if i == 0:
+            ax.legend(fontsize=8)
+    axes[-1][0].set_xlabel("record time (s)")
+    axes[-1][1].set_xlabel("record time (s)")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_response(path: Path, t: np.ndarray, series: dict[str, np.ndarray], title: str = "",
+                  ylabel: str = "x (m)") -> None:
+    """Measured vs predicted time histories on one axis."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(10, 3.2))
+    for i, (name, y) in enumerate(series.items()):
+        ax.plot(t, y, lw=0.9 if i == 0 else 0.8, ls="-" if i == 0 else "--", label=name,
+                color="0.3" if i == 0 else None)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel(ylabel)
+    ax.legend(fontsize=8, loc="upper right")
+    ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

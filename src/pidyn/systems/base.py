@@ -1,0 +1,106 @@
+"""The contract every structural system fulfils (pure PyTorch/NumPy, no training framework).
+
+A system knows its parameters (``ParamSpec``), its named physics residuals for the loss
+(torch) and its right-hand side for simulation (NumPy/SciPy). The excitation is either a
+ground acceleration (``-M 1 ag``) or a force applied to the structure (``u``).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Callable, Literal
+
+import numpy as np
+import torch
+
+from pidyn.params import ParamSpec
+
+ExcitationKind = Literal["ground", "force"]
+
+
+@dataclass
+class Kinematics:
+    """Response and its time derivatives at a set of time points.
+
+    Shapes: ``x, v, a``: (N, n_dof); ``z, zd``: (N, n_latent) or None.
+    """
+
+    t: torch.Tensor
+    x: torch.Tensor
+    v: torch.Tensor
+    a: torch.Tensor
+    z: torch.Tensor | None = None
+    zd: torch.Tensor | None = None
+
+
+class StructuralSystem(ABC):
+    """Base class: parameter specs, named residuals, simulation right-hand side."""
+
+    name: str = "system"
+    n_dof: int = 1
+    n_latent: int = 0
+    latent_names: tuple[str, ...] = ()
+
+    def __init__(self, excitation: ExcitationKind = "ground") -> None:
+        if excitation not in ("ground", "force"):
+            raise ValueError(f"{self.name}: excitation must be 'ground' or 'force', got '{excitation}'")
+        self.excitation = excitation
+
+    @abstractmethod
+    def param_specs(self) -> list[ParamSpec]:
+        """All parameters, known ones (trainable=False) included."""
+
+    @abstractmethod
+    def residual(
+        self, k: Kinematics, f: torch.Tensor, p: dict[str, torch.Tensor]
+    ) -> dict[str, torch.Tensor]:
+        """Named residuals, each (N, ·), zero when the response obeys the model.
+
+        ``f`` is the excitation at the same points: ground acceleration (m/s^2) or force (N),
+        shape (N,). ``motion`` is in force units; latent rates in their own units.
+        """
+
+    @abstractmethod
+    def rhs(
+        self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]
+    ) -> np.ndarray:
+        """dy/dt for the state y = [x (n_dof), v (n_dof), z (n_latent)]."""
+
+    def linear_params(self) -> list[str]:
+        """Parameters in which the ``motion`` residual is linear (for least-squares init)."""
+        return []
+
+    def true_values(self) -> dict[str, float]:
+        out = {}
+        for s in self.param_specs():
+            if s.true is None:
+                raise ValueError(f"{self.name}: parameter '{s.name}' has no true value to simulate with")
+            out[s.name] = s.true
+        return out
+
+    def describe(self, p: dict[str, float]) -> str:
+        """Human-readable equation with the given parameter values."""
+        return f"{self.name}(" + ", ".join(f"{k}={v:.5g}" for k, v in p.items()) + ")"
+
+
+def merge_specs(defaults: list[ParamSpec], overrides: dict | None) -> list[ParamSpec]:
+    """Apply config overrides (``{name: {field: value}}``) to default specs; typos fail."""
+    from dataclasses import fields, replace
+
+    overrides = dict(overrides or {})
+    by_name = {s.name: s for s in defaults}
+    unknown = set(overrides) - set(by_name)
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {sorted(unknown)}; this system has {list(by_name)}")
+    allowed = {f.name for f in fields(ParamSpec)} - {"name"}
+    out = []
+    for s in defaults:
+        o = dict(overrides.get(s.name) or {})
+        bad = set(o) - allowed
+        if bad:
+            raise ValueError(f"parameter '{s.name}': unknown field(s) {sorted(bad)}; allowed {sorted(allowed)}")
+        if "init" in o and "scale" not in o and s.transform != "box":
+            o["scale"] = abs(float(o["init"])) or s.scale  # never scale by the (unknown) truth
+        out.append(replace(s, **o))
+    return out

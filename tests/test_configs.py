@@ -1,0 +1,49 @@
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+from pathlib import Path
+
+import hydra
+import pytest
+from hydra.errors import ConfigCompositionException
+from omegaconf.errors import ConfigAttributeError
+
+from conftest import CONF, make_cfg
+
+SYSTEMS = sorted(p.stem for p in (Path(CONF) / "system").glob("*.yaml"))
+EXPERIMENTS = sorted(p.stem for p in (Path(CONF) / "experiment").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("system", SYSTEMS)
+def test_every_system_composes_and_instantiates(system, tmp_path):
+    cfg = make_cfg([f"system={system}"], tmp_path)
+    s = hydra.utils.instantiate(cfg.system)
+    assert s.param_specs() and all(sp.true is not None for sp in s.param_specs())
+    hydra.utils.instantiate(cfg.model.rpn, out_features=s.n_dof)
+    hydra.utils.instantiate(cfg.callbacks.clamp)
+    hydra.utils.instantiate(cfg.callbacks.early_stopping)
+
+
+@pytest.mark.parametrize("experiment", EXPERIMENTS)
+def test_every_experiment_composes(experiment, tmp_path):
+    cfg = make_cfg([f"experiment={experiment}"], tmp_path)
+    assert cfg.system._target_
+
+
+def test_bouc_wen_defaults_to_el_centro_and_record_override_wins(tmp_path):
+    assert make_cfg(["system=bouc_wen"], tmp_path).excitation.record == "el_centro"
+    assert make_cfg(["system=bouc_wen", "excitation=kobe"], tmp_path).excitation.record == "kobe"
+    assert make_cfg([], tmp_path).excitation.record == "kobe"
+
+
+def test_sweep_knobs_reach_the_nested_nodes(tmp_path):
+    cfg = make_cfg(["noise=0.05", "batch_size=400", "eq_scale=3", "data_seed=7"], tmp_path)
+    assert cfg.data.source.noise == 0.05 and cfg.data.windows.batch_size == 400
+    assert cfg.data.source.eq_scale == 3 and cfg.data.source.data_seed == 7
+
+
+@pytest.mark.parametrize("bad", ["nosie=0.05", "system=dufing", "model.rpn.widht=3"])
+def test_config_typos_fail_loudly(bad, tmp_path):
+    with pytest.raises((ConfigCompositionException, ConfigAttributeError)):
+        make_cfg([bad], tmp_path)

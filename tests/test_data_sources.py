@@ -1,0 +1,38 @@
+import numpy as np
+import pytest
+
+from pidyn.data.sources import DataError, from_csv
+
+
+def write(tmp_path, text):
+    p = tmp_path / "m.csv"
+    p.write_text(text)
+    return p
+
+
+def good_rows(n=20, dt=0.01):
+    t = np.arange(n) * dt
+    return "t,x,v,ag\n" + "\n".join(f"{a:.4f},{np.sin(a):.6f},{np.cos(a):.6f},{0.1*a:.6f}" for a in t) + "\n"
+
+
+def test_good_csv(tmp_path):
+    r = from_csv(write(tmp_path, good_rows()))
+    assert r.excitation == "ground" and r.x.shape == (20,) and r.dt == pytest.approx(0.01)
+
+
+@pytest.mark.parametrize(
+    "mutate, message",
+    [
+        (lambda s: s.replace("0.0500,", "0.0550,"), "non-uniform time step"),
+        (lambda s: s.replace(",ag\n", ",u\n").replace("t,x,v,u", "t,x,v,ag,u"), "exactly one excitation"),
+        (lambda s: s.replace("t,x,v,ag", "t,y,v,ag"), "missing column 'x'"),
+        (lambda s: s.replace(s.splitlines()[5], s.splitlines()[5].rsplit(",", 1)[0] + ",nan"), "NaN"),
+        (lambda s: s + "0.2000,0.1\n", "NaN"),  # a short row: mismatched column lengths
+        (lambda s: s.replace("0.0300,", "0.0100,"), "not strictly increasing"),
+    ],
+)
+def test_bad_csv_names_file_and_problem(tmp_path, mutate, message):
+    p = write(tmp_path, mutate(good_rows()))
+    with pytest.raises(DataError) as exc:
+        from_csv(p)
+    assert str(p) in str(exc.value) and message in str(exc.value)
