@@ -1,0 +1,38 @@
+# pidyn: `make train` runs the default identification, `make test` the test suite.
+# Both create .venv and install what they need on first use.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+# torch is pinned to the CPU build; set TORCH_INDEX="--index-url <a CPU wheel index>" where
+# the default index would serve a CUDA build.
+TORCH_INDEX ?=
+
+.PHONY: install train test test-fast bench tb clean-outputs
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q "torch==2.13.0" $(TORCH_INDEX)
+	$(PY) -m pip install -q -e ".[dev]"
+	touch $(STAMP)
+
+install: $(STAMP)
+
+train: $(STAMP)
+	$(PY) train.py $(ARGS)
+
+test: $(STAMP)
+	$(PY) -m pytest -q -p no:cacheprovider $(ARGS)
+
+test-fast: $(STAMP)
+	$(PY) -m pytest -q -m "not slow" $(ARGS)
+
+bench: $(STAMP)
+	$(PY) experiments/bench.py $(ARGS)
+
+tb: $(STAMP)
+	$(PY) -m tensorboard.main --logdir outputs
+
+clean-outputs:
+	rm -rf outputs

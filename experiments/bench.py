@@ -1,0 +1,178 @@
+"""Speed and accuracy benchmark; writes experiments/results/bench.{md,json}.
+
+    python experiments/bench.py            # per-iteration cost, Lightning overhead, end-to-end runs
+    python experiments/bench.py --quick    # skip the end-to-end runs
+
+Measures (one thread, CPU):
+  * ms per training iteration (500 collocation points, x, x', x'') for the Taylor-mode
+    network against nested autograd, in float32 and float64;
+  * Lightning's overhead against a plain PyTorch loop driving the same module;
+  * end-to-end wall time and parameter errors of `python train.py` (Duffing) and
+    `python train.py system=bouc_wen`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "experiments" / "results"
+
+
+def _setup(dtype):
+    from pidyn.data.sources import synthetic
+    from pidyn.data.windows import make_windows
+    from pidyn.models.pidynnet import PIDynNet
+    from pidyn.nets import TaylorMLP
+    from pidyn.systems import Duffing
+
+    torch.set_default_dtype(dtype)
+    torch.manual_seed(0)
+    s = Duffing()
+    rec = synthetic(s, "kobe", duration=12.0, dt=0.01)
+    w = make_windows(rec.t, rec.f, rec.x, rec.v, None, 3.0, 1000)[3]
+    net = PIDynNet(s, TaylorMLP())
+    net.enter_window(w)
+    return net, w
+
+
+def per_iteration_ms(dtype, mode: str, n: int = 200) -> float:
+    net, w = _setup(dtype)
+    opt = torch.optim.Adam(list(net.parameters()), lr=1e-3)
+    g = torch.Generator().manual_seed(0)
+
+    def autograd_physics(t, f):
+        t = t.clone().requires_grad_(True)
+        x = net.rpn(t)
+        v = torch.autograd.grad(x.sum(), t, create_graph=True)[0][:, None]
+        a = torch.autograd.grad(v.sum(), t, create_graph=True)[0][:, None]
+        from pidyn.systems.base import Kinematics
+
+        r = net.system.residual(Kinematics(t, x, v, a), f, net.params.values())["motion"]
+        return {"physics/motion": ((r / net.scale_f) ** 2).mean()}
+
+    def step():
+        idx = torch.randperm(1000, generator=g)[:500]
+        t, f = w.t_pool[idx], w.f_pool[idx]
+        L = net.physics_losses(t, f) if mode == "taylor" else autograd_physics(t, f)
+        L.update(net.data_losses(w))
+        loss = sum(L.values())
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+
+    for _ in range(20):
+        step()
+    t0 = time.perf_counter()
+    for _ in range(n):
+        step()
+    return 1e3 * (time.perf_counter() - t0) / n
+
+
+def lightning_overhead(n_iter: int = 1500) -> dict:
+    import lightning as L
+
+    from pidyn.data.datamodule import SubperiodDataModule
+    from pidyn.data.sources import synthetic
+    from pidyn.models.lit_module import PIDynNetModule
+    from pidyn.models.pidynnet import PIDynNet
+    from pidyn.nets import TaylorMLP
+    from pidyn.systems import Duffing
+
+    torch.set_default_dtype(torch.float32)
+    s = Duffing()
+    rec = synthetic(s, "kobe", duration=12.0, dt=0.01)
+    dm = SubperiodDataModule(rec, min_peak_fraction=0.0)
+
+    def fresh():
+        torch.manual_seed(0)
+        mod = PIDynNetModule(PIDynNet(s, TaylorMLP()))
+        mod.net.enter_window(dm.windows[3])
+        mod.start(dm.windows[3], "identify", n_iter)
+        return mod
+
+    # plain loop: same module, same batches, same optimiser and schedule
+    mod = fresh()
+    dm.activate(3, n_iter, mod.inner_steps, True)
+    (opt,), (sched,) = mod.configure_optimizers()
+    batches = list(dm.train_dataloader())
+    t0 = time.perf_counter()
+    for b in batches:
+        for k in range(b["t"].shape[0]):
+            loss = mod.total(mod.losses(b["t"][k], b["f"][k]))
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            sched.step()
+    plain = time.perf_counter() - t0
+
+    mod = fresh()
+    dm.activate(3, n_iter, mod.inner_steps, True)
+    trainer = L.Trainer(accelerator="cpu", max_epochs=1, logger=False, enable_checkpointing=False,
+                        enable_progress_bar=False, enable_model_summary=False, num_sanity_val_steps=0)
+    t0 = time.perf_counter()
+    trainer.fit(mod, datamodule=dm)
+    lit = time.perf_counter() - t0
+    return {"iterations": n_iter, "plain_s": plain, "lightning_s": lit, "overhead_pct": 100 * (lit / plain - 1)}
+
+
+def end_to_end(args: list[str]) -> dict:
+    run_dir = ROOT / "outputs" / "bench" / ("_".join(a.replace("=", "-") for a in args) or "default")
+    cmd = [sys.executable, str(ROOT / "train.py"), *args, f"hydra.run.dir={run_dir}",
+           "trainer.enable_progress_bar=false", "resume=false"]
+    if run_dir.exists():
+        import shutil
+
+        shutil.rmtree(run_dir)
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    wall = time.perf_counter() - t0
+    m = json.loads((run_dir / "metrics.json").read_text())
+    return {"command": "python train.py " + " ".join(args), "wall_s": wall, "error_pct": m["error_pct"],
+            "max_error_pct": m["max_error_pct"], "iterations": m["iterations"], "windows": m["windows"]}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="skip end-to-end runs")
+    a = ap.parse_args()
+    torch.set_num_threads(1)
+    res: dict = {"command": "python experiments/bench.py" + (" --quick" if a.quick else ""),
+                 "machine": f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} thread, torch {torch.__version__}",
+                 "date": time.strftime("%Y-%m-%d")}
+    res["ms_per_iteration"] = {
+        f"{mode}/{name}": per_iteration_ms(dt, mode)
+        for mode in ("taylor", "autograd") for name, dt in (("float32", torch.float32), ("float64", torch.float64))
+    }
+    res["lightning_overhead"] = lightning_overhead()
+    if not a.quick:
+        res["end_to_end"] = [end_to_end([]), end_to_end(["system=bouc_wen"])]
+    OUT.mkdir(parents=True, exist_ok=True)
+    (OUT / "bench.json").write_text(json.dumps(res, indent=2))
+    lines = [f"# Benchmark\n\nCommand: `{res['command']}`  \nMachine: {res['machine']}  \nDate: {res['date']}\n",
+             "## ms per training iteration (500 collocation points, x, x', x'', plus data loss)\n",
+             "| derivatives | ms |", "|---|---|"]
+    lines += [f"| {k} | {v:.2f} |" for k, v in res["ms_per_iteration"].items()]
+    lo = res["lightning_overhead"]
+    lines += ["", "## Lightning against a plain loop (same module, same batches)\n",
+              f"{lo['iterations']} iterations: plain {lo['plain_s']:.2f} s, Lightning {lo['lightning_s']:.2f} s, "
+              f"overhead {lo['overhead_pct']:+.1f} %"]
+    if "end_to_end" in res:
+        lines += ["", "## End to end\n", "| command | wall s | windows | iterations | errors % |", "|---|---|---|---|---|"]
+        for e in res["end_to_end"]:
+            errs = ", ".join(f"{k} {v:.2f}" for k, v in e["error_pct"].items())
+            lines.append(f"| `{e['command']}` | {e['wall_s']:.0f} | {e['windows']} | {e['iterations']} | {errs} |")
+    (OUT / "bench.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
