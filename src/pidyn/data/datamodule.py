@@ -34,7 +34,10 @@ class _CollocationStream(IterableDataset):
                 yield {}
                 continue
             idx = torch.stack([torch.randperm(pool, generator=g)[:b] for _ in range(self.inner_steps)])
-            yield {"t": self.window.t_pool[idx], "f": self.window.f_pool[idx]}
+            batch = {"t": self.window.t_pool[idx], "f": self.window.f_pool[idx]}
+            if self.window.q_pool is not None:
+                batch["q"], batch["qd"] = self.window.q_pool[idx], self.window.qd_pool[idx]
+            yield batch
 
     def __len__(self) -> int:
         return self.n_batches
@@ -53,6 +56,8 @@ class SubperiodDataModule(L.LightningDataModule):
         t_start: float | None = None,
         t_end: float | None = None,
         data_seed: int = 0,
+        excitation_transform: bool = True,
+        accel_signal=None,
     ) -> None:
         super().__init__()
         if batch_size > pool_size:
@@ -63,6 +68,7 @@ class SubperiodDataModule(L.LightningDataModule):
         self.windows = make_windows(
             record.t, record.f, record.x, record.v, record.a, window_length, pool_size,
             min_peak_fraction, t_start, t_end,
+            accel_signal=(record.f if accel_signal is None else accel_signal) if excitation_transform else None,
         )
         self.active: Window = self.windows[0]
         self.inner_steps, self.n_batches, self.physics = 10, 1, True

@@ -28,6 +28,11 @@ class Window:
     f_pool: torch.Tensor
     peak_x: float = 0.0
     informative: bool = True
+    # excitation transform: q'' = s(t) (s = ag, or -u/m), q(t0) = q'(t0) = 0; zeros if unused
+    q_data: torch.Tensor | None = None
+    qd_data: torch.Tensor | None = None
+    q_pool: torch.Tensor | None = None
+    qd_pool: torch.Tensor | None = None
 
     def scales(self) -> dict[str, torch.Tensor]:
         """Per-window scales that make every loss term O(1) (x, v per channel; f overall)."""
@@ -35,6 +40,30 @@ class Window:
         s["v"] = self.v.std(0).clamp_min(1e-12) if self.v is not None else s["x"] * 2 * np.pi / (self.t1 - self.t0)
         s["a"] = self.a.std(0).clamp_min(1e-12) if self.a is not None else s["f"]
         return s
+
+
+def double_integral(t: np.ndarray, s: np.ndarray, tq: np.ndarray, t0: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact q, q' at ``tq`` with q'' = s (piecewise linear through the samples), q(t0) = q'(t0) = 0.
+
+    Integrated from the record start in float64, then the value and slope at t0 removed,
+    which leaves q'' unchanged.
+    """
+    h = np.diff(t)
+    ds = np.diff(s)
+    v_nodes = np.concatenate([[0.0], np.cumsum(s[:-1] * h + ds * h / 2)])
+    d_nodes = np.concatenate([[0.0], np.cumsum(v_nodes[:-1] * h + s[:-1] * h**2 / 2 + ds * h**2 / 6)])
+
+    def at(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        i = np.clip(np.searchsorted(t, x, side="right") - 1, 0, len(t) - 2)
+        tau, hh = x - t[i], h[i]
+        slope = ds[i] / hh
+        v = v_nodes[i] + s[i] * tau + slope * tau**2 / 2
+        d = d_nodes[i] + v_nodes[i] * tau + s[i] * tau**2 / 2 + slope * tau**3 / 6
+        return d, v
+
+    d0, v0 = at(np.array([t0]))
+    d, v = at(np.asarray(tq, float))
+    return d - d0[0] - v0[0] * (np.asarray(tq) - t0), v - v0[0]
 
 
 def make_windows(
@@ -49,8 +78,13 @@ def make_windows(
     t_start: float | None = None,
     t_end: float | None = None,
     dtype: torch.dtype | None = None,
+    accel_signal: np.ndarray | None = None,
 ) -> list[Window]:
     """Cut a record into equal windows of ``length`` seconds.
+
+    ``accel_signal`` (the excitation as an acceleration: ag, or -u/m) switches on the
+    excitation transform: each window carries q, q' with q'' = accel_signal, so that the
+    network can represent the smooth y = x + q instead of x (see ``PIDynNet``).
 
     The collocation pool holds ``pool_size`` equally spaced times per window with the
     excitation linearly interpolated between samples. A window whose peak |x| is below
@@ -72,6 +106,12 @@ def make_windows(
         m = (t >= t0 - 1e-9) & (t <= t1 + 1e-9)
         tp = np.linspace(t0, t1, pool_size)
         peak = float(np.max(np.abs(x[m])))
+        if accel_signal is not None:
+            qd_, qdd_ = double_integral(t, np.asarray(accel_signal, float), t[m], t0)
+            qp_, qpd_ = double_integral(t, np.asarray(accel_signal, float), tp, t0)
+        else:
+            qd_ = qdd_ = np.zeros(int(m.sum()))
+            qp_ = qpd_ = np.zeros(pool_size)
         out.append(
             Window(
                 index=i,
@@ -86,6 +126,10 @@ def make_windows(
                 f_pool=T(np.interp(tp, t, f)),
                 peak_x=peak,
                 informative=peak >= min_peak_fraction * record_peak,
+                q_data=T(qd_),
+                qd_data=T(qdd_),
+                q_pool=T(qp_),
+                qd_pool=T(qpd_),
             )
         )
     return out

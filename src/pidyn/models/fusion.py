@@ -12,15 +12,17 @@ from __future__ import annotations
 
 import torch
 
+from pidyn.data.windows import Window
 from pidyn.models.pidynnet import PIDynNet
 
 
-def residual_information(net: PIDynNet, t: torch.Tensor, f: torch.Tensor) -> torch.Tensor:
+def residual_information(net: PIDynNet, w: Window) -> torch.Tensor:
     """J = G^T G / mean(r^2) for the stacked normalised physics residuals r(theta_raw)."""
     names = net.params.trainable_names
     raw0 = net.params.raw_vector(names).detach()
+    t, f = w.t_pool, w.f_pool
     with torch.no_grad():
-        k = net.kinematics(t, f if net.rpn.use_excitation_input else None)
+        k = net.kinematics(t, f, w.q_pool, w.qd_pool)
     from pidyn.params import from_raw
 
     specs = [net.params.spec(n) for n in names]

@@ -159,12 +159,14 @@ class SubperiodIdentifier:
                 self._fit(w, "pretrain", pre, physics=False, callbacks=[])
             if net.lnn is not None and sch.transfer_lnn:
                 net.transfer_rpn_to_lnn()
+                net.set_latent_offset(torch.zeros(1), torch.zeros(1))
                 with torch.no_grad():
-                    x0 = net.rpn.taylor(torch.tensor([w.t0], dtype=w.t_pool.dtype), order=0)[0][0]
+                    x0 = net.response_at_start(w)
+                    z_init = net.latent_state_at(w, end=False)  # = x0 right after the transfer
                 z0 = z_end if z_end is not None else x0[:1] * 0  # at rest before the record
-                net.set_latent_offset(z0, x0[:1])
+                net.set_latent_offset(z0, z_init[:1])
             if sch.ls_init == "every" or (sch.ls_init == "first" and not first_done):
-                est = net.least_squares_init(w.t_pool, w.f_pool)
+                est = net.least_squares_init(w)
                 log.info("window %d: least-squares init %s", w.index, {k: f"{v:.5g}" for k, v in est.items()})
             cbs: list[L.Callback] = []
             if self.clamp is not None:
@@ -185,7 +187,7 @@ class SubperiodIdentifier:
                     {"iteration": it0 + j, "t": w.t0 + j * dt_it, **{n: float(traj[j, i]) for i, n in enumerate(names)}}
                 )
             if sch.fusion == "information":
-                info = residual_information(net, w.t_pool, w.f_pool)
+                info = residual_information(net, w)
                 theta = self.fusion.add(net.params.raw_vector(names).detach(), info)
                 with torch.no_grad():
                     for i, n in enumerate(names):
@@ -193,7 +195,8 @@ class SubperiodIdentifier:
             fused = net.params.as_floats()
             self.trajectory.append({"iteration": int(self.module.iteration), "t": w.t1, **{n: fused[n] for n in names}})
             if net.lnn is not None:
-                z_end = net.latent_state_at(w.t1).detach()
+                with torch.no_grad():
+                    z_end = net.latent_state_at(w).detach()
             res = WindowResult(
                 index=w.index, t0=w.t0, t1=w.t1,
                 iterations=int(self.module.iteration) - it0,

@@ -82,14 +82,15 @@ class PIDynNetModule(L.LightningModule):
         return [opt], [sched]
 
     # ------------------------------------------------------------ training
-    def losses(self, t_c: torch.Tensor | None, f_c: torch.Tensor | None) -> dict[str, torch.Tensor]:
+    def losses(self, t_c: torch.Tensor | None, f_c: torch.Tensor | None, q_c: torch.Tensor | None = None,
+               qd_c: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
         assert self.window is not None
         out: dict[str, torch.Tensor] = {}
         if self.phase != "finetune":
             out.update(self.net.data_losses(self.window))
         if self.phase != "pretrain":
             assert t_c is not None and f_c is not None
-            out.update(self.net.physics_losses(t_c, f_c))
+            out.update(self.net.physics_losses(t_c, f_c, q_c, qd_c))
         return out
 
     def total(self, losses: dict[str, torch.Tensor]) -> torch.Tensor:
@@ -98,10 +99,11 @@ class PIDynNetModule(L.LightningModule):
     def training_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> None:
         opt = self.optimizers()
         sched = self.lr_schedulers()
-        t_c, f_c = batch.get("t"), batch.get("f")
+        t_c, f_c, q_c, qd_c = batch.get("t"), batch.get("f"), batch.get("q"), batch.get("qd")
         k_steps = t_c.shape[0] if t_c is not None else self.inner_steps
+        pick = lambda a, k: None if a is None else a[k]  # noqa: E731
         for k in range(k_steps):
-            losses = self.losses(None if t_c is None else t_c[k], None if f_c is None else f_c[k])
+            losses = self.losses(pick(t_c, k), pick(f_c, k), pick(q_c, k), pick(qd_c, k))
             loss = self.total(losses)
             opt.zero_grad(set_to_none=True)
             self.manual_backward(loss)

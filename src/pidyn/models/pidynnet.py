@@ -63,7 +63,8 @@ class PIDynNet(nn.Module):
         for net in (self.rpn, self.lnn):
             if net is not None:
                 net.set_window(w.t0, w.t1)
-        self.rpn.set_output_scale(s["x"], w.x.mean(0))
+        y = w.x + (w.q_data[:, None] if w.q_data is not None else 0.0)
+        self.rpn.set_output_scale(y.std(0).clamp_min(1e-12), y.mean(0))
         if self.lnn is not None and transfer_lnn:
             self.transfer_rpn_to_lnn()
 
@@ -91,18 +92,55 @@ class PIDynNet(nn.Module):
         self.z_offset.copy_((z0 - x0).reshape(-1)[: self.z_offset.numel()])
 
     # ----------------------------------------------------------------- forward
-    def kinematics(self, t: torch.Tensor, f: torch.Tensor | None = None, order: int = 2) -> Kinematics:
-        xs = self.rpn.taylor(t, order=order, f=f)
+    def kinematics(
+        self,
+        t: torch.Tensor,
+        f: torch.Tensor | None = None,
+        q: torch.Tensor | None = None,
+        qd: torch.Tensor | None = None,
+        order: int = 2,
+    ) -> Kinematics:
+        """x, x', x'' (and z, z') at ``t``.
+
+        With the excitation transform the networks represent y = x + q and z + q, where
+        q'' is the excitation as an acceleration (ag, or -u/m) with q(t0) = q'(t0) = 0 in
+        the window. Then x = y - q, x' = y' - q', x'' = y'' - q''. This is an exact change of
+        variable; it spares the network the broadband ag that x'' must otherwise contain
+        (y is the smooth absolute displacement of a base-excited structure).
+        """
+        fin = f if self.rpn.use_excitation_input else None
+        xs = self.rpn.taylor(t, order=order, f=fin)
         x, v = xs[0], xs[1] if order >= 1 else None
         a = xs[2] if order >= 2 else None
+        if q is not None:
+            assert qd is not None and f is not None
+            x = x - q[:, None]
+            v = v - qd[:, None] if v is not None else None
+            if a is not None:
+                a = a - self.accel_signal(f)[:, None]
         z = zd = None
         if self.lnn is not None:
-            zs = self.lnn.taylor(t, order=1, f=f)
+            zs = self.lnn.taylor(t, order=1, f=fin)
             z, zd = zs[0] + self.z_offset, zs[1]
+            if q is not None:
+                z, zd = z - q[:, None], zd - qd[:, None]
         return Kinematics(t=t, x=x, v=v, a=a, z=z, zd=zd)  # type: ignore[arg-type]
 
-    def physics_losses(self, t: torch.Tensor, f: torch.Tensor) -> dict[str, torch.Tensor]:
-        k = self.kinematics(t, f if self.rpn.use_excitation_input else None)
+    def accel_signal(self, f: torch.Tensor) -> torch.Tensor:
+        """The excitation as an acceleration: ag (ground), or -u/m with the initial mass (force)."""
+        if self.system.excitation == "ground":
+            return f
+        return -f / self.mass_nominal
+
+    @property
+    def mass_nominal(self) -> float:
+        spec = next((s for s in self.params.specs if s.name == "m"), None)
+        return float(spec.init) if spec is not None else 1.0
+
+    def physics_losses(
+        self, t: torch.Tensor, f: torch.Tensor, q: torch.Tensor | None = None, qd: torch.Tensor | None = None
+    ) -> dict[str, torch.Tensor]:
+        k = self.kinematics(t, f, q, qd)
         res = self.system.residual(k, f, self.params.values())
         out = {"physics/motion": ((res.pop("motion") / self.scale_f) ** 2).mean()}
         for name, r in res.items():
@@ -110,14 +148,13 @@ class PIDynNet(nn.Module):
         return out
 
     def data_losses(self, w: Window, order: int = 1) -> dict[str, torch.Tensor]:
-        f = w.f_data if self.rpn.use_excitation_input else None
         need = 2 if w.a is not None else (1 if w.v is not None else 0)
-        xs = self.rpn.taylor(w.t_data, order=need, f=f)
-        out = {"data/x": (((xs[0] - w.x) / self.scale_x) ** 2).mean()}
+        k = self.kinematics(w.t_data, w.f_data, w.q_data, w.qd_data, order=need)
+        out = {"data/x": (((k.x - w.x) / self.scale_x) ** 2).mean()}
         if w.v is not None:
-            out["data/v"] = (((xs[1] - w.v) / self.scale_v) ** 2).mean()
+            out["data/v"] = (((k.v - w.v) / self.scale_v) ** 2).mean()
         if w.a is not None:
-            out["data/a"] = (((xs[2] - w.a) / self.scale_a) ** 2).mean()
+            out["data/a"] = (((k.a - w.a) / self.scale_a) ** 2).mean()
         return out
 
     # ----------------------------------------------------------------- helpers
@@ -131,12 +168,23 @@ class PIDynNet(nn.Module):
         return [p for p in self.params.raw.values() if p.requires_grad]
 
     @torch.no_grad()
-    def latent_state_at(self, t: float) -> torch.Tensor:
+    def latent_state_at(self, w: Window, end: bool = True) -> torch.Tensor:
+        """z at the end (or start) of window ``w`` (the next window starts from it)."""
         assert self.lnn is not None
-        tt = torch.tensor([t], dtype=self.z_offset.dtype)
-        return self.lnn.taylor(tt, order=0)[0][0] + self.z_offset
+        sl = slice(-1, None) if end else slice(0, 1)
+        q = None if w.q_pool is None else w.q_pool[sl]
+        qd = None if w.qd_pool is None else w.qd_pool[sl]
+        k = self.kinematics(w.t_pool[sl], w.f_pool[sl], q, qd, order=1)
+        assert k.z is not None
+        return k.z[0]
 
-    def least_squares_init(self, t: torch.Tensor, f: torch.Tensor, names: list[str] | None = None) -> dict[str, float]:
+    @torch.no_grad()
+    def response_at_start(self, w: Window) -> torch.Tensor:
+        k = self.kinematics(w.t_pool[:1], w.f_pool[:1], None if w.q_pool is None else w.q_pool[:1],
+                            None if w.qd_pool is None else w.qd_pool[:1], order=0)
+        return k.x[0]
+
+    def least_squares_init(self, w: Window, names: list[str] | None = None) -> dict[str, float]:
         """Solve for the parameters the motion residual is linear in, with the current networks.
 
         r(p) = r(0) + J p exactly for those parameters, so one linear least-squares solve
@@ -146,8 +194,9 @@ class PIDynNet(nn.Module):
         if not names:
             return {}
         vals = {k: v.detach() for k, v in self.params.values().items()}
+        t, f = w.t_pool, w.f_pool
         with torch.no_grad():
-            k = self.kinematics(t, f if self.rpn.use_excitation_input else None)
+            k = self.kinematics(t, f, w.q_pool, w.qd_pool)
         theta = torch.stack([vals[n] for n in names]).requires_grad_(True)
 
         def motion(th: torch.Tensor) -> torch.Tensor:

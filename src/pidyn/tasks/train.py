@@ -61,7 +61,12 @@ def train(cfg: DictConfig) -> dict[str, Any]:
             f"data '{record.name}' is {record.excitation}-excited but system '{system.name}' expects "
             f"'{system.excitation}' excitation: set system.excitation={record.excitation}"
         )
-    dm: SubperiodDataModule = hydra.utils.instantiate(cfg.data.windows, record=record, data_seed=cfg.data_seed)
+    accel = record.f if system.excitation == "ground" else -record.f / _nominal_mass(system)
+    dm: SubperiodDataModule = hydra.utils.instantiate(
+        cfg.data.windows, record=record, data_seed=cfg.data_seed,
+        excitation_transform=bool(cfg.model.excitation_transform) and not (system.excitation == "force" and system.n_dof > 1),
+        accel_signal=accel,
+    )
     rpn = hydra.utils.instantiate(cfg.model.rpn, out_features=system.n_dof)
     lnn = hydra.utils.instantiate(cfg.model.lnn, out_features=system.n_latent) if system.n_latent else None
     core = PIDynNet(system, rpn, lnn, normalize_losses=cfg.model.normalize_losses)
@@ -71,7 +76,10 @@ def train(cfg: DictConfig) -> dict[str, Any]:
     stopper = hydra.utils.instantiate(cfg.callbacks.early_stopping) if cfg.callbacks.get("early_stopping") else None
     logger = hydra.utils.instantiate(cfg.logger) if cfg.get("logger") else None
 
+    progress = bool(cfg.trainer.get("enable_progress_bar", True)) and not _in_multirun()
+
     def trainer_factory(**kw: Any) -> L.Trainer:
+        kw.setdefault("enable_progress_bar", progress)
         return hydra.utils.instantiate(cfg.trainer, logger=logger if logger is not None else False, **kw)
 
     ident = SubperiodIdentifier(module, dm, trainer_factory, schedule, clamp, stopper, run_dir)
@@ -122,6 +130,22 @@ def train(cfg: DictConfig) -> dict[str, Any]:
         log.info("errors (%%): %s", ", ".join(f"{k}={v:.3f}" for k, v in errors.items()))
     log.info("wall %.1f s, run folder %s", metrics["wall_seconds"], run_dir)
     return metrics
+
+
+def _nominal_mass(system: StructuralSystem) -> float:
+    spec = next((s for s in system.param_specs() if s.name == "m"), None)
+    return float(spec.init) if spec is not None else 1.0
+
+
+def _in_multirun() -> bool:
+    """True inside a Hydra multirun job (progress bars of parallel jobs would interleave)."""
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
+    try:
+        return HydraConfig.get().mode == RunMode.MULTIRUN
+    except ValueError:
+        return False
 
 
 def _quiet_framework_warnings() -> None:
