@@ -13,18 +13,21 @@ from conftest import make_cfg
 from pidyn.tasks.train import train
 
 FAST = ["model.schedule.pretrain_iters=20", "model.schedule.pretrain_iters_window=10",
-        "model.schedule.max_iters=20", "excitation.duration=15"]
+        "model.schedule.max_iters=20", "excitation.duration=15", "baselines=none"]
 
 
 def test_run_folder_holds_everything(tmp_path):
-    cfg = make_cfg(FAST + ["model.schedule.max_windows=2"], tmp_path)
+    cfg = make_cfg([o for o in FAST if o != "baselines=none"] + ["model.schedule.max_windows=2",
+                   "baselines.run=[equation_error,ukf]"], tmp_path)
     metrics = train(cfg)
     for f in ["identified_params.yaml", "metrics.json", "windows.json", "subperiod_state.json",
-              "figures/param_convergence.png", "figures/response.png", "checkpoints/last.pt"]:
+              "figures/param_convergence.png", "figures/response.png", "checkpoints/last.pt",
+              "baselines.json", "cramer_rao.json"]:
         assert (tmp_path / f).exists(), f
     assert list((tmp_path / "tensorboard").glob("events.out.tfevents.*"))
     table = yaml.safe_load((tmp_path / "identified_params.yaml").read_text())["params"]
     assert set(table) == {"c", "k1", "k3"} and table["k3"]["truth"] == 120.0 and "error_pct" in table["k3"]
+    assert set(metrics["baselines"]) == {"equation_error", "ukf"}
     assert metrics["windows"] == 2 and json.loads((tmp_path / "metrics.json").read_text())["iterations"] > 0
 
 

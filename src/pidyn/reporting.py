@@ -35,7 +35,7 @@ def nrmse(pred: np.ndarray, true: np.ndarray) -> float:
 
 
 def plot_convergence(path: Path, trajectory: list[dict], truths: dict[str, float | None], windows: list[dict],
-                     title: str = "") -> None:
+                     title: str = "", other: tuple[str, list[dict]] | None = None) -> None:
     """Parameter estimates over record time with window boundaries (cf. paper Figure 3)."""
     import matplotlib
 
@@ -51,9 +51,15 @@ def plot_convergence(path: Path, trajectory: list[dict], truths: dict[str, float
         v = np.array([p[n] for p in trajectory])
         ax, axe = axes[i]
         ax.plot(t, v, lw=1, label="PIDynNet")
+        if other is not None and other[1] and n in other[1][0]:
+            to = np.array([p["t"] for p in other[1]])
+            vo = np.array([p[n] for p in other[1]])
+            ax.plot(to, vo, lw=0.8, color="tab:orange", label=other[0])
+            if truths.get(n) is not None:
+                axe.semilogy(to, 100 * np.abs(vo - truths[n]) / abs(truths[n]) + 1e-6, lw=0.8, color="tab:orange")
         if truths.get(n) is not None:
             ax.axhline(truths[n], color="k", ls="--", lw=0.8, label="truth")
-            axe.semilogy(t, 100 * np.abs(v - truths[n]) / abs(truths[n]) + 1e-6, lw=1)
+            axe.semilogy(t, 100 * np.abs(v - truths[n]) / abs(truths[n]) + 1e-6, lw=1, color="tab:blue")
             axe.set_ylabel(f"|err| {n} (%)")
         ax.set_ylabel(n)
         for w in windows:

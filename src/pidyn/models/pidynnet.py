@@ -14,6 +14,7 @@ from pidyn.data.windows import Window
 from pidyn.nets import TaylorMLP
 from pidyn.params import PhysicalParameters
 from pidyn.systems.base import Kinematics, StructuralSystem
+from pidyn.systems.lstsq import solve_linear_params
 
 
 class PIDynNet(nn.Module):
@@ -193,20 +194,8 @@ class PIDynNet(nn.Module):
         names = names if names is not None else self.system.linear_params()
         if not names:
             return {}
-        vals = {k: v.detach() for k, v in self.params.values().items()}
-        t, f = w.t_pool, w.f_pool
         with torch.no_grad():
-            k = self.kinematics(t, f, w.q_pool, w.qd_pool)
-        theta = torch.stack([vals[n] for n in names]).requires_grad_(True)
-
-        def motion(th: torch.Tensor) -> torch.Tensor:
-            p = dict(vals)
-            p.update({n: th[i] for i, n in enumerate(names)})
-            return self.system.residual(k, f, p)["motion"].reshape(-1)
-
-        r0 = motion(torch.zeros_like(theta)).detach()
-        J = torch.autograd.functional.jacobian(motion, theta.detach())
-        sol = torch.linalg.lstsq(J, -r0[:, None]).solution[:, 0]
-        est = {n: float(sol[i]) for i, n in enumerate(names)}
+            k = self.kinematics(w.t_pool, w.f_pool, w.q_pool, w.qd_pool)
+        est = solve_linear_params(self.system, k, w.f_pool, self.params.values(), names)
         self.params.set_values(est)
         return est

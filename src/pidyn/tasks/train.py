@@ -116,12 +116,16 @@ def train(cfg: DictConfig) -> dict[str, Any]:
         "iterations": int(module.iteration),
         "wall_seconds": time.perf_counter() - t_wall,
     }
+    baselines = run_baselines(cfg, system, record, run_dir, params.as_floats())
+    if baselines:
+        metrics["baselines"] = {b["method"]: {"error_pct": b.get("error_pct"), "seconds": b["seconds"]} for b in baselines}
     write_json(run_dir / "metrics.json", metrics)
     write_json(run_dir / "windows.json", {"windows": [r.__dict__ for r in results]})
     fig_dir = run_dir / "figures"
     fig_dir.mkdir(exist_ok=True)
+    ukf = next((b for b in baselines if b["method"] == "ukf" and b.get("trajectory")), None)
     plot_convergence(fig_dir / "param_convergence.png", ident.trajectory, truths, [r.__dict__ for r in results],
-                     title=f"{system.name} under {record.name}")
+                     title=f"{system.name} under {record.name}", other=None if ukf is None else ("UKF", ukf["trajectory"]))
     series = {"measured x": record.x[:, 0], "identified model (simulated)": sim.x[:, 0]}
     plot_response(fig_dir / "response.png", record.t, series, title=f"{system.name}: NRMSE {metrics['sim_nrmse_x']:.3g}")
     _tb_figures(logger, fig_dir, int(module.iteration), metrics)
@@ -130,6 +134,47 @@ def train(cfg: DictConfig) -> dict[str, Any]:
         log.info("errors (%%): %s", ", ".join(f"{k}={v:.3f}" for k, v in errors.items()))
     log.info("wall %.1f s, run folder %s", metrics["wall_seconds"], run_dir)
     return metrics
+
+
+def run_baselines(cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path,
+                  identified: dict[str, float]) -> list[dict]:
+    """Run the configured classical methods on the same record; a failure is recorded, not raised."""
+    from pidyn import baselines as B
+
+    bcfg = cfg.get("baselines") or {}
+    out: list[dict] = []
+    truth = record.truth or {}
+    fns = {
+        "equation_error": lambda: B.equation_error(record, system),
+        "output_error": lambda: B.output_error(record, system, **dict(bcfg.get("output_error") or {})),
+        "ukf": lambda: B.unscented_kalman_filter(record, system, noise_level=float(cfg.noise), **dict(bcfg.get("ukf") or {})),
+    }
+    for name in bcfg.get("run") or []:
+        if name not in fns:
+            raise ValueError(f"unknown baseline '{name}'; choose from {sorted(fns)}")
+        if not hasattr(system, "terms") and name != "equation_error":
+            out.append({"method": name, "params": {}, "seconds": 0.0, "note": "SDOF systems only"})
+            continue
+        try:
+            r = fns[name]()
+            row = {"method": r.method, "params": r.params, "seconds": r.seconds, "note": r.note, "trajectory": r.trajectory}
+        except Exception as exc:  # a failed baseline must not spoil the run
+            log.warning("baseline %s failed: %s", name, exc)
+            row = {"method": name, "params": {}, "seconds": 0.0, "note": f"failed: {exc}"}
+        if truth and row["params"]:
+            row["error_pct"] = {k: 100 * abs(v - truth[k]) / abs(truth[k]) for k, v in row["params"].items() if truth.get(k)}
+        out.append(row)
+        log.info("baseline %s: %s (%.1f s) %s", row["method"],
+                 ", ".join(f"{k}={v:.5g}" for k, v in row["params"].items()), row["seconds"], row.get("note", ""))
+    if bcfg.get("cramer_rao") and hasattr(system, "terms"):
+        # the bound at the truth when it is known, else at the identified model
+        ref = {**{s.name: s.init for s in system.param_specs()}, **identified, **(truth or {})}
+        crb = B.cramer_rao(system, ref, record.t, record.f, float(cfg.noise),
+                           channels=tuple(c for c in ("x", "v", "a") if getattr(record, c) is not None))
+        write_json(run_dir / "cramer_rao.json", crb)
+    if out:
+        write_json(run_dir / "baselines.json", {"baselines": out})
+    return out
 
 
 def _nominal_mass(system: StructuralSystem) -> float:

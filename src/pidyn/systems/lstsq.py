@@ -1,0 +1,35 @@
+"""Least squares for the parameters a residual is linear in.
+
+r(p) = r(0) + J p exactly for those parameters, so one linear solve gives the best values
+for a given response estimate. Used to initialise PIDynNet from its pretrained networks
+and, with differenced measurements, as the equation-error baseline.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from pidyn.systems.base import Kinematics, StructuralSystem
+
+
+def solve_linear_params(
+    system: StructuralSystem,
+    k: Kinematics,
+    f: torch.Tensor,
+    values: dict[str, torch.Tensor],
+    names: list[str],
+    residual: str = "motion",
+) -> dict[str, float]:
+    """Least-squares values of ``names`` (others fixed at ``values``) for one named residual."""
+    vals = {n: v.detach() for n, v in values.items()}
+    theta0 = torch.zeros(len(names), dtype=f.dtype)
+
+    def r(th: torch.Tensor) -> torch.Tensor:
+        p = dict(vals)
+        p.update({n: th[i] for i, n in enumerate(names)})
+        return system.residual(k, f, p)[residual].reshape(-1)
+
+    r0 = r(theta0).detach()
+    J = torch.autograd.functional.jacobian(r, theta0)
+    sol = torch.linalg.lstsq(J, -r0[:, None]).solution[:, 0]
+    return {n: float(sol[i]) for i, n in enumerate(names)}
