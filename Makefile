@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # the default index would serve a CUDA build.
 TORCH_INDEX ?=
 
-.PHONY: install train test test-fast bench tb clean-outputs
+.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -36,3 +36,9 @@ tb: $(STAMP)
 
 clean-outputs:
 	rm -rf outputs
+
+tables: $(STAMP)
+	$(PY) experiments/run_tables.py $(ARGS)
+
+tables-smoke: $(STAMP)
+	$(PY) experiments/run_tables.py --smoke $(ARGS)

@@ -1,0 +1,143 @@
+"""Aggregate multirun job folders into the paper's tables (markdown + CSV).
+
+    python experiments/aggregate.py outputs/table3/multiruns/<stamp> [--out experiments/results/table3]
+
+Each job folder holds metrics.json, baselines.json and cramer_rao.json; jobs that failed
+(no metrics.json) are listed and skipped. Rows are grouped into cells by system, noise,
+batch size, earthquake scaling and stretching; per parameter the table shows the truth, the
+paper's values, PIDynNet's mean +- std and RMS error over seeds, the Cramer-Rao bound, and
+each baseline's mean error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+# Paper Tables I-III (value, error %), PIDynNet and UKF.
+PAPER = {
+    ("duffing", 0.0): {"PIDynNet": {"c": (0.494, 1.19), "k1": (14.981, 0.13), "k3": (122.392, 1.99)},
+                       "UKF": {"c": (0.513, 2.86), "k1": (14.564, 2.91), "k3": (118.164, 1.53)}},
+    ("bouc_wen", 0.0): {"PIDynNet": {"c": (0.295, 1.50), "k": (11.954, 0.38), "beta": (0.982, 1.77),
+                                     "gamma": (1.963, 1.87), "n": (2.051, 2.57)},
+                        "UKF": {"c": (0.286, 4.58), "k": (11.987, 0.11), "beta": (0.988, 1.25),
+                                "gamma": (2.051, 2.57), "n": (2.064, 3.21)}},
+    ("bouc_wen", 0.025): {"PIDynNet": {"c": (0.301, 0.37), "k": (12.032, 0.27), "beta": (1.017, 1.72),
+                                       "gamma": (1.952, 2.41), "n": (1.989, 0.56)},
+                          "UKF": {"c": (0.292, 2.53), "k": (12.016, 0.13), "beta": (0.975, 2.49),
+                                  "gamma": (2.022, 1.08), "n": (1.960, 2.02)}},
+    ("bouc_wen", 0.05): {"PIDynNet": {"c": (0.294, 1.84), "k": (11.987, 0.11), "beta": (1.027, 2.70),
+                                      "gamma": (1.950, 2.50), "n": (2.020, 1.02)},
+                         "UKF": {"c": (0.316, 5.49), "k": (11.956, 0.36), "beta": (0.971, 2.86),
+                                 "gamma": (1.948, 2.58), "n": (2.064, 3.18)}},
+}
+METHODS = ["equation_error", "output_error", "ukf"]
+
+
+def load_jobs(root: Path) -> tuple[list[dict], list[str]]:
+    jobs, failed = [], []
+    for d in sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")):
+        m = d / "metrics.json"
+        if not m.exists():
+            failed.append(d.name)
+            continue
+        job = json.loads(m.read_text())
+        b = d / "baselines.json"
+        job["_baselines"] = json.loads(b.read_text())["baselines"] if b.exists() else []
+        c = d / "cramer_rao.json"
+        job["_crb"] = json.loads(c.read_text()) if c.exists() else None
+        job["_dir"] = d.name
+        jobs.append(job)
+    return jobs, failed
+
+
+def cell_key(j: dict) -> tuple:
+    return (j["system"], j["record"], float(j["noise"]), int(j["batch_size"]), float(j.get("eq_scale", 1.0)),
+            float(j.get("eq_stretch", 1.0)))
+
+
+def aggregate(root: Path) -> tuple[pd.DataFrame, list[str]]:
+    jobs, failed = load_jobs(root)
+    cells: dict[tuple, list[dict]] = defaultdict(list)
+    for j in jobs:
+        cells[cell_key(j)].append(j)
+    rows = []
+    for key, js in sorted(cells.items()):
+        system, record, noise, batch, scale, stretch = key
+        names = list(js[0]["params"])
+        paper = PAPER.get((system, noise), {}) if scale == 1.0 and stretch == 1.0 else {}
+        for n in names:
+            truth = js[0]["truth"].get(n)
+            vals = np.array([j["params"][n] for j in js])
+            errs = np.array([j["error_pct"].get(n, np.nan) for j in js])
+            row = {
+                "system": system, "record": record, "noise": noise, "batch_size": batch, "eq_scale": scale,
+                "eq_stretch": stretch, "param": n, "truth": truth, "seeds": len(js),
+                "paper_pidynnet": paper.get("PIDynNet", {}).get(n, (np.nan, np.nan))[0],
+                "paper_pidynnet_err": paper.get("PIDynNet", {}).get(n, (np.nan, np.nan))[1],
+                "paper_ukf_err": paper.get("UKF", {}).get(n, (np.nan, np.nan))[1],
+                "pidynnet_mean": vals.mean(), "pidynnet_std": vals.std(ddof=1) if len(vals) > 1 else 0.0,
+                "pidynnet_err_mean": np.nanmean(errs),
+                "pidynnet_rms_err": float(np.sqrt(np.nanmean(errs**2))),
+                "crb_std_pct": np.nanmean([j["_crb"]["std_pct"].get(n, np.nan) for j in js if j["_crb"]]) if any(j["_crb"] for j in js) else np.nan,
+                "pidynnet_seconds": np.mean([j["wall_seconds"] for j in js]),
+            }
+            for mth in METHODS:
+                e = [b.get("error_pct", {}).get(n) for j in js for b in j["_baselines"] if b["method"] == mth]
+                e = [x for x in e if x is not None]
+                row[f"{mth}_rms_err"] = float(np.sqrt(np.mean(np.square(e)))) if e else np.nan
+                s = [b["seconds"] for j in js for b in j["_baselines"] if b["method"] == mth]
+                row[f"{mth}_seconds"] = float(np.mean(s)) if s else np.nan
+            rows.append(row)
+    return pd.DataFrame(rows), failed
+
+
+def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str]) -> str:
+    f = lambda x, d=3: "-" if x is None or (isinstance(x, float) and np.isnan(x)) else f"{x:.{d}f}"  # noqa: E731
+    out = [f"# {title}\n", f"Command: `{command}`\n"]
+    for key, g in df.groupby(["system", "record", "noise", "batch_size", "eq_scale", "eq_stretch"], sort=False):
+        system, record, noise, batch, scale, stretch = key
+        out.append(f"\n## {system} under {record} x{scale:g} (stretch {stretch:g}), noise {100 * noise:g} %, "
+                   f"batch {batch}, {int(g.seeds.iloc[0])} seed(s)\n")
+        out.append("| param | truth | paper PIDynNet (err %) | paper UKF err % | PIDynNet mean +- std | "
+                   "PIDynNet RMS err % | CRB std % | EE RMS err % | OE RMS err % | UKF RMS err % |")
+        out.append("|---|---|---|---|---|---|---|---|---|---|")
+        for _, r in g.iterrows():
+            out.append(
+                f"| {r.param} | {f(r.truth, 4)} | {f(r.paper_pidynnet, 3)} ({f(r.paper_pidynnet_err, 2)}) | "
+                f"{f(r.paper_ukf_err, 2)} | {f(r.pidynnet_mean, 4)} +- {f(r.pidynnet_std, 4)} | "
+                f"{f(r.pidynnet_rms_err, 2)} | {f(r.crb_std_pct, 3)} | {f(r.equation_error_rms_err, 2)} | "
+                f"{f(r.output_error_rms_err, 2)} | {f(r.ukf_rms_err, 2)} |"
+            )
+        r0 = g.iloc[0]
+        out.append(f"\nWall seconds per run: PIDynNet {f(r0.pidynnet_seconds, 0)}, EE {f(r0.equation_error_seconds, 2)}, "
+                   f"OE {f(r0.output_error_seconds, 1)}, UKF {f(r0.ukf_seconds, 1)}.")
+    if failed:
+        out.append(f"\nFailed jobs (no metrics.json): {', '.join(failed)}")
+    return "\n".join(out) + "\n"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("root", type=Path, help="a multirun folder (outputs/<task>/multiruns/<stamp>)")
+    ap.add_argument("--out", type=Path, default=None, help="output stem (default: <root>/table)")
+    ap.add_argument("--title", default=None)
+    ap.add_argument("--command", default="")
+    a = ap.parse_args()
+    df, failed = aggregate(a.root)
+    if df.empty:
+        raise SystemExit(f"{a.root}: no finished job (failed: {failed})")
+    out = a.out or a.root / "table"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    df.to_csv(out.with_suffix(".csv"), index=False)
+    out.with_suffix(".md").write_text(to_markdown(df, a.title or a.root.parent.parent.name, a.command, failed))
+    print(out.with_suffix(".md").read_text())
+
+
+if __name__ == "__main__":
+    main()

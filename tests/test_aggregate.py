@@ -1,0 +1,43 @@
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "experiments"))
+import aggregate  # noqa: E402
+
+
+def job(d: Path, seed: int, k3: float, ukf_err: float) -> None:
+    d.mkdir(parents=True)
+    (d / "metrics.json").write_text(json.dumps({
+        "system": "duffing", "record": "kobe", "noise": 0.05, "batch_size": 500, "eq_scale": 1.0, "seed": seed,
+        "params": {"k3": k3}, "truth": {"k3": 120.0}, "error_pct": {"k3": abs(k3 - 120) / 1.2}, "wall_seconds": 10.0}))
+    (d / "baselines.json").write_text(json.dumps({"baselines": [
+        {"method": "ukf", "params": {"k3": 0.0}, "error_pct": {"k3": ukf_err}, "seconds": 1.0}]}))
+    (d / "cramer_rao.json").write_text(json.dumps({"std_pct": {"k3": 0.1}}))
+
+
+def test_aggregate_means_rms_and_failed_jobs(tmp_path):
+    job(tmp_path / "0_seed=0", 0, 121.2, 3.0)
+    job(tmp_path / "1_seed=1", 1, 118.8, 4.0)
+    (tmp_path / "2_seed=2").mkdir()  # a failed job: no metrics.json
+    df, failed = aggregate.aggregate(tmp_path)
+    row = df.iloc[0]
+    assert failed == ["2_seed=2"]
+    assert row.seeds == 2 and row.pidynnet_mean == pytest.approx(120.0)
+    assert row.pidynnet_rms_err == pytest.approx(1.0)
+    assert row.ukf_rms_err == pytest.approx((12.5) ** 0.5)
+    md = aggregate.to_markdown(df, "t", "cmd", failed)
+    assert "Failed jobs" in md and "| k3 |" in md
+
+
+@pytest.mark.slow
+def test_tables_smoke_runs_a_multirun_and_aggregates(tmp_path):
+    r = subprocess.run([sys.executable, "experiments/run_tables.py", "--smoke", "--only", "table2", "--jobs", "1"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    mds = sorted((ROOT / "outputs" / "tables-smoke").glob("*/table2.md"))
+    assert mds and "| beta |" in mds[-1].read_text()
