@@ -49,7 +49,8 @@ def main() -> None:
         machine = f"{platform.machine()}, {a.jobs} parallel jobs, one thread each"
         agg = [sys.executable, "experiments/aggregate.py", str(sweep_dir), "--out", str(out),
                "--title", f"{exp} ({'smoke' if a.smoke else 'full'}; {machine})",
-               "--command", "python " + " ".join(["train.py"] + cmd[2:])]
+               "--command", f"python experiments/run_tables.py {'--smoke ' if a.smoke else ''}--only {exp} --jobs {a.jobs}"
+               f"  (runs: python train.py experiment={exp} {' '.join(extra)})".rstrip()]
         if subprocess.run(agg, cwd=ROOT, stdout=subprocess.DEVNULL).returncode != 0:
             raise SystemExit(f"{exp}: aggregation failed (see {sweep_dir})")
 

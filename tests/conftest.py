@@ -20,10 +20,10 @@ def _clean_state():
     torch.set_default_dtype(torch.float32)
 
 
-def make_cfg(overrides: list[str], out: Path | None = None) -> DictConfig:
-    """Compose ``conf/train.yaml`` as ``python train.py <overrides>`` would."""
+def make_cfg(overrides: list[str], out: Path | None = None, config_name: str = "train") -> DictConfig:
+    """Compose ``conf/<config_name>.yaml`` as ``python <config_name>.py <overrides>`` would."""
     with initialize_config_dir(CONF, version_base="1.3"):
-        cfg = compose("train", overrides=overrides, return_hydra_config=True)
+        cfg = compose(config_name, overrides=overrides, return_hydra_config=True)
     with open_dict(cfg):
         if out is not None:
             cfg.paths.output_dir = str(out)

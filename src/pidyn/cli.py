@@ -13,16 +13,29 @@ CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 log = logging.getLogger("pidyn")
 
 
-@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="train")
-def train_main(cfg: DictConfig) -> float | None:
-    from pidyn.tasks.train import train
-
+def _guarded(task, cfg: DictConfig) -> dict:
+    """Run a task; user errors (bad files, bad values) end with one clear line and exit 2."""
     try:
-        metrics = train(cfg)
+        return task(cfg)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         log.error("%s: %s", type(exc).__name__, exc)
         if cfg.get("raise_errors", False):
             raise
         sys.exit(2)
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="train")
+def train_main(cfg: DictConfig) -> float | None:
+    from pidyn.tasks.train import train
+
+    metrics = _guarded(train, cfg)
     value = metrics.get(cfg.get("optimized_metric", "max_error_pct"))
     return float(value) if value is not None else None
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="generalize")
+def generalize_main(cfg: DictConfig) -> float | None:
+    from pidyn.tasks.generalize import generalize
+
+    summary = _guarded(generalize, cfg)
+    return summary.get("share_gamma_ge_0.95_pidynnet")

@@ -58,6 +58,7 @@ class SubperiodDataModule(L.LightningDataModule):
         data_seed: int = 0,
         excitation_transform: bool = True,
         accel_signal=None,
+        cover_tail: bool = False,
     ) -> None:
         super().__init__()
         if batch_size > pool_size:
@@ -69,6 +70,7 @@ class SubperiodDataModule(L.LightningDataModule):
             record.t, record.f, record.x, record.v, record.a, window_length, pool_size,
             min_peak_fraction, t_start, t_end,
             accel_signal=(record.f if accel_signal is None else accel_signal) if excitation_transform else None,
+            cover_tail=cover_tail,
         )
         self.active: Window = self.windows[0]
         self.inner_steps, self.n_batches, self.physics = 10, 1, True

@@ -79,6 +79,7 @@ def make_windows(
     t_end: float | None = None,
     dtype: torch.dtype | None = None,
     accel_signal: np.ndarray | None = None,
+    cover_tail: bool = False,
 ) -> list[Window]:
     """Cut a record into equal windows of ``length`` seconds.
 
@@ -97,12 +98,13 @@ def make_windows(
     t_start = t[0] if t_start is None else t_start
     t_end = t[-1] if t_end is None else min(t_end, t[-1])
     n_win = max(1, int(np.floor((t_end - t_start) / length + 1e-9)))
+    bounds = [(t_start + i * length, t_start + (i + 1) * length) for i in range(n_win)]
+    if cover_tail and t_end - bounds[-1][1] > 2 * (t[1] - t[0]):
+        bounds.append((bounds[-1][1], t_end))  # a shorter last window so that every sample is covered
     record_peak = float(np.max(np.abs(x[(t >= t_start) & (t <= t_end)])))
     T = lambda arr: None if arr is None else torch.as_tensor(np.asarray(arr, float), dtype=dtype)  # noqa: E731
     out = []
-    for i in range(n_win):
-        t0 = t_start + i * length
-        t1 = t0 + length
+    for i, (t0, t1) in enumerate(bounds):
         m = (t >= t0 - 1e-9) & (t <= t1 + 1e-9)
         tp = np.linspace(t0, t1, pool_size)
         peak = float(np.max(np.abs(x[m])))

@@ -48,6 +48,8 @@ class PIDynNet(nn.Module):
         self.register_buffer("scale_v", torch.ones(nd))
         self.register_buffer("scale_a", torch.ones(nd))
         self.register_buffer("scale_f", torch.ones(()))
+        # hard initial condition for prediction: (t0, x0, v0, z0) or None
+        self.anchor: tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None] | None = None
 
     # ----------------------------------------------------------------- windows
     @torch.no_grad()
@@ -111,6 +113,8 @@ class PIDynNet(nn.Module):
         """
         fin = f if self.rpn.use_excitation_input else None
         xs = self.rpn.taylor(t, order=order, f=fin)
+        if self.anchor is not None:
+            xs = self._anchored(self.rpn, t, xs, f)
         x, v = xs[0], xs[1] if order >= 1 else None
         a = xs[2] if order >= 2 else None
         if q is not None:
@@ -122,10 +126,31 @@ class PIDynNet(nn.Module):
         z = zd = None
         if self.lnn is not None:
             zs = self.lnn.taylor(t, order=1, f=fin)
-            z, zd = zs[0] + self.z_offset, zs[1]
+            if self.anchor is not None and self.anchor[3] is not None:
+                t0 = self.anchor[0].reshape(1)
+                zs = [zs[0] - self.lnn.taylor(t0, order=0, f=None if fin is None else fin[:1])[0] + self.anchor[3], zs[1]]
+                z, zd = zs[0], zs[1]
+            else:
+                z, zd = zs[0] + self.z_offset, zs[1]
             if q is not None:
                 z, zd = z - q[:, None], zd - qd[:, None]
         return Kinematics(t=t, x=x, v=v, a=a, z=z, zd=zd)  # type: ignore[arg-type]
+
+    def _anchored(self, net: TaylorMLP, t: torch.Tensor, ys: list[torch.Tensor], f: torch.Tensor | None):
+        """y - y(t0) - y'(t0)(t - t0) + x0 + v0 (t - t0): the initial state holds exactly.
+
+        Valid because q(t0) = q'(t0) = 0, so the state at t0 is that of y itself.
+        """
+        assert self.anchor is not None
+        t0, x0, v0, _ = self.anchor
+        fin = f[:1] if (f is not None and net.use_excitation_input) else None
+        y0 = net.taylor(t0.reshape(1), order=1, f=fin)
+        dt = (t - t0)[:, None]
+        out = [ys[0] - y0[0] - y0[1] * dt + x0 + v0 * dt]
+        if len(ys) > 1:
+            out.append(ys[1] - y0[1] + v0)
+        out.extend(ys[2:])
+        return out
 
     def accel_signal(self, f: torch.Tensor) -> torch.Tensor:
         """The excitation as an acceleration: ag (ground), or -u/m with the initial mass (force)."""
@@ -157,6 +182,33 @@ class PIDynNet(nn.Module):
         if w.a is not None:
             out["data/a"] = (((k.a - w.a) / self.scale_a) ** 2).mean()
         return out
+
+    @torch.no_grad()
+    def enter_prediction_window(self, w: Window, x_scale: torch.Tensor, v_scale: torch.Tensor,
+                                f_scale: torch.Tensor) -> None:
+        """Like ``enter_window`` for a window without measurements (scales given).
+
+        The force scale is the whole record's: a quiet window's own std would blow up the
+        normalised residual and stall the fit there.
+        """
+        self.scale_x.copy_(x_scale)
+        self.scale_v.copy_(v_scale)
+        mass = self.params.values().get("m", torch.ones(()))
+        self.scale_f.copy_(f_scale.clamp_min(1e-12) * (mass if self.system.excitation == "ground" else 1.0))
+        for net in (self.rpn, self.lnn):
+            if net is not None:
+                net.set_window(w.t0, w.t1)
+        y_scale = torch.maximum(x_scale, (w.q_pool.std() if w.q_pool is not None else x_scale[0]) * torch.ones_like(x_scale))
+        self.rpn.set_output_scale(y_scale, torch.zeros_like(x_scale))
+        if self.lnn is not None:
+            self.lnn.set_output_scale(y_scale[:1].expand_as(self.lnn.out_scale), torch.zeros_like(self.lnn.out_shift))
+
+    @torch.no_grad()
+    def state_at_end(self, w: Window) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        sl = slice(-1, None)
+        k = self.kinematics(w.t_pool[sl], w.f_pool[sl], None if w.q_pool is None else w.q_pool[sl],
+                            None if w.qd_pool is None else w.qd_pool[sl], order=1)
+        return k.x[0], k.v[0], None if k.z is None else k.z[0]
 
     # ----------------------------------------------------------------- helpers
     def net_parameters(self) -> list[nn.Parameter]:

@@ -44,6 +44,12 @@ def _target_args(node: DictConfig) -> set[str]:
 
 def train(cfg: DictConfig) -> dict[str, Any]:
     """Identify the system's parameters from the configured data; returns the metrics."""
+    return identify(cfg)[0]
+
+
+def identify(cfg: DictConfig) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Identify and report; returns (metrics, objects) with the module, system, record,
+    trainer factory and run folder for follow-up tasks (prediction, diagnosis)."""
     t_wall = time.perf_counter()
     _quiet_framework_warnings()
     for name in ("lightning", "lightning.pytorch", "lightning.fabric"):
@@ -133,7 +139,9 @@ def train(cfg: DictConfig) -> dict[str, Any]:
     if errors:
         log.info("errors (%%): %s", ", ".join(f"{k}={v:.3f}" for k, v in errors.items()))
     log.info("wall %.1f s, run folder %s", metrics["wall_seconds"], run_dir)
-    return metrics
+    objects = {"module": module, "system": system, "record": record, "trainer_factory": trainer_factory,
+               "run_dir": run_dir, "logger": logger}
+    return metrics, objects
 
 
 def run_baselines(cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path,
