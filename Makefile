@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # the default index would serve a CUDA build.
 TORCH_INDEX ?=
 
-.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke
+.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke generalize
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -42,3 +42,6 @@ tables: $(STAMP)
 
 tables-smoke: $(STAMP)
 	$(PY) experiments/run_tables.py --smoke $(ARGS)
+
+generalize: $(STAMP)
+	$(PY) generalize.py $(ARGS)

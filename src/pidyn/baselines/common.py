@@ -44,3 +44,11 @@ def from_theta(specs: list[ParamSpec], theta: np.ndarray) -> dict[str, np.ndarra
 
 def fixed_values(system) -> dict[str, float]:
     return {s.name: s.init for s in system.param_specs() if not s.trainable}
+
+
+def starting_point(system, init: dict[str, float] | None) -> tuple[list[ParamSpec], dict[str, float], np.ndarray]:
+    """Trainable specs, fixed values and the unconstrained start (the specs' init, overridden by ``init``)."""
+    specs = trainable_specs(system)
+    start = {s.name: s.init for s in specs}
+    start.update(init or {})
+    return specs, fixed_values(system), to_theta(specs, start)

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from scipy.optimize import least_squares
 
-from pidyn.baselines.common import BaselineResult, fixed_values, from_theta, to_theta, trainable_specs
+from pidyn.baselines.common import BaselineResult, from_theta, starting_point
 from pidyn.baselines.fastsim import simulate_batch
 from pidyn.data.sources import Record
 from pidyn.systems.base import Kinematics
@@ -49,11 +49,7 @@ def output_error(
     max_nfev: int = 60,
 ) -> BaselineResult:
     t0 = time.perf_counter()
-    specs = trainable_specs(system)
-    fixed = fixed_values(system)
-    start = {s.name: s.init for s in specs}
-    start.update(init or {})
-    th0 = to_theta(specs, start)
+    specs, fixed, th0 = starting_point(system, init)
     chans = [("x", record.x[:, 0])] + ([("v", record.v[:, 0])] if record.v is not None else [])
     scale = {c: max(float(np.std(y)), 1e-300) for c, y in chans}
     h = 1e-6

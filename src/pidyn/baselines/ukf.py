@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from pidyn.baselines.common import BaselineResult, fixed_values, from_theta, to_theta, trainable_specs
+from pidyn.baselines.common import BaselineResult, from_theta, starting_point
 from pidyn.baselines.fastsim import simulate_batch
 from pidyn.data.sources import Record
 
@@ -35,10 +35,7 @@ def unscented_kalman_filter(
     thin: int = 10,
 ) -> BaselineResult:
     t0 = time.perf_counter()
-    specs = trainable_specs(system)
-    fixed = fixed_values(system)
-    start = {s.name: s.init for s in specs}
-    start.update(init or {})
+    specs, fixed, theta0 = starting_point(system, init)
     nz, npar = system.n_latent, len(specs)
     n = 2 + nz + npar
     chans = [("x", record.x[:, 0])]
@@ -49,7 +46,7 @@ def unscented_kalman_filter(
     rms = {c: float(np.sqrt(np.mean(y**2))) for c, y in chans}
     R = np.diag([max(noise_level, r_floor) ** 2 * rms[c] ** 2 for c, _ in chans])
     m = np.zeros(n)
-    m[2 + nz :] = to_theta(specs, start)
+    m[2 + nz :] = theta0
     P = np.diag([1e-12, 1e-12] + [1e-12] * nz + [init_param_std**2] * npar)
     Q = np.diag([q_state * rms["x"] ** 2, q_state * rms.get("v", rms["x"]) ** 2] + [q_state * rms["x"] ** 2] * nz
                 + [q_param] * npar)
