@@ -155,6 +155,11 @@ def main() -> None:
     res["lightning_overhead"] = lightning_overhead()
     if not a.quick:
         res["end_to_end"] = [end_to_end([]), end_to_end(["system=bouc_wen"])]
+    elif (OUT / "bench.json").exists():  # keep the last full run's end-to-end rows
+        prev = json.loads((OUT / "bench.json").read_text())
+        if "end_to_end" in prev:
+            res["end_to_end"] = prev["end_to_end"]
+            res["end_to_end_date"] = prev.get("date", "")
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "bench.json").write_text(json.dumps(res, indent=2))
     lines = [f"# Benchmark\n\nCommand: `{res['command']}`  \nMachine: {res['machine']}  \nDate: {res['date']}\n",
@@ -166,7 +171,7 @@ def main() -> None:
               f"{lo['iterations']} iterations: plain {lo['plain_s']:.2f} s, Lightning {lo['lightning_s']:.2f} s, "
               f"overhead {lo['overhead_pct']:+.1f} %"]
     if "end_to_end" in res:
-        lines += ["", "## End to end\n", "| command | wall s | windows | iterations | errors % |", "|---|---|---|---|---|"]
+        lines += ["", "## End to end" + (f" (from the full run of {res['end_to_end_date']})" if res.get("end_to_end_date") else "") + "\n", "| command | wall s | windows | iterations | errors % |", "|---|---|---|---|---|"]
         for e in res["end_to_end"]:
             errs = ", ".join(f"{k} {v:.2f}" for k, v in e["error_pct"].items())
             lines.append(f"| `{e['command']}` | {e['wall_s']:.0f} | {e['windows']} | {e['iterations']} | {errs} |")
