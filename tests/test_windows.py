@@ -45,3 +45,26 @@ def test_excitation_transform_is_an_exact_change_of_variable():
     qdd = (w.q_pool[2:] - 2 * w.q_pool[1:-1] + w.q_pool[:-2]) / h**2
     assert float((qdd - w.f_pool[1:-1]).abs().max()) < 0.05 * float(w.f_pool.abs().max())
     assert float(w.q_pool[0]) == pytest.approx(0.0, abs=1e-12) and float(w.qd_pool[0]) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_without_the_transform_the_networks_represent_x_itself():
+    """Transform off (experiment=paper): no q, and x'' is the network's own second derivative."""
+    torch.set_default_dtype(torch.float64)
+    t = np.arange(0, 6.0001, 0.01)
+    ag = np.sin(7 * t)
+    w = make_windows(t, ag, 0.1 * np.sin(t), None, None, 3.0, 200)[1]
+    assert w.q_pool is None and w.q_data is None
+    net = PIDynNet(Duffing(), TaylorMLP())
+    net.enter_window(w)
+    k = net.kinematics(w.t_pool, w.f_pool, w.q_pool, w.qd_pool)
+    y, yd, ydd = net.rpn.taylor(w.t_pool)
+    assert torch.equal(k.x, y) and torch.equal(k.a, ydd)
+
+
+def test_excitation_as_acceleration():
+    from pidyn.systems import ShearBuilding
+
+    f = np.array([1.0, -2.0])
+    assert np.array_equal(Duffing().excitation_as_acceleration(f), f)
+    assert np.array_equal(Duffing(mass=2.0, excitation="force").excitation_as_acceleration(f), -f / 2.0)
+    assert ShearBuilding(excitation="force").excitation_as_acceleration(f) is None

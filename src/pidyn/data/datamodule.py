@@ -44,7 +44,12 @@ class _CollocationStream(IterableDataset):
 
 
 class SubperiodDataModule(L.LightningDataModule):
-    """Windows of a record plus the collocation stream of the active window."""
+    """Windows of a record plus the collocation stream of the active window.
+
+    ``accel_signal`` (the excitation as an acceleration, see
+    ``StructuralSystem.excitation_as_acceleration``) switches on the excitation transform;
+    None leaves the networks representing x itself.
+    """
 
     def __init__(
         self,
@@ -56,7 +61,6 @@ class SubperiodDataModule(L.LightningDataModule):
         t_start: float | None = None,
         t_end: float | None = None,
         data_seed: int = 0,
-        excitation_transform: bool = True,
         accel_signal=None,
         cover_tail: bool = False,
     ) -> None:
@@ -69,7 +73,7 @@ class SubperiodDataModule(L.LightningDataModule):
         self.windows = make_windows(
             record.t, record.f, record.x, record.v, record.a, window_length, pool_size,
             min_peak_fraction, t_start, t_end,
-            accel_signal=(record.f if accel_signal is None else accel_signal) if excitation_transform else None,
+            accel_signal=accel_signal,
             cover_tail=cover_tail,
         )
         self.active: Window = self.windows[0]

@@ -28,7 +28,7 @@ class Window:
     f_pool: torch.Tensor
     peak_x: float = 0.0
     informative: bool = True
-    # excitation transform: q'' = s(t) (s = ag, or -u/m), q(t0) = q'(t0) = 0; zeros if unused
+    # excitation transform: q'' = s(t) (s = ag, or -u/m), q(t0) = q'(t0) = 0; None if unused
     q_data: torch.Tensor | None = None
     qd_data: torch.Tensor | None = None
     q_pool: torch.Tensor | None = None
@@ -108,12 +108,10 @@ def make_windows(
         m = (t >= t0 - 1e-9) & (t <= t1 + 1e-9)
         tp = np.linspace(t0, t1, pool_size)
         peak = float(np.max(np.abs(x[m])))
+        qd_ = qdd_ = qp_ = qpd_ = None
         if accel_signal is not None:
             qd_, qdd_ = double_integral(t, np.asarray(accel_signal, float), t[m], t0)
             qp_, qpd_ = double_integral(t, np.asarray(accel_signal, float), tp, t0)
-        else:
-            qd_ = qdd_ = np.zeros(int(m.sum()))
-            qp_ = qpd_ = np.zeros(pool_size)
         out.append(
             Window(
                 index=i,

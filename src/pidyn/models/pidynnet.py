@@ -102,6 +102,7 @@ class PIDynNet(nn.Module):
         q: torch.Tensor | None = None,
         qd: torch.Tensor | None = None,
         order: int = 2,
+        latent: bool = True,
     ) -> Kinematics:
         """x, x', x'' (and z, z') at ``t``.
 
@@ -110,6 +111,7 @@ class PIDynNet(nn.Module):
         the window. Then x = y - q, x' = y' - q', x'' = y'' - q''. This is an exact change of
         variable; it spares the network the broadband ag that x'' must otherwise contain
         (y is the smooth absolute displacement of a base-excited structure).
+        ``latent=False`` skips the LNN (the data terms need x only).
         """
         fin = f if self.rpn.use_excitation_input else None
         xs = self.rpn.taylor(t, order=order, f=fin)
@@ -122,9 +124,9 @@ class PIDynNet(nn.Module):
             x = x - q[:, None]
             v = v - qd[:, None] if v is not None else None
             if a is not None:
-                a = a - self.accel_signal(f)[:, None]
+                a = a - self.system.excitation_as_acceleration(f)[:, None]
         z = zd = None
-        if self.lnn is not None:
+        if self.lnn is not None and latent:
             zs = self.lnn.taylor(t, order=1, f=fin)
             if self.anchor is not None and self.anchor[3] is not None:
                 t0 = self.anchor[0].reshape(1)
@@ -152,17 +154,6 @@ class PIDynNet(nn.Module):
         out.extend(ys[2:])
         return out
 
-    def accel_signal(self, f: torch.Tensor) -> torch.Tensor:
-        """The excitation as an acceleration: ag (ground), or -u/m with the initial mass (force)."""
-        if self.system.excitation == "ground":
-            return f
-        return -f / self.mass_nominal
-
-    @property
-    def mass_nominal(self) -> float:
-        spec = next((s for s in self.params.specs if s.name == "m"), None)
-        return float(spec.init) if spec is not None else 1.0
-
     def physics_losses(
         self, t: torch.Tensor, f: torch.Tensor, q: torch.Tensor | None = None, qd: torch.Tensor | None = None
     ) -> dict[str, torch.Tensor]:
@@ -175,7 +166,7 @@ class PIDynNet(nn.Module):
 
     def data_losses(self, w: Window, order: int = 1) -> dict[str, torch.Tensor]:
         need = 2 if w.a is not None else (1 if w.v is not None else 0)
-        k = self.kinematics(w.t_data, w.f_data, w.q_data, w.qd_data, order=need)
+        k = self.kinematics(w.t_data, w.f_data, w.q_data, w.qd_data, order=need, latent=False)
         out = {"data/x": (((k.x - w.x) / self.scale_x) ** 2).mean()}
         if w.v is not None:
             out["data/v"] = (((k.v - w.v) / self.scale_v) ** 2).mean()
@@ -188,8 +179,8 @@ class PIDynNet(nn.Module):
                                 f_scale: torch.Tensor) -> None:
         """Like ``enter_window`` for a window without measurements (scales given).
 
-        The force scale is the whole record's: a quiet window's own std would blow up the
-        normalised residual and stall the fit there.
+        The force scale is the whole record's, so a loss value means the same in every
+        window of a prediction.
         """
         self.scale_x.copy_(x_scale)
         self.scale_v.copy_(v_scale)
@@ -234,7 +225,7 @@ class PIDynNet(nn.Module):
     @torch.no_grad()
     def response_at_start(self, w: Window) -> torch.Tensor:
         k = self.kinematics(w.t_pool[:1], w.f_pool[:1], None if w.q_pool is None else w.q_pool[:1],
-                            None if w.qd_pool is None else w.qd_pool[:1], order=0)
+                            None if w.qd_pool is None else w.qd_pool[:1], order=0, latent=False)
         return k.x[0]
 
     def least_squares_init(self, w: Window, names: list[str] | None = None) -> dict[str, float]:

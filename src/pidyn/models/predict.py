@@ -1,9 +1,9 @@
 """Response prediction for unseen excitations by physics-only fine-tuning (paper Eq. 14).
 
-The identified parameters stay fixed; the RPN (and LNN) start from the identification
-networks and are re-trained window by window on the physics residual alone, with the
-state at each window start handed over from the previous window (zero at rest before the
-record). No measurement of the new response is used.
+The identified parameters stay fixed; the RPN (and LNN) are trained window by window on
+the physics residual alone (from a fresh start or from the identification networks), with
+the state at each window start handed over from the previous window (zero at rest before
+the record). No measurement of the new response is used.
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ def predict_response(
     net = module.net
     for p in net.physical_parameters():
         p.requires_grad_(False)
-    accel = record.f if net.system.excitation == "ground" else -record.f / net.mass_nominal
+    accel = net.system.excitation_as_acceleration(record.f)
     # the DataModule needs response columns for its windows: zeros (never used in fine-tuning)
     blank = Record(name=record.name, t=record.t, f=record.f, x=np.zeros_like(record.x), excitation=record.excitation)
     dm = SubperiodDataModule(blank, window_length=window_length, pool_size=pool_size, batch_size=batch_size,
@@ -88,8 +88,6 @@ def predict_response(
     try:
         for w in dm.windows:
             net.enter_prediction_window(w, xs, vs, fs)
-            if net.lnn is not None:
-                net.z_offset.zero_()
             net.anchor = (w.t0 * torch.ones((), dtype=dt), state[0], state[1], state[2])
             module.start(w, "finetune", iterations)
             dm.activate(w.index, iterations, module.inner_steps, physics=True)
@@ -98,7 +96,7 @@ def predict_response(
             log.debug("window %d: physics loss %.3g", w.index, module.last_losses.get("total", float("nan")))
             with torch.no_grad():
                 m = (record.t >= w.t0 - 1e-9) & (record.t <= w.t1 + 1e-9)
-                k = net.kinematics(w.t_data, w.f_data, w.q_data, w.qd_data, order=0)
+                k = net.kinematics(w.t_data, w.f_data, w.q_data, w.qd_data, order=0, latent=False)
                 x_pred[m] = k.x.numpy()
         log.info("predicted %s: %d windows, %.1f s", record.name, len(dm.windows), time.perf_counter() - t_start)
     finally:

@@ -67,6 +67,23 @@ class StructuralSystem(ABC):
     ) -> np.ndarray:
         """dy/dt for the state y = [x (n_dof), v (n_dof), z (n_latent)]."""
 
+    def nominal_mass(self) -> float:
+        """The mass as given (its spec's init): known, or the starting guess when identified."""
+        spec = next((s for s in self.param_specs() if s.name in ("m", "m1")), None)
+        return float(spec.init) if spec is not None else 1.0
+
+    def excitation_as_acceleration(self, f):
+        """The excitation as an acceleration q'' for the excitation transform, or None.
+
+        Ground excitation: ag itself. A force on a single mass: -u/m (nominal m). A force
+        on one storey of a multi-storey model has no common acceleration: None (no transform).
+        """
+        if self.excitation == "ground":
+            return f
+        if self.n_dof > 1:
+            return None
+        return -f / self.nominal_mass()
+
     def linear_params(self) -> list[str]:
         """Parameters in which the ``motion`` residual is linear (for least-squares init)."""
         return []

@@ -67,11 +67,9 @@ def identify(cfg: DictConfig) -> tuple[dict[str, Any], dict[str, Any]]:
             f"data '{record.name}' is {record.excitation}-excited but system '{system.name}' expects "
             f"'{system.excitation}' excitation: set system.excitation={record.excitation}"
         )
-    accel = record.f if system.excitation == "ground" else -record.f / _nominal_mass(system)
+    accel = system.excitation_as_acceleration(record.f) if cfg.model.excitation_transform else None
     dm: SubperiodDataModule = hydra.utils.instantiate(
-        cfg.data.windows, record=record, data_seed=cfg.data_seed,
-        excitation_transform=bool(cfg.model.excitation_transform) and not (system.excitation == "force" and system.n_dof > 1),
-        accel_signal=accel,
+        cfg.data.windows, record=record, data_seed=cfg.data_seed, accel_signal=accel
     )
     rpn = hydra.utils.instantiate(cfg.model.rpn, out_features=system.n_dof)
     lnn = hydra.utils.instantiate(cfg.model.lnn, out_features=system.n_latent) if system.n_latent else None
@@ -183,11 +181,6 @@ def run_baselines(cfg: DictConfig, system: StructuralSystem, record: Record, run
     if out:
         write_json(run_dir / "baselines.json", {"baselines": out})
     return out
-
-
-def _nominal_mass(system: StructuralSystem) -> float:
-    spec = next((s for s in system.param_specs() if s.name == "m"), None)
-    return float(spec.init) if spec is not None else 1.0
 
 
 def _in_multirun() -> bool:
