@@ -17,7 +17,7 @@ def good_rows(n=20, dt=0.01):
 
 def test_good_csv(tmp_path):
     r = from_csv(write(tmp_path, good_rows()))
-    assert r.excitation == "ground" and r.x.shape == (20,) and r.dt == pytest.approx(0.01)
+    assert r.excitation == "ground" and r.x.shape == (20, 1) and r.dt == pytest.approx(0.01)
 
 
 @pytest.mark.parametrize(

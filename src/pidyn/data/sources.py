@@ -36,9 +36,34 @@ class Record:
     clean: Trajectory | None = None
     meta: dict = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        """Response channels are (N, n_dof); a 1-D series is one degree of freedom."""
+        for name in ("x", "v", "a"):
+            arr = getattr(self, name)
+            if arr is not None:
+                arr = np.asarray(arr, dtype=float)
+                setattr(self, name, arr[:, None] if arr.ndim == 1 else arr)
+        self.f = np.asarray(self.f, dtype=float)
+        if len(self.x) != len(self.t) or len(self.f) != len(self.t):
+            raise DataError(f"record '{self.name}': {len(self.t)} times, {len(self.x)} displacements, "
+                            f"{len(self.f)} excitation samples; they must match")
+
     @property
     def dt(self) -> float:
         return float(self.t[1] - self.t[0])
+
+    def segment(self, t0: float | None, t1: float | None) -> "Record":
+        """The samples with t0 <= t <= t1 (times kept absolute; the truth travels along)."""
+        from dataclasses import replace
+
+        lo = -np.inf if t0 is None else t0 - 1e-9
+        hi = np.inf if t1 is None else t1 + 1e-9
+        keep = (self.t >= lo) & (self.t <= hi)
+        if keep.sum() < 10:
+            raise ValueError(f"record '{self.name}': only {int(keep.sum())} samples in [{t0}, {t1}] s")
+        cut = lambda a: None if a is None else a[keep]  # noqa: E731
+        return replace(self, t=self.t[keep], f=self.f[keep], x=self.x[keep], v=cut(self.v), a=cut(self.a),
+                       clean=None, meta={**self.meta, "segment": [t0, t1]})
 
 
 def synthetic(

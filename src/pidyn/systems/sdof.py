@@ -59,6 +59,15 @@ class SDOFSystem(StructuralSystem):
     def param_specs(self) -> list[ParamSpec]:
         return list(self._specs)
 
+    def with_term(self, term: ForceTerm, name: str | None = None, params: dict | None = None) -> "SDOFSystem":
+        """This model plus one more force term (a discovered effect); the existing parameter
+        specs (their initial values included) are kept, ``params`` overrides any of them."""
+        new = SDOFSystem(self.terms + [term], mass=self.mass, excitation=self.excitation,
+                         name=name or f"{self.name}+{term.name}")
+        new.identify_mass = self.identify_mass
+        new._specs = merge_specs(list(self._specs) + merge_specs(term.specs(), None), params)
+        return new
+
     def linear_params(self) -> list[str]:
         names = [n for t in self.terms for n in t.linear]
         if self.identify_mass:

@@ -122,16 +122,23 @@ class BoucWenHysteresis(ForceTerm):
     n_latent = 1
 
     def __init__(
-        self, k: float = 12.0, beta: float = 1.0, gamma: float = 2.0, n: float = 2.0, param: str = "k"
+        self, k: float = 12.0, beta: float = 1.0, gamma: float = 2.0, n: float = 2.0, param: str = "k",
+        shape_scale: float = 1.0, gamma_lower: float | None = None,
     ) -> None:
+        """``shape_scale`` sizes beta's and gamma's bounds (+-10 x it): they scale with
+        displacement^-n, so a response in centimetres needs a larger range than one in metres.
+        ``gamma_lower`` (default -10 x shape_scale) can keep beta + gamma > 0 (bounded z)."""
         self.k, self.beta, self.gamma, self.n, self.param = k, beta, gamma, n, param
+        self.shape_scale = shape_scale
+        self.gamma_lower = -10.0 * shape_scale if gamma_lower is None else gamma_lower
         self.linear = (param,)
 
     def specs(self):
+        S = self.shape_scale
         return [
             ParamSpec(self.param, init=self.k, scale=self.k, true=self.k, unit="N/m"),
-            ParamSpec("beta", init=self.beta, scale=1.0, true=self.beta, lower=0.0, upper=10.0),
-            ParamSpec("gamma", init=self.gamma, scale=1.0, true=self.gamma, lower=-10.0, upper=10.0,
+            ParamSpec("beta", init=self.beta, scale=S, true=self.beta, lower=0.0, upper=10.0 * S),
+            ParamSpec("gamma", init=self.gamma, scale=S, true=self.gamma, lower=self.gamma_lower, upper=10.0 * S,
                       transform="box"),
             ParamSpec("n", init=self.n, scale=1.0, true=self.n, lower=0.5, upper=6.0, transform="box"),
         ]
@@ -150,6 +157,122 @@ class BoucWenHysteresis(ForceTerm):
         return f"{p[self.param]:.5g} z"
 
 
+class QuadraticStiffness(ForceTerm):
+    """k2 x^2: a stiffness that differs in tension and compression (asymmetric)."""
+
+    name = "quadratic_stiffness"
+    linear = ("k2",)
+
+    def __init__(self, k2: float = 10.0, scale: float | None = None) -> None:
+        self.k2, self.scale = k2, scale
+
+    def specs(self):
+        s = self.scale or (abs(self.k2) or 1.0)
+        return [ParamSpec("k2", init=self.k2, scale=s, true=self.k2, transform="identity", unit="N/m^2")]
+
+    def force(self, t, x, v, z, p):
+        return p["k2"] * x**2
+
+    def formula(self, p):
+        return f"{p['k2']:.5g} x^2"
+
+
+class CoulombFriction(ForceTerm):
+    """Fc sign(x'), smoothed as Fc tanh(x'/eps) so that integrators and gradients stay finite.
+
+    ``eps`` (m/s) is fixed, not identified: a small fraction of the velocity scale.
+    """
+
+    name = "coulomb_friction"
+    linear = ("Fc",)
+
+    def __init__(self, Fc: float = 0.1, eps: float = 1e-3) -> None:
+        if eps <= 0:
+            raise ValueError(f"coulomb_friction: eps must be > 0, got {eps}")
+        self.Fc, self.eps = Fc, eps
+
+    def specs(self):
+        return [ParamSpec("Fc", init=self.Fc, scale=self.Fc, true=self.Fc, unit="N")]
+
+    def force(self, t, x, v, z, p):
+        return p["Fc"] * _tanh(v / self.eps)
+
+    def formula(self, p):
+        return f"{p['Fc']:.5g} sign(x')"
+
+
+class QuadraticDamping(ForceTerm):
+    """c2 x'|x'|: drag-type damping that grows with the square of the velocity."""
+
+    name = "quadratic_damping"
+    linear = ("c2",)
+
+    def __init__(self, c2: float = 0.5) -> None:
+        self.c2 = c2
+
+    def specs(self):
+        return [ParamSpec("c2", init=self.c2, scale=self.c2, true=self.c2, unit="N s^2/m^2")]
+
+    def force(self, t, x, v, z, p):
+        return p["c2"] * v * _abs(v)
+
+    def formula(self, p):
+        return f"{p['c2']:.5g} x'|x'|"
+
+
+class StiffnessLoss(ForceTerm):
+    """-drop k x H(t - t_d): the stiffness ``k`` falls by the fraction ``drop`` at time t_d.
+
+    Damage during the earthquake. The step is smoothed over ``tau`` seconds (a sigmoid) so
+    that t_d has a gradient; ``stiffness`` names the nominal stiffness parameter it scales.
+    """
+
+    name = "stiffness_loss"
+
+    def __init__(self, drop: float = 0.2, t_d: float = 10.0, t_min: float = 0.0, t_max: float = 40.0,
+                 stiffness: str = "k", tau: float = 0.05) -> None:
+        if not t_min < t_d < t_max:
+            raise ValueError(f"stiffness_loss: t_d={t_d} outside ({t_min}, {t_max})")
+        self.drop, self.t_d, self.t_min, self.t_max, self.stiffness, self.tau = drop, t_d, t_min, t_max, stiffness, tau
+
+    def specs(self):
+        return [
+            ParamSpec("drop", init=self.drop, true=self.drop, transform="box", lower=0.0, upper=0.95),
+            ParamSpec("t_d", init=self.t_d, true=self.t_d, transform="box", lower=self.t_min, upper=self.t_max,
+                      unit="s"),
+        ]
+
+    def force(self, t, x, v, z, p):
+        return -p["drop"] * p[self.stiffness] * x * _sigmoid((t - p["t_d"]) / self.tau)
+
+    def formula(self, p):
+        return f"- {p['drop']:.4g} {p[self.stiffness]:.5g} x H(t - {p['t_d']:.4g})"
+
+
+class GapContact(ForceTerm):
+    """kg (|x| - gap)_+ sign(x): a symmetric stop that engages beyond a gap."""
+
+    name = "gap_contact"
+    linear = ("kg",)
+
+    def __init__(self, kg: float = 50.0, gap: float = 0.05) -> None:
+        self.kg, self.gap = kg, gap
+
+    def specs(self):
+        return [
+            ParamSpec("kg", init=self.kg, scale=self.kg, true=self.kg, unit="N/m"),
+            ParamSpec("gap", init=self.gap, scale=self.gap, true=self.gap, unit="m"),
+        ]
+
+    def force(self, t, x, v, z, p):
+        return p["kg"] * (_relu(x - p["gap"]) - _relu(-x - p["gap"]))
+
+    def formula(self, p):
+        return f"{p['kg']:.5g} (|x| - {p['gap']:.4g})+ sign(x)"
+
+
 TERMS: dict[str, type[ForceTerm]] = {
-    cls.name: cls for cls in (ViscousDamping, LinearStiffness, CubicStiffness, BoucWenHysteresis)
+    cls.name: cls
+    for cls in (ViscousDamping, LinearStiffness, CubicStiffness, BoucWenHysteresis, QuadraticStiffness,
+                CoulombFriction, QuadraticDamping, StiffnessLoss, GapContact)
 }
