@@ -47,3 +47,15 @@ def test_sweep_knobs_reach_the_nested_nodes(tmp_path):
 def test_config_typos_fail_loudly(bad, tmp_path):
     with pytest.raises((ConfigCompositionException, ConfigAttributeError)):
         make_cfg([bad], tmp_path)
+
+
+@pytest.mark.parametrize("overrides", [[], ["data=silverbox", "system=linear"],
+                                       ["data=csv", "data.path=x.csv", "data.mass=2.0"]])
+def test_diagnose_configs_compose(overrides, tmp_path):
+    cfg = make_cfg(overrides, tmp_path, config_name="diagnose")
+    assert cfg.task_name == "diagnose" and cfg.diagnosis.thresholds.min_delta_bic > 0
+    if "data=silverbox" in overrides:
+        assert cfg.data.mass is None and cfg.model.schedule.max_windows == 10
+        assert cfg.diagnosis.polish_seconds == 10.0
+    else:
+        assert cfg.model.schedule.max_windows is None and cfg.diagnosis.polish_seconds is None

@@ -39,3 +39,11 @@ def generalize_main(cfg: DictConfig) -> float | None:
 
     summary = _guarded(generalize, cfg)
     return summary.get("share_gamma_ge_0.95_pidynnet")
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="diagnose")
+def diagnose_main(cfg: DictConfig) -> float | None:
+    from pidyn.tasks.diagnose import diagnose
+
+    result = _guarded(diagnose, cfg)
+    return result["gain"]["extended"] if result["gain"]["extended"] is not None else result["gain"]["nominal"]

@@ -1,0 +1,290 @@
+"""The library of candidate effects a nominal model may be missing.
+
+Each effect is one small class that knows three things:
+
+* ``candidates``: its force as regression columns on the measured signals, one set per
+  point of a small grid over the parameters the force is nonlinear in (a gap, a damage
+  time, a hysteresis shape). The screening fits the coefficients by least squares.
+* ``term``: the restoring-force term (``pidyn.systems.terms``) that extends the model,
+  initialised from the screening estimate, whose parameters PIDynNet then trains.
+* ``sample``: a hidden instance of itself with a random magnitude, for the tests and the
+  benchmark that hide an effect in simulated data and require the diagnosis to find it.
+
+To add an effect: write the force term in ``terms.py``, one subclass here, and register
+it in ``EFFECTS``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Iterator
+
+import numpy as np
+
+from pidyn.systems.terms import (
+    BoucWenHysteresis,
+    CoulombFriction,
+    CubicStiffness,
+    ForceTerm,
+    GapContact,
+    QuadraticDamping,
+    QuadraticStiffness,
+    StiffnessLoss,
+)
+
+
+@dataclass
+class Signals:
+    """Pointwise response used to evaluate candidate forces (smoothed measurements).
+
+    ``k_nominal`` is the nominal linear stiffness (for scales and the stiffness-loss
+    fraction); ``stiffness`` its parameter name.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    mass: float
+    k_nominal: float
+    stiffness: str = "k"
+    t_fit_end: float | None = None
+    v_noise: float = 0.0  # noise std left in the smoothed velocity
+
+    @property
+    def x_peak(self) -> float:
+        return float(np.max(np.abs(self.x)))
+
+    @property
+    def v_rms(self) -> float:
+        return float(np.sqrt(np.mean(self.v**2)))
+
+    @property
+    def friction_eps(self) -> float:
+        """Velocity width of the smoothed sign: 2 % of the RMS velocity."""
+        return 0.02 * self.v_rms
+
+    def context(self) -> dict:
+        """What a force term needs to know about the record (plain numbers, for configs)."""
+        return {"friction_eps": self.friction_eps, "t_min": float(self.t[0]), "t_max": float(self.t[-1]),
+                "stiffness": self.stiffness}
+
+
+@dataclass
+class Candidate:
+    """One grid point of an effect: its regression columns and how to read the coefficients."""
+
+    effect: str
+    columns: np.ndarray  # (N, q) force per unit coefficient
+    coef_names: tuple[str, ...]
+    fixed: dict[str, float] = field(default_factory=dict)  # grid-searched (nonlinear) parameters
+    positive: tuple[bool, ...] = ()  # coefficient must be > 0 to be physical
+
+
+class Effect:
+    """Base class of a candidate effect."""
+
+    name: str = "effect"
+    n_grid: int = 0  # parameters found by the grid (they count in the information criterion)
+
+    def candidates(self, s: Signals) -> Iterator[Candidate]:
+        raise NotImplementedError
+
+    def parameters(self, coef: dict[str, float], fixed: dict[str, float], nominal: dict[str, float]) -> dict[str, float]:
+        """The effect's physical parameters from regression coefficients (what is reported)."""
+        return {**coef, **fixed}
+
+    def term(self, params: dict[str, float], ctx: dict) -> ForceTerm:
+        """The force term at ``params``; ``ctx`` is ``Signals.context()``."""
+        raise NotImplementedError
+
+    def sample(self, rng: np.random.Generator, s: Signals) -> dict[str, float]:
+        """Random true parameters of a hidden instance, sized against the response ``s``."""
+        raise NotImplementedError
+
+    #: the parameter the tests check, and its relative tolerance
+    key: str = ""
+    tolerance: float = 0.25
+
+    def _size(self, rng: np.random.Generator, s: Signals, lo: float = 0.15, hi: float = 0.35) -> float:
+        """Peak effect force as a share of the peak linear restoring force."""
+        return float(rng.uniform(lo, hi)) * s.k_nominal * s.x_peak
+
+
+class Cubic(Effect):
+    name, key, tolerance = "cubic_stiffness", "k3", 0.2
+
+    def candidates(self, s):
+        yield Candidate(self.name, s.x[:, None] ** 3, ("k3",), positive=(False,))
+
+    def term(self, p, s):
+        return CubicStiffness(p["k3"])
+
+    def sample(self, rng, s):
+        return {"k3": self._size(rng, s) / s.x_peak**3}
+
+
+class Quadratic(Effect):
+    name, key, tolerance = "quadratic_stiffness", "k2", 0.25
+
+    def candidates(self, s):
+        yield Candidate(self.name, s.x[:, None] ** 2, ("k2",), positive=(False,))
+
+    def term(self, p, s):
+        return QuadraticStiffness(p["k2"])
+
+    def sample(self, rng, s):
+        return {"k2": float(rng.choice([-1.0, 1.0])) * self._size(rng, s) / s.x_peak**2}
+
+
+class Coulomb(Effect):
+    name, key, tolerance = "coulomb_friction", "Fc", 0.25
+
+    def candidates(self, s):
+        # near rest, noise flips the sign of the measured velocity: a column no sharper than
+        # the noise (the expected sign of a noisy velocity is a smooth step of that width)
+        eps = max(s.friction_eps, 2.0 * s.v_noise)
+        yield Candidate(self.name, np.tanh(s.v / eps)[:, None], ("Fc",), positive=(True,))
+
+    def term(self, p, s):
+        return CoulombFriction(p["Fc"], eps=s["friction_eps"])
+
+    def sample(self, rng, s):
+        return {"Fc": self._size(rng, s, 0.04, 0.1)}
+
+
+class QuadDamping(Effect):
+    name, key, tolerance = "quadratic_damping", "c2", 0.3
+
+    def candidates(self, s):
+        yield Candidate(self.name, (s.v * np.abs(s.v))[:, None], ("c2",), positive=(True,))
+
+    def term(self, p, s):
+        return QuadraticDamping(p["c2"])
+
+    def sample(self, rng, s):
+        v_peak = float(np.max(np.abs(s.v)))
+        return {"c2": self._size(rng, s, 0.08, 0.2) / v_peak**2}
+
+
+def bouc_wen_z(x: np.ndarray, beta: np.ndarray, gamma: np.ndarray, n: np.ndarray, substeps: int = 4) -> np.ndarray:
+    """Bouc-Wen z along a displacement path, for P parameter sets at once: (N,) -> (N, P).
+
+    z' = x' (1 - (beta + gamma sgn(x' z)) |z|^n) is rate independent, so z follows from the
+    increments of x alone (midpoint rule on ``substeps`` sub-increments).
+    """
+    beta, gamma, n = (np.atleast_1d(np.asarray(a, float)) for a in (beta, gamma, n))
+    z = np.zeros((len(x), beta.size))
+    zi = np.zeros(beta.size)
+    dxs = np.diff(x) / substeps
+    for i, dx in enumerate(dxs):
+        for _ in range(substeps):
+            g = lambda zz: dx * (1 - (beta + gamma * np.sign(dx * zz)) * np.abs(zz) ** n)  # noqa: E731
+            zi = zi + g(zi + 0.5 * g(zi))
+        z[i + 1] = zi
+    return z
+
+
+class Hysteresis(Effect):
+    """Bouc-Wen hysteresis kh z beside the elastic k x (a latent state: the LNN learns z)."""
+
+    name, key, tolerance = "hysteresis", "kh", 0.3
+    n_grid = 2
+    yield_shares = (0.15, 0.3, 0.6)  # z's ceiling (beta + gamma)^(-1/n) over the peak |x|
+    shapes = (0.5, 0.75)  # gamma / (beta + gamma)
+    exponents = (1.0, 2.0)
+
+    def _grid(self, s):
+        rows = []
+        for n in self.exponents:
+            for share in self.yield_shares:
+                total = (share * s.x_peak) ** (-n)
+                for g in self.shapes:
+                    rows.append((total * (1 - g), total * g, n))
+        return np.array(rows)
+
+    def candidates(self, s):
+        grid = self._grid(s)
+        z = bouc_wen_z(s.x, grid[:, 0], grid[:, 1], grid[:, 2])
+        for j, (beta, gamma, n) in enumerate(grid):
+            yield Candidate(self.name, z[:, j : j + 1], ("kh",), fixed={"beta": beta, "gamma": gamma, "n": n},
+                            positive=(True,))
+
+    def parameters(self, coef, fixed, nominal):
+        out = {**coef, **fixed}
+        out["z_max"] = float((fixed["beta"] + fixed["gamma"]) ** (-1.0 / fixed["n"]))
+        return out
+
+    def term(self, p, s):
+        return BoucWenHysteresis(p["kh"], p["beta"], p["gamma"], p["n"], param="kh",
+                                 shape_scale=max(abs(p["beta"]) + abs(p["gamma"]), 1e-12) / 2, gamma_lower=0.0)
+
+    def sample(self, rng, s):
+        n = float(rng.choice([1.0, 2.0]))
+        share = float(rng.uniform(0.2, 0.5))
+        total = (share * s.x_peak) ** (-n)
+        g = float(rng.uniform(0.5, 0.8))
+        # kh z_max sized like the other effects' peak force
+        kh = self._size(rng, s, 0.1, 0.25) / (share * s.x_peak)
+        return {"kh": kh, "beta": total * (1 - g), "gamma": total * g, "n": n}
+
+
+class Damage(Effect):
+    """The stiffness falls by a fraction at an unknown time (grid over the time)."""
+
+    name, key, tolerance = "stiffness_loss", "drop", 0.25
+    n_grid = 1
+    n_times = 40
+
+    def _span(self, s):
+        t_end = s.t_fit_end if s.t_fit_end is not None else float(s.t[-1])
+        return float(s.t[0]) + 0.05 * (t_end - s.t[0]), t_end
+
+    def candidates(self, s):
+        lo, hi = self._span(s)
+        for t_d in np.linspace(lo, hi, self.n_times + 2)[1:-1]:
+            col = s.x * (s.t >= t_d)
+            yield Candidate(self.name, col[:, None], ("dk",), fixed={"t_d": float(t_d)}, positive=(False,))
+
+    def parameters(self, coef, fixed, nominal):
+        k = nominal.get("k", nominal.get("k1", 1.0))
+        return {"drop": -coef["dk"] / k, "t_d": fixed["t_d"]}
+
+    def term(self, p, s):
+        drop = min(max(p["drop"], 0.01), 0.9)
+        return StiffnessLoss(drop, p["t_d"], t_min=s["t_min"], t_max=s["t_max"], stiffness=s["stiffness"])
+
+    def sample(self, rng, s):
+        lo, hi = self._span(s)
+        return {"drop": float(rng.uniform(0.15, 0.4)), "t_d": float(rng.uniform(lo + 0.2 * (hi - lo), lo + 0.7 * (hi - lo)))}
+
+
+class Gap(Effect):
+    """A symmetric stop beyond a gap (grid over the gap)."""
+
+    name, key, tolerance = "gap_contact", "kg", 0.3
+    n_grid = 1
+    gap_shares = tuple(np.linspace(0.2, 0.85, 14))
+
+    def candidates(self, s):
+        for share in self.gap_shares:
+            gap = share * s.x_peak
+            col = np.maximum(s.x - gap, 0) - np.maximum(-s.x - gap, 0)
+            yield Candidate(self.name, col[:, None], ("kg",), fixed={"gap": float(gap)}, positive=(True,))
+
+    def term(self, p, s):
+        return GapContact(p["kg"], p["gap"])
+
+    def sample(self, rng, s):
+        share = float(rng.uniform(0.35, 0.7))
+        kg = float(rng.uniform(0.5, 2.0)) * s.k_nominal
+        return {"kg": kg, "gap": share * s.x_peak}
+
+
+EFFECTS: dict[str, Effect] = {e.name: e for e in (Cubic(), Quadratic(), Coulomb(), QuadDamping(), Hysteresis(), Damage(), Gap())}
+"""Every candidate effect by name; ``none`` is the verdict when none of them is needed."""
+
+
+def get_effect(name: str) -> Effect:
+    if name not in EFFECTS:
+        raise ValueError(f"unknown effect '{name}'; choose from {sorted(EFFECTS)} (or 'none')")
+    return EFFECTS[name]

@@ -1,0 +1,84 @@
+"""Simulated records with a hidden effect: the ground truth for testing a diagnosis.
+
+A case draws (seeded) a shipped earthquake record, a measurement-noise level and one effect
+of the library with a random magnitude, simulates the nominal structure plus that effect,
+and measures it. The nominal model does not know the effect; the diagnosis has to find it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pidyn.data.sources import Record, synthetic_from_motion
+from pidyn.discrepancy.effects import Signals, get_effect
+from pidyn.excitation.ground_motion import prepare
+from pidyn.simulate import simulate
+from pidyn.systems.sdof import LinearSDOF, SDOFSystem
+
+#: records whose strong motion lies in their first 25 s
+RECORDS = ("el_centro", "el_centro_peer2000", "kobe", "kobe_090", "taft", "san_fernando", "loma_prieta",
+           "landers", "northridge")
+
+
+@dataclass
+class HiddenCase:
+    record: Record
+    effect: str | None
+    truth: dict[str, float]  # the hidden effect's parameters
+    nominal: dict[str, float]  # the nominal structure's true parameters
+    noise: float
+    motion: str
+    fit_end: float
+
+
+def hidden_case(
+    effect: str | None,
+    seed: int,
+    noise: float | None = None,
+    duration: float = 25.0,
+    fit_end: float = 16.0,
+    dt: float = 0.01,
+    pga: float = 3.0,
+    c: float = 0.5,
+    k: float = 15.0,
+    mass: float = 1.0,
+    max_noise: float = 0.05,
+) -> HiddenCase:
+    """Linear SDOF (m, c, k) plus ``effect`` (None: nothing hidden) under a random record.
+
+    ``noise`` None draws it uniformly in [0, max_noise] (std as a share of each channel's RMS).
+    """
+    rng = np.random.default_rng(seed)
+    motion = str(rng.choice(RECORDS))
+    gm = prepare(motion, dt=dt, duration=duration)
+    gm = gm.scaled(pga / gm.pga)
+    level = float(rng.uniform(0.0, max_noise)) if noise is None else float(noise)
+    nominal = LinearSDOF(c=c, k=k, mass=mass)
+    truth_nom = nominal.true_values()
+    terms = list(nominal.terms)
+    hidden: dict[str, float] = {}
+    if effect is not None:
+        eff = get_effect(effect)
+        base = simulate(nominal, truth_nom, gm, gm.t)
+        s = Signals(base.t, base.x[:, 0], base.v[:, 0], mass, k, "k", t_fit_end=fit_end)
+        hidden = eff.sample(rng, s)
+        terms.append(eff.term(hidden, s.context()))
+    system = SDOFSystem(terms, mass=mass, name=f"linear_sdof+{effect or 'none'}")
+    truth = {**truth_nom, **{k_: v for k_, v in system.true_values().items() if k_ not in truth_nom}}
+    truth.update(hidden)
+    rec = synthetic_from_motion(system, gm, noise=level, data_seed=seed, channels=("x", "v"), params=truth)
+    rec.name = f"{motion}+{effect or 'none'}"
+    rec.meta.update({"hidden_effect": effect, "hidden_params": hidden, "seed": seed})
+    return HiddenCase(rec, effect, hidden, truth_nom, level, motion, fit_end)
+
+
+def hidden_record(effect: str | None = "cubic_stiffness", seed: int = 0, noise: float | None = None,
+                  duration: float = 25.0, fit_end: float = 16.0, dt: float = 0.01) -> Record:
+    """A hidden-effect case as a data source (``data=hidden``); ``effect: null`` hides nothing."""
+    if effect in ("none", "null", ""):
+        effect = None
+    case = hidden_case(effect, seed, noise=noise, duration=duration, fit_end=fit_end, dt=dt)
+    case.record.meta["split"] = {"fit": [0.0, fit_end], "heldout": [fit_end, float(case.record.t[-1])]}
+    return case.record

@@ -1,0 +1,138 @@
+"""Figures and the markdown report of a diagnosis."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _shade(ax, fit, held) -> None:
+    ax.axvspan(*held, color="0.92", zorder=0, label="held out")
+
+
+def plot_response(path: Path, t, x, x_nom, x_ext, fit, held, unit: str = "m") -> None:
+    """Measured vs simulated displacement (nominal, extended) and the simulation errors."""
+    plt = _plt()
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(11, 5.5), sharex=True)
+    _shade(a1, fit, held)
+    a1.plot(t, x, color="k", lw=0.6, label="measured")
+    a1.plot(t, x_nom, color="tab:red", lw=0.7, label="nominal model")
+    if x_ext is not None:
+        a1.plot(t, x_ext, color="tab:blue", lw=0.7, ls="--", label="extended model")
+    a1.set_ylabel(f"x [{unit}]")
+    a1.legend(loc="upper right", fontsize=8, ncol=4)
+    _shade(a2, fit, held)
+    a2.plot(t, x_nom - x, color="tab:red", lw=0.6, label="nominal - measured")
+    if x_ext is not None:
+        a2.plot(t, x_ext - x, color="tab:blue", lw=0.6, label="extended - measured")
+    a2.set_ylabel(f"error [{unit}]")
+    a2.set_xlabel("t [s]")
+    a2.legend(loc="upper right", fontsize=8)
+    fig.suptitle("What the simulation gets wrong: free simulation from the measured initial state")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_residual(path: Path, t, r, x, v, fit, cause, fitted, units: dict) -> None:
+    """The force the nominal model cannot explain: over time, against x and x', spectrum."""
+    from scipy.signal import welch
+
+    plt = _plt()
+    fig, ax = plt.subplots(2, 2, figsize=(11, 7.5))
+    ux, uf = units.get("x", "m"), units.get("u", "N")
+    ax[0, 0].plot(t, r, lw=0.4, color="0.3", label="unexplained force")
+    if fitted is not None:
+        ax[0, 0].plot(t, fitted, lw=0.6, color="tab:blue", label=f"explained by {cause}")
+    ax[0, 0].axvline(fit[1], color="k", ls=":", lw=0.8)
+    ax[0, 0].set(xlabel="t [s]", ylabel=f"force [{uf}]", title="over time (dotted: end of fitting part)")
+    ax[0, 0].legend(fontsize=8)
+    step = max(1, len(t) // 20000)
+    for a, s, lab in ((ax[0, 1], x, f"x [{ux}]"), (ax[1, 0], v, f"x' [{ux}/s]")):
+        a.scatter(s[::step], r[::step], s=1, c=t[::step], cmap="viridis", alpha=0.5, rasterized=True)
+        if fitted is not None:
+            a.scatter(s[::step], fitted[::step], s=0.5, color="tab:red", alpha=0.5, rasterized=True,
+                      label=f"explained by {cause}")
+            a.legend(fontsize=8, markerscale=8)
+        a.set(xlabel=lab, ylabel=f"force [{uf}]", title=f"against {lab.split()[0]} (colour: time)")
+    dt = float(t[1] - t[0])
+    nper = int(min(len(r), 2048))
+    f, pr = welch(r - r.mean(), fs=1 / dt, nperseg=nper)
+    ax[1, 1].semilogy(f[1:], pr[1:], color="0.3", lw=0.8, label="unexplained force")
+    if fitted is not None:
+        _, pf = welch(fitted - fitted.mean(), fs=1 / dt, nperseg=nper)
+        ax[1, 1].semilogy(f[1:], pf[1:], color="tab:blue", lw=0.8, label=f"explained by {cause}")
+    ax[1, 1].set(xlabel="frequency [Hz]", ylabel="PSD", title="spectrum")
+    ax[1, 1].legend(fontsize=8)
+    fig.suptitle("The force the nominal model cannot explain")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_ranking(path: Path, ranking: list[dict], min_delta_bic: float) -> None:
+    plt = _plt()
+    rows = [r for r in ranking if r.get("score") is not None]
+    fig, ax = plt.subplots(figsize=(7, 0.45 * len(rows) + 1.2))
+    names = [r["effect"] for r in rows][::-1]
+    scores = [r["score"] for r in rows][::-1]
+    colors = ["tab:blue" if r.get("passes") else "0.6" for r in rows][::-1]
+    ax.barh(names, scores, color=colors)
+    ax.axvline(min_delta_bic, color="k", ls=":", lw=0.8, label=f"evidence threshold (-dBIC = {min_delta_bic:g})")
+    ax.set_xscale("symlog")
+    ax.set_xlabel("score = -dBIC (symlog)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _num(v) -> str:
+    return "-" if v is None else (f"{v:.4g}" if isinstance(v, (int, float)) else str(v))
+
+
+def write_report(path: Path, d: dict, figures: list[str]) -> None:
+    g = d["gain"]
+    lines = [f"# Diagnosis of `{d['record']}`", ""]
+    if d["verdict"] == "none":
+        lines += ["**Verdict: none.** No candidate effect explains more of the residual than noise and the "
+                  "model's own error would (thresholds below). The nominal model is adequate for these data.", ""]
+    else:
+        lines += [f"**Verdict: discrepancy. Cause: `{d['cause']}`**"
+                  + (" (named by the user, not by the screening)" if d.get("forced") else ""), ""]
+    lines += ["| model | equation | held-out NRMSE of x |", "|---|---|---|",
+              f"| nominal | `{d['nominal']}` | {_num(g['nominal'])} |"]
+    if d.get("extended"):
+        lines.append(f"| extended | `{d['extended']}` | {_num(g['extended'])} |")
+    lines += ["", f"Fitting part {d['split']['fit'][0]:.4g}-{d['split']['fit'][1]:.4g} s; held-out part "
+              f"{d['split']['heldout'][0]:.4g}-{d['split']['heldout'][1]:.4g} s (not used for fitting).", ""]
+    if d.get("parameters"):
+        lines += ["Estimated effect parameters: " + ", ".join(f"{k} = {v:.5g}" for k, v in d["parameters"].items()), ""]
+    if d.get("hidden"):
+        h = d["hidden"]
+        lines += [f"Hidden in the data (simulated): `{h['effect']}` "
+                  + ", ".join(f"{k} = {v:.5g}" for k, v in (h["parameters"] or {}).items()), ""]
+    lines += ["## Ranking of the candidate effects", "",
+              "score = -dBIC (weak-form equation error, fitting part); explained = share of the nominal residual "
+              "removed; CV gain = share removed in blocked cross-validation over the fitting part; held-out gain = share "
+              "removed on the held-out rows with coefficients from the fitting part.", "",
+              "| effect | score | explained | CV gain | held-out gain | passes | estimate |", "|---|---|---|---|---|---|---|"]
+    for r in d["ranking"]:
+        est = ", ".join(f"{k}={v:.4g}" for k, v in (r.get("parameters") or {}).items())
+        lines.append(f"| {r['effect']} | {_num(r.get('score'))} | {_num(r.get('explained'))} | "
+                     f"{_num(r.get('cv_gain'))} | {_num(r.get('heldout_gain'))} | {'yes' if r.get('passes') else 'no'} | {est or r.get('note', '')} |")
+    th = d["thresholds"]
+    lines += ["", f"An effect counts when -dBIC >= {th['min_delta_bic']:g}, CV gain >= "
+              f"{th['min_cv_gain']:g} and it removes at least {th['min_force_share']:g} of the force variance.", ""]
+    lines += ["## Figures", ""] + [f"![{f}](figures/{f})" for f in figures]
+    path.write_text("\n".join(lines) + "\n")

@@ -1,0 +1,281 @@
+"""The diagnosis task: what does the nominal model get wrong, why, and what does fixing it gain?
+
+1. identify the nominal model on the fitting part (PIDynNet, then optionally an output-error
+   polish);
+2. compute the force it cannot explain (figures: over time, against x and x', spectrum);
+3. screen the effect library against it (``pidyn.discrepancy.screening``) and name the cause,
+   or ``none``;
+4. extend the model with the named effect and identify it again with PIDynNet (its parameters
+   trainable in the physics loss; hysteresis brings a latent state through the LNN);
+5. simulate nominal and extended models over the held-out part and compare.
+
+The nominal and extended identifications are ordinary PIDynNet runs in ``nominal/`` and
+``extended/``, each with its resolved ``config.yaml``.
+"""
+
+from __future__ import annotations
+
+import copy
+import logging
+import time
+from pathlib import Path
+from typing import Any
+
+import hydra
+import numpy as np
+from omegaconf import DictConfig, OmegaConf, open_dict
+
+from pidyn.baselines.fastsim import simulate_batch
+from pidyn.baselines.least_squares import output_error
+from pidyn.data.sources import Record
+from pidyn.discrepancy.effects import EFFECTS, Signals
+from pidyn.discrepancy.report import plot_ranking, plot_residual, plot_response, write_report
+from pidyn.discrepancy.residual import dominant_period, unexplained_force
+from pidyn.discrepancy.screening import Thresholds, screen
+from pidyn.discrepancy.weak_form import WeakForm, smooth_signals, velocity_noise
+from pidyn.reporting import nrmse, write_json
+from pidyn.systems.sdof import SDOFSystem
+from pidyn.tasks.train import build_record, identify
+
+log = logging.getLogger(__name__)
+
+
+def split_spans(record: Record, fit_share: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Fitting and held-out time spans: the record's own split if it has one, else a share."""
+    sp = (record.meta or {}).get("split")
+    if sp:
+        return (float(sp["fit"][0]), float(sp["fit"][1])), (float(sp["heldout"][0]), float(sp["heldout"][1]))
+    if not 0.1 <= fit_share <= 0.95:
+        raise ValueError(f"diagnosis.fit_share must lie in [0.1, 0.95], got {fit_share}")
+    t0, t1 = float(record.t[0]), float(record.t[-1])
+    cut = t0 + fit_share * (t1 - t0)
+    return (t0, cut), (cut, t1)
+
+
+def _stiffness_name(system: SDOFSystem) -> str:
+    names = [s.name for s in system.param_specs()]
+    for n in ("k", "k1"):
+        if n in names:
+            return n
+    raise ValueError(f"nominal system '{system.name}' has no linear stiffness 'k' or 'k1' to extend")
+
+
+def _system_node(node: DictConfig, inits: dict[str, float], mass: float, identify_mass: bool) -> dict:
+    """The nominal system's config with data-driven initial values and the mass setting."""
+    out = OmegaConf.to_container(node, resolve=True)
+    assert isinstance(out, dict)
+    out["mass"] = float(mass)
+    out["identify_mass"] = bool(identify_mass)
+    params = dict(out.get("params") or {})
+    for n, v in inits.items():
+        if n == "m":
+            continue
+        params[n] = {**dict(params.get(n) or {}), "init": float(v)}
+    out["params"] = params
+    return out
+
+
+def _sub_cfg(cfg: DictConfig, system_node: dict, out_dir: Path, fit: tuple[float, float]) -> DictConfig:
+    c = copy.deepcopy(cfg)
+    with open_dict(c):
+        c.system = system_node
+        c.paths.output_dir = str(out_dir)
+        c.data.windows.t_start = fit[0]
+        c.data.windows.t_end = fit[1]
+        c.baselines = {"run": [], "cramer_rao": False}
+        if cfg.diagnosis.get("ls_init") is not None:
+            c.model.schedule.ls_init = cfg.diagnosis.ls_init
+    out_dir.mkdir(parents=True, exist_ok=True)
+    OmegaConf.save(c, out_dir / "config.yaml", resolve=False)
+    return c
+
+
+def _polish(record: Record, system: SDOFSystem, values: dict[str, float], dcfg: DictConfig,
+            fit: tuple[float, float]) -> tuple[dict[str, float], str]:
+    """Output-error least squares on (part of) the fitting span, from ``values``."""
+    seg_end = fit[1] if dcfg.polish_seconds is None else min(fit[1], fit[0] + float(dcfg.polish_seconds))
+    seg = record.segment(fit[0], seg_end)
+    trainable = {s.name for s in system.param_specs() if s.trainable}
+    res = output_error(seg, system, init={k: v for k, v in values.items() if k in trainable},
+                       substeps=int(dcfg.substeps), max_nfev=int(dcfg.polish_max_nfev))
+    out = dict(values)
+    out.update(res.params)
+    return out, f"output error on {seg.t[0]:.4g}-{seg.t[-1]:.4g} s: {res.note}, {res.seconds:.1f} s"
+
+
+def _simulate(system: SDOFSystem, values: dict[str, float], record: Record, vs: np.ndarray, substeps: int) -> np.ndarray:
+    """Free simulation over the whole record from the measured initial state."""
+    p = {k: np.array([v]) for k, v in values.items()}
+    z0 = np.zeros((1, system.n_latent))
+    with np.errstate(all="ignore"):
+        out = simulate_batch(system, p, record.t, record.f, substeps=substeps,
+                             state0=(np.array([record.x[0, 0]]), np.array([vs[0]]), z0))
+    x = out["x"][:, 0]
+    return np.where(np.isfinite(x), x, np.nan)
+
+
+def diagnose(cfg: DictConfig) -> dict[str, Any]:
+    t_wall = time.perf_counter()
+    run_dir = Path(cfg.paths.output_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    dcfg = cfg.diagnosis
+    wanted = list(dcfg.effects) if dcfg.get("effects") else list(EFFECTS)
+    unknown = set(wanted) - set(EFFECTS)
+    if unknown:
+        raise ValueError(f"diagnosis.effects: unknown effect(s) {sorted(unknown)}; the library has {sorted(EFFECTS)}")
+    effects = {n: EFFECTS[n] for n in wanted}
+    thresholds = Thresholds(**OmegaConf.to_container(dcfg.thresholds, resolve=True))  # type: ignore[arg-type]
+
+    base: SDOFSystem = hydra.utils.instantiate(cfg.system)
+    if not isinstance(base, SDOFSystem):
+        raise ValueError(f"diagnosis needs a single-degree-of-freedom nominal system, got '{base.name}'")
+    record = build_record(cfg, base)
+    if record.excitation != base.excitation:
+        base = hydra.utils.instantiate(cfg.system, excitation=record.excitation)
+    mass = cfg.data.get("mass", 1.0)
+    mass_known = mass is not None
+    if not mass_known and record.excitation == "ground":
+        raise ValueError("data.mass is null, but a ground-excited record cannot reveal the mass "
+                         "(m x'' + ... = -m ag is homogeneous in m): give the mass")
+    fit, held = split_spans(record, float(dcfg.fit_share))
+    stiff = _stiffness_name(base)
+    log.info("diagnosing '%s' with nominal '%s': fit %.4g-%.4g s, held out %.4g-%.4g s",
+             record.name, base.name, *fit, *held)
+
+    # --- signals, time scale and a data-driven starting point for the nominal parameters
+    x_raw = record.x[:, 0]
+    fit_mask = (record.t >= fit[0]) & (record.t <= fit[1])
+    period = dominant_period(record.t[fit_mask], x_raw[fit_mask])
+    values0 = {s.name: s.init for s in base.param_specs()}
+    if mass_known:
+        values0["m"] = float(mass)
+
+    def signals(period_: float, k_nom: float) -> tuple[Signals, WeakForm]:
+        v_raw = None if record.v is None else record.v[:, 0]
+        xs, vs = smooth_signals(record.t, x_raw, v_raw, period_)
+        return (Signals(record.t, xs, vs, values0.get("m", 1.0), k_nom, stiff, t_fit_end=fit[1],
+                        v_noise=velocity_noise(record.t, x_raw, v_raw, period_)),
+                WeakForm.for_record(record.t, period_))
+
+    s, weak = signals(period, values0[stiff])
+    start = screen(base, values0, s, record.f, x_raw, weak, fit[1], mass_known, effects={}, thresholds=thresholds)
+    values0.update(start.nominal_params)
+    if values0.get(stiff, 0) > 0 and values0.get("m", 0) > 0:
+        period = 2 * np.pi * np.sqrt(values0["m"] / values0[stiff])
+        s, weak = signals(period, values0[stiff])
+        start = screen(base, values0, s, record.f, x_raw, weak, fit[1], mass_known, effects={}, thresholds=thresholds)
+        values0.update(start.nominal_params)
+    log.info("weak-form starting point: %s (natural period %.4g s)", _fmt(values0), period)
+
+    # --- 1. nominal identification (PIDynNet, then polish)
+    nominal_node = _system_node(cfg.system, {k: v for k, v in values0.items() if v > 0},
+                                values0["m"] if "m" in values0 else 1.0, not mass_known)
+    if record.excitation != OmegaConf.select(cfg, "system.excitation", default=record.excitation):
+        nominal_node["excitation"] = record.excitation
+    nom_metrics, nom_obj = identify(_sub_cfg(cfg, nominal_node, run_dir / "nominal", fit))
+    nominal: SDOFSystem = nom_obj["system"]
+    nominal_values = nom_obj["module"].net.params.as_floats()
+    polish_note = None
+    if dcfg.polish:
+        nominal_values, polish_note = _polish(record, nominal, nominal_values, dcfg, fit)
+    s, weak = signals(period, nominal_values[stiff])
+    s.mass = nominal_values["m"]
+
+    # --- 2-3. what the nominal model cannot explain, and which effect explains it
+    sc = screen(nominal, nominal_values, s, record.f, x_raw, weak, fit[1], mass_known, effects, thresholds)
+    residual, accel = unexplained_force(nominal, nominal_values, record.t, x_raw, s.x, s.v, record.f, period)
+    forced = dcfg.get("force_effect")
+    cause = forced or sc.cause
+    log.info("screening: %s", ", ".join(f"{r['effect']} {r['score']:.1f}" for r in sc.ranking[:4]))
+
+    # --- 4. extended model
+    ext_values = ext_metrics = ext_system = None
+    ext_note = None
+    if cause is not None and dcfg.extend:
+        row = next(r for r in sc.ranking if r["effect"] == cause)
+        if not np.isfinite(row["score"]):
+            raise ValueError(f"effect '{cause}' has no physical fit to this record ({row.get('note')})")
+        refit = {k: v for k, v in row["nominal_refit"].items() if v > 0}
+        node = {"_target_": "pidyn.discrepancy.extend.extended_system",
+                "nominal": _system_node(OmegaConf.create(nominal_node), refit, refit.get("m", nominal_values["m"]),
+                                        not mass_known),
+                "effect": cause, "effect_params": row["parameters"], "context": s.context()}
+        ext_metrics, ext_obj = identify(_sub_cfg(cfg, node, run_dir / "extended", fit))
+        ext_system = ext_obj["system"]
+        ext_values = ext_obj["module"].net.params.as_floats()
+        if dcfg.polish:
+            ext_values, ext_note = _polish(record, ext_system, ext_values, dcfg, fit)
+
+    # --- 5. held-out gain
+    held_mask = (record.t >= held[0]) & (record.t <= held[1])
+    x_nom = _simulate(nominal, nominal_values, record, s.v, int(dcfg.substeps))
+    x_ext = _simulate(ext_system, ext_values, record, s.v, int(dcfg.substeps)) if ext_system is not None else None
+    gain = {"metric": "heldout_nrmse_x", "nominal": nrmse(x_nom[held_mask], x_raw[held_mask]),
+            "extended": None if x_ext is None else nrmse(x_ext[held_mask], x_raw[held_mask])}
+    if record.clean is not None:
+        xc = record.clean.x[:, 0]
+        gain["nominal_vs_clean"] = nrmse(x_nom[held_mask], xc[held_mask])
+        gain["extended_vs_clean"] = None if x_ext is None else nrmse(x_ext[held_mask], xc[held_mask])
+
+    effect_params = {}
+    if ext_values is not None and ext_system is not None:
+        nominal_names = {sp.name for sp in nominal.param_specs()}
+        effect_params = {k: v for k, v in ext_values.items() if k not in nominal_names}
+    truth = dict(record.meta.get("hidden_params") or {}) if "hidden_effect" in record.meta else None
+    diagnosis = {
+        "nominal": nominal.describe(nominal_values),
+        "verdict": "discrepancy" if cause is not None else "none",
+        "cause": cause,
+        "forced": bool(forced),
+        "ranking": sc.ranking,
+        "extended": ext_system.describe(ext_values) if ext_system is not None else None,
+        "parameters": effect_params,
+        "nominal_parameters": nominal_values,
+        "extended_parameters": ext_values,
+        "gain": gain,
+        "split": {"fit": list(fit), "heldout": list(held)},
+        "record": record.name,
+        "noise": (record.meta or {}).get("noise"),
+        "natural_period": period,
+        "thresholds": OmegaConf.to_container(dcfg.thresholds, resolve=True),
+        "polish": {"nominal": polish_note, "extended": ext_note},
+        "pidynnet": {"nominal_errors_pct": nom_metrics.get("error_pct"),
+                     "extended_errors_pct": None if ext_metrics is None else ext_metrics.get("error_pct")},
+        "hidden": None if truth is None else {"effect": record.meta.get("hidden_effect"), "parameters": truth},
+        "wall_seconds": time.perf_counter() - t_wall,
+    }
+    write_json(run_dir / "diagnosis.json", diagnosis)
+    fig = run_dir / "figures"
+    fig.mkdir(exist_ok=True)
+    units = (record.meta or {}).get("units", {})
+    plot_response(fig / "simulation_vs_measured.png", record.t, x_raw, x_nom, x_ext, fit, held, units.get("x", "m"))
+    explained = None
+    if cause is not None:
+        explained = _explained_force(nominal, nominal_values, next(r for r in sc.ranking if r["effect"] == cause), s,
+                                     accel)
+    plot_residual(fig / "residual.png", record.t, residual, s.x, s.v, fit, cause, explained, units)
+    plot_ranking(fig / "ranking.png", sc.ranking, thresholds.min_delta_bic)
+    write_report(run_dir / "report.md", diagnosis, [p.name for p in sorted(fig.glob("*.png"))])
+    log.info("verdict: %s%s; held-out NRMSE nominal %.4g%s", diagnosis["verdict"],
+             f" ({cause})" if cause else "", gain["nominal"],
+             "" if gain["extended"] is None else f", extended {gain['extended']:.4g}")
+    log.info("run folder %s (%.0f s)", run_dir, diagnosis["wall_seconds"])
+    return diagnosis
+
+
+def _explained_force(nominal: SDOFSystem, values: dict[str, float], row: dict, s: Signals,
+                     accel: np.ndarray) -> np.ndarray:
+    """What the screening's fit says the residual is: the effect's force plus the change it
+    brings to the nominal parameters (which had absorbed part of the effect)."""
+    from pidyn.discrepancy.effects import bouc_wen_z
+
+    p = {**values, **row["nominal_refit"], **row["parameters"]}
+    term = EFFECTS[row["effect"]].term(row["parameters"], s.context())
+    z = bouc_wen_z(s.x, p["beta"], p["gamma"], p["n"]) if term.n_latent else None
+    change = nominal.restoring_force(s.t, s.x, s.v, None, values) - nominal.restoring_force(s.t, s.x, s.v, None, p)
+    inertia = (p["m"] - values["m"]) * accel  # nonzero only when the mass is identified
+    return term.force(s.t, s.x, s.v, z, p) - change + inertia
+
+
+def _fmt(values: dict[str, float]) -> str:
+    return ", ".join(f"{k}={v:.5g}" for k, v in values.items())
