@@ -1,4 +1,5 @@
 import numpy as np
+import pandas as pd
 import pytest
 
 from pidyn.data.sources import DataError, from_csv
@@ -36,3 +37,20 @@ def test_bad_csv_names_file_and_problem(tmp_path, mutate, message):
     with pytest.raises(DataError) as exc:
         from_csv(p)
     assert str(p) in str(exc.value) and message in str(exc.value)
+
+
+def test_csv_response_with_an_at2_record(tmp_path):
+    from pidyn.excitation import prepare
+
+    gm = prepare("el_centro", duration=5.0)
+    t = gm.t
+    p = tmp_path / "resp.csv"
+    pd.DataFrame({"t": t, "x": 0.01 * np.sin(t)}).to_csv(p, index=False)
+    r = from_csv(p, at2="el_centro")
+    assert r.excitation == "ground"
+    np.testing.assert_allclose(r.f, gm.acc, rtol=1e-12)
+    with pytest.raises(DataError, match="longer than the AT2"):
+        long = tmp_path / "long.csv"
+        tt = np.arange(0, 60, 0.01)
+        pd.DataFrame({"t": tt, "x": np.sin(tt)}).to_csv(long, index=False)
+        from_csv(long, at2="el_centro")

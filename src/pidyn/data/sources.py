@@ -119,11 +119,14 @@ def from_csv(
     excitation: str | None = None,
     units: dict[str, float] | None = None,
     t_end: float | None = None,
+    at2: str | Path | None = None,
 ) -> Record:
     """Read a measured record: columns ``t`` (s), ``x`` (m), optional ``v``, ``a``, and
     the excitation as ``ag`` (m/s^2, ground) or ``u`` (N, force).
 
-    ``units`` multiplies columns into SI (e.g. ``{"x": 0.001}`` for millimetres).
+    ``units`` multiplies columns into SI (e.g. ``{"x": 0.001}`` for millimetres). ``at2``
+    takes the ground acceleration from a PEER AT2 record (a path or a shipped record's
+    name) instead of a column: interpolated at the CSV's times, which start with the record.
     """
     path = Path(path)
     if not path.is_file():
@@ -138,6 +141,19 @@ def from_csv(
         if col not in df.columns:
             raise DataError(f"{path}: units given for '{col}', which is not a column ({list(df.columns)})")
         df[col] = df[col] * factor
+    if at2 is not None:
+        from pidyn.excitation.ground_motion import load_record
+
+        if "ag" in df.columns or "u" in df.columns:
+            raise DataError(f"{path}: has an excitation column and an AT2 record ({at2}) was given too; use one")
+        if time_col not in df.columns:
+            raise DataError(f"{path}: missing column '{time_col}' (columns: {list(df.columns)})")
+        gm = load_record(at2)
+        t_csv = df[time_col].to_numpy(float)
+        if t_csv[-1] - t_csv[0] > gm.duration + 1e-9:
+            raise DataError(f"{path}: spans {t_csv[-1] - t_csv[0]:.4g} s, longer than the AT2 record {at2} "
+                            f"({gm.duration:.4g} s)")
+        df["ag"] = gm(t_csv - t_csv[0])
     for need in (time_col, "x"):
         if need not in df.columns:
             raise DataError(f"{path}: missing column '{need}' (columns: {list(df.columns)})")

@@ -109,7 +109,7 @@ def identify(cfg: DictConfig) -> tuple[dict[str, Any], dict[str, Any]]:
     metrics: dict[str, Any] = {
         "system": system.name,
         "record": record.name,
-        "noise": float(cfg.noise),
+        "noise": float((record.meta or {}).get("noise", cfg.noise) or 0.0),  # a data source may draw it
         "seed": int(cfg.seed),
         "data_seed": int(cfg.data_seed),
         "batch_size": int(cfg.batch_size),
