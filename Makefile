@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # the default index would serve a CUDA build.
 TORCH_INDEX ?=
 
-.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke generalize
+.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -45,3 +45,9 @@ tables-smoke: $(STAMP)
 
 generalize: $(STAMP)
 	$(PY) generalize.py $(ARGS)
+
+diagnose: $(STAMP)
+	$(PY) diagnose.py $(ARGS)
+
+discrepancy-bench: $(STAMP)
+	$(PY) experiments/discrepancy_bench.py $(ARGS)

@@ -253,7 +253,7 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
     if cause is not None:
         explained = _explained_force(nominal, nominal_values, next(r for r in sc.ranking if r["effect"] == cause), s,
                                      accel)
-    plot_residual(fig / "residual.png", record.t, residual, s.x, s.v, fit, cause, explained, units)
+    plot_residual(fig / "residual.png", record.t, residual, s.x, s.v, fit, cause, explained, units, period)
     plot_ranking(fig / "ranking.png", sc.ranking, thresholds.min_delta_bic)
     write_report(run_dir / "report.md", diagnosis, [p.name for p in sorted(fig.glob("*.png"))])
     log.info("verdict: %s%s; held-out NRMSE nominal %.4g%s", diagnosis["verdict"],
