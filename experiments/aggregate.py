@@ -36,7 +36,7 @@ PAPER = {
                          "UKF": {"c": (0.316, 5.49), "k": (11.956, 0.36), "beta": (0.971, 2.86),
                                  "gamma": (1.948, 2.58), "n": (2.064, 3.18)}},
 }
-METHODS = ["equation_error", "output_error", "ukf"]
+METHODS = ["equation_error", "sindy", "output_error", "ukf"]
 
 
 def load_jobs(root: Path) -> tuple[list[dict], list[str]]:
@@ -105,18 +105,18 @@ def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str]) -
         out.append(f"\n## {system} under {record} x{scale:g} (stretch {stretch:g}), noise {100 * noise:g} %, "
                    f"batch {batch}, {int(g.seeds.iloc[0])} seed(s)\n")
         out.append("| param | truth | paper PIDynNet (err %) | paper UKF err % | PIDynNet mean +- std | "
-                   "PIDynNet RMS err % | CRB std % | EE RMS err % | OE RMS err % | UKF RMS err % |")
-        out.append("|---|---|---|---|---|---|---|---|---|---|")
+                   "PIDynNet RMS err % | CRB std % | EE RMS err % | SINDy RMS err % | OE RMS err % | UKF RMS err % |")
+        out.append("|---|---|---|---|---|---|---|---|---|---|---|")
         for _, r in g.iterrows():
             out.append(
                 f"| {r.param} | {f(r.truth, 4)} | {f(r.paper_pidynnet, 3)} ({f(r.paper_pidynnet_err, 2)}) | "
                 f"{f(r.paper_ukf_err, 2)} | {f(r.pidynnet_mean, 4)} +- {f(r.pidynnet_std, 4)} | "
                 f"{f(r.pidynnet_rms_err, 2)} | {f(r.crb_std_pct, 3)} | {f(r.equation_error_rms_err, 2)} | "
-                f"{f(r.output_error_rms_err, 2)} | {f(r.ukf_rms_err, 2)} |"
+                f"{f(r.sindy_rms_err, 2)} | {f(r.output_error_rms_err, 2)} | {f(r.ukf_rms_err, 2)} |"
             )
         r0 = g.iloc[0]
         out.append(f"\nWall seconds per run: PIDynNet {f(r0.pidynnet_seconds, 0)}, EE {f(r0.equation_error_seconds, 2)}, "
-                   f"OE {f(r0.output_error_seconds, 1)}, UKF {f(r0.ukf_seconds, 1)}.")
+                   f"SINDy {f(r0.sindy_seconds, 2)}, OE {f(r0.output_error_seconds, 1)}, UKF {f(r0.ukf_seconds, 1)}.")
     if failed:
         out.append(f"\nFailed jobs (no metrics.json): {', '.join(failed)}")
     return "\n".join(out) + "\n"

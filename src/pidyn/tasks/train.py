@@ -173,12 +173,13 @@ def run_baselines(cfg: DictConfig, system: StructuralSystem, record: Record, run
     fns = {
         "equation_error": lambda: B.equation_error(record, system),
         "output_error": lambda: B.output_error(record, system, **dict(bcfg.get("output_error") or {})),
+        "sindy": lambda: B.weak_sindy(record, system, **dict(bcfg.get("sindy") or {})),
         "ukf": lambda: B.unscented_kalman_filter(record, system, noise_level=float(cfg.noise), **dict(bcfg.get("ukf") or {})),
     }
     for name in bcfg.get("run") or []:
         if name not in fns:
             raise ValueError(f"unknown baseline '{name}'; choose from {sorted(fns)}")
-        if not hasattr(system, "terms") and name != "equation_error":
+        if not hasattr(system, "terms") and name not in ("equation_error", "sindy"):
             out.append({"method": name, "params": {}, "seconds": 0.0, "note": "SDOF systems only"})
             continue
         try:
