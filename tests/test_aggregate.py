@@ -41,3 +41,18 @@ def test_tables_smoke_runs_a_multirun_and_aggregates(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     mds = sorted((ROOT / "outputs" / "tables-smoke").glob("*/table2.md"))
     assert mds and "| beta |" in mds[-1].read_text()
+
+
+@pytest.mark.slow
+def test_submitit_launcher_runs_a_multirun_locally(tmp_path):
+    """The cluster path: the same multirun through submitit (its local executor, as on a
+    SLURM node), each job in its own process and folder."""
+    pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
+    root = Path(__file__).resolve().parents[1]
+    cmd = [sys.executable, "train.py", "-m", "hydra/launcher=submitit_local", "debug=smoke", "logger=none",
+           "baselines=none", "seed=0,1", f"hydra.sweep.dir={tmp_path}", "hydra.launcher.timeout_min=10"]
+    proc = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    jobs = sorted(p for p in tmp_path.iterdir() if (p / "metrics.json").exists())
+    assert len(jobs) == 2, list(tmp_path.iterdir())
+    assert (tmp_path / ".submitit").is_dir()
