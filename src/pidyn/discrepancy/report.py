@@ -20,10 +20,23 @@ def _shade(ax, fit, held) -> None:
     ax.axvspan(*held, color="0.92", zorder=0, label="held out")
 
 
-def plot_response(path: Path, t, x, x_nom, x_ext, fit, held, unit: str = "m") -> None:
-    """Measured vs simulated displacement (nominal, extended) and the simulation errors."""
+def plot_response(path: Path, t, x, x_nom, x_ext, fit, held, unit: str = "m", period: float | None = None) -> None:
+    """Measured vs simulated displacement (nominal, extended) and the simulation errors; for a
+    record of many periods, a third panel zooms into 30 periods at the start of the held-out part."""
     plt = _plt()
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(11, 5.5), sharex=True)
+    zoom = period is not None and (t[-1] - t[0]) > 200 * period
+    fig, axes = plt.subplots(3 if zoom else 2, 1, figsize=(11, 8 if zoom else 5.5))
+    a1, a2 = axes[0], axes[1]
+    a2.sharex(a1)
+    if zoom:
+        a3 = axes[2]
+        sel = (t >= held[0]) & (t <= held[0] + 30 * period)
+        a3.plot(t[sel], x[sel], color="k", lw=0.8, label="measured")
+        a3.plot(t[sel], x_nom[sel], color="tab:red", lw=0.8, label="nominal model")
+        if x_ext is not None:
+            a3.plot(t[sel], x_ext[sel], color="tab:blue", lw=0.8, ls="--", label="extended model")
+        a3.set(xlabel="t [s]", ylabel=f"x [{unit}]", title="zoom: start of the held-out part")
+        a3.legend(loc="upper right", fontsize=8, ncol=3)
     _shade(a1, fit, held)
     a1.plot(t, x, color="k", lw=0.6, label="measured")
     a1.plot(t, x_nom, color="tab:red", lw=0.7, label="nominal model")

@@ -129,6 +129,10 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
     base: SDOFSystem = hydra.utils.instantiate(cfg.system)
     if not isinstance(base, SDOFSystem):
         raise ValueError(f"diagnosis needs a single-degree-of-freedom nominal system, got '{base.name}'")
+    already = {t.name for t in base.terms} & set(effects)
+    if already:  # an effect the nominal model already has cannot be what it misses
+        log.info("not screening %s: already in the nominal model", sorted(already))
+        effects = {n: e for n, e in effects.items() if n not in already}
     record = build_record(cfg, base)
     if record.excitation != base.excitation:
         base = hydra.utils.instantiate(cfg.system, excitation=record.excitation)
@@ -248,7 +252,7 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
     fig = run_dir / "figures"
     fig.mkdir(exist_ok=True)
     units = (record.meta or {}).get("units", {})
-    plot_response(fig / "simulation_vs_measured.png", record.t, x_raw, x_nom, x_ext, fit, held, units.get("x", "m"))
+    plot_response(fig / "simulation_vs_measured.png", record.t, x_raw, x_nom, x_ext, fit, held, units.get("x", "m"), period)
     explained = None
     if cause is not None:
         explained = _explained_force(nominal, nominal_values, next(r for r in sc.ranking if r["effect"] == cause), s,
