@@ -60,22 +60,21 @@ def plot_response(path: Path, t, x, x_nom, x_ext, fit, held, unit: str = "m", pe
 def plot_residual(path: Path, t, r_raw, x, v, fit, cause, fitted, units: dict, period: float) -> None:
     """The force the nominal model cannot explain: over time, against x and x', spectrum.
 
-    The sample-by-sample residual carries the noise of a second derivative; the panels show
-    it smoothed over a quarter of the natural period (the raw one in grey over time)."""
-    from scipy.signal import savgol_filter, welch
+    The residual and x, x' are band-limited alike (``residual.unexplained_force``); one
+    natural period at each end, where the spectral derivative rings, is left out."""
+    from scipy.signal import welch
 
     plt = _plt()
     dt = float(t[1] - t[0])
-    win = max(5, int(round(period / 4 / dt)) | 1)
-    r = savgol_filter(r_raw, win, 2) if len(r_raw) > 3 * win else r_raw
-    if len(r_raw) > 3 * win:  # the end samples carry the derivative filter's edge error
-        inner = slice(win, len(r_raw) - win)
-        t, r_raw, r, x, v = t[inner], r_raw[inner], r[inner], x[inner], v[inner]
+    edge = max(1, int(round(period / dt)))
+    if len(r_raw) > 4 * edge:
+        inner = slice(edge, len(r_raw) - edge)
+        t, r_raw, x, v = t[inner], r_raw[inner], x[inner], v[inner]
         fitted = None if fitted is None else fitted[inner]
+    r = r_raw
     fig, ax = plt.subplots(2, 2, figsize=(11, 7.5))
     ux, uf = units.get("x", "m"), units.get("u", "N")
-    ax[0, 0].plot(t, r_raw, lw=0.3, color="0.75", label="unexplained force, sample by sample")
-    ax[0, 0].plot(t, r, lw=0.5, color="0.2", label="smoothed")
+    ax[0, 0].plot(t, r, lw=0.4, color="0.2", label="unexplained force")
     if fitted is not None:
         ax[0, 0].plot(t, fitted, lw=0.6, color="tab:blue", label=f"explained by {cause}")
     ax[0, 0].axvline(fit[1], color="k", ls=":", lw=0.8)

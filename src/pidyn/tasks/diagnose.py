@@ -30,7 +30,7 @@ from pidyn.baselines.least_squares import output_error
 from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.report import plot_ranking, plot_residual, plot_response, write_report
-from pidyn.discrepancy.residual import dominant_period, unexplained_force
+from pidyn.discrepancy.residual import band_limited, dominant_period, unexplained_force
 from pidyn.discrepancy.screening import Thresholds, screen
 from pidyn.discrepancy.weak_form import WeakForm, smooth_signals, velocity_noise
 from pidyn.reporting import nrmse, write_json
@@ -187,7 +187,7 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
 
     # --- 2-3. what the nominal model cannot explain, and which effect explains it
     sc = screen(nominal, nominal_values, s, record.f, x_raw, weak, fit[1], mass_known, effects, thresholds)
-    residual, accel = unexplained_force(nominal, nominal_values, record.t, x_raw, s.x, s.v, record.f, period)
+    pointwise = unexplained_force(nominal, nominal_values, record.t, x_raw, record.f, period)
     forced = dcfg.get("force_effect")
     cause = forced or sc.cause
     log.info("screening: %s", ", ".join(f"{r['effect']} {r['score']:.1f}" for r in sc.ranking[:4]))
@@ -256,8 +256,9 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
     explained = None
     if cause is not None:
         explained = _explained_force(nominal, nominal_values, next(r for r in sc.ranking if r["effect"] == cause), s,
-                                     accel)
-    plot_residual(fig / "residual.png", record.t, residual, s.x, s.v, fit, cause, explained, units, period)
+                                     pointwise)
+    plot_residual(fig / "residual.png", record.t, pointwise["r"], pointwise["x"], pointwise["v"], fit, cause,
+                  explained, units, period)
     plot_ranking(fig / "ranking.png", sc.ranking, thresholds.min_delta_bic)
     write_report(run_dir / "report.md", diagnosis, [p.name for p in sorted(fig.glob("*.png"))])
     log.info("verdict: %s%s; held-out NRMSE nominal %.4g%s", diagnosis["verdict"],
@@ -268,17 +269,20 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
 
 
 def _explained_force(nominal: SDOFSystem, values: dict[str, float], row: dict, s: Signals,
-                     accel: np.ndarray) -> np.ndarray:
+                     pw: dict[str, np.ndarray]) -> np.ndarray:
     """What the screening's fit says the residual is: the effect's force plus the change it
-    brings to the nominal parameters (which had absorbed part of the effect)."""
+    brings to the nominal parameters (which had absorbed part of the effect), on the same
+    band-limited signals as the residual."""
     from pidyn.discrepancy.effects import bouc_wen_z
 
     p = {**values, **row["nominal_refit"], **row["parameters"]}
     term = EFFECTS[row["effect"]].term(row["parameters"], s.context())
-    z = bouc_wen_z(s.x, p["beta"], p["gamma"], p["n"]) if term.n_latent else None
-    change = nominal.restoring_force(s.t, s.x, s.v, None, values) - nominal.restoring_force(s.t, s.x, s.v, None, p)
-    inertia = (p["m"] - values["m"]) * accel  # nonzero only when the mass is identified
-    return term.force(s.t, s.x, s.v, z, p) - change + inertia
+    x, v = pw["x"], pw["v"]
+    z = bouc_wen_z(x, p["beta"], p["gamma"], p["n"]) if term.n_latent else None
+    change = nominal.restoring_force(s.t, x, v, None, values) - nominal.restoring_force(s.t, x, v, None, p)
+    inertia = (p["m"] - values["m"]) * pw["a"]  # nonzero only when the mass is identified
+    total = term.force(s.t, x, v, z, p) - change + inertia
+    return band_limited(total, float(s.t[1] - s.t[0]), float(pw["f_cut"]))[0]  # the residual's band
 
 
 def _fmt(values: dict[str, float]) -> str:
