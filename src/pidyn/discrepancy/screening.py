@@ -131,16 +131,16 @@ def screen(
     for eff in effects.values():
         best = None
         for cand in eff.candidates(s):
-            row = _fit_candidate(eff, cand, A0, weak.project(cand.columns), y, fit, ho, names)
+            B = weak.project(cand.columns)
+            row = _fit_candidate(cand, A0, B, y, fit, ho)
             if row is not None:
-                row["A"] = cand
+                row["B"] = B
             if row is not None and (best is None or row["rss_fit"] < best["rss_fit"]):
                 best = row
         if best is None:
             ranking.append({"effect": eff.name, "score": None, "note": "no physical fit (wrong sign)"})
             continue
-        B = weak.project(best.pop("A").columns)
-        rss_cv = _cv_rss(np.column_stack([A0, B]), y, folds)
+        rss_cv = _cv_rss(np.column_stack([A0, best.pop("B")]), y, folds)
         k = len(best["coef"]) + eff.n_grid
         rss = max(best["rss_fit"], 1e-300)
         delta_bic = n_eff * np.log(rss / max(rss0, 1e-300)) + k * np.log(n_eff)
@@ -203,7 +203,7 @@ def _cv_rss(A: np.ndarray, y: np.ndarray, folds: list[np.ndarray]) -> float:
     return total
 
 
-def _fit_candidate(eff: Effect, cand: Candidate, A0, B, y, fit, ho, names) -> dict | None:
+def _fit_candidate(cand: Candidate, A0, B, y, fit, ho) -> dict | None:
     A = np.column_stack([A0, B])
     theta = _lstsq(A[fit], y[fit])
     coef = theta[A0.shape[1]:]

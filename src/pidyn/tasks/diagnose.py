@@ -25,7 +25,6 @@ import hydra
 import numpy as np
 from omegaconf import DictConfig, OmegaConf, open_dict
 
-from pidyn.baselines.fastsim import simulate_batch
 from pidyn.baselines.least_squares import output_error
 from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS, Signals
@@ -35,7 +34,7 @@ from pidyn.discrepancy.screening import Thresholds, screen
 from pidyn.discrepancy.weak_form import WeakForm, smooth_signals, velocity_noise
 from pidyn.reporting import nrmse, write_json
 from pidyn.systems.sdof import SDOFSystem
-from pidyn.tasks.train import build_record, identify
+from pidyn.tasks.train import build_record, identify, simulate_identified
 
 log = logging.getLogger(__name__)
 
@@ -103,17 +102,6 @@ def _polish(record: Record, system: SDOFSystem, values: dict[str, float], dcfg: 
     return out, f"output error on {seg.t[0]:.4g}-{seg.t[-1]:.4g} s: {res.note}, {res.seconds:.1f} s"
 
 
-def _simulate(system: SDOFSystem, values: dict[str, float], record: Record, vs: np.ndarray, substeps: int) -> np.ndarray:
-    """Free simulation over the whole record from the measured initial state."""
-    p = {k: np.array([v]) for k, v in values.items()}
-    z0 = np.zeros((1, system.n_latent))
-    with np.errstate(all="ignore"):
-        out = simulate_batch(system, p, record.t, record.f, substeps=substeps,
-                             state0=(np.array([record.x[0, 0]]), np.array([vs[0]]), z0))
-    x = out["x"][:, 0]
-    return np.where(np.isfinite(x), x, np.nan)
-
-
 def diagnose(cfg: DictConfig) -> dict[str, Any]:
     t_wall = time.perf_counter()
     run_dir = Path(cfg.paths.output_dir)
@@ -176,7 +164,7 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
                                 values0["m"] if "m" in values0 else 1.0, not mass_known)
     if record.excitation != OmegaConf.select(cfg, "system.excitation", default=record.excitation):
         nominal_node["excitation"] = record.excitation
-    nom_metrics, nom_obj = identify(_sub_cfg(cfg, nominal_node, run_dir / "nominal", fit))
+    nom_metrics, nom_obj = identify(_sub_cfg(cfg, nominal_node, run_dir / "nominal", fit), record)
     nominal: SDOFSystem = nom_obj["system"]
     nominal_values = nom_obj["module"].net.params.as_floats()
     polish_note = None
@@ -204,7 +192,7 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
                 "nominal": _system_node(OmegaConf.create(nominal_node), refit, refit.get("m", nominal_values["m"]),
                                         not mass_known),
                 "effect": cause, "effect_params": row["parameters"], "context": s.context()}
-        ext_metrics, ext_obj = identify(_sub_cfg(cfg, node, run_dir / "extended", fit))
+        ext_metrics, ext_obj = identify(_sub_cfg(cfg, node, run_dir / "extended", fit), record)
         ext_system = ext_obj["system"]
         ext_values = ext_obj["module"].net.params.as_floats()
         if dcfg.polish:
@@ -212,8 +200,13 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
 
     # --- 5. held-out gain
     held_mask = (record.t >= held[0]) & (record.t <= held[1])
-    x_nom = _simulate(nominal, nominal_values, record, s.v, int(dcfg.substeps))
-    x_ext = _simulate(ext_system, ext_values, record, s.v, int(dcfg.substeps)) if ext_system is not None else None
+    def free_run(system: SDOFSystem, values: dict[str, float]) -> np.ndarray:
+        """From the measured initial state over the whole record."""
+        return simulate_identified(system, values, record, x0=float(x_raw[0]), v0=float(s.v[0]),
+                                   substeps=int(dcfg.substeps))[:, 0]
+
+    x_nom = free_run(nominal, nominal_values)
+    x_ext = free_run(ext_system, ext_values) if ext_system is not None else None
     gain = {"metric": "heldout_nrmse_x", "nominal": nrmse(x_nom[held_mask], x_raw[held_mask]),
             "extended": None if x_ext is None else nrmse(x_ext[held_mask], x_raw[held_mask])}
     if record.clean is not None:

@@ -47,9 +47,12 @@ def train(cfg: DictConfig) -> dict[str, Any]:
     return identify(cfg)[0]
 
 
-def identify(cfg: DictConfig) -> tuple[dict[str, Any], dict[str, Any]]:
+def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
     """Identify and report; returns (metrics, objects) with the module, system, record,
-    trainer factory and run folder for follow-up tasks (prediction, diagnosis)."""
+    trainer factory and run folder for follow-up tasks (prediction, diagnosis).
+
+    ``record``: data already built from ``cfg.data.source`` (a caller that identifies
+    several models on one record builds it once)."""
     t_wall = time.perf_counter()
     _quiet_framework_warnings()
     for name in ("lightning", "lightning.pytorch", "lightning.fabric"):
@@ -61,7 +64,7 @@ def identify(cfg: DictConfig) -> tuple[dict[str, Any], dict[str, Any]]:
     L.seed_everything(cfg.seed, workers=True, verbose=False)
 
     system: StructuralSystem = hydra.utils.instantiate(cfg.system)
-    record = build_record(cfg, system)
+    record = build_record(cfg, system) if record is None else record
     if record.excitation != system.excitation:
         raise ValueError(
             f"data '{record.name}' is {record.excitation}-excited but system '{system.name}' expects "
@@ -146,18 +149,22 @@ def identify(cfg: DictConfig) -> tuple[dict[str, Any], dict[str, Any]]:
     return metrics, objects
 
 
-def simulate_identified(system: StructuralSystem, values: dict[str, float], record: Record) -> np.ndarray:
+def simulate_identified(system: StructuralSystem, values: dict[str, float], record: Record,
+                        x0: float = 0.0, v0: float = 0.0, substeps: int = 4) -> np.ndarray:
     """The identified model's displacement over the record, (N, n_dof).
 
-    Single-degree-of-freedom models use the fixed-step batched RK4 (bounded cost: a model
-    that blows up gives NaNs rather than an adaptive integrator crawling); others solve_ivp.
+    Single-degree-of-freedom models use the fixed-step batched RK4 from (x0, v0) (bounded
+    cost: a model that blows up gives NaNs rather than an adaptive integrator crawling);
+    others solve_ivp from rest.
     """
     from pidyn.baselines.fastsim import simulate_batch
     from pidyn.systems.sdof import SDOFSystem
 
     if isinstance(system, SDOFSystem):
+        state0 = (np.array([x0]), np.array([v0]), np.zeros((1, system.n_latent)))
         with np.errstate(all="ignore"):
-            out = simulate_batch(system, {k: np.array([v]) for k, v in values.items()}, record.t, record.f)
+            out = simulate_batch(system, {k: np.array([v]) for k, v in values.items()}, record.t, record.f,
+                                 substeps=substeps, state0=state0)
         return out["x"][:, :1]
     return simulate(system, values, lambda t: np.interp(t, record.t, record.f), record.t).x
 
