@@ -17,7 +17,7 @@ import torch
 from pidyn.data.windows import Window
 from pidyn.models.pidynnet import PIDynNet
 
-Phase = Literal["pretrain", "identify", "finetune"]
+Phase = Literal["pretrain", "identify", "finetune", "finetune_lbfgs"]
 
 
 class PIDynNetModule(L.LightningModule):
@@ -31,6 +31,9 @@ class PIDynNetModule(L.LightningModule):
         lr_decay: factor by which both rates decay over a window's iteration budget.
         inner_steps: optimiser steps per Lightning ``training_step``.
         log_every: iterations between TensorBoard scalars.
+        lbfgs_max_iter: function evaluations per L-BFGS step in the ``finetune_lbfgs`` phase
+            (full collocation pool, strong-Wolfe line search; see ``predict_response``).
+        lbfgs_tol: the L-BFGS phase stops once the (normalised) physics loss is below this.
     """
 
     def __init__(
@@ -43,6 +46,8 @@ class PIDynNetModule(L.LightningModule):
         lr_decay: float = 0.1,
         inner_steps: int = 10,
         log_every: int = 50,
+        lbfgs_max_iter: int = 50,
+        lbfgs_tol: float = 1e-5,
     ) -> None:
         super().__init__()
         self.automatic_optimization = False
@@ -51,6 +56,8 @@ class PIDynNetModule(L.LightningModule):
         self.lr_net, self.lr_pretrain, self.lr_phys, self.lr_decay = lr_net, lr_pretrain, lr_phys, lr_decay
         self.inner_steps = inner_steps
         self.log_every = log_every
+        self.lbfgs_max_iter = lbfgs_max_iter
+        self.lbfgs_tol = lbfgs_tol
         self.phase: Phase = "identify"
         self.window: Window | None = None
         self.budget = 1000  # iterations planned for the current fit (sets the LR decay)
@@ -66,6 +73,9 @@ class PIDynNetModule(L.LightningModule):
         self.trajectory = []
 
     def configure_optimizers(self) -> Any:
+        if self.phase == "finetune_lbfgs":
+            return torch.optim.LBFGS(self.net.net_parameters(), lr=1.0, max_iter=self.lbfgs_max_iter, history_size=50,
+                                     line_search_fn="strong_wolfe", tolerance_grad=1e-10, tolerance_change=1e-14)
         if self.phase == "pretrain":
             opt = torch.optim.Adam(self.net.net_parameters(), lr=self.lr_pretrain)
         elif self.phase == "finetune":
@@ -97,6 +107,8 @@ class PIDynNetModule(L.LightningModule):
         return sum(self.loss_weights.get(k, 1.0) * v for k, v in losses.items())  # type: ignore[return-value]
 
     def training_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> None:
+        if self.phase == "finetune_lbfgs":
+            return self._lbfgs_step()
         opt = self.optimizers()
         sched = self.lr_schedulers()
         t_c, f_c, q_c, qd_c = batch.get("t"), batch.get("f"), batch.get("q"), batch.get("qd")
@@ -127,6 +139,38 @@ class PIDynNetModule(L.LightningModule):
                     self.log(name, v, prog_bar=True, on_step=True, logger=False)
         if int(self.iteration) % self.log_every < k_steps:
             self._tb_scalars()
+
+    def _lbfgs_step(self) -> None:
+        """One L-BFGS step on the physics residual over the window's whole pool.
+
+        Deterministic (no collocation draws), as a quasi-Newton method needs. Stops the
+        fit when the loss is below ``lbfgs_tol`` or a step improves it by less than 1e-3 of
+        itself; a non-finite loss
+        stops it too and is left in ``last_losses`` for the caller to reject."""
+        w = self.window
+        assert w is not None
+        opt = self.optimizers()
+        box: dict[str, dict[str, torch.Tensor]] = {}
+
+        def closure() -> torch.Tensor:
+            opt.zero_grad(set_to_none=True)
+            losses = self.net.physics_losses(w.t_pool, w.f_pool, w.q_pool, w.qd_pool)
+            loss = self.total(losses)
+            self.manual_backward(loss)
+            box["losses"] = losses
+            return loss
+
+        before = self.last_losses.get("total", math.inf)
+        opt.step(closure=closure)
+        self.iteration += 1
+        self.window_iteration += 1
+        with torch.no_grad():
+            losses = self.net.physics_losses(w.t_pool, w.f_pool, w.q_pool, w.qd_pool)
+        self.last_losses = {k: float(v) for k, v in losses.items()}
+        self.last_losses["total"] = float(self.total(losses))
+        now = self.last_losses["total"]
+        if not math.isfinite(now) or now < self.lbfgs_tol or (math.isfinite(before) and before - now < 1e-3 * abs(now)):
+            self.trainer.should_stop = True
 
     def _tb_scalars(self) -> None:
         tb = _tensorboard(self.logger)

@@ -55,7 +55,8 @@ def generalize(cfg: DictConfig) -> dict[str, Any]:
         pred = predict_response(module, truth, make_trainer, iterations=g.iterations,
                                 window_length=cfg.data.windows.window_length, batch_size=cfg.batch_size,
                                 x_scale=float(np.std(record.x)), v_scale=float(np.std(record.v)) if record.v is not None else None,
-                                start_from=str(g.start_from), seed=int(cfg.seed))
+                                start_from=str(g.start_from), seed=int(cfg.seed),
+                                lbfgs_steps=int(g.get("lbfgs_steps", 30)))
         sim = simulate(system, identified, gm, gm.t)
         row = {"case": i, **case, "pga": gm.pga, "gamma_pidynnet": pearson(pred.x, truth.x),
                "gamma_simulation": pearson(sim.x, truth.x), "peak_x_true": float(np.max(np.abs(truth.x))),
