@@ -67,3 +67,16 @@ def test_resume_continues_from_next_window(tmp_path):
     assert len(state2["windows"]) == 2 and second["iterations"] > first["iterations"]
     # the first window was not redone: its record is unchanged
     assert state2["windows"][0] == state["windows"][0]
+
+
+def test_resume_of_a_latent_system_carries_z_across(tmp_path):
+    """A Bouc-Wen run resumes with the LNN's z at the end of the last finished window."""
+    over = FAST + ["system=bouc_wen"]
+    cfg = make_cfg(over + ["model.schedule.max_windows=1"], tmp_path)
+    train(cfg)
+    z_end = json.loads((tmp_path / "subperiod_state.json").read_text())["windows"][0]["z_end"]
+    assert len(z_end) == 1 and z_end[0] != 0.0
+    train(make_cfg(over + ["model.schedule.max_windows=2"], tmp_path))
+    state = json.loads((tmp_path / "subperiod_state.json").read_text())
+    assert len(state["windows"]) == 2 and state["windows"][0]["z_end"] == z_end
+    assert all(len(w["z_end"]) == 1 for w in state["windows"])

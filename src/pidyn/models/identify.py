@@ -59,6 +59,7 @@ class WindowResult:
     losses: dict[str, float]
     stopped_early: bool
     clamp_bounds: dict[str, list[float]] = field(default_factory=dict)
+    z_end: list[float] | None = None  # latent state at the window's end (the next window starts from it)
 
 
 class SubperiodIdentifier:
@@ -146,7 +147,7 @@ class SubperiodIdentifier:
             raise ValueError("no informative window: lower data.min_peak_fraction or check the record")
         z_end: torch.Tensor | None = None
         if start > 0 and net.lnn is not None:
-            z_end = torch.tensor(self.results[-1].__dict__.get("z_end", [0.0]))
+            z_end = torch.tensor(self.results[-1].z_end if self.results[-1].z_end is not None else [0.0])
         first_done = start > 0
         for w in todo:
             if w.index < start:
@@ -206,9 +207,8 @@ class SubperiodIdentifier:
                 losses=dict(self.module.last_losses),
                 stopped_early=stopped,
                 clamp_bounds={k: list(v) for k, v in (self.clamp.bounds.items() if self.clamp else [])},
+                z_end=None if z_end is None else z_end.tolist(),
             )
-            if z_end is not None:
-                res.__dict__["z_end"] = z_end.tolist()
             self.results.append(res)
             first_done = True
             self._report(res)
