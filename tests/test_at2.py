@@ -67,3 +67,23 @@ def test_transformations():
     down = prepare("loma_prieta").resampled(0.01)  # 0.005 -> 0.01 s with anti-aliasing
     assert down.dt == 0.01 and abs(down.acc.size - prepare("loma_prieta").acc.size / 2) <= 1
     assert gm(np.array([-1.0, 1e6])).tolist() == [0.0, 0.0]
+
+
+def test_arias_onset_and_start():
+    from pidyn.excitation.ground_motion import GroundMotion
+
+    # a pulse of energy between 3 and 4 s: 5 % of the Arias intensity falls at 3.05 s, 95 % at 3.95 s
+    acc = np.zeros(1001)
+    acc[300:400] = 1.0
+    gm = GroundMotion(name="pulse", dt=0.01, acc=acc)
+    assert gm.arias_time(0.05) == pytest.approx(3.04, abs=0.011)
+    assert gm.arias_time(0.95) == pytest.approx(3.94, abs=0.011)
+    cut = gm.starting_at(2.5)
+    assert cut.duration == pytest.approx(7.5) and cut.arias_time(0.05) == pytest.approx(gm.arias_time(0.05) - 2.5)
+    with pytest.raises(ValueError, match="past its end"):
+        gm.starting_at(20.0)
+    # Chi-Chi TCU078 is nearly silent for its first 20 s: the strong motion starts after 20 s
+    chichi = prepare("chichi", dt=0.02)
+    assert chichi.arias_time(0.05) > 20.0
+    seg = prepare("chichi", dt=0.02, start=22.0, duration=20.0)
+    assert seg.pga > 50 * prepare("chichi", dt=0.02, duration=20.0).pga

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import lightning as L
 import numpy as np
+import pandas as pd
 import pytest
 import torch
 
@@ -54,7 +55,7 @@ def test_lbfgs_finish_solves_a_strongly_nonlinear_window_that_adam_alone_does_no
     module = PIDynNetModule(PIDynNet(s, TaylorMLP()))
     module.net.params.set_values(s.true_values())
     strong = truth.t > 6.0
-    kw = dict(iterations=300, x_scale=0.1, v_scale=0.5)
+    kw = dict(iterations=300, x_scale=0.1, v_scale=0.5, split_tol=float("inf"))  # no window splitting here
     adam = predict_response(module, truth, trainer, lbfgs_steps=0, **kw)
     both = predict_response(module, truth, trainer, lbfgs_steps=30, **kw)
     g_adam, g_both = pearson(adam.x[strong], truth.x[strong]), pearson(both.x[strong], truth.x[strong])
@@ -69,10 +70,56 @@ def test_generalize_task_writes_figures_and_table(tmp_path):
     from pidyn.tasks.generalize import generalize
 
     gcfg = make_cfg(["excitation.duration=12", "model.schedule.max_windows=1", "generalization.max_cases=1",
-                     "generalization.duration=4", "generalization.iterations=50", "logger=none"], tmp_path,
+                     "generalization.duration=4", "generalization.iterations=50", "generalization.split_tol=1e9",
+                     "logger=none"], tmp_path,
                     config_name="generalize")
     summary = generalize(gcfg)
     assert summary["cases"] == 1
     for f in ["generalization.csv", "generalization.json", "figures/fig4_identification_prediction.png",
-              "figures/fig5_correlation_histogram.png"]:
+              "figures/fig5_correlation_histogram.png", "predictions/case_000.npz", "generalization.md"]:
         assert (tmp_path / f).exists(), f
+    first = pd.read_csv(tmp_path / "generalization.csv")
+    # a longer sweep in the same folder resumes: the finished case is kept, not recomputed
+    gcfg.generalization.max_cases = 2
+    summary = generalize(gcfg)
+    again = pd.read_csv(tmp_path / "generalization.csv")
+    assert summary["cases"] == 2 and len(again) == 2
+    pd.testing.assert_frame_equal(again.iloc[:1], first)
+    assert (tmp_path / "predictions/case_001.npz").exists()
+
+
+def test_a_window_left_unsolved_is_solved_again_as_two_halves():
+    """With a tolerance no window can meet, every window is halved down to min_window, the
+    halves tile the record without gap or overlap, and the state is handed across them."""
+    torch.manual_seed(0)
+    s = Duffing()
+    gm = prepare("kobe", scale=0.5, duration=3.0, dt=0.01).truncated(3.0)
+    truth = synthetic_from_motion(s, gm)
+    module = PIDynNetModule(PIDynNet(s, TaylorMLP()))
+    module.net.params.set_values(s.true_values())
+    pred = predict_response(module, truth, trainer, iterations=5, window_length=1.5, lbfgs_steps=0,
+                            x_scale=0.1, v_scale=0.5, split_tol=0.0, min_window=0.75)
+    spans = [(a, b) for a, b, _ in pred.windows]
+    assert spans == [(0.0, 0.75), (0.75, 1.5), (1.5, 2.25), (2.25, 3.0)]
+    assert all(np.isfinite(loss) and loss > 0 for _, _, loss in pred.windows)
+    assert np.all(np.isfinite(pred.x))
+    # never-failing tolerance: the windows are left as they are
+    pred = predict_response(module, truth, trainer, iterations=5, window_length=1.5, lbfgs_steps=0,
+                            x_scale=0.1, v_scale=0.5, split_tol=float("inf"))
+    assert [(a, b) for a, b, _ in pred.windows] == [(0.0, 1.5), (1.5, 3.0)]
+
+
+def test_unseen_records_start_before_their_strong_motion_and_match_the_pga():
+    from pidyn.tasks.generalize import unseen_cases
+
+    cfg = make_cfg([], config_name="generalize")
+    cases = unseen_cases(cfg, "kobe", 8.0)
+    own = [c for c in cases if c["record"] == "kobe"]
+    assert own and all(c["start"] == 0.0 for c in own)  # versions of the identification record start with it
+    chichi = [c for c in cases if c["record"] == "chichi"]
+    assert [c["start"] for c in chichi] == [22.0, 22.0]  # strong motion (5 % Arias) at 24.2 s, 2 s lead
+    seg = prepare("chichi", dt=cfg.excitation.dt, start=22.0, duration=cfg.generalization.duration,
+                  scale=chichi[1]["scale"])
+    assert seg.pga == pytest.approx(8.0, rel=1e-9)  # the predicted segment itself carries the target PGA
+    cfg.generalization.align = False
+    assert all(c["start"] == 0.0 for c in unseen_cases(cfg, "kobe", 8.0))

@@ -84,6 +84,23 @@ class GroundMotion:
         n = int(round(duration / self.dt)) + 1
         return replace(self, acc=self.acc[:n])
 
+    def starting_at(self, t0: float) -> GroundMotion:
+        """Drop the samples before ``t0`` (s); the structure is taken at rest at the new t = 0."""
+        if t0 <= 0.0:
+            return self
+        k = int(round(t0 / self.dt))
+        if k >= self.acc.size - 1:
+            raise ValueError(f"ground motion '{self.name}': start {t0} s is past its end ({self.duration:g} s)")
+        return replace(self, acc=self.acc[k:], name=_tag(self.name, f"from{k * self.dt:g}s"))
+
+    def arias_time(self, fraction: float) -> float:
+        """Time (s) at which the Arias intensity (integral of acc^2) reaches ``fraction`` of its total:
+        0.05 marks the onset of strong motion, 0.95 its end (Trifunac and Brady, 1975)."""
+        if not 0.0 <= fraction <= 1.0:
+            raise ValueError(f"Arias fraction must lie in [0, 1], got {fraction}")
+        cum = np.cumsum(self.acc**2)
+        return float(np.searchsorted(cum, fraction * cum[-1]) * self.dt)
+
     def resampled(self, dt: float) -> GroundMotion:
         """Resample to step ``dt``: linear interpolation up, anti-aliased polyphase down."""
         if np.isclose(dt, self.dt, rtol=1e-9):
@@ -147,11 +164,14 @@ def prepare(
     stretch: float = 1.0,
     duration: float | None = None,
     dt: float | None = None,
+    start: float = 0.0,
 ) -> GroundMotion:
-    """Load a record and apply, in order: resampling, truncation, stretching, scaling."""
+    """Load a record and apply, in order: resampling, start (s, in record time), truncation,
+    stretching, scaling."""
     gm = load_record(record)
     if dt is not None:
         gm = gm.resampled(dt)
+    gm = gm.starting_at(start)
     gm = gm.truncated(duration)
     if stretch != 1.0:
         gm = gm.stretched(stretch)
