@@ -58,7 +58,7 @@ def generalize(cfg: DictConfig) -> dict[str, Any]:
     identified = module.net.params.as_floats()
     ident_pga = float(np.max(np.abs(record.f)))
     cases = unseen_cases(cfg, cfg.excitation.record, ident_pga)
-    rows, examples = _resume(run_dir, cases) if cfg.get("resume", True) else ([], [])
+    rows = _resume(run_dir, cases) if cfg.get("resume", True) else []
     pred_dir = run_dir / "predictions"
     pred_dir.mkdir(exist_ok=True)
     for i, case in enumerate(cases):
@@ -81,8 +81,6 @@ def generalize(cfg: DictConfig) -> dict[str, Any]:
         np.savez_compressed(pred_dir / f"case_{i:03d}.npz", t=truth.t, x_true=truth.x, x_pred=pred.x, x_sim=sim.x)
         log.info("[%d/%d] %s x%.3g t%.3g: gamma PIDynNet %.4f, simulation %.4f", i + 1, len(cases), case["record"],
                  case["scale"], case["stretch"], row["gamma_pidynnet"], row["gamma_simulation"])
-        if len(examples) < 4:
-            examples.append((row, truth.t, truth.x[:, 0], pred.x[:, 0], sim.x[:, 0]))
         pd.DataFrame(rows).to_csv(run_dir / "generalization.csv", index=False)  # progress survives a crash
     df = pd.DataFrame(rows)
     share = float((df.gamma_pidynnet >= 0.95).mean()) if len(df) else float("nan")
@@ -93,7 +91,7 @@ def generalize(cfg: DictConfig) -> dict[str, Any]:
                "identification": {k: metrics[k] for k in ("params", "error_pct", "max_error_pct")}}
     write_json(run_dir / "generalization.json", summary)
     _write_markdown(run_dir / "generalization.md", cfg, df, summary)
-    _figures(run_dir / "figures", record, module, df, examples)
+    _figures(run_dir / "figures", record, module, df, _examples(pred_dir, df))
     _tb_figures(obj["logger"], run_dir / "figures", int(module.iteration), {})
     log.info("generalisation: %d cases, share gamma >= 0.95: PIDynNet %.2f, simulation %.2f", len(df), share,
              summary["share_gamma_ge_0.95_simulation"])
@@ -118,7 +116,7 @@ def _write_markdown(path: Path, cfg: DictConfig, df: pd.DataFrame, summary: dict
     lines = [
         f"# Generalisation ({str(cfg.system._target_).rsplit('.', 1)[-1]}, identified on {cfg.excitation.record} "
         f"0-{cfg.excitation.duration:g} s)\n",
-        f"Command: `python generalize.py {overrides}`".rstrip() + "  ",
+        f"Command: `{('python generalize.py ' + overrides).strip()}`  ",
         f"Machine: {platform.machine()}, {torch.get_num_threads()} torch thread(s), {os.cpu_count()} cores  \n",
         "Identification errors (%): " + ", ".join(f"{k} {v:.3g}" for k, v in errs.items()) + "\n",
         f"Each unseen excitation is {g.duration:g} s long (stretched records longer); other records start "
@@ -144,13 +142,13 @@ def _write_markdown(path: Path, cfg: DictConfig, df: pd.DataFrame, summary: dict
     path.write_text("\n".join(lines) + "\n")
 
 
-def _resume(run_dir: Path, cases: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], list]:
+def _resume(run_dir: Path, cases: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Rows already in ``generalization.csv`` whose case matches, in order, and whose prediction
     file exists; an interrupted sweep continues at the first case not done."""
     path = run_dir / "generalization.csv"
     if not path.exists():
-        return [], []
-    rows, examples = [], []
+        return []
+    rows = []
     for i, r in enumerate(pd.read_csv(path).to_dict("records")):
         npz = run_dir / "predictions" / f"case_{i:03d}.npz"
         if i >= len(cases) or not npz.exists():
@@ -161,15 +159,32 @@ def _resume(run_dir: Path, cases: list[dict[str, Any]]) -> tuple[list[dict[str, 
             break
         r["start"] = c["start"]  # sweeps written before records were aligned all started at 0
         rows.append(r)
-        if len(examples) < 4:
-            d = np.load(npz)
-            examples.append((r, d["t"], d["x_true"][:, 0], d["x_pred"][:, 0], d["x_sim"][:, 0]))
     if rows:
         if len(rows) < len(cases):
             log.info("resuming the generalisation sweep at case %d of %d", len(rows) + 1, len(cases))
         else:
             log.info("all %d cases already done; rewriting the summary, table and figures", len(cases))
-    return rows, examples
+    return rows
+
+
+def _examples(pred_dir: Path, df: pd.DataFrame, n: int = 4) -> list:
+    """Cases for Figure 4: the worst PIDynNet prediction first, then one case of each of the
+    first other records (the identification record's own versions are the easy ones)."""
+    if not len(df):
+        return []
+    picks = [int(df.gamma_pidynnet.idxmin())]
+    for rec in df.record.drop_duplicates().iloc[1:]:
+        if len(picks) >= n:
+            break
+        i = int(df.index[df.record == rec][-1])
+        if i not in picks:
+            picks.append(i)
+    out = []
+    for i in picks:
+        r = df.loc[i].to_dict()
+        d = np.load(pred_dir / f"case_{int(r['case']):03d}.npz")
+        out.append((r, d["t"], d["x_true"][:, 0], d["x_pred"][:, 0], d["x_sim"][:, 0]))
+    return out
 
 
 def _figures(fig_dir: Path, record, module, df: pd.DataFrame, examples: list) -> None:
@@ -193,7 +208,8 @@ def _figures(fig_dir: Path, record, module, df: pd.DataFrame, examples: list) ->
         ax.plot(t, xt, color="0.3", lw=0.9, label="true")
         ax.plot(t, xp, "--", lw=0.8, label=f"PIDynNet (gamma {row['gamma_pidynnet']:.3f})")
         ax.plot(t, xs, ":", lw=0.8, label=f"identified model simulated (gamma {row['gamma_simulation']:.3f})")
-        ax.set_title(f"prediction: {row['record']} x{row['scale']:.3g}, stretch {row['stretch']:.3g}", fontsize=9)
+        ax.set_title(f"prediction: {row['record']} from {row.get('start', 0.0):g} s, x{row['scale']:.3g}, "
+                     f"stretch {row['stretch']:.3g}", fontsize=9)
         ax.legend(fontsize=7, loc="upper right")
     axes[-1][0].set_xlabel("t (s)")
     fig.tight_layout()
