@@ -26,6 +26,16 @@ def trainer(**kw):
                      enable_progress_bar=False, enable_model_summary=False, **kw)
 
 
+def duffing_with_true_params(scale: float, duration: float):
+    """A Duffing module holding the true parameters, and its true response to Kobe x ``scale``."""
+    torch.manual_seed(0)
+    s = Duffing()
+    truth = synthetic_from_motion(s, prepare("kobe", scale=scale, duration=duration, dt=0.01).truncated(duration))
+    module = PIDynNetModule(PIDynNet(s, TaylorMLP()))
+    module.net.params.set_values(s.true_values())
+    return module, truth
+
+
 @pytest.mark.slow
 def test_physics_only_prediction_tracks_the_true_response():
     torch.manual_seed(0)
@@ -48,12 +58,7 @@ def test_physics_only_prediction_tracks_the_true_response():
 def test_lbfgs_finish_solves_a_strongly_nonlinear_window_that_adam_alone_does_not():
     """Kobe x1.5 drives the Duffing to k3 x^2 / k1 ~ 0.8; a short Adam budget per window
     leaves the forward problem unsolved, and the wrong state is handed on."""
-    torch.manual_seed(0)
-    s = Duffing()
-    gm = prepare("kobe", scale=1.5, duration=12.0, dt=0.01).truncated(12.0)
-    truth = synthetic_from_motion(s, gm)
-    module = PIDynNetModule(PIDynNet(s, TaylorMLP()))
-    module.net.params.set_values(s.true_values())
+    module, truth = duffing_with_true_params(scale=1.5, duration=12.0)
     strong = truth.t > 6.0
     kw = dict(iterations=300, x_scale=0.1, v_scale=0.5, split_tol=float("inf"))  # no window splitting here
     adam = predict_response(module, truth, trainer, lbfgs_steps=0, **kw)
@@ -91,12 +96,7 @@ def test_generalize_task_writes_figures_and_table(tmp_path):
 def test_a_window_left_unsolved_is_solved_again_as_two_halves():
     """With a tolerance no window can meet, every window is halved down to min_window, the
     halves tile the record without gap or overlap, and the state is handed across them."""
-    torch.manual_seed(0)
-    s = Duffing()
-    gm = prepare("kobe", scale=0.5, duration=3.0, dt=0.01).truncated(3.0)
-    truth = synthetic_from_motion(s, gm)
-    module = PIDynNetModule(PIDynNet(s, TaylorMLP()))
-    module.net.params.set_values(s.true_values())
+    module, truth = duffing_with_true_params(scale=0.5, duration=3.0)
     pred = predict_response(module, truth, trainer, iterations=5, window_length=1.5, lbfgs_steps=0,
                             x_scale=0.1, v_scale=0.5, split_tol=0.0, min_window=0.75)
     spans = [(a, b) for a, b, _ in pred.windows]

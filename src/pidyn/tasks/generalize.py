@@ -34,7 +34,7 @@ def unseen_cases(cfg: DictConfig, ident_record: str, ident_pga: float) -> list[d
     for rec in g.other_records:
         if rec == ident_record:
             continue
-        start = strong_motion_start(rec, float(g.get("lead", 2.0))) if g.get("align", True) else 0.0
+        start = strong_motion_start(rec, float(g.lead)) if g.align else 0.0
         seg = prepare(rec, start=start, duration=g.duration, dt=cfg.excitation.dt)
         base = ident_pga / seg.pga if g.match_pga else 1.0
         for sc in g.other_scales:
@@ -71,8 +71,8 @@ def generalize(cfg: DictConfig) -> dict[str, Any]:
                                 window_length=cfg.data.windows.window_length, batch_size=cfg.batch_size,
                                 x_scale=float(np.std(record.x)), v_scale=float(np.std(record.v)) if record.v is not None else None,
                                 start_from=str(g.start_from), seed=int(cfg.seed),
-                                lbfgs_steps=int(g.get("lbfgs_steps", 30)), split_tol=float(g.get("split_tol", 1e-3)),
-                                min_window=float(g.get("min_window", 0.75)))
+                                lbfgs_steps=int(g.lbfgs_steps), split_tol=float(g.split_tol),
+                                min_window=float(g.min_window))
         sim = simulate(system, identified, gm, gm.t)
         row = {"case": i, **case, "pga": gm.pga, "gamma_pidynnet": pearson(pred.x, truth.x),
                "gamma_simulation": pearson(sim.x, truth.x), "peak_x_true": float(np.max(np.abs(truth.x))),
@@ -120,7 +120,7 @@ def _write_markdown(path: Path, cfg: DictConfig, df: pd.DataFrame, summary: dict
         f"Machine: {platform.machine()}, {torch.get_num_threads()} torch thread(s), {os.cpu_count()} cores  \n",
         "Identification errors (%): " + ", ".join(f"{k} {v:.3g}" for k, v in errs.items()) + "\n",
         f"Each unseen excitation is {g.duration:g} s long (stretched records longer); other records start "
-        f"{g.get('lead', 2.0):g} s before their strong motion (5 % Arias intensity), rounded down to a whole "
+        f"{g.lead:g} s before their strong motion (5 % Arias intensity), rounded down to a whole "
         "second, and are scaled to the identification record's PGA times the listed factor. Physics-only prediction "
         f"(paper Eq. 14), identified parameters fixed: per {cfg.data.windows.window_length:g} s window "
         f"{g.iterations} Adam iterations, then up to {g.lbfgs_steps} L-BFGS steps on the window's whole pool; "
