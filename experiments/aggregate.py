@@ -1,12 +1,15 @@
 """Aggregate multirun job folders into the paper's tables (markdown + CSV).
 
     python experiments/aggregate.py outputs/table3/multiruns/<stamp> [--out experiments/results/table3]
+    python experiments/aggregate.py SWEEP_A SWEEP_B ... --out experiments/results/scaling
 
 Each job folder holds metrics.json, baselines.json and cramer_rao.json; jobs that failed
 (no metrics.json) are listed and skipped. Rows are grouped into cells by system, noise,
 batch size, earthquake scaling and stretching; per parameter the table shows the truth, the
 paper's values, PIDynNet's mean +- std and RMS error over seeds, the Cramer-Rao bound, and
-each baseline's mean error.
+each baseline's RMS error. Several sweep folders can be aggregated together (cells run at
+different times, seeds added later); with more than one cell a system gets a summary table,
+one row per cell, so trends across noise, scaling or batch size read at a glance.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from omegaconf import OmegaConf
 
 # Paper Tables I-III (value, error %), PIDynNet and UKF.
 PAPER = {
@@ -39,14 +43,28 @@ PAPER = {
 METHODS = ["equation_error", "sindy", "output_error", "ukf"]
 
 
-def load_jobs(root: Path) -> tuple[list[dict], list[str]]:
+def _from_config(d: Path, job: dict) -> None:
+    """Fill the excitation keys older metrics.json files lack from the job's own config."""
+    cfg_file = d / ".hydra" / "config.yaml"
+    missing = [k for k in ("eq_scale", "eq_stretch") if k not in job]
+    if missing and cfg_file.exists():
+        cfg = OmegaConf.load(cfg_file)
+        for k in missing:
+            if k in cfg:
+                job[k] = float(cfg[k])
+
+
+def load_jobs(root: Path, label: str = "") -> tuple[list[dict], list[str]]:
+    if not root.is_dir():
+        raise SystemExit(f"{root}: not a sweep folder")
     jobs, failed = [], []
     for d in sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")):
         m = d / "metrics.json"
         if not m.exists():
-            failed.append(d.name)
+            failed.append(f"{label}{d.name}")
             continue
         job = json.loads(m.read_text())
+        _from_config(d, job)
         b = d / "baselines.json"
         job["_baselines"] = json.loads(b.read_text())["baselines"] if b.exists() else []
         c = d / "cramer_rao.json"
@@ -61,8 +79,13 @@ def cell_key(j: dict) -> tuple:
             float(j.get("eq_stretch", 1.0)))
 
 
-def aggregate(root: Path) -> tuple[pd.DataFrame, list[str]]:
-    jobs, failed = load_jobs(root)
+def aggregate(roots: Path | list[Path]) -> tuple[pd.DataFrame, list[str]]:
+    roots = [roots] if isinstance(roots, Path) else list(roots)
+    jobs, failed = [], []
+    for root in roots:
+        j, f = load_jobs(root, f"{root.name}/" if len(roots) > 1 else "")
+        jobs += j
+        failed += f
     cells: dict[tuple, list[dict]] = defaultdict(list)
     for j in jobs:
         cells[cell_key(j)].append(j)
@@ -97,10 +120,48 @@ def aggregate(root: Path) -> tuple[pd.DataFrame, list[str]]:
     return pd.DataFrame(rows), failed
 
 
+CELL = ["system", "record", "noise", "batch_size", "eq_scale", "eq_stretch"]
+
+
+def _num(x, d: int = 3) -> str:
+    return "-" if x is None or (isinstance(x, float) and np.isnan(x)) else f"{x:.{d}f}"
+
+
+def _short(x) -> str:
+    """Two significant digits for errors that span 0.01 % to 90 %."""
+    if x is None or (isinstance(x, float) and np.isnan(x)):
+        return "-"
+    if 0 < abs(x) < 0.01:
+        return "<0.01"
+    return f"{x:.2g}" if abs(x) < 10 else f"{x:.0f}"
+
+
+def summary(df: pd.DataFrame) -> list[str]:
+    """One row per cell and one column per parameter: how the errors move across the cells."""
+    out = []
+    for system, gs in df.groupby("system", sort=False):
+        cells = gs.groupby(CELL, sort=False)
+        if cells.ngroups < 2:
+            continue
+        names = list(dict.fromkeys(gs.param))
+        out.append(f"\n## Summary, {system}: RMS error % over seeds, PIDynNet / output-error LS / UKF "
+                   "(Cramer-Rao std %)\n")
+        out.append("| record | scale | stretch | noise % | batch | seeds | " + " | ".join(names) + " |")
+        out.append("|---|---|---|---|---|---|" + "---|" * len(names))
+        for key, g in cells:
+            _, record, noise, batch, scale, stretch = key
+            by = g.set_index("param")
+            vals = [f"{_short(by.pidynnet_rms_err[n])} / {_short(by.output_error_rms_err[n])} / "
+                    f"{_short(by.ukf_rms_err[n])} ({_short(by.crb_std_pct[n])})" for n in names]
+            out.append(f"| {record} | {scale:g} | {stretch:g} | {100 * noise:g} | {batch} | {int(g.seeds.iloc[0])} | "
+                       + " | ".join(vals) + " |")
+    return out
+
+
 def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str]) -> str:
-    f = lambda x, d=3: "-" if x is None or (isinstance(x, float) and np.isnan(x)) else f"{x:.{d}f}"  # noqa: E731
-    out = [f"# {title}\n", f"Command: `{command}`\n"]
-    for key, g in df.groupby(["system", "record", "noise", "batch_size", "eq_scale", "eq_stretch"], sort=False):
+    f = _num
+    out = [f"# {title}\n", f"Command: `{command}`\n", *summary(df)]
+    for key, g in df.groupby(CELL, sort=False):
         system, record, noise, batch, scale, stretch = key
         out.append(f"\n## {system} under {record} x{scale:g} (stretch {stretch:g}), noise {100 * noise:g} %, "
                    f"batch {batch}, {int(g.seeds.iloc[0])} seed(s)\n")
@@ -124,18 +185,18 @@ def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str]) -
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("root", type=Path, help="a multirun folder (outputs/<task>/multiruns/<stamp>)")
+    ap.add_argument("root", type=Path, nargs="+", help="one or more multirun folders (outputs/tables/<stamp>/<exp>)")
     ap.add_argument("--out", type=Path, default=None, help="output stem (default: <root>/table)")
     ap.add_argument("--title", default=None)
     ap.add_argument("--command", default="")
     a = ap.parse_args()
     df, failed = aggregate(a.root)
     if df.empty:
-        raise SystemExit(f"{a.root}: no finished job (failed: {failed})")
-    out = a.out or a.root / "table"
+        raise SystemExit(f"{', '.join(map(str, a.root))}: no finished job (failed: {failed})")
+    out = a.out or a.root[0] / "table"
     out.parent.mkdir(parents=True, exist_ok=True)
     df.to_csv(out.with_suffix(".csv"), index=False)
-    out.with_suffix(".md").write_text(to_markdown(df, a.title or a.root.parent.parent.name, a.command, failed))
+    out.with_suffix(".md").write_text(to_markdown(df, a.title or a.root[0].parent.parent.name, a.command, failed))
     print(out.with_suffix(".md").read_text())
 
 

@@ -34,6 +34,29 @@ def test_aggregate_means_rms_and_failed_jobs(tmp_path):
     assert "Failed jobs" in md and "| k3 |" in md
 
 
+def test_aggregate_joins_sweeps_reads_stretch_from_config_and_summarises(tmp_path):
+    """Cells from several sweep folders in one table; a job whose metrics.json predates the
+    eq_stretch key takes it from its own .hydra/config.yaml instead of counting as stretch 1."""
+    a, b = tmp_path / "scaling", tmp_path / "scaling_t1.5"
+    job(a / "0_seed=0", 0, 121.2, 3.0)
+    job(b / "0_seed=0", 0, 114.0, 6.0)
+    (b / "0_seed=0" / ".hydra").mkdir()
+    (b / "0_seed=0" / ".hydra" / "config.yaml").write_text("eq_scale: 1.0\neq_stretch: 1.5\nseed: 0\n")
+    (b / "1_seed=1").mkdir()
+    df, failed = aggregate.aggregate([a, b])
+    assert failed == ["scaling_t1.5/1_seed=1"]
+    assert sorted(df.eq_stretch) == [1.0, 1.5]
+    assert df.set_index("eq_stretch").pidynnet_rms_err[1.5] == pytest.approx(5.0)
+    md = aggregate.to_markdown(df, "t", "cmd", failed)
+    assert "(stretch 1.5)" in md and "(stretch 1)" in md
+    summary = md.split("## Summary, duffing")[1].split("\n## ")[0]
+    rows = [r for r in summary.splitlines() if r.startswith("| kobe")]
+    assert rows == ["| kobe | 1 | 1 | 5 | 500 | 1 | 1 / - / 3 (0.1) |",
+                    "| kobe | 1 | 1.5 | 5 | 500 | 1 | 5 / - / 6 (0.1) |"]
+    one, _ = aggregate.aggregate(a)
+    assert "## Summary" not in aggregate.to_markdown(one, "t", "cmd", [])
+
+
 @pytest.mark.slow
 def test_tables_smoke_runs_a_multirun_and_aggregates(tmp_path):
     r = subprocess.run([sys.executable, "experiments/run_tables.py", "--smoke", "--only", "table2", "--jobs", "1"],

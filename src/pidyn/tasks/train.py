@@ -117,6 +117,7 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
         "data_seed": int(cfg.data_seed),
         "batch_size": int(cfg.batch_size),
         "eq_scale": float(cfg.eq_scale),
+        "eq_stretch": float(cfg.eq_stretch),
         "params": values,
         "truth": truths,
         "error_pct": errors,
