@@ -9,7 +9,9 @@ batch size, earthquake scaling and stretching; per parameter the table shows the
 paper's values, PIDynNet's mean +- std and RMS error over seeds, the Cramer-Rao bound, and
 each baseline's RMS error. Several sweep folders can be aggregated together (cells run at
 different times, seeds added later); with more than one cell a system gets a summary table,
-one row per cell, so trends across noise, scaling or batch size read at a glance.
+one row per cell, so trends across noise, scaling or batch size read at a glance. Each cell
+also gets Figure 3 (PIDynNet's and the UKF's estimates over record time for every seed, with
+the Cramer-Rao std), written to figures/ beside the markdown and linked from it.
 """
 
 from __future__ import annotations
@@ -70,6 +72,8 @@ def load_jobs(root: Path, label: str = "") -> tuple[list[dict], list[str]]:
         c = d / "cramer_rao.json"
         job["_crb"] = json.loads(c.read_text()) if c.exists() else None
         job["_dir"] = d.name
+        s = d / "subperiod_state.json"
+        job["_trajectory"] = json.loads(s.read_text()).get("trajectory", []) if s.exists() else []
         jobs.append(job)
     return jobs, failed
 
@@ -79,16 +83,48 @@ def cell_key(j: dict) -> tuple:
             float(j.get("eq_stretch", 1.0)))
 
 
-def aggregate(roots: Path | list[Path]) -> tuple[pd.DataFrame, list[str]]:
+def load_cells(roots: Path | list[Path]) -> tuple[dict[tuple, list[dict]], list[str]]:
     roots = [roots] if isinstance(roots, Path) else list(roots)
-    jobs, failed = [], []
-    for root in roots:
-        j, f = load_jobs(root, f"{root.name}/" if len(roots) > 1 else "")
-        jobs += j
-        failed += f
     cells: dict[tuple, list[dict]] = defaultdict(list)
-    for j in jobs:
-        cells[cell_key(j)].append(j)
+    failed: list[str] = []
+    for root in roots:
+        jobs, f = load_jobs(root, f"{root.name}/" if len(roots) > 1 else "")
+        failed += f
+        for j in jobs:
+            cells[cell_key(j)].append(j)
+    return cells, failed
+
+
+def figure_name(key: tuple) -> str:
+    system, record, noise, batch, scale, stretch = key
+    return (f"{system}_{record}_x{scale:g}_stretch{stretch:g}_noise{100 * noise:g}_batch{batch}"
+            .replace(".", "p"))
+
+
+def plot_cells(cells: dict[tuple, list[dict]], fig_dir: Path, prefix: str) -> dict[tuple, str]:
+    """Figure 3 per cell (PIDynNet and UKF estimates over record time, every seed); returns
+    each cell's file name."""
+    from pidyn.reporting import plot_convergence_seeds
+
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    names = {}
+    for key, js in sorted(cells.items()):
+        runs = {"PIDynNet": [j["_trajectory"] for j in js],
+                "UKF": [b.get("trajectory") or [] for j in js for b in j["_baselines"] if b["method"] == "ukf"]}
+        crb = [j["_crb"]["std_pct"] for j in js if j["_crb"]]
+        bound = {n: float(np.nanmean([c.get(n, np.nan) for c in crb])) for n in js[0]["params"]} if crb else None
+        name = f"{prefix}_{figure_name(key)}.png"
+        system, record, noise, batch, scale, stretch = key
+        plot_convergence_seeds(fig_dir / name, runs, js[0]["truth"], bound,
+                               title=f"{system} under {record} x{scale:g} (stretch {stretch:g}), noise "
+                                     f"{100 * noise:g} %, batch {batch}: {len(js)} seed(s)")
+        if (fig_dir / name).exists():
+            names[key] = name
+    return names
+
+
+def aggregate(roots: Path | list[Path]) -> tuple[pd.DataFrame, list[str]]:
+    cells, failed = load_cells(roots)
     rows = []
     for key, js in sorted(cells.items()):
         system, record, noise, batch, scale, stretch = key
@@ -158,7 +194,8 @@ def summary(df: pd.DataFrame) -> list[str]:
     return out
 
 
-def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str]) -> str:
+def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str],
+                figures: dict[tuple, str] | None = None, fig_rel: str = "figures") -> str:
     f = _num
     out = [f"# {title}\n", f"Command: `{command}`\n", *summary(df)]
     for key, g in df.groupby(CELL, sort=False):
@@ -178,6 +215,9 @@ def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str]) -
         r0 = g.iloc[0]
         out.append(f"\nWall seconds per run: PIDynNet {f(r0.pidynnet_seconds, 0)}, EE {f(r0.equation_error_seconds, 2)}, "
                    f"SINDy {f(r0.sindy_seconds, 2)}, OE {f(r0.output_error_seconds, 1)}, UKF {f(r0.ukf_seconds, 1)}.")
+        if figures and tuple(key) in figures:
+            out.append(f"\nFigure 3, estimates over record time, every seed, PIDynNet and UKF: "
+                       f"[{figures[tuple(key)]}]({fig_rel}/{figures[tuple(key)]})")
     if failed:
         out.append(f"\nFailed jobs (no metrics.json): {', '.join(failed)}")
     return "\n".join(out) + "\n"
@@ -189,6 +229,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None, help="output stem (default: <root>/table)")
     ap.add_argument("--title", default=None)
     ap.add_argument("--command", default="")
+    ap.add_argument("--no-figures", action="store_true", help="skip the per-cell Figure 3")
     a = ap.parse_args()
     df, failed = aggregate(a.root)
     if df.empty:
@@ -196,7 +237,9 @@ def main() -> None:
     out = a.out or a.root[0] / "table"
     out.parent.mkdir(parents=True, exist_ok=True)
     df.to_csv(out.with_suffix(".csv"), index=False)
-    out.with_suffix(".md").write_text(to_markdown(df, a.title or a.root[0].parent.parent.name, a.command, failed))
+    figures = {} if a.no_figures else plot_cells(load_cells(a.root)[0], out.parent / "figures", out.name)
+    out.with_suffix(".md").write_text(to_markdown(df, a.title or a.root[0].parent.parent.name, a.command, failed,
+                                                  figures))
     print(out.with_suffix(".md").read_text())
 
 

@@ -3,6 +3,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -16,7 +17,10 @@ def job(d: Path, seed: int, k3: float, ukf_err: float) -> None:
         "system": "duffing", "record": "kobe", "noise": 0.05, "batch_size": 500, "eq_scale": 1.0, "seed": seed,
         "params": {"k3": k3}, "truth": {"k3": 120.0}, "error_pct": {"k3": abs(k3 - 120) / 1.2}, "wall_seconds": 10.0}))
     (d / "baselines.json").write_text(json.dumps({"baselines": [
-        {"method": "ukf", "params": {"k3": 0.0}, "error_pct": {"k3": ukf_err}, "seconds": 1.0}]}))
+        {"method": "ukf", "params": {"k3": 0.0}, "error_pct": {"k3": ukf_err}, "seconds": 1.0,
+         "trajectory": [{"t": 0.1 * i, "k3": 100.0 + i} for i in range(30)]}]}))
+    (d / "subperiod_state.json").write_text(json.dumps({"trajectory": [
+        {"iteration": 10 * i, "t": 0.2 * i, "k3": 110.0 + 0.1 * i} for i in range(20)]}))
     (d / "cramer_rao.json").write_text(json.dumps({"std_pct": {"k3": 0.1}}))
 
 
@@ -55,6 +59,24 @@ def test_aggregate_joins_sweeps_reads_stretch_from_config_and_summarises(tmp_pat
                     "| kobe | 1 | 1.5 | 5 | 500 | 1 | 5 / - / 6 (0.1) |"]
     one, _ = aggregate.aggregate(a)
     assert "## Summary" not in aggregate.to_markdown(one, "t", "cmd", [])
+
+
+def test_aggregate_draws_figure_3_per_cell_and_links_it(tmp_path):
+    job(tmp_path / "sweep" / "0_seed=0", 0, 121.2, 3.0)
+    job(tmp_path / "sweep" / "1_seed=1", 1, 118.8, 4.0)
+    out = tmp_path / "results" / "table9"
+    r = subprocess.run([sys.executable, "experiments/aggregate.py", str(tmp_path / "sweep"), "--out", str(out),
+                        "--title", "t"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    (png,) = (tmp_path / "results" / "figures").glob("table9_*.png")
+    assert png.name == "table9_duffing_kobe_x1_stretch1_noise5_batch500.png"
+    from PIL import Image
+
+    rgb = np.asarray(Image.open(png).convert("RGB")).reshape(-1, 3).astype(int)
+    r, b = rgb[:, 0], rgb[:, 2]
+    assert (b > r + 40).sum() > 200, "no PIDynNet (blue) curve"
+    assert (r > b + 60).sum() > 200, "no UKF (orange) curve"
+    assert f"](figures/{png.name})" in out.with_suffix(".md").read_text()
 
 
 @pytest.mark.slow

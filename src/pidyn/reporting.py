@@ -75,6 +75,65 @@ def plot_convergence(path: Path, trajectory: list[dict], truths: dict[str, float
     plt.close(fig)
 
 
+def plot_convergence_seeds(path: Path, runs: dict[str, list[list[dict]]], truths: dict[str, float | None],
+                           bound_pct: dict[str, float] | None = None, title: str = "") -> None:
+    """Figure 3 for a table cell: every seed's estimate over record time, per method.
+
+    One seed's curve says little when the error is partly luck; the spread of all seeds beside
+    the truth (left) and their relative errors beside the Cramer-Rao std (right, dotted) show
+    whether a method converges, and to what.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    first = next((tr for trs in runs.values() for tr in trs if tr), None)
+    if first is None:
+        return
+    names = [k for k in first[0] if k not in ("iteration", "t")]
+    colors = dict(zip(runs, ["tab:blue", "tab:orange", "tab:green", "tab:red"]))
+    fig, axes = plt.subplots(len(names), 2, figsize=(10, 2.2 * len(names)), squeeze=False, sharex=True)
+    for i, n in enumerate(names):
+        ax, axe = axes[i]
+        for method, trs in runs.items():
+            for s_i, tr in enumerate(t for t in trs if t and n in t[0]):
+                t = np.array([p["t"] for p in tr])
+                v = np.array([p[n] for p in tr])
+                ax.plot(t, v, lw=0.7, alpha=0.6, color=colors[method], label=method if s_i == 0 else None)
+                if truths.get(n):
+                    axe.semilogy(t, 100 * np.abs(v - truths[n]) / abs(truths[n]) + 1e-6, lw=0.7, alpha=0.6,
+                                 color=colors[method])
+        if truths.get(n) is not None:
+            ax.axhline(truths[n], color="k", ls="--", lw=0.8, label="truth")
+            axe.set_ylabel(f"|err| {n} (%)")
+        if bound_pct and bound_pct.get(n):
+            axe.axhline(bound_pct[n], color="k", ls=":", lw=0.9, label="Cramer-Rao std")
+            if i == 0:
+                axe.legend(fontsize=8)
+        ax.set_ylabel(n)
+        if i == 0:
+            ax.legend(fontsize=8)
+    axes[-1][0].set_xlabel("record time (s)")
+    axes[-1][1].set_xlabel("record time (s)")
+    fig.suptitle(title)
+    fig.tight_layout()
+    _save_small(fig, path, dpi=90)
+    plt.close(fig)
+
+
+def _save_small(fig, path: Path, dpi: int) -> None:
+    """PNG with a 64-colour palette: many thin overlapping curves are several times smaller so."""
+    import io
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    fig.savefig(buf, dpi=dpi, format="png")
+    buf.seek(0)
+    Image.open(buf).convert("RGB").quantize(colors=64).save(path, optimize=True)
+
+
 def plot_response(path: Path, t: np.ndarray, series: dict[str, np.ndarray], title: str = "",
                   ylabel: str = "x (m)") -> None:
     """Measured vs predicted time histories on one axis."""
