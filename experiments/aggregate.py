@@ -43,6 +43,7 @@ PAPER = {
                                  "gamma": (1.948, 2.58), "n": (2.064, 3.18)}},
 }
 METHODS = ["equation_error", "sindy", "output_error", "ukf"]
+LABEL = {"equation_error": "EE", "sindy": "SINDy", "output_error": "OE", "ukf": "UKF"}
 
 
 def _from_config(d: Path, job: dict) -> None:
@@ -150,8 +151,10 @@ def aggregate(roots: Path | list[Path]) -> tuple[pd.DataFrame, list[str]]:
                 e = [b.get("error_pct", {}).get(n) for j in js for b in j["_baselines"] if b["method"] == mth]
                 e = [x for x in e if x is not None]
                 row[f"{mth}_rms_err"] = float(np.sqrt(np.mean(np.square(e)))) if e else np.nan
-                s = [b["seconds"] for j in js for b in j["_baselines"] if b["method"] == mth]
+                ran = [b for j in js for b in j["_baselines"] if b["method"] == mth]
+                s = [b["seconds"] for b in ran if b.get("params")]  # a method that did not apply took no time
                 row[f"{mth}_seconds"] = float(np.mean(s)) if s else np.nan
+                row[f"{mth}_note"] = ran[0].get("note", "") if ran and not s else ""
             rows.append(row)
     return pd.DataFrame(rows), failed
 
@@ -215,6 +218,9 @@ def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str],
         r0 = g.iloc[0]
         out.append(f"\nWall seconds per run: PIDynNet {f(r0.pidynnet_seconds, 0)}, EE {f(r0.equation_error_seconds, 2)}, "
                    f"SINDy {f(r0.sindy_seconds, 2)}, OE {f(r0.output_error_seconds, 1)}, UKF {f(r0.ukf_seconds, 1)}.")
+        na = {LABEL[m]: r0[f"{m}_note"] for m in METHODS if r0.get(f"{m}_note")}
+        if na:
+            out.append("\n" + "; ".join(f"{m}: {note}" for m, note in na.items()) + ".")
         if figures and tuple(key) in figures:
             out.append(f"\nFigure 3, estimates over record time, every seed, PIDynNet and UKF: "
                        f"[{figures[tuple(key)]}]({fig_rel}/{figures[tuple(key)]})")

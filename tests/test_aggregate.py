@@ -28,14 +28,21 @@ def test_aggregate_means_rms_and_failed_jobs(tmp_path):
     job(tmp_path / "0_seed=0", 0, 121.2, 3.0)
     job(tmp_path / "1_seed=1", 1, 118.8, 4.0)
     (tmp_path / "2_seed=2").mkdir()  # a failed job: no metrics.json
+    for d in ("0_seed=0", "1_seed=1"):  # a baseline that cannot apply: no error, no seconds, its reason shown
+        b = json.loads((tmp_path / d / "baselines.json").read_text())
+        b["baselines"].append({"method": "equation_error", "params": {}, "seconds": 0.0,
+                               "note": "not applicable: unmeasured latent state"})
+        (tmp_path / d / "baselines.json").write_text(json.dumps(b))
     df, failed = aggregate.aggregate(tmp_path)
     row = df.iloc[0]
+    assert np.isnan(row.equation_error_rms_err) and np.isnan(row.equation_error_seconds)
     assert failed == ["2_seed=2"]
     assert row.seeds == 2 and row.pidynnet_mean == pytest.approx(120.0)
     assert row.pidynnet_rms_err == pytest.approx(1.0)
     assert row.ukf_rms_err == pytest.approx((12.5) ** 0.5)
     md = aggregate.to_markdown(df, "t", "cmd", failed)
     assert "Failed jobs" in md and "| k3 |" in md
+    assert "EE -," in md and "EE: not applicable: unmeasured latent state." in md
 
 
 def test_aggregate_joins_sweeps_reads_stretch_from_config_and_summarises(tmp_path):
