@@ -126,6 +126,11 @@ def plot_cells(cells: dict[tuple, list[dict]], fig_dir: Path, prefix: str) -> di
 
 def aggregate(roots: Path | list[Path]) -> tuple[pd.DataFrame, list[str]]:
     cells, failed = load_cells(roots)
+    return table(cells), failed
+
+
+def table(cells: dict[tuple, list[dict]]) -> pd.DataFrame:
+    """One row per cell and parameter."""
     rows = []
     for key, js in sorted(cells.items()):
         system, record, noise, batch, scale, stretch = key
@@ -156,7 +161,7 @@ def aggregate(roots: Path | list[Path]) -> tuple[pd.DataFrame, list[str]]:
                 row[f"{mth}_seconds"] = float(np.mean(s)) if s else np.nan
                 row[f"{mth}_note"] = ran[0].get("note", "") if ran and not s else ""
             rows.append(row)
-    return pd.DataFrame(rows), failed
+    return pd.DataFrame(rows)
 
 
 CELL = ["system", "record", "noise", "batch_size", "eq_scale", "eq_stretch"]
@@ -221,9 +226,9 @@ def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str],
         na = {LABEL[m]: r0[f"{m}_note"] for m in METHODS if r0.get(f"{m}_note")}
         if na:
             out.append("\n" + "; ".join(f"{m}: {note}" for m, note in na.items()) + ".")
-        if figures and tuple(key) in figures:
+        if figures and key in figures:
             out.append(f"\nFigure 3, estimates over record time, every seed, PIDynNet and UKF: "
-                       f"[{figures[tuple(key)]}]({fig_rel}/{figures[tuple(key)]})")
+                       f"[{figures[key]}]({fig_rel}/{figures[key]})")
     if failed:
         out.append(f"\nFailed jobs (no metrics.json): {', '.join(failed)}")
     return "\n".join(out) + "\n"
@@ -237,13 +242,14 @@ def main() -> None:
     ap.add_argument("--command", default="")
     ap.add_argument("--no-figures", action="store_true", help="skip the per-cell Figure 3")
     a = ap.parse_args()
-    df, failed = aggregate(a.root)
+    cells, failed = load_cells(a.root)
+    df = table(cells)
     if df.empty:
         raise SystemExit(f"{', '.join(map(str, a.root))}: no finished job (failed: {failed})")
     out = a.out or a.root[0] / "table"
     out.parent.mkdir(parents=True, exist_ok=True)
     df.to_csv(out.with_suffix(".csv"), index=False)
-    figures = {} if a.no_figures else plot_cells(load_cells(a.root)[0], out.parent / "figures", out.name)
+    figures = {} if a.no_figures else plot_cells(cells, out.parent / "figures", out.name)
     out.with_suffix(".md").write_text(to_markdown(df, a.title or a.root[0].parent.parent.name, a.command, failed,
                                                   figures))
     print(out.with_suffix(".md").read_text())

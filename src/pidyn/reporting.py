@@ -34,18 +34,37 @@ def nrmse(pred: np.ndarray, true: np.ndarray) -> float:
     return float(np.sqrt(np.mean((pred - true) ** 2)) / max(np.std(true), 1e-300))
 
 
-def plot_convergence(path: Path, trajectory: list[dict], truths: dict[str, float | None], windows: list[dict],
-                     title: str = "", other: tuple[str, list[dict]] | None = None) -> None:
-    """Parameter estimates over record time with window boundaries (cf. paper Figure 3)."""
+def _param_grid(n_params: int):
+    """One row per parameter: estimate (left), relative error (right), shared record-time axis."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt.subplots(n_params, 2, figsize=(10, 2.2 * n_params), squeeze=False, sharex=True)
+
+
+def _finish_grid(fig, axes, title: str, path: Path, dpi: int, palette: bool = False) -> None:
+    import matplotlib.pyplot as plt
+
+    axes[-1][0].set_xlabel("record time (s)")
+    axes[-1][1].set_xlabel("record time (s)")
+    fig.suptitle(title)
+    fig.tight_layout()
+    if palette:
+        _save_small(fig, path, dpi)
+    else:
+        fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
+def plot_convergence(path: Path, trajectory: list[dict], truths: dict[str, float | None], windows: list[dict],
+                     title: str = "", other: tuple[str, list[dict]] | None = None) -> None:
+    """Parameter estimates over record time with window boundaries (cf. paper Figure 3)."""
     names = [k for k in trajectory[0] if k not in ("iteration", "t")] if trajectory else []
     if not names:
         return
-    fig, axes = plt.subplots(len(names), 2, figsize=(10, 2.2 * len(names)), squeeze=False, sharex=True)
+    fig, axes = _param_grid(len(names))
     t = np.array([p["t"] for p in trajectory])
     for i, n in enumerate(names):
         v = np.array([p[n] for p in trajectory])
@@ -67,12 +86,7 @@ def plot_convergence(path: Path, trajectory: list[dict], truths: dict[str, float
             axe.axvline(w["t1"], color="0.85", lw=0.6)
         if i == 0:
             ax.legend(fontsize=8)
-    axes[-1][0].set_xlabel("record time (s)")
-    axes[-1][1].set_xlabel("record time (s)")
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish_grid(fig, axes, title, path, dpi=110)
 
 
 def plot_convergence_seeds(path: Path, runs: dict[str, list[list[dict]]], truths: dict[str, float | None],
@@ -83,17 +97,12 @@ def plot_convergence_seeds(path: Path, runs: dict[str, list[list[dict]]], truths
     the truth (left) and their relative errors beside the Cramer-Rao std (right, dotted) show
     whether a method converges, and to what.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     first = next((tr for trs in runs.values() for tr in trs if tr), None)
     if first is None:
         return
     names = [k for k in first[0] if k not in ("iteration", "t")]
     colors = dict(zip(runs, ["tab:blue", "tab:orange", "tab:green", "tab:red"]))
-    fig, axes = plt.subplots(len(names), 2, figsize=(10, 2.2 * len(names)), squeeze=False, sharex=True)
+    fig, axes = _param_grid(len(names))
     for i, n in enumerate(names):
         ax, axe = axes[i]
         for method, trs in runs.items():
@@ -114,12 +123,7 @@ def plot_convergence_seeds(path: Path, runs: dict[str, list[list[dict]]], truths
         ax.set_ylabel(n)
         if i == 0:
             ax.legend(fontsize=8)
-    axes[-1][0].set_xlabel("record time (s)")
-    axes[-1][1].set_xlabel("record time (s)")
-    fig.suptitle(title)
-    fig.tight_layout()
-    _save_small(fig, path, dpi=90)
-    plt.close(fig)
+    _finish_grid(fig, axes, title, path, dpi=90, palette=True)
 
 
 def _save_small(fig, path: Path, dpi: int) -> None:
