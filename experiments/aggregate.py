@@ -116,10 +116,9 @@ def plot_cells(cells: dict[tuple, list[dict]], fig_dir: Path, prefix: str) -> di
         bound = {n: float(np.nanmean([c.get(n, np.nan) for c in crb])) for n in js[0]["params"]} if crb else None
         name = f"{prefix}_{figure_name(key)}.png"
         system, record, noise, batch, scale, stretch = key
-        plot_convergence_seeds(fig_dir / name, runs, js[0]["truth"], bound,
-                               title=f"{system} under {record} x{scale:g} (stretch {stretch:g}), noise "
-                                     f"{100 * noise:g} %, batch {batch}: {len(js)} seed(s)")
-        if (fig_dir / name).exists():
+        if plot_convergence_seeds(fig_dir / name, runs, js[0]["truth"], bound,
+                                  title=f"{system} under {record} x{scale:g} (stretch {stretch:g}), noise "
+                                        f"{100 * noise:g} %, batch {batch}: {len(js)} seed(s)"):
             names[key] = name
     return names
 
@@ -173,7 +172,7 @@ def _num(x, d: int = 3) -> str:
 
 def _short(x) -> str:
     """Two significant digits for errors that span 0.01 % to 90 %."""
-    if x is None or (isinstance(x, float) and np.isnan(x)):
+    if _num(x) == "-":
         return "-"
     if 0 < abs(x) < 0.01:
         return "<0.01"

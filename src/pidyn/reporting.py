@@ -90,16 +90,16 @@ def plot_convergence(path: Path, trajectory: list[dict], truths: dict[str, float
 
 
 def plot_convergence_seeds(path: Path, runs: dict[str, list[list[dict]]], truths: dict[str, float | None],
-                           bound_pct: dict[str, float] | None = None, title: str = "") -> None:
+                           bound_pct: dict[str, float] | None = None, title: str = "") -> bool:
     """Figure 3 for a table cell: every seed's estimate over record time, per method.
 
     One seed's curve says little when the error is partly luck; the spread of all seeds beside
     the truth (left) and their relative errors beside the Cramer-Rao std (right, dotted) show
-    whether a method converges, and to what.
+    whether a method converges, and to what. Returns False (no file) when no run has a trajectory.
     """
     first = next((tr for trs in runs.values() for tr in trs if tr), None)
     if first is None:
-        return
+        return False
     names = [k for k in first[0] if k not in ("iteration", "t")]
     colors = dict(zip(runs, ["tab:blue", "tab:orange", "tab:green", "tab:red"]))
     fig, axes = _param_grid(len(names))
@@ -124,6 +124,7 @@ def plot_convergence_seeds(path: Path, runs: dict[str, list[list[dict]]], truths
         if i == 0:
             ax.legend(fontsize=8)
     _finish_grid(fig, axes, title, path, dpi=90, palette=True)
+    return True
 
 
 def _save_small(fig, path: Path, dpi: int) -> None:
