@@ -10,14 +10,21 @@ import numpy as np
 import yaml
 
 
-def param_table(values: dict[str, float], truths: dict[str, float | None], units: dict[str, str]) -> dict:
+def param_table(values: dict[str, float], truths: dict[str, float | None], units: dict[str, str],
+                intervals: dict[str, dict] | None = None) -> dict:
+    """Per parameter: value, unit, 95 % interval and std (when estimated), truth and error %."""
     out = {}
     for n, v in values.items():
         row: dict[str, Any] = {"value": float(v), "unit": units.get(n, "")}
+        if intervals and n in intervals:
+            row["ci95"] = [float(x) for x in intervals[n]["ci95"]]
+            row["std"] = float(intervals[n]["std"])
         t = truths.get(n)
         if t is not None:
             row["truth"] = float(t)
             row["error_pct"] = float(100 * abs(v - t) / abs(t)) if t != 0 else None
+            if "ci95" in row:
+                row["covered"] = bool(row["ci95"][0] <= t <= row["ci95"][1])
         out[n] = row
     return out
 
@@ -59,8 +66,10 @@ def _finish_grid(fig, axes, title: str, path: Path, dpi: int, palette: bool = Fa
 
 
 def plot_convergence(path: Path, trajectory: list[dict], truths: dict[str, float | None], windows: list[dict],
-                     title: str = "", other: tuple[str, list[dict]] | None = None) -> None:
-    """Parameter estimates over record time with window boundaries (cf. paper Figure 3)."""
+                     title: str = "", other: tuple[str, list[dict]] | None = None,
+                     final: dict[str, dict] | None = None) -> None:
+    """Parameter estimates over record time with window boundaries (cf. paper Figure 3);
+    ``final``: the refined estimate with its 95 % interval, drawn at the record's end."""
     names = [k for k in trajectory[0] if k not in ("iteration", "t")] if trajectory else []
     if not names:
         return
@@ -80,6 +89,11 @@ def plot_convergence(path: Path, trajectory: list[dict], truths: dict[str, float
             ax.axhline(truths[n], color="k", ls="--", lw=0.8, label="truth")
             axe.semilogy(t, 100 * np.abs(v - truths[n]) / abs(truths[n]) + 1e-6, lw=1, color="tab:blue")
             axe.set_ylabel(f"|err| {n} (%)")
+        if final and n in final:
+            lo, hi = final[n]["ci95"]
+            te = t[-1] if len(t) else 0.0
+            ax.errorbar([te], [final[n]["value"]], yerr=[[final[n]["value"] - lo], [hi - final[n]["value"]]],
+                        fmt="o", color="tab:green", ms=4, capsize=3, label="refined, 95 %")
         ax.set_ylabel(n)
         for w in windows:
             ax.axvline(w["t1"], color="0.85", lw=0.6)

@@ -5,9 +5,9 @@ then solve the motion residual for the parameters it is linear in. Milliseconds;
 clean data, biased by noise through the differenced acceleration; not applicable when the
 model has unmeasured latent states (Bouc-Wen z).
 
-Output error (OE): simulate the model and fit the simulated x (and x') to the measured
-ones with scipy's trust-region least squares; the Jacobian comes from one batched
-simulation of all perturbed parameter sets. The estimator a practitioner would try first.
+Output error (OE): simulate the model and fit the simulated channels to the measured ones
+with scipy's trust-region least squares; the residuals are those of the refinement stage's
+shooting problem with one segment from rest. The estimator a practitioner would try first.
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ import numpy as np
 import torch
 from scipy.optimize import least_squares
 
-from pidyn.baselines.common import BaselineResult, from_theta, starting_point
-from pidyn.baselines.fastsim import simulate_batch
+from pidyn.baselines.common import BaselineResult, starting_point
 from pidyn.data.sources import Record
+from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
 from pidyn.systems.base import Kinematics
 from pidyn.systems.lstsq import solve_linear_params
 
@@ -48,38 +48,16 @@ def output_error(
     substeps: int = 4,
     max_nfev: int = 60,
 ) -> BaselineResult:
+    """Single shooting from rest over the whole record (the shooting problem with one segment
+    and a fixed initial state), trust-region least squares, forward-difference Jacobian from
+    one batched simulation of all perturbed parameter sets."""
     t0 = time.perf_counter()
     specs, fixed, th0 = starting_point(system, init)
-    chans = [("x", record.x[:, 0])] + ([("v", record.v[:, 0])] if record.v is not None else [])
-    scale = {c: max(float(np.std(y)), 1e-300) for c, y in chans}
-    h = 1e-6
-
-    def sims(thetas: np.ndarray) -> dict[str, np.ndarray]:
-        p = from_theta(specs, thetas)
-        p.update({k: np.full(thetas.shape[1], v) for k, v in fixed.items()})
-        return simulate_batch(system, p, record.t, record.f, substeps=substeps)
-
-    def resid_from(out: dict[str, np.ndarray], j: int) -> np.ndarray:
-        return np.concatenate([(out[c][:, j] - y) / scale[c] for c, y in chans])
-
-    cache: dict[bytes, np.ndarray] = {}
-
-    def fun(th: np.ndarray) -> np.ndarray:
-        key = th.tobytes()
-        if key not in cache:
-            out = sims(th[:, None])
-            r = resid_from(out, 0)
-            cache[key] = np.nan_to_num(r, nan=1e6, posinf=1e6, neginf=-1e6)
-        return cache[key]
-
-    def jac(th: np.ndarray) -> np.ndarray:
-        n = len(th)
-        thetas = np.repeat(th[:, None], n + 1, axis=1)
-        thetas[np.arange(n), np.arange(1, n + 1)] += h
-        out = sims(thetas)
-        base = resid_from(out, 0)
-        return np.stack([(resid_from(out, j + 1) - base) / h for j in range(n)], axis=1)
-
-    sol = least_squares(fun, th0, jac=jac, method="trf", max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, gtol=1e-12)
-    est = {k: float(v) for k, v in from_theta(specs, sol.x).items()}
+    problem = ShootingProblem(system, record.t, record.f, record_channels(record, system.n_dof),
+                              segment_bounds(record.t, None), substeps, fixed_state0=np.zeros(system.n_state))
+    for ch in problem.channels:  # residuals relative to each channel's spread, as a practitioner scales them
+        ch.sigma = max(float(np.std(ch.data)), 1e-300)
+    sol = least_squares(lambda th: problem.residuals(th)[0], th0, jac=problem.jacobian_fd, method="trf",
+                        max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    est = problem.values(sol.x)
     return BaselineResult("output_error", est, time.perf_counter() - t0, note=f"nfev={sol.nfev}, cost={sol.cost:.3g}")

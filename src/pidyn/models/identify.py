@@ -28,7 +28,6 @@ from pidyn.data.datamodule import SubperiodDataModule
 from pidyn.data.windows import Window
 from pidyn.models.fusion import InformationFusion, residual_information
 from pidyn.models.lit_module import PIDynNetModule
-from pidyn.params import from_raw
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +59,7 @@ class WindowResult:
     stopped_early: bool
     clamp_bounds: dict[str, list[float]] = field(default_factory=dict)
     z_end: list[float] | None = None  # latent state at the window's end (the next window starts from it)
+    states: list[list[float]] | None = None  # [t, x, x', z] from the networks every 10th sample (refinement starts)
 
 
 class SubperiodIdentifier:
@@ -178,6 +178,7 @@ class SubperiodIdentifier:
             stopped = bool(self.early_stopping and self.early_stopping.stopped_at is not None)
             names = net.params.trainable_names
             estimate = net.params.as_floats()
+            states = net.states_at_samples(w)
             traj = self.module.trajectory_values()
             if self.clamp is not None:
                 self.clamp.update_from_trajectory(names, traj, estimate)
@@ -208,6 +209,7 @@ class SubperiodIdentifier:
                 stopped_early=stopped,
                 clamp_bounds={k: list(v) for k, v in (self.clamp.bounds.items() if self.clamp else [])},
                 z_end=None if z_end is None else z_end.tolist(),
+                states=states,
             )
             self.results.append(res)
             first_done = True
@@ -240,6 +242,13 @@ class SubperiodIdentifier:
             tb.add_scalar(f"params_fused/{n}", v, step)
 
 
-def raw_to_values(module: PIDynNetModule, raw: torch.Tensor) -> dict[str, float]:
-    names = module.net.params.trainable_names
-    return {n: float(from_raw(module.net.params.spec(n), raw[i])) for i, n in enumerate(names)}
+def network_states(results: list[WindowResult]) -> "np.ndarray | None":
+    """All windows' network states, (K, 1 + n_state) rows [t, x, x', z], in time order; a
+    later window's value wins where two windows share a time (its networks start there)."""
+    import numpy as np
+
+    rows: dict[float, list[float]] = {}
+    for r in results:
+        for row in r.states or []:
+            rows[round(row[0], 9)] = row
+    return np.array([rows[k] for k in sorted(rows)]) if rows else None

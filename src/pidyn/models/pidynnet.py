@@ -223,6 +223,17 @@ class PIDynNet(nn.Module):
         return k.z[0]
 
     @torch.no_grad()
+    def states_at_samples(self, w: Window, stride: int = 10) -> list[list[float]]:
+        """[t, x..., x'..., z...] from the networks at every ``stride``-th sample of the window:
+        the segment initial states of the multiple-shooting refinement."""
+        sl = slice(0, None, stride)
+        q = None if w.q_data is None else w.q_data[sl]
+        qd = None if w.qd_data is None else w.qd_data[sl]
+        k = self.kinematics(w.t_data[sl], w.f_data[sl], q, qd, order=1)
+        parts = [w.t_data[sl][:, None], k.x, k.v] + ([k.z] if k.z is not None else [])
+        return torch.cat([p.to(torch.float64) for p in parts], dim=1).tolist()
+
+    @torch.no_grad()
     def response_at_start(self, w: Window) -> torch.Tensor:
         k = self.kinematics(w.t_pool[:1], w.f_pool[:1], None if w.q_pool is None else w.q_pool[:1],
                             None if w.qd_pool is None else w.qd_pool[:1], order=0, latent=False)

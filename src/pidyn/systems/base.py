@@ -67,6 +67,18 @@ class StructuralSystem(ABC):
     ) -> np.ndarray:
         """dy/dt for the state y = [x (n_dof), v (n_dof), z (n_latent)]."""
 
+    @property
+    def n_state(self) -> int:
+        """Length of the state y = [x (n_dof), v (n_dof), z (n_latent)]."""
+        return 2 * self.n_dof + self.n_latent
+
+    def state_rate(self, t, y, p: dict, f):
+        """dy/dt for a batch of states ``y`` (..., n_state) at times ``t`` and excitation ``f``
+        (both broadcast against y[..., 0]). Written on array operations only, so NumPy
+        arrays and ``pidyn.autodiff.Dual`` arrays (exact sensitivities) go through the same
+        code; ``rhs`` is its one-state special case."""
+        raise NotImplementedError(f"{self.name}: no batched state rate")
+
     def nominal_mass(self) -> float:
         """The mass as given (its spec's init): known, or the starting guess when identified."""
         spec = next((s for s in self.param_specs() if s.name in ("m", "m1")), None)

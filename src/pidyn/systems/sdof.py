@@ -105,11 +105,18 @@ class SDOFSystem(StructuralSystem):
                 out[term.name] = k.zd[:, sl] - term.latent_rate(k.t, x, v, k.z[:, sl], p)
         return out
 
+    def state_rate(self, t, y, p, f):
+        x, v, z = y[..., 0], y[..., 1], y[..., 2:]
+        a = (self.forcing(f, p) - self.restoring_force(t, x, v, z, p)) / p["m"]
+        parts = [v, a]
+        for term, sl in zip(self.terms, self._latent_slices()):
+            if sl is not None:
+                rate = term.latent_rate(t, x, v, z[..., sl], p)
+                parts += [rate[..., j] for j in range(term.n_latent)]
+        return np.stack(parts, axis=-1)
+
     def rhs(self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]) -> np.ndarray:
-        x, v, z = y[0], y[1], y[2:]
-        a = (self.forcing(f(t), p) - self.restoring_force(t, x, v, z, p)) / p["m"]
-        dz = [term.latent_rate(t, x, v, z[sl], p) for term, sl in zip(self.terms, self._latent_slices()) if sl]
-        return np.concatenate([[v, a], *dz]) if dz else np.array([v, a])
+        return self.state_rate(t, np.asarray(y, dtype=float), p, f(t))
 
     def describe(self, p: dict[str, float]) -> str:
         lhs = f"{p['m']:.5g} x'' + " + " + ".join(t.formula(p) for t in self.terms)

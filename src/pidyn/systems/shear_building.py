@@ -78,14 +78,27 @@ class ShearBuilding(StructuralSystem):
         rhs = -M[None, :] * f[:, None] if self.excitation == "ground" else f[:, None] * (torch.arange(self.n_dof) == self.n_dof - 1)
         return {"motion": M[None, :] * k.a + k.v @ C.T + k.x @ K.T - rhs}
 
-    def rhs(self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]) -> np.ndarray:
+    def state_rate(self, t, y, p, f):
+        """Storey forces on the inter-storey drifts, element by element (no matrices), so
+        the same code runs on NumPy and dual arrays."""
         n = self.n_dof
-        m, C, K = self._mck(p, np)
-        M = np.array(m, dtype=float)
-        x, v = y[:n], y[n:]
-        force = -M * f(t) if self.excitation == "ground" else np.eye(n)[-1] * f(t)
-        a = (force - C @ v - K @ x) / M
-        return np.concatenate([v, a])
+        x = [y[..., i] for i in range(n)]
+        v = [y[..., n + i] for i in range(n)]
+        storey = []
+        for i in range(n):
+            drift = x[i] - x[i - 1] if i else x[i]
+            rate = v[i] - v[i - 1] if i else v[i]
+            storey.append(p[f"k{i + 1}"] * drift + p[f"c{i + 1}"] * rate)
+        acc = []
+        for i in range(n):
+            net = storey[i] - storey[i + 1] if i + 1 < n else storey[i]
+            m = p[f"m{i + 1}"]
+            ext = -m * f if self.excitation == "ground" else (f if i == n - 1 else 0.0 * f)
+            acc.append((ext - net) / m)
+        return np.stack(v + acc, axis=-1)
+
+    def rhs(self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]) -> np.ndarray:
+        return self.state_rate(t, np.asarray(y, dtype=float), p, f(t))
 
     def describe(self, p: dict[str, float]) -> str:
         return "M x'' + C x' + K x = -M 1 ag; " + ", ".join(f"{k}={v:.5g}" for k, v in p.items())

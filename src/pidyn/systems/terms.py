@@ -30,15 +30,17 @@ def _relu(x: Array) -> Array:
     return torch.relu(x) if isinstance(x, torch.Tensor) else np.maximum(x, 0.0)
 
 
+def _clamp_min(x: Array, lo: float) -> Array:
+    return x.clamp_min(lo) if isinstance(x, torch.Tensor) else np.maximum(x, lo)
+
+
 def _sigmoid(x: Array) -> Array:
     return torch.sigmoid(x) if isinstance(x, torch.Tensor) else 0.5 * (1 + np.tanh(0.5 * x))
 
 
 def _spow(z: Array, n: Array) -> Array:
     """|z|^n, with a floor so that the gradient stays finite at z = 0 for any n > 0."""
-    if isinstance(z, torch.Tensor):
-        return z.abs().clamp_min(1e-12) ** n
-    return np.maximum(np.abs(z), 1e-12) ** n
+    return _clamp_min(_abs(z), 1e-12) ** n
 
 
 class ForceTerm:
@@ -149,7 +151,7 @@ class BoucWenHysteresis(ForceTerm):
     def latent_rate(self, t, x, v, z, p):
         z0 = z[..., 0]
         zn = _spow(z0, p["n"])
-        sgn_z = z0 / _abs(z0).clip(1e-12) if isinstance(z0, np.ndarray) else z0 / z0.abs().clamp_min(1e-12)
+        sgn_z = z0 / _clamp_min(_abs(z0), 1e-12)
         rate = v - p["gamma"] * _abs(v) * zn * sgn_z - p["beta"] * v * zn
         return rate[..., None]
 

@@ -82,6 +82,7 @@ def _sub_cfg(cfg: DictConfig, system_node: dict, out_dir: Path, fit: tuple[float
         c.data.windows.t_start = fit[0]
         c.data.windows.t_end = fit[1]
         c.baselines = {"run": [], "cramer_rao": False}
+        c.model.refine = {"method": "none"}  # the diagnosis polishes with output error itself (diagnosis.polish)
         if cfg.diagnosis.get("ls_init") is not None:
             c.model.schedule.ls_init = cfg.diagnosis.ls_init
     out_dir.mkdir(parents=True, exist_ok=True)

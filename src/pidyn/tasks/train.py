@@ -24,7 +24,6 @@ from pidyn.models.identify import Schedule, SubperiodIdentifier
 from pidyn.models.lit_module import PIDynNetModule
 from pidyn.models.pidynnet import PIDynNet
 from pidyn.reporting import nrmse, param_table, plot_convergence, plot_response, write_json, write_yaml
-from pidyn.simulate import simulate
 from pidyn.systems.base import StructuralSystem
 
 log = logging.getLogger(__name__)
@@ -96,18 +95,31 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     ident = SubperiodIdentifier(module, dm, trainer_factory, schedule, clamp, stopper, run_dir)
     results = ident.run(resume=cfg.get("resume", True))
 
-    # ------------------------------------------------------------------ report
+    # ------------------------------------------------------------------ baselines, refinement
     params = core.params
     names = params.trainable_names
-    values = {n: params.as_floats()[n] for n in names}
+    pidyn_values = {n: params.as_floats()[n] for n in names}
     truths = {n: (record.truth or {}).get(n) for n in names}
+    baselines = run_baselines(cfg, system, record, run_dir, params.as_floats())
+    refined = run_refinement(cfg, system, record, pidyn_values, baselines, results)
+    values = dict(refined.params) if refined is not None else dict(pidyn_values)
+    final = {**params.as_floats(), **values}
+
+    # ------------------------------------------------------------------ report
     units = {n: params.spec(n).unit for n in names}
-    table = param_table(values, truths, units)
-    write_yaml(run_dir / "identified_params.yaml", {"system": system.name, "equation": system.describe(params.as_floats()), "params": table})
-    errors = {n: r["error_pct"] for n, r in table.items() if r.get("error_pct") is not None}
+    table = param_table(values, truths, units, None if refined is None else refined.intervals)
+    identified = {"system": system.name, "equation": system.describe(final), "params": table}
+    if refined is not None:
+        identified["notes"] = refined.notes
+        identified["correlation"] = {"names": refined.names, "matrix": refined.correlation}
+        identified["noise_std"] = refined.noise_std
+    write_yaml(run_dir / "identified_params.yaml", identified)
+    errors = relative_errors(values, truths)
+    pidyn_errors = relative_errors(pidyn_values, truths)
 
     # Simulate the identified model over the whole record (the physics-only check)
-    sim_x = simulate_identified(system, params.as_floats(), record)
+    sim_x = simulate_identified(system, final, record,
+                                state0=None if refined is None else np.array(refined.initial_state))
     x_ref = record.clean.x if record.clean is not None else record.x
     metrics: dict[str, Any] = {
         "system": system.name,
@@ -118,32 +130,48 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
         "batch_size": int(cfg.batch_size),
         "eq_scale": float(cfg.eq_scale),
         "eq_stretch": float(cfg.eq_stretch),
+        "refine": str(cfg.model.refine.method),
         "params": values,
         "truth": truths,
         "error_pct": errors,
         "max_error_pct": max(errors.values()) if errors else None,
         "mean_error_pct": float(np.mean(list(errors.values()))) if errors else None,
+        "pidynnet": {"params": pidyn_values, "error_pct": pidyn_errors,
+                     "max_error_pct": max(pidyn_errors.values()) if pidyn_errors else None},
         "sim_nrmse_x": nrmse(sim_x, x_ref),
         "windows": len(results),
         "iterations": int(module.iteration),
-        "wall_seconds": time.perf_counter() - t_wall,
     }
-    baselines = run_baselines(cfg, system, record, run_dir, params.as_floats())
+    if refined is not None:
+        metrics["ci95"] = {n: refined.intervals[n]["ci95"] for n in names}
+        metrics["std"] = {n: refined.intervals[n]["std"] for n in names}
+        if truths and all(truths.values()):
+            metrics["covered"] = {n: bool(metrics["ci95"][n][0] <= truths[n] <= metrics["ci95"][n][1]) for n in names}
+        metrics["refinement"] = {k: v for k, v in refined.to_dict().items()
+                                 if k not in ("params", "intervals", "correlation", "history")}
+        write_json(run_dir / "refinement.json", refined.to_dict())
+        torch.save({"names": names, "values": values, "ci95": metrics["ci95"]}, run_dir / "checkpoints" / "refined.pt")
     if baselines:
         metrics["baselines"] = {b["method"]: {"error_pct": b.get("error_pct"), "seconds": b["seconds"]} for b in baselines}
+    metrics["wall_seconds"] = time.perf_counter() - t_wall
     write_json(run_dir / "metrics.json", metrics)
     write_json(run_dir / "windows.json", {"windows": [r.__dict__ for r in results]})
     fig_dir = run_dir / "figures"
     fig_dir.mkdir(exist_ok=True)
     ukf = next((b for b in baselines if b["method"] == "ukf" and b.get("trajectory")), None)
     plot_convergence(fig_dir / "param_convergence.png", ident.trajectory, truths, [r.__dict__ for r in results],
-                     title=f"{system.name} under {record.name}", other=None if ukf is None else ("UKF", ukf["trajectory"]))
+                     title=f"{system.name} under {record.name}", other=None if ukf is None else ("UKF", ukf["trajectory"]),
+                     final=None if refined is None else refined.intervals)
     series = {"measured x": record.x[:, 0], "identified model (simulated)": sim_x[:, 0]}
     plot_response(fig_dir / "response.png", record.t, series, title=f"{system.name}: NRMSE {metrics['sim_nrmse_x']:.3g}")
-    _tb_figures(logger, fig_dir, int(module.iteration), metrics)
-    log.info("identified: %s", system.describe(params.as_floats()))
+    _tb_figures(logger, fig_dir, int(module.iteration), metrics, refined)
+    log.info("identified: %s", system.describe(final))
     if errors:
         log.info("errors (%%): %s", ", ".join(f"{k}={v:.3f}" for k, v in errors.items()))
+        if refined is not None:
+            log.info("PIDynNet alone (%%): %s", ", ".join(f"{k}={v:.3f}" for k, v in pidyn_errors.items()))
+    if refined is not None:
+        log.info("95 %% intervals: %s", ", ".join(f"{n} [{lo:.5g}, {hi:.5g}]" for n, (lo, hi) in metrics["ci95"].items()))
     log.info("wall %.1f s, run folder %s", metrics["wall_seconds"], run_dir)
     objects = {"module": module, "system": system, "record": record, "trainer_factory": trainer_factory,
                "run_dir": run_dir, "logger": logger}
@@ -151,23 +179,55 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
 
 
 def simulate_identified(system: StructuralSystem, values: dict[str, float], record: Record,
-                        x0: float = 0.0, v0: float = 0.0, substeps: int = 4) -> np.ndarray:
-    """The identified model's displacement over the record, (N, n_dof).
+                        x0: float = 0.0, v0: float = 0.0, substeps: int = 4,
+                        state0: np.ndarray | None = None) -> np.ndarray:
+    """The identified model's displacement over the record, (N, n_dof), by the fixed-step
+    batched RK4 (bounded cost: a model that blows up gives NaNs rather than an adaptive
+    integrator crawling) from ``state0`` (the full state), else from (x0, v0) with z = 0."""
+    from pidyn.integrate import rk4
 
-    Single-degree-of-freedom models use the fixed-step batched RK4 from (x0, v0) (bounded
-    cost: a model that blows up gives NaNs rather than an adaptive integrator crawling);
-    others solve_ivp from rest.
-    """
-    from pidyn.baselines.fastsim import simulate_batch
-    from pidyn.systems.sdof import SDOFSystem
+    n = system.n_dof
+    y0 = np.zeros(system.n_state)
+    if state0 is not None:
+        y0[:] = state0
+    else:
+        y0[:n], y0[n:2 * n] = x0, v0
+    with np.errstate(all="ignore"):
+        Y, _ = rk4(system, dict(values), record.t, record.f, y0[None, :], substeps=substeps)
+    return Y[:, 0, :n]
 
-    if isinstance(system, SDOFSystem):
-        state0 = (np.array([x0]), np.array([v0]), np.zeros((1, system.n_latent)))
-        with np.errstate(all="ignore"):
-            out = simulate_batch(system, {k: np.array([v]) for k, v in values.items()}, record.t, record.f,
-                                 substeps=substeps, state0=state0)
-        return out["x"][:, :1]
-    return simulate(system, values, lambda t: np.interp(t, record.t, record.f), record.t).x
+
+def relative_errors(values: dict[str, float], truths: dict[str, float | None]) -> dict[str, float]:
+    """|value - truth| / |truth| in %, for the parameters whose truth is known and nonzero."""
+    return {n: float(100 * abs(v - truths[n]) / abs(truths[n])) for n, v in values.items() if truths.get(n)}
+
+
+def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pidyn_values: dict[str, float],
+                   baselines: list[dict], results: list) -> Any:
+    """The refinement stage after PIDynNet (``model.refine``); None when it is off.
+
+    Starts: PIDynNet's estimate with its networks' states, and the classical estimates named
+    in ``model.refine.starts`` that ran on the same record; the stage refines the one that
+    simulates the record best and says so when that is not PIDynNet's."""
+    from pidyn.models.identify import network_states
+    from pidyn.refine import RefineSettings, refine
+
+    rcfg = OmegaConf.to_container(cfg.model.refine, resolve=True)
+    assert isinstance(rcfg, dict)
+    method = rcfg.pop("method", "none")
+    if method == "none":
+        return None
+    if method != "multiple_shooting":
+        raise ValueError(f"model.refine: unknown method '{method}'; choose multiple_shooting or none")
+    allowed = set(rcfg.pop("starts", None) or [])
+    settings = RefineSettings(**rcfg)
+    starts = {"pidynnet": pidyn_values}
+    for b in baselines:
+        if b["method"] in allowed and b.get("params"):
+            starts[b["method"]] = b["params"]
+    w = cfg.data.windows
+    return refine(system, record, starts, settings, network_states=network_states(results),
+                  t_start=w.get("t_start"), t_end=w.get("t_end"))
 
 
 def run_baselines(cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path,
@@ -201,7 +261,7 @@ def run_baselines(cfg: DictConfig, system: StructuralSystem, record: Record, run
         out.append(row)
         log.info("baseline %s: %s (%.1f s) %s", row["method"],
                  ", ".join(f"{k}={v:.5g}" for k, v in row["params"].items()), row["seconds"], row.get("note", ""))
-    if bcfg.get("cramer_rao") and hasattr(system, "terms"):
+    if bcfg.get("cramer_rao"):
         # the bound at the truth when it is known, else at the identified model
         ref = {**{s.name: s.init for s in system.param_specs()}, **identified, **(truth or {})}
         crb = B.cramer_rao(system, ref, record.t, record.f, float(cfg.noise),
@@ -232,10 +292,19 @@ def _quiet_framework_warnings() -> None:
         warnings.filterwarnings("ignore", message=msg)
 
 
-def _tb_figures(logger: Any, fig_dir: Path, step: int, metrics: dict) -> None:
+def _tb_figures(logger: Any, fig_dir: Path, step: int, metrics: dict, refined: Any = None) -> None:
     exp = getattr(logger, "experiment", None) if logger is not None else None
     if exp is None or not hasattr(exp, "add_image"):
         return
+    if refined is not None:
+        for n, row in refined.intervals.items():
+            exp.add_scalar(f"refined/{n}", row["value"], step)
+            exp.add_scalar(f"ci95_lo/{n}", row["ci95"][0], step)
+            exp.add_scalar(f"ci95_hi/{n}", row["ci95"][1], step)
+        for c, sd in refined.noise_std.items():
+            exp.add_scalar(f"noise_std/{c}", sd, step)
+        if refined.notes:
+            exp.add_text("identifiability", "\n\n".join(refined.notes), step)
     import matplotlib.image as mpimg
 
     for png in sorted(fig_dir.glob("*.png")):
@@ -243,4 +312,6 @@ def _tb_figures(logger: Any, fig_dir: Path, step: int, metrics: dict) -> None:
         exp.add_image(f"figures/{png.stem}", np.transpose(img, (2, 0, 1)), step)
     for k, v in (metrics.get("error_pct") or {}).items():
         exp.add_scalar(f"final/error_pct_{k}", v, step)
+    for k, v in (metrics["pidynnet"].get("error_pct") or {}).items():
+        exp.add_scalar(f"pidynnet/error_pct_{k}", v, step)
     exp.flush()

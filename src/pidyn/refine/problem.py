@@ -1,0 +1,289 @@
+"""Output error over shooting segments: residuals and exact Jacobians for any system.
+
+A record is cut into segments at sample indices b_0 < b_1 < ... < b_S = N - 1. Each segment
+is simulated from its own initial state y_s (x, x' and latent z of every degree of freedom)
+with the shared parameters theta, all segments as one batch (``pidyn.integrate.rk4``). The
+residuals are the measured channels minus the simulated ones, each divided by its noise
+level, and the continuity defects y_{s+1} - y_s(b_{s+1}) at the segment edges. One segment
+with a fixed initial state is classical output error (single shooting).
+
+Unknowns u = [theta (the parameters' unconstrained coordinates, as PIDynNet trains them),
+y_0 / scale, ..., y_{S-1} / scale]; y_0 drops out when the initial state is fixed.
+Jacobians are exact: the integrator runs on dual arrays with one direction per parameter
+and one per state component (the state directions are shared by all segments, since a
+segment depends on its own initial state only).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pidyn.autodiff import Dual
+from pidyn.baselines.common import fixed_values, from_theta, to_theta, trainable_specs
+from pidyn.integrate import rk4
+from pidyn.params import ParamSpec
+from pidyn.systems.base import StructuralSystem
+
+CHANNELS = ("x", "v", "a")
+
+
+@dataclass
+class Channel:
+    """One measured signal: ``kind`` (x, v or a: relative to the ground) of degree of freedom ``dof``."""
+
+    kind: str
+    dof: int
+    data: np.ndarray
+    sigma: float  # noise std used as the residual's unit (refined from the residuals)
+
+    @property
+    def name(self) -> str:
+        return self.kind if self.dof == 0 else f"{self.kind}{self.dof + 1}"
+
+
+def record_channels(record, n_dof: int) -> list[Channel]:
+    """Every measured channel of a record, with its standard deviation as the first noise unit."""
+    out = []
+    for kind in CHANNELS:
+        arr = getattr(record, kind, None)
+        if arr is None:
+            continue
+        arr = np.asarray(arr, float).reshape(len(record.t), -1)
+        if arr.shape[1] != n_dof:
+            raise ValueError(f"record '{record.name}': channel '{kind}' has {arr.shape[1]} columns, "
+                             f"the system has {n_dof} degrees of freedom")
+        for j in range(n_dof):
+            col = arr[:, j]
+            if np.all(np.isnan(col)):
+                continue
+            out.append(Channel(kind, j, col, max(float(np.nanstd(col)), 1e-300)))
+    if not out:
+        raise ValueError(f"record '{record.name}' has no measured response channel")
+    return out
+
+
+def segment_bounds(t: np.ndarray, length: float | None, t_start: float | None = None,
+                   t_end: float | None = None) -> np.ndarray:
+    """Sample indices b_0 < ... < b_S of segments of about ``length`` s over [t_start, t_end]
+    (None: one segment). A last piece shorter than half a segment joins its neighbour."""
+    i0 = 0 if t_start is None else int(np.searchsorted(t, t_start - 1e-9))
+    i1 = len(t) - 1 if t_end is None else int(np.searchsorted(t, t_end + 1e-9)) - 1
+    if i1 - i0 < 2:
+        raise ValueError(f"segment span [{t_start}, {t_end}] s holds fewer than 3 samples")
+    if length is None:
+        return np.array([i0, i1])
+    step = max(2, int(round(length / float(t[1] - t[0]))))
+    b = list(range(i0, i1, step))
+    if i1 - b[-1] < step // 2 and len(b) > 1:
+        b.pop()
+    return np.array(b + [i1])
+
+
+class ShootingProblem:
+    """Residuals r(u) of the measured channels and continuity defects c(u), with Jacobians."""
+
+    def __init__(
+        self,
+        system: StructuralSystem,
+        t: np.ndarray,
+        f: np.ndarray,
+        channels: list[Channel],
+        bounds: np.ndarray,
+        substeps: int = 4,
+        fixed_state0: np.ndarray | None = None,
+        state_scale: np.ndarray | None = None,
+        fixed: dict[str, float] | None = None,
+    ) -> None:
+        """``fixed``: values of the known (non-trainable) parameters, default their specs' init."""
+        self.system = system
+        self.t, self.f = np.asarray(t, float), np.asarray(f, float)
+        self.channels = channels
+        self.bounds = np.asarray(bounds, int)
+        self.substeps = substeps
+        self.specs: list[ParamSpec] = trainable_specs(system)
+        self.fixed = {**fixed_values(system), **{k: v for k, v in (fixed or {}).items() if k in fixed_values(system)}}
+        self.names = [s.name for s in self.specs]
+        self.n_theta = len(self.specs)
+        self.ns = system.n_state
+        self.S = len(self.bounds) - 1
+        self.fixed_state0 = None if fixed_state0 is None else np.asarray(fixed_state0, float).reshape(self.ns)
+        self.state_scale = np.ones(self.ns) if state_scale is None else np.asarray(state_scale, float)
+        lengths = np.diff(self.bounds)
+        self.L = int(lengths.max())
+        j = np.arange(self.L + 1)
+        self.idx = np.minimum(self.bounds[:-1, None] + j[None, :], len(self.t) - 1)  # (S, L+1) sample index
+        own = j[None, :] < lengths[:, None]  # a segment owns its samples up to (not incl.) its end ...
+        own[-1, lengths[-1]] = True  # ... the last one its end too
+        self.sel_s, self.sel_j = np.nonzero(own)
+        self.ends = lengths
+        self.t_local = self.t[: self.L + 1] - self.t[0]
+        self.t0 = self.t[self.bounds[:-1]]
+        self.F = self.f[self.idx].T  # (L+1, S)
+
+    # ------------------------------------------------------------------ unknowns
+    @property
+    def free_state0(self) -> bool:
+        return self.fixed_state0 is None
+
+    @property
+    def n_unknowns(self) -> int:
+        return self.n_theta + self.ns * (self.S - (0 if self.free_state0 else 1))
+
+    def pack(self, values: dict[str, float], states: np.ndarray) -> np.ndarray:
+        """u from physical parameter values and segment initial states (S, n_state)."""
+        states = np.asarray(states, float).reshape(self.S, self.ns)
+        keep = states if self.free_state0 else states[1:]
+        return np.concatenate([to_theta(self.specs, values), (keep / self.state_scale).ravel()])
+
+    def unpack(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(theta, states (S, n_state)) from u."""
+        theta = u[: self.n_theta]
+        rest = u[self.n_theta:].reshape(-1, self.ns) * self.state_scale
+        states = rest if self.free_state0 else np.vstack([self.fixed_state0[None, :], rest])
+        return theta, states
+
+    def values(self, theta: np.ndarray) -> dict[str, float]:
+        return {k: float(v) for k, v in from_theta(self.specs, np.asarray(theta, float)).items()}
+
+    # ------------------------------------------------------------------ simulation
+    def _params(self, theta: np.ndarray, dual: bool) -> dict:
+        if not dual:
+            p = from_theta(self.specs, theta)
+        else:
+            D = self.n_theta + self.ns
+            eye = np.eye(D)
+            p = from_theta(self.specs, [Dual(theta[i], eye[i]) for i in range(self.n_theta)])  # type: ignore[arg-type]
+        p = dict(p)
+        p.update(self.fixed)
+        return p
+
+    def simulate(self, u: np.ndarray, dual: bool = False):
+        """States (L+1, S, n_state) and rates of every segment (dual arrays when ``dual``)."""
+        theta, states = self.unpack(u)
+        y0 = states
+        if dual:
+            D = self.n_theta + self.ns
+            d = np.zeros((self.S, self.ns, D))
+            d[:, np.arange(self.ns), self.n_theta + np.arange(self.ns)] = self.state_scale
+            if not self.free_state0:
+                d[0] = 0.0
+            y0 = Dual(states, d)
+        with np.errstate(all="ignore"):
+            return rk4(self.system, self._params(theta, dual), self.t_local, self.F, y0, self.substeps, t0=self.t0)
+
+    def _channel_sim(self, Y, R, ch: Channel):
+        n = self.system.n_dof
+        if ch.kind == "x":
+            return Y[..., ch.dof]
+        if ch.kind == "v":
+            return Y[..., n + ch.dof]
+        return R[..., n + ch.dof]
+
+    # ------------------------------------------------------------------ residuals
+    def residuals(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(measured-channel residuals in noise units, continuity defects in state scales)."""
+        Y, R = self.simulate(u)
+        return self._data_res(Y, R), self._defects(u, Y)
+
+    def _data_res(self, Y, R) -> np.ndarray:
+        out = []
+        rows = self.idx[self.sel_s, self.sel_j]
+        for ch in self.channels:
+            sim = self._channel_sim(Y, R, ch)
+            v = sim.v if isinstance(sim, Dual) else sim
+            out.append((v[self.sel_j, self.sel_s] - ch.data[rows]) / ch.sigma)
+        r = np.concatenate(out)
+        return np.nan_to_num(r, nan=1e8, posinf=1e8, neginf=-1e8)
+
+    def _defects(self, u: np.ndarray, Y) -> np.ndarray:
+        if self.S == 1:
+            return np.zeros(0)
+        _, states = self.unpack(u)
+        yv = Y.v if isinstance(Y, Dual) else Y
+        end = yv[self.ends[:-1], np.arange(self.S - 1)]  # (S-1, ns)
+        c = (states[1:] - end) / self.state_scale
+        return np.nan_to_num(c.ravel(), nan=1e8, posinf=1e8, neginf=-1e8)
+
+    def _state_cols(self, s: np.ndarray) -> np.ndarray:
+        """Columns of segment s's initial state in u (-1 where it is fixed)."""
+        k = s if self.free_state0 else s - 1
+        cols = self.n_theta + k[:, None] * self.ns + np.arange(self.ns)[None, :]
+        return np.where(k[:, None] >= 0, cols, -1)
+
+    def linearize(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """r, J = dr/du, c, C = dc/du, all exact."""
+        Y, R = self.simulate(u, dual=True)
+        r = self._data_res(Y, R)
+        nt, ns, n_u = self.n_theta, self.ns, self.n_unknowns
+        blocks = []
+        for ch in self.channels:
+            sim = self._channel_sim(Y, R, ch)
+            blocks.append(sim.d[self.sel_j, self.sel_s] / ch.sigma)  # (M_c, D)
+        G = np.concatenate(blocks)
+        J = np.zeros((len(r), n_u))
+        J[:, :nt] = G[:, :nt]
+        seg = np.tile(self.sel_s, len(self.channels))
+        cols = self._state_cols(seg)
+        ok = cols[:, 0] >= 0
+        rows = np.nonzero(ok)[0]
+        J[rows[:, None], cols[ok]] = G[ok, nt:]
+        c = self._defects(u, Y)
+        C = np.zeros((len(c), n_u))
+        if self.S > 1:
+            s = np.arange(self.S - 1)
+            end_d = Y.d[self.ends[:-1], s] / self.state_scale[None, :, None]  # (S-1, ns, D)
+            rr = (s[:, None] * ns + np.arange(ns)[None, :])  # defect rows
+            C[rr.ravel(), :nt] = -end_d[..., :nt].reshape(-1, nt)
+            own = self._state_cols(s)
+            ok = own[:, 0] >= 0
+            for k in np.nonzero(ok)[0]:
+                C[np.ix_(rr[k], own[k])] = -end_d[k, :, nt:]
+            nxt = self._state_cols(s + 1)
+            C[rr.ravel(), nxt.ravel()] = 1.0
+        return np.nan_to_num(r), np.nan_to_num(J), c, np.nan_to_num(C)
+
+    def jacobian_fd(self, u: np.ndarray, step: float = 1e-6) -> np.ndarray:
+        """Forward-difference dr/du from one batched plain simulation per unknown block.
+
+        Single shooting only (one segment, fixed start): every perturbed parameter set is one
+        batch member, so the cost is one simulation, as the classical output-error code has it."""
+        if self.S != 1 or self.free_state0:
+            raise ValueError("the finite-difference Jacobian is for single shooting from a fixed state")
+        nt = self.n_theta
+        thetas = np.repeat(u[:nt, None], nt + 1, axis=1)
+        thetas[np.arange(nt), np.arange(1, nt + 1)] += step
+        p = dict(from_theta(self.specs, thetas))
+        p.update({k: np.full(nt + 1, v) for k, v in self.fixed.items()})
+        y0 = np.repeat(self.fixed_state0[None, :], nt + 1, axis=0)
+        with np.errstate(all="ignore"):
+            Y, R = rk4(self.system, p, self.t_local, self.F[:, 0], y0, self.substeps, t0=float(self.t0[0]))
+        res = [self._data_res(Y[:, j:j + 1], R[:, j:j + 1]) for j in range(nt + 1)]
+        return np.stack([(res[j + 1] - res[0]) / step for j in range(nt)], axis=1)
+
+    # ------------------------------------------------------------------ helpers
+    def channel_slices(self) -> list[slice]:
+        m = len(self.sel_s)
+        return [slice(i * m, (i + 1) * m) for i in range(len(self.channels))]
+
+    def free_run(self, theta: np.ndarray, y0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The whole span as one trajectory from ``y0``: states (N_span, n_state) and rates."""
+        i0, i1 = self.bounds[0], self.bounds[-1]
+        p = self._params(np.asarray(theta, float), False)
+        with np.errstate(all="ignore"):
+            Y, R = rk4(self.system, p, self.t[i0:i1 + 1], self.f[i0:i1 + 1], np.asarray(y0, float)[None, :],
+                       self.substeps, t0=float(self.t[i0]))
+        return Y[:, 0], R[:, 0]
+
+    def free_run_cost(self, theta: np.ndarray, y0: np.ndarray) -> float:
+        """Sum of squared channel residuals (noise units) of one free simulation over the span."""
+        Y, R = self.free_run(theta, y0)
+        i0, i1 = self.bounds[0], self.bounds[-1]
+        n = self.system.n_dof
+        total = 0.0
+        for ch in self.channels:
+            sim = {"x": Y[:, ch.dof], "v": Y[:, n + ch.dof], "a": R[:, n + ch.dof]}[ch.kind]
+            e = (sim - ch.data[i0:i1 + 1]) / ch.sigma
+            total += float(np.sum(np.nan_to_num(e, nan=1e8, posinf=1e8, neginf=1e8) ** 2))
+        return total

@@ -1,0 +1,127 @@
+"""What the data say about the estimate: noise level, covariance, intervals, and plain words
+when a parameter is not determined.
+
+At the solution of a shooting problem the Gauss-Newton (Laplace) covariance of the
+unknowns is N (N^T J^T J N)^-1 N^T, with J the Jacobian of the channel residuals in noise
+units and N a basis of the directions that keep the segments continuous (the single-
+shooting parametrisation by theta and y_0). The parameters' block is in their unconstrained
+coordinates (log for positive quantities, logit for bounded ones), so the 95 % interval is
+taken there and mapped back: it never crosses a physical bound.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import null_space
+
+from pidyn.params import ParamSpec, from_raw
+from pidyn.refine.problem import ShootingProblem
+
+Z95 = 1.959963984540054
+
+
+def estimate_noise(problem: ShootingProblem, r: np.ndarray) -> dict[str, float]:
+    """Per-channel noise std from the residuals (r in the channels' current units), corrected
+    for the degrees of freedom the fit used."""
+    free = problem.n_theta + problem.ns
+    m_total = len(r)
+    out = {}
+    for ch, sl in zip(problem.channels, problem.channel_slices()):
+        e = r[sl] * ch.sigma
+        dof = max(len(e) - free * len(e) / m_total, 1.0)
+        out[ch.name] = float(np.sqrt(np.sum(e**2) / dof))
+    return out
+
+
+def set_noise(problem: ShootingProblem, sigma: dict[str, float], floor_rel: float = 1e-9) -> None:
+    for ch in problem.channels:
+        ch.sigma = max(sigma[ch.name], floor_rel * float(np.std(ch.data)) + 1e-300)
+
+
+def covariance(problem: ShootingProblem, J: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, float]:
+    """Covariance of the parameters' unconstrained coordinates, and the condition number of
+    the information matrix (continuity eliminated)."""
+    N = null_space(C) if C.shape[0] else np.eye(J.shape[1])
+    JN = J @ N
+    info = JN.T @ JN
+    w = np.linalg.eigvalsh(info)
+    cond = float(w[-1] / max(w[0], 1e-300)) if w[-1] > 0 else float("inf")
+    cov_red = np.linalg.pinv(info, rcond=1e-15, hermitian=True)
+    cov_u = N @ cov_red @ N.T
+    nt = problem.n_theta
+    return cov_u[:nt, :nt], cond
+
+
+def _dvalue_draw(spec: ParamSpec, raw: float) -> float:
+    import torch
+
+    r = torch.tensor(raw, dtype=torch.float64, requires_grad=True)
+    v = from_raw(spec, r)
+    (g,) = torch.autograd.grad(v, r)
+    return float(g)
+
+
+def intervals(specs: list[ParamSpec], theta: np.ndarray, cov: np.ndarray) -> dict[str, dict]:
+    """Value, std (delta method), 95 % interval (mapped from the unconstrained coordinates)."""
+    import torch
+
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    out = {}
+    for i, s in enumerate(specs):
+        to_v = lambda x: float(from_raw(s, torch.tensor(float(x), dtype=torch.float64)))  # noqa: E731
+        value = to_v(theta[i])
+        std = abs(_dvalue_draw(s, float(theta[i]))) * sd[i]
+        lo, hi = sorted((to_v(theta[i] - Z95 * sd[i]), to_v(theta[i] + Z95 * sd[i])))
+        out[s.name] = {"value": value, "std": float(std), "ci95": [lo, hi],
+                       "rel_std_pct": float(100 * std / abs(value)) if value != 0 else None}
+    return out
+
+
+def correlation(cov: np.ndarray) -> np.ndarray:
+    sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    return cov / np.outer(sd, sd)
+
+
+def bound_notes(specs: list[ParamSpec], theta: np.ndarray, edge: float = 12.0) -> list[str]:
+    """Parameters that ran to a bound of their transform (a log-parameter towards 0, a boxed one
+    to an end): the data pushed them there, which is a finding, not a converged value."""
+    out = []
+    for s, th in zip(specs, theta):
+        if s.transform == "log" and th < -edge:
+            out.append(f"{s.name} ran to its lower bound (0): the record gives no evidence for this term, or the "
+                       "model lacks what the data show; treat its interval as meaningless")
+        elif s.transform == "box" and abs(th) > edge:
+            end = s.lower if th < 0 else s.upper
+            out.append(f"{s.name} ran to the {'lower' if th < 0 else 'upper'} end of its range ({end:g}): widen "
+                       f"system.params.{s.name}.lower/upper if that range is not physical, else the record does not "
+                       "determine it")
+    return out
+
+
+def identifiability_notes(names: list[str], ints: dict[str, dict], corr: np.ndarray, cond: float,
+                          wide_pct: float = 10.0, strong_corr: float = 0.95) -> list[str]:
+    """Sentences a structural engineer acts on, for parameters the record does not pin down."""
+    notes = []
+    half = {n: 100 * (ints[n]["ci95"][1] - ints[n]["ci95"][0]) / 2 / max(abs(ints[n]["value"]), 1e-300)
+            for n in names}
+    wide = [n for n in names if half[n] > wide_pct]
+    done: set[str] = set()
+    for n in wide:
+        if n in done:
+            continue
+        i = names.index(n)
+        group = [names[j] for j in range(len(names)) if j == i or abs(corr[i, j]) >= strong_corr]
+        done.update(group)
+        widths = ", ".join(f"{g} +-{half[g]:.3g} %" for g in group)
+        if len(group) > 1:
+            idx = [names.index(g) for g in group]
+            rho = max(abs(corr[a, b]) for a in idx for b in idx if a != b)
+            notes.append(f"{', '.join(group)} are not separable from this record (correlation {rho:.2f}; 95 % "
+                         f"intervals {widths}); a stronger or longer excitation is needed")
+        else:
+            notes.append(f"{n} is poorly determined by this record (95 % interval {widths}); a stronger or longer "
+                         "excitation, or a channel that responds to it, is needed")
+    if cond > 1e14 and not notes:
+        notes.append(f"the information matrix is near-singular (condition number {cond:.2g}): some combination "
+                     "of parameters is not determined by this record")
+    return notes
