@@ -128,6 +128,35 @@ def aggregate(roots: Path | list[Path]) -> tuple[pd.DataFrame, list[str]]:
     return table(cells), failed
 
 
+def _pidynnet(j: dict) -> dict:
+    """PIDynNet's own estimate: ``pidynnet`` in runs with a refinement stage, else the run's params."""
+    return j.get("pidynnet") or {"params": j["params"], "error_pct": j["error_pct"]}
+
+
+def _refined(js: list[dict]) -> list[dict]:
+    return [j for j in js if "pidynnet" in j and j.get("refine", "none") != "none"]
+
+
+def _refined_columns(js: list[dict], n: str, truth: float | None, crb: float) -> dict:
+    """PIDynNet + refinement: mean, std, RMS error, RMS / Cramer-Rao std, 95 % interval coverage."""
+    ref = _refined(js)
+    if not ref:
+        return {k: np.nan for k in ("refined_mean", "refined_std", "refined_rms_err", "refined_over_crb",
+                                    "coverage", "ci_half_pct", "refine_seconds")}
+    vals = np.array([j["params"][n] for j in ref])
+    errs = np.array([j["error_pct"].get(n, np.nan) for j in ref])
+    rms = float(np.sqrt(np.nanmean(errs**2)))
+    cis = [j["ci95"][n] for j in ref if j.get("ci95") and n in j["ci95"]]
+    cover = [lo <= truth <= hi for lo, hi in cis] if truth is not None else []
+    return {
+        "refined_mean": vals.mean(), "refined_std": vals.std(ddof=1) if len(vals) > 1 else 0.0,
+        "refined_rms_err": rms, "refined_over_crb": rms / crb if crb and crb > 0 else np.nan,
+        "coverage": float(np.mean(cover)) if cover else np.nan,
+        "ci_half_pct": float(np.mean([100 * (hi - lo) / 2 / abs(truth) for lo, hi in cis])) if cis and truth else np.nan,
+        "refine_seconds": float(np.mean([j["refinement"]["seconds"] for j in ref if j.get("refinement")])),
+    }
+
+
 def table(cells: dict[tuple, list[dict]]) -> pd.DataFrame:
     """One row per cell and parameter."""
     rows = []
@@ -137,8 +166,8 @@ def table(cells: dict[tuple, list[dict]]) -> pd.DataFrame:
         paper = PAPER.get((system, noise), {}) if scale == 1.0 and stretch == 1.0 else {}
         for n in names:
             truth = js[0]["truth"].get(n)
-            vals = np.array([j["params"][n] for j in js])
-            errs = np.array([j["error_pct"].get(n, np.nan) for j in js])
+            vals = np.array([_pidynnet(j)["params"][n] for j in js])
+            errs = np.array([_pidynnet(j)["error_pct"].get(n, np.nan) for j in js])
             row = {
                 "system": system, "record": record, "noise": noise, "batch_size": batch, "eq_scale": scale,
                 "eq_stretch": stretch, "param": n, "truth": truth, "seeds": len(js),
@@ -151,6 +180,7 @@ def table(cells: dict[tuple, list[dict]]) -> pd.DataFrame:
                 "crb_std_pct": np.nanmean([j["_crb"]["std_pct"].get(n, np.nan) for j in js if j["_crb"]]) if any(j["_crb"] for j in js) else np.nan,
                 "pidynnet_seconds": np.mean([j["wall_seconds"] for j in js]),
             }
+            row.update(_refined_columns(js, n, truth, row["crb_std_pct"]))
             for mth in METHODS:
                 e = [b.get("error_pct", {}).get(n) for j in js for b in j["_baselines"] if b["method"] == mth]
                 e = [x for x in e if x is not None]
@@ -187,14 +217,15 @@ def summary(df: pd.DataFrame) -> list[str]:
         if cells.ngroups < 2:
             continue
         names = list(dict.fromkeys(gs.param))
-        out.append(f"\n## Summary, {system}: RMS error % over seeds, PIDynNet / output-error LS / UKF "
-                   "(Cramer-Rao std %)\n")
+        out.append(f"\n## Summary, {system}: RMS error % over seeds, PIDynNet / PIDynNet + refinement / "
+                   "output-error LS / UKF (Cramer-Rao std %)\n")
         out.append("| record | scale | stretch | noise % | batch | seeds | " + " | ".join(names) + " |")
         out.append("|---|---|---|---|---|---|" + "---|" * len(names))
         for key, g in cells:
             _, record, noise, batch, scale, stretch = key
             by = g.set_index("param")
-            vals = [f"{_short(by.pidynnet_rms_err[n])} / {_short(by.output_error_rms_err[n])} / "
+            vals = [f"{_short(by.pidynnet_rms_err[n])} / {_short(by.refined_rms_err[n])} / "
+                    f"{_short(by.output_error_rms_err[n])} / "
                     f"{_short(by.ukf_rms_err[n])} ({_short(by.crb_std_pct[n])})" for n in names]
             out.append(f"| {record} | {scale:g} | {stretch:g} | {100 * noise:g} | {batch} | {int(g.seeds.iloc[0])} | "
                        + " | ".join(vals) + " |")
@@ -210,17 +241,22 @@ def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str],
         out.append(f"\n## {system} under {record} x{scale:g} (stretch {stretch:g}), noise {100 * noise:g} %, "
                    f"batch {batch}, {int(g.seeds.iloc[0])} seed(s)\n")
         out.append("| param | truth | paper PIDynNet (err %) | paper UKF err % | PIDynNet mean +- std | "
-                   "PIDynNet RMS err % | CRB std % | EE RMS err % | SINDy RMS err % | OE RMS err % | UKF RMS err % |")
-        out.append("|---|---|---|---|---|---|---|---|---|---|---|")
+                   "PIDynNet RMS err % | PIDynNet + refinement RMS err % | CRB std % | refined RMS / CRB | "
+                   "95 % interval coverage (mean half width %) | EE RMS err % | SINDy RMS err % | OE RMS err % | "
+                   "UKF RMS err % |")
+        out.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for _, r in g.iterrows():
             out.append(
                 f"| {r.param} | {f(r.truth, 4)} | {f(r.paper_pidynnet, 3)} ({f(r.paper_pidynnet_err, 2)}) | "
                 f"{f(r.paper_ukf_err, 2)} | {f(r.pidynnet_mean, 4)} +- {f(r.pidynnet_std, 4)} | "
-                f"{f(r.pidynnet_rms_err, 2)} | {f(r.crb_std_pct, 3)} | {f(r.equation_error_rms_err, 2)} | "
+                f"{f(r.pidynnet_rms_err, 2)} | {f(r.refined_rms_err, 3)} | {f(r.crb_std_pct, 3)} | "
+                f"{f(r.refined_over_crb, 2)} | {f(r.coverage, 2)} ({f(r.ci_half_pct, 3)}) | "
+                f"{f(r.equation_error_rms_err, 2)} | "
                 f"{f(r.sindy_rms_err, 2)} | {f(r.output_error_rms_err, 2)} | {f(r.ukf_rms_err, 2)} |"
             )
         r0 = g.iloc[0]
-        out.append(f"\nWall seconds per run: PIDynNet {f(r0.pidynnet_seconds, 0)}, EE {f(r0.equation_error_seconds, 2)}, "
+        out.append(f"\nWall seconds per run: PIDynNet run {f(r0.pidynnet_seconds, 0)} (of which refinement "
+                   f"{f(r0.refine_seconds, 1)}), EE {f(r0.equation_error_seconds, 2)}, "
                    f"SINDy {f(r0.sindy_seconds, 2)}, OE {f(r0.output_error_seconds, 1)}, UKF {f(r0.ukf_seconds, 1)}.")
         na = {LABEL[m]: r0[f"{m}_note"] for m in METHODS if r0.get(f"{m}_note")}
         if na:

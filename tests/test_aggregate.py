@@ -62,10 +62,28 @@ def test_aggregate_joins_sweeps_reads_stretch_from_config_and_summarises(tmp_pat
     assert "(stretch 1.5)" in md and "(stretch 1)" in md
     summary = md.split("## Summary, duffing")[1].split("\n## ")[0]
     rows = [r for r in summary.splitlines() if r.startswith("| kobe")]
-    assert rows == ["| kobe | 1 | 1 | 5 | 500 | 1 | 1 / - / 3 (0.1) |",
-                    "| kobe | 1 | 1.5 | 5 | 500 | 1 | 5 / - / 6 (0.1) |"]
+    assert rows == ["| kobe | 1 | 1 | 5 | 500 | 1 | 1 / - / - / 3 (0.1) |",
+                    "| kobe | 1 | 1.5 | 5 | 500 | 1 | 5 / - / - / 6 (0.1) |"]
     one, _ = aggregate.aggregate(a)
     assert "## Summary" not in aggregate.to_markdown(one, "t", "cmd", [])
+
+
+def test_refined_runs_give_the_refinement_column_and_interval_coverage(tmp_path):
+    """A run with a refinement stage: PIDynNet's column reads ``pidynnet``, the refined one
+    ``params``; coverage counts the seeds whose 95 % interval holds the truth."""
+    for seed, (k3, ci) in enumerate([(120.1, [119.9, 120.3]), (120.4, [120.2, 120.6])]):
+        d = tmp_path / f"{seed}_seed={seed}"
+        job(d, seed, k3, 3.0)
+        m = json.loads((d / "metrics.json").read_text())
+        m.update({"refine": "multiple_shooting", "pidynnet": {"params": {"k3": 126.0}, "error_pct": {"k3": 5.0}},
+                  "ci95": {"k3": ci}, "refinement": {"seconds": 4.0}})
+        (d / "metrics.json").write_text(json.dumps(m))
+    df, _ = aggregate.aggregate(tmp_path)
+    row = df.iloc[0]
+    assert row.pidynnet_rms_err == pytest.approx(5.0) and row.pidynnet_mean == pytest.approx(126.0)
+    assert row.refined_mean == pytest.approx(120.25)
+    assert row.coverage == pytest.approx(0.5) and row.refine_seconds == pytest.approx(4.0)
+    assert row.refined_over_crb == pytest.approx(row.refined_rms_err / 0.1)
 
 
 def test_aggregate_draws_figure_3_per_cell_and_links_it(tmp_path):

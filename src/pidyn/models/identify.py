@@ -60,6 +60,7 @@ class WindowResult:
     clamp_bounds: dict[str, list[float]] = field(default_factory=dict)
     z_end: list[float] | None = None  # latent state at the window's end (the next window starts from it)
     states: list[list[float]] | None = None  # [t, x, x', z] from the networks every 10th sample (refinement starts)
+    notes: list[str] = field(default_factory=list)  # what the data decided that a user should know
 
 
 class SubperiodIdentifier:
@@ -154,6 +155,7 @@ class SubperiodIdentifier:
                 continue
             t_start = time.perf_counter()
             it0 = int(self.module.iteration)
+            notes: list[str] = []
             net.enter_window(w)
             pre = sch.pretrain_iters if not first_done else sch.pretrain_iters_window
             if pre > 0:
@@ -167,13 +169,19 @@ class SubperiodIdentifier:
                 z0 = z_end if z_end is not None else x0[:1] * 0  # at rest before the record
                 net.set_latent_offset(z0, z_init[:1])
             if sch.ls_init == "every" or (sch.ls_init == "first" and not first_done):
-                est = net.least_squares_init(w)
+                est, rejected = net.least_squares_init(w)
                 log.info("window %d: least-squares init %s", w.index, {k: f"{v:.5g}" for k, v in est.items()})
+                for n, v in rejected.items():
+                    msg = (f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range; the "
+                           f"data do not decide its sign here, so {n} keeps {net.params.as_floats()[n]:.4g}")
+                    log.warning(msg)
+                    notes.append(msg)
             cbs: list[L.Callback] = []
             if self.clamp is not None:
                 cbs.append(self.clamp)
             if self.early_stopping is not None:
                 cbs.append(self.early_stopping)
+            box = dict(self.clamp.bounds) if self.clamp is not None else {}
             self._fit(w, "identify", sch.max_iters, physics=True, callbacks=cbs)
             stopped = bool(self.early_stopping and self.early_stopping.stopped_at is not None)
             names = net.params.trainable_names
@@ -191,6 +199,9 @@ class SubperiodIdentifier:
             if sch.fusion == "information":
                 info = residual_information(net, w)
                 theta = self.fusion.add(net.params.raw_vector(names).detach(), info)
+                if self.fusion.fallback:
+                    log.info("window %d: the joint information product fell outside the windows' estimates "
+                             "(ill-conditioned parameters); fused by each window's marginal precision", w.index)
                 with torch.no_grad():
                     for i, n in enumerate(names):
                         net.params.raw[n].copy_(theta[i])
@@ -210,6 +221,7 @@ class SubperiodIdentifier:
                 clamp_bounds={k: list(v) for k, v in (self.clamp.bounds.items() if self.clamp else [])},
                 z_end=None if z_end is None else z_end.tolist(),
                 states=states,
+                notes=notes + self._clamp_notes(names, estimate, box),
             )
             self.results.append(res)
             first_done = True
@@ -217,6 +229,21 @@ class SubperiodIdentifier:
             self._log_window(res)
             self.save_state(next_window=w.index + 1)
         return self.results
+
+    @staticmethod
+    def _clamp_notes(names: list[str], estimate: dict[str, float], boxes: dict) -> list[str]:
+        """A parameter that ended the window on its clamp box is reported, not silently held."""
+        out = []
+        for n in names:
+            if n not in boxes:
+                continue
+            lo, hi = boxes[n]
+            v = estimate[n]
+            if min(abs(v - lo), abs(v - hi)) <= 1e-6 * max(abs(v), 1e-12):
+                msg = f"{n} = {v:.5g} ended the window on its clamp bound [{lo:.5g}, {hi:.5g}]"
+                log.warning(msg)
+                out.append(msg)
+        return out
 
     def _report(self, r: WindowResult) -> None:
         truth = self.module.net.params.truths()

@@ -239,17 +239,35 @@ class PIDynNet(nn.Module):
                             None if w.qd_pool is None else w.qd_pool[:1], order=0, latent=False)
         return k.x[0]
 
-    def least_squares_init(self, w: Window, names: list[str] | None = None) -> dict[str, float]:
+    def least_squares_init(self, w: Window, names: list[str] | None = None) -> tuple[dict[str, float], dict[str, float]]:
         """Solve for the parameters the motion residual is linear in, with the current networks.
 
         r(p) = r(0) + J p exactly for those parameters, so one linear least-squares solve
-        gives the best values for the current response estimate (and the LNN's z).
-        """
-        names = names if names is not None else self.system.linear_params()
+        gives the best values for the current response estimate (and the LNN's z). A value
+        outside a parameter's range (a negative value for a log-parameter) is not clipped to
+        the bound, where a log-parameter would be stuck: that parameter keeps its current
+        value, the others are solved again, and the rejected values are returned for the
+        log. Returns (accepted, rejected)."""
+        names = list(names if names is not None else self.system.linear_params())
+        rejected: dict[str, float] = {}
         if not names:
-            return {}
+            return {}, rejected
         with torch.no_grad():
             k = self.kinematics(w.t_pool, w.f_pool, w.q_pool, w.qd_pool)
-        est = solve_linear_params(self.system, k, w.f_pool, self.params.values(), names)
-        self.params.set_values(est)
-        return est
+        while names:
+            est = solve_linear_params(self.system, k, w.f_pool, self.params.values(), names)
+            bad = {n: v for n, v in est.items() if not _in_range(self.params.spec(n), v)}
+            if not bad:
+                self.params.set_values(est)
+                return est, rejected
+            rejected.update(bad)
+            names = [n for n in names if n not in bad]
+        return {}, rejected
+
+
+def _in_range(spec, value: float) -> bool:
+    if spec.transform == "log" and value <= 0:
+        return False
+    lo = spec.lower if spec.lower is not None else -float("inf")
+    hi = spec.upper if spec.upper is not None else float("inf")
+    return lo < value < hi

@@ -244,11 +244,12 @@ class ShootingProblem:
             C[rr.ravel(), nxt.ravel()] = 1.0
         return np.nan_to_num(r), np.nan_to_num(J), c, np.nan_to_num(C)
 
-    def jacobian_fd(self, u: np.ndarray, step: float = 1e-6) -> np.ndarray:
-        """Forward-difference dr/du from one batched plain simulation per unknown block.
+    def residuals_and_fd_jacobian(self, u: np.ndarray, step: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+        """Residuals and their forward-difference Jacobian from one batched plain simulation.
 
-        Single shooting only (one segment, fixed start): every perturbed parameter set is one
-        batch member, so the cost is one simulation, as the classical output-error code has it."""
+        Single shooting from a fixed state only: the unperturbed and every perturbed parameter
+        set are members of one batch, so both cost about one simulation (the classical
+        output-error recipe; the refinement uses the exact ``linearize``)."""
         if self.S != 1 or self.free_state0:
             raise ValueError("the finite-difference Jacobian is for single shooting from a fixed state")
         nt = self.n_theta
@@ -260,7 +261,7 @@ class ShootingProblem:
         with np.errstate(all="ignore"):
             Y, R = rk4(self.system, p, self.t_local, self.F[:, 0], y0, self.substeps, t0=float(self.t0[0]))
         res = [self._data_res(Y[:, j:j + 1], R[:, j:j + 1]) for j in range(nt + 1)]
-        return np.stack([(res[j + 1] - res[0]) / step for j in range(nt)], axis=1)
+        return res[0], np.stack([(res[j + 1] - res[0]) / step for j in range(nt)], axis=1)
 
     # ------------------------------------------------------------------ helpers
     def channel_slices(self) -> list[slice]:

@@ -177,9 +177,11 @@ def refine(system, record, start: dict[str, dict[str, float]], settings: RefineS
     costs = {k: problem.free_run_cost(th, y0) for k, th in thetas.items()}
     order = sorted(costs, key=lambda k: costs[k])
     best = order[0]
+    start_notes = []
     if prefer in costs and best != prefer:
-        log.warning("PIDynNet's estimate simulates the record worse than %s's (cost %.4g against %.4g); the "
-                    "refinement starts from %s", best, costs[prefer], costs[best], best)
+        start_notes.append(f"PIDynNet's estimate simulates the record worse than {best}'s (cost {costs[prefer]:.4g} "
+                           f"against {costs[best]:.4g}); the refinement started from {best}")
+        log.warning(start_notes[-1])
 
     def run_from(label: str):
         st = states0 if label == first else initial_states(problem, thetas[label], settings.states, network_states)
@@ -211,8 +213,8 @@ def refine(system, record, start: dict[str, dict[str, float]], settings: RefineS
     theta, states = problem.unpack(u)
     ints = intervals(problem.specs, theta, cov)
     corr = correlation(cov)
-    notes = bound_notes(problem.specs, theta) + identifiability_notes(names, ints, corr, cond)
-    for n_ in notes:
+    notes = start_notes + bound_notes(problem.specs, theta) + identifiability_notes(names, ints, corr, cond)
+    for n_ in notes[len(start_notes):]:
         log.warning("identifiability: %s", n_)
     return RefineResult(
         params=problem.values(theta), intervals=ints, correlation=corr.tolist(), names=names, noise_std=noise,

@@ -108,9 +108,9 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     # ------------------------------------------------------------------ report
     units = {n: params.spec(n).unit for n in names}
     table = param_table(values, truths, units, None if refined is None else refined.intervals)
-    identified = {"system": system.name, "equation": system.describe(final), "params": table}
+    notes = [n for r in results for n in (r.notes or [])] + ([] if refined is None else refined.notes)
+    identified = {"system": system.name, "equation": system.describe(final), "params": table, "notes": notes}
     if refined is not None:
-        identified["notes"] = refined.notes
         identified["correlation"] = {"names": refined.names, "matrix": refined.correlation}
         identified["noise_std"] = refined.noise_std
     write_yaml(run_dir / "identified_params.yaml", identified)
@@ -130,7 +130,7 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
         "batch_size": int(cfg.batch_size),
         "eq_scale": float(cfg.eq_scale),
         "eq_stretch": float(cfg.eq_stretch),
-        "refine": str(cfg.model.refine.method),
+        "refine": "none" if refined is None else "multiple_shooting",
         "params": values,
         "truth": truths,
         "error_pct": errors,
@@ -139,6 +139,7 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
         "pidynnet": {"params": pidyn_values, "error_pct": pidyn_errors,
                      "max_error_pct": max(pidyn_errors.values()) if pidyn_errors else None},
         "sim_nrmse_x": nrmse(sim_x, x_ref),
+        "notes": notes,
         "windows": len(results),
         "iterations": int(module.iteration),
     }
@@ -202,6 +203,9 @@ def relative_errors(values: dict[str, float], truths: dict[str, float | None]) -
     return {n: float(100 * abs(v - truths[n]) / abs(truths[n])) for n, v in values.items() if truths.get(n)}
 
 
+DEFAULT_STARTS = ("output_error", "equation_error", "sindy", "ukf")
+
+
 def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pidyn_values: dict[str, float],
                    baselines: list[dict], results: list) -> Any:
     """The refinement stage after PIDynNet (``model.refine``); None when it is off.
@@ -212,14 +216,17 @@ def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pi
     from pidyn.models.identify import network_states
     from pidyn.refine import RefineSettings, refine
 
-    rcfg = OmegaConf.to_container(cfg.model.refine, resolve=True)
+    node = cfg.model.get("refine") or "none"
+    # model.refine=none / =multiple_shooting on the command line sets the method by name (the
+    # settings then are RefineSettings' defaults, which conf/model/refine/*.yaml mirror)
+    rcfg = {"method": node} if isinstance(node, str) else OmegaConf.to_container(node, resolve=True)
     assert isinstance(rcfg, dict)
     method = rcfg.pop("method", "none")
     if method == "none":
         return None
     if method != "multiple_shooting":
         raise ValueError(f"model.refine: unknown method '{method}'; choose multiple_shooting or none")
-    allowed = set(rcfg.pop("starts", None) or [])
+    allowed = set(rcfg.pop("starts", DEFAULT_STARTS))
     settings = RefineSettings(**rcfg)
     starts = {"pidynnet": pidyn_values}
     for b in baselines:
