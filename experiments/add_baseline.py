@@ -25,7 +25,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("sweep", type=Path)
     ap.add_argument("--method", default="sindy")
+    ap.add_argument("--keep-saved-settings", action="store_true",
+                    help="use the method's settings from each job's saved config, not today's conf/baselines/default.yaml")
     a = ap.parse_args()
+    current = OmegaConf.load(ROOT / "conf" / "baselines" / "default.yaml")
     from pidyn.tasks.train import build_record, run_baselines
 
     done = 0
@@ -35,6 +38,8 @@ def main() -> None:
             cfg.paths.output_dir = str(job)
             cfg.baselines.run = [a.method]
             cfg.baselines.cramer_rao = False
+            if not a.keep_saved_settings and a.method in current:
+                cfg.baselines[a.method] = current[a.method]  # e.g. the UKF's likelihood-tuned random walk
             cfg.baselines.setdefault("sindy", {"threshold": 0.01})
         system = hydra.utils.instantiate(cfg.system)
         record = build_record(cfg, system)

@@ -82,7 +82,7 @@ def test_continuity_holds_at_convergence():
     res = refine(s, r, {"guess": {"c": 0.55, "k1": 14.0, "k3": 110.0}}, RefineSettings(states="measured"))
     assert res.max_defect < 1e-8
     prob = _problem(s, r, 1.0)
-    from pidyn.baselines.common import to_theta
+    from pidyn.params import to_theta
 
     theta = to_theta(prob.specs, res.params)
     Y_free, _ = prob.free_run(theta, np.array(res.initial_state))
@@ -103,7 +103,7 @@ def test_covariance_matches_finite_difference_hessian():
     single = ShootingProblem(s, r.t, r.f, record_channels(r, 1), segment_bounds(r.t, None), 4)
     for ch in single.channels:
         ch.sigma = res.noise_std[ch.name]
-    from pidyn.baselines.common import to_theta
+    from pidyn.params import to_theta
 
     u = np.concatenate([to_theta(single.specs, res.params), np.array(res.initial_state) / single.state_scale])
 

@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -143,3 +144,35 @@ def clip_to_bounds(spec: ParamSpec, value: float) -> float:
         eps = 1e-6 * (hi - lo)
         lo, hi = lo + eps, hi - eps
     return min(max(value, lo), hi)
+
+
+# ---------------------------------------------------------------- vectorised coordinates
+def trainable_specs(system) -> list[ParamSpec]:
+    return [s for s in system.param_specs() if s.trainable]
+
+
+def to_theta(specs: list[ParamSpec], values: dict[str, float]) -> np.ndarray:
+    """Unconstrained coordinates (log for positive, logit for boxed), as PIDynNet trains them."""
+    return np.array([to_raw(s, clip_to_bounds(s, values[s.name])) for s in specs])
+
+
+def from_theta(specs: list[ParamSpec], theta: np.ndarray) -> dict[str, np.ndarray]:
+    """Vectorised inverse of ``to_theta``; ``theta`` has shape (n,) or (n, P), plain or dual
+    (``pidyn.autodiff``: the same formulas give exact derivatives)."""
+    out = {}
+    for i, s in enumerate(specs):
+        th = theta[i]
+        if s.transform == "log":
+            out[s.name] = s.scale * np.exp(th)
+        elif s.transform == "box":
+            assert s.lower is not None and s.upper is not None
+            out[s.name] = s.lower + (s.upper - s.lower) / (1 + np.exp(-th))
+        else:
+            out[s.name] = s.scale * th
+    return out
+
+
+def fixed_values(system) -> dict[str, float]:
+    return {s.name: s.init for s in system.param_specs() if not s.trainable}
+
+

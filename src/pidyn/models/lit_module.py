@@ -109,7 +109,9 @@ class PIDynNetModule(L.LightningModule):
     def training_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> None:
         if self.phase == "finetune_lbfgs":
             return self._lbfgs_step()
-        opt = self.optimizers()
+        # the plain torch optimizer: Lightning's wrapper adds a strategy round trip per Adam
+        # step, which at ~7 ms an iteration was most of its overhead (single device, no AMP)
+        opt = self.optimizers(use_pl_optimizer=False)
         sched = self.lr_schedulers()
         t_c, f_c, q_c, qd_c = batch.get("t"), batch.get("f"), batch.get("q"), batch.get("qd")
         k_steps = t_c.shape[0] if t_c is not None else self.inner_steps
@@ -132,11 +134,13 @@ class PIDynNetModule(L.LightningModule):
                 f"loss became {self.last_losses['total']} in window {self.window.index if self.window else '?'} "
                 f"({self.phase}, iteration {self.window_iteration}); lower the learning rates"
             )
-        self.log("loss", self.last_losses["total"], prog_bar=True, on_step=True, logger=False)
-        if self.phase == "identify":
-            for name, v in self.net.params.as_floats().items():
-                if self.net.params.spec(name).trainable:
-                    self.log(name, v, prog_bar=True, on_step=True, logger=False)
+        if self._trainer is not None and self.trainer.progress_bar_callback is not None:
+            # what the progress bar shows; skipped without one (it costs more than an Adam step)
+            self.log("loss", self.last_losses["total"], prog_bar=True, on_step=True, logger=False)
+            if self.phase == "identify":
+                for name, v in self.net.params.as_floats().items():
+                    if self.net.params.spec(name).trainable:
+                        self.log(name, v, prog_bar=True, on_step=True, logger=False)
         if int(self.iteration) % self.log_every < k_steps:
             self._tb_scalars()
 

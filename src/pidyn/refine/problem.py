@@ -21,9 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from pidyn.autodiff import Dual
-from pidyn.baselines.common import fixed_values, from_theta, to_theta, trainable_specs
 from pidyn.integrate import rk4
-from pidyn.params import ParamSpec
+from pidyn.params import ParamSpec, fixed_values, from_theta, to_theta, trainable_specs
 from pidyn.systems.base import StructuralSystem
 
 CHANNELS = ("x", "v", "a")

@@ -53,8 +53,8 @@ def _penalised(problem: ShootingProblem, mu: float):
     return fun, jac
 
 
-def solve_penalty(problem: ShootingProblem, u0: np.ndarray, mu0: float = 1.0, growth: float = 100.0,
-                  penalty_tol: float = 1e-6, max_rounds: int = 6, max_nfev: int = 200,
+def solve_penalty(problem: ShootingProblem, u0: np.ndarray, mu0: float = 100.0, growth: float = 100.0,
+                  penalty_tol: float = 1e-6, max_rounds: int = 6, max_nfev: int = 100,
                   history: list[dict] | None = None) -> tuple[np.ndarray, int, int]:
     """Stage 1. The penalty weight is relative to the mean data term per sample."""
     u = np.asarray(u0, float).copy()
@@ -125,12 +125,13 @@ def solve_constrained(problem: ShootingProblem, u0: np.ndarray, max_steps: int =
     return u, steps, converged
 
 
-def solve(problem: ShootingProblem, u0: np.ndarray, penalty_tol: float = 1e-6, max_nfev: int = 200,
-          gn_steps: int = 12) -> SolveReport:
+def solve(problem: ShootingProblem, u0: np.ndarray, penalty_tol: float = 1e-6, max_nfev: int = 100,
+          gn_steps: int = 12, penalty_start: float = 100.0) -> SolveReport:
     """Both stages from ``u0``."""
     t0 = time.perf_counter()
     hist: list[dict] = []
-    u, nfev, njev = solve_penalty(problem, u0, penalty_tol=penalty_tol, max_nfev=max_nfev, history=hist) \
+    u, nfev, njev = solve_penalty(problem, u0, mu0=penalty_start, penalty_tol=penalty_tol, max_nfev=max_nfev,
+                                  history=hist) \
         if problem.S > 1 else _single(problem, u0, max_nfev, hist)
     u, steps, ok = solve_constrained(problem, u, max_steps=gn_steps, history=hist)
     r, c = problem.residuals(u)

@@ -44,8 +44,9 @@ class RefineSettings:
     states: StateSource = "networks"  # where segment initial states start: networks | measured | simulated
     substeps: int = 4  # RK4 steps per sample interval
     free_initial_state: bool = True  # the record's initial state is an unknown too
+    penalty_start: float = 100.0  # first continuity weight, relative to a segment's data term
     penalty_tol: float = 1e-6  # stage 1 ends when every continuity defect is below this (state scales)
-    max_nfev: int = 200  # Levenberg-Marquardt evaluations per penalty round
+    max_nfev: int = 100  # Levenberg-Marquardt evaluations per penalty round
     gn_steps: int = 12  # constrained Gauss-Newton steps (stage 2)
     reweight: bool = True  # weight each channel by its estimated noise and finish again
 
@@ -167,7 +168,7 @@ def refine(system, record, start: dict[str, dict[str, float]], settings: RefineS
     cands = {k: v for k, v in start.items() if v and all(n in v and np.isfinite(v[n]) for n in names)}
     if not cands:
         raise ValueError(f"refinement: no starting estimate has every parameter {names}")
-    from pidyn.baselines.common import to_theta
+    from pidyn.params import to_theta
 
     thetas = {k: to_theta(problem.specs, v) for k, v in cands.items()}
     first = prefer if prefer in thetas else next(iter(thetas))
@@ -186,7 +187,7 @@ def refine(system, record, start: dict[str, dict[str, float]], settings: RefineS
     def run_from(label: str):
         st = states0 if label == first else initial_states(problem, thetas[label], settings.states, network_states)
         rep = solve(problem, problem.pack(cands[label], st), settings.penalty_tol, settings.max_nfev,
-                    settings.gn_steps)
+                    settings.gn_steps, settings.penalty_start)
         return rep
 
     rep = run_from(best)
