@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # the default index would serve a CUDA build.
 TORCH_INDEX ?=
 
-.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench
+.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench basin
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -51,3 +51,8 @@ diagnose: $(STAMP)
 
 discrepancy-bench: $(STAMP)
 	$(PY) experiments/discrepancy_bench.py $(ARGS)
+
+basin: $(STAMP)
+	$(PY) experiments/basin.py --cell duffing $(ARGS)
+	$(PY) experiments/basin.py --cell bouc_wen_x1 $(ARGS)
+	$(PY) experiments/basin.py --cell bouc_wen_x3 $(ARGS)

@@ -24,7 +24,7 @@ sys.path.insert(0, str(ROOT / "src"))
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("sweep", type=Path)
-    ap.add_argument("--method", default="sindy")
+    ap.add_argument("--method", default="sindy", help="a baseline of conf/baselines, or cramer_rao (the bound)")
     ap.add_argument("--keep-saved-settings", action="store_true",
                     help="use the method's settings from each job's saved config, not today's conf/baselines/default.yaml")
     a = ap.parse_args()
@@ -36,8 +36,8 @@ def main() -> None:
         cfg = OmegaConf.load(job / ".hydra" / "config.yaml")
         with open_dict(cfg):
             cfg.paths.output_dir = str(job)
-            cfg.baselines.run = [a.method]
-            cfg.baselines.cramer_rao = False
+            cfg.baselines.run = [] if a.method == "cramer_rao" else [a.method]  # cramer_rao: the bound again
+            cfg.baselines.cramer_rao = a.method == "cramer_rao"
             if not a.keep_saved_settings and a.method in current:
                 cfg.baselines[a.method] = current[a.method]  # e.g. the UKF's likelihood-tuned random walk
             cfg.baselines.setdefault("sindy", {"threshold": 0.01})
@@ -46,7 +46,8 @@ def main() -> None:
         metrics = json.loads((job / "metrics.json").read_text())
         old_path = job / "baselines.json"
         old = json.loads(old_path.read_text())["baselines"] if old_path.exists() else []
-        new = run_baselines(cfg, system, record, job, metrics["params"])  # writes baselines.json with the new one only
+        ident = {**metrics.get("pidynnet", {}).get("params", {}), **metrics["params"]}
+        new = run_baselines(cfg, system, record, job, ident)  # writes baselines.json with the new one only
         merged = [b for b in old if b["method"] != a.method] + new
         old_path.write_text(json.dumps({"baselines": merged}, indent=2, default=float))
         metrics.setdefault("baselines", {}).update(

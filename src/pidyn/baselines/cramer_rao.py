@@ -47,9 +47,9 @@ def cramer_rao(
     prob = ShootingProblem(system, t, f, chans, segment_bounds(t, None), substeps, fixed_state0=np.zeros(system.n_state),
                            fixed=params)
     _, J, _, _ = prob.linearize(u)
-    # unconstrained -> relative coordinates: d/d ln(value) = (value / dvalue_draw) d/draw
+    # unconstrained -> relative coordinates: dr/d ln(value) = dr/draw * value / (dvalue/draw)
     rel = np.array([params[s.name] / _dvalue_draw(s, float(u[i])) for i, s in enumerate(prob.specs)])
-    Jr = J[:, : prob.n_theta] / rel[None, :]
+    Jr = J[:, : prob.n_theta] * rel[None, :]
     cov = np.linalg.pinv(Jr.T @ Jr)
     std = np.sqrt(np.clip(np.diag(cov), 0, None))
     corr = cov / np.outer(std, std).clip(1e-300)

@@ -158,69 +158,82 @@ def refine(system, record, start: dict[str, dict[str, float]], settings: RefineS
 
     Every candidate is scored by a free simulation of the span from the same initial state;
     the best one starts the refinement. When ``prefer`` (PIDynNet) is not the best, the log
-    says so. A candidate that still simulates better than the refined estimate is refined as
-    well, and the lower cost wins.
+    and the notes say so. A candidate that still simulates better than the refined estimate
+    is refined as well, and the lower cost wins.
     """
     settings = settings or RefineSettings()
     t_wall = time.perf_counter()
     problem = build_problem(system, record, settings, t_start, t_end)
-    names = problem.names
-    cands = {k: v for k, v in start.items() if v and all(n in v and np.isfinite(v[n]) for n in names)}
-    if not cands:
-        raise ValueError(f"refinement: no starting estimate has every parameter {names}")
-    from pidyn.params import to_theta
-
-    thetas = {k: to_theta(problem.specs, v) for k, v in cands.items()}
-    first = prefer if prefer in thetas else next(iter(thetas))
-    states0 = initial_states(problem, thetas[first], settings.states, network_states)
-    problem.state_scale = _state_scale(problem, states0)
-    y0 = states0[0]
-    costs = {k: problem.free_run_cost(th, y0) for k, th in thetas.items()}
-    order = sorted(costs, key=lambda k: costs[k])
-    best = order[0]
-    start_notes = []
-    if prefer in costs and best != prefer:
-        start_notes.append(f"PIDynNet's estimate simulates the record worse than {best}'s (cost {costs[prefer]:.4g} "
-                           f"against {costs[best]:.4g}); the refinement started from {best}")
-        log.warning(start_notes[-1])
-
-    def run_from(label: str):
-        st = states0 if label == first else initial_states(problem, thetas[label], settings.states, network_states)
-        rep = solve(problem, problem.pack(cands[label], st), settings.penalty_tol, settings.max_nfev,
-                    settings.gn_steps, settings.penalty_start)
-        return rep
-
-    rep = run_from(best)
-    used = best
-    for other in order[1:]:
-        if costs[other] < rep.cost * (1 - 1e-6):
-            log.warning("%s's estimate simulates better (%.4g) than the refined one (%.4g): refining it too",
-                        other, costs[other], rep.cost)
-            alt = run_from(other)
-            if alt.cost < rep.cost:
-                rep, used = alt, other
-    u = rep.u
-    converged = rep.converged
+    starts = _Starts(problem, settings, start, network_states, prefer)
+    rep, used = starts.solve_best()
+    u, converged = rep.u, rep.converged
     if settings.reweight:
         r, _ = problem.residuals(u)
         set_noise(problem, estimate_noise(problem, r))
         u, _, converged = solve_constrained(problem, u, max_steps=settings.gn_steps, history=rep.history)
     r, J, c, C = problem.linearize(u)
-    noise = estimate_noise(problem, r)
-    cov, cond = covariance(problem, J, C)
-    # the residuals are in units of the noise the weights assumed; rescale to the estimate
-    scale2 = float(r @ r) / max(len(r) - (problem.n_theta + problem.ns), 1)
-    cov = cov * scale2
     theta, states = problem.unpack(u)
-    ints = intervals(problem.specs, theta, cov)
-    corr = correlation(cov)
-    notes = start_notes + bound_notes(problem.specs, theta) + identifiability_notes(names, ints, corr, cond)
-    for n_ in notes[len(start_notes):]:
+    ints, corr, cond = _uncertainty(problem, r, J, C, theta)
+    notes = bound_notes(problem.specs, theta) + identifiability_notes(problem.names, ints, corr, cond)
+    for n_ in notes:
         log.warning("identifiability: %s", n_)
     return RefineResult(
-        params=problem.values(theta), intervals=ints, correlation=corr.tolist(), names=names, noise_std=noise,
-        notes=notes, start=used, start_costs=costs, initial_state=states[0].tolist(), cost=float(r @ r),
-        max_defect=float(np.max(np.abs(c))) if c.size else 0.0, segments=problem.S, condition_number=cond,
-        converged=bool(converged), seconds=time.perf_counter() - t_wall, state_source=settings.states,
-        history=rep.history,
+        params=problem.values(theta), intervals=ints, correlation=corr.tolist(), names=problem.names,
+        noise_std=estimate_noise(problem, r), notes=starts.notes + notes, start=used, start_costs=starts.costs,
+        initial_state=states[0].tolist(), cost=float(r @ r), max_defect=float(np.max(np.abs(c))) if c.size else 0.0,
+        segments=problem.S, condition_number=cond, converged=bool(converged), seconds=time.perf_counter() - t_wall,
+        state_source=settings.states, history=rep.history,
     )
+
+
+def _uncertainty(problem: ShootingProblem, r: np.ndarray, J: np.ndarray, C: np.ndarray, theta: np.ndarray):
+    """Intervals, correlation and condition number at the solution; the covariance is scaled by
+    the residuals' own variance (the weights' noise unit may still be off by a factor)."""
+    cov, cond = covariance(problem, J, C)
+    cov = cov * float(r @ r) / max(len(r) - (problem.n_theta + problem.ns), 1)
+    return intervals(problem.specs, theta, cov), correlation(cov), cond
+
+
+class _Starts:
+    """The candidate starting estimates, scored by a free simulation from the same state."""
+
+    def __init__(self, problem: ShootingProblem, settings: RefineSettings, start: dict[str, dict[str, float]],
+                 network_states: np.ndarray | None, prefer: str) -> None:
+        from pidyn.params import to_theta
+
+        names = problem.names
+        self.cands = {k: v for k, v in start.items() if v and all(n in v and np.isfinite(v[n]) for n in names)}
+        if not self.cands:
+            raise ValueError(f"refinement: no starting estimate has every parameter {names}")
+        self.problem, self.settings, self.network_states = problem, settings, network_states
+        self.thetas = {k: to_theta(problem.specs, v) for k, v in self.cands.items()}
+        self.first = prefer if prefer in self.thetas else next(iter(self.thetas))
+        self.states0 = initial_states(problem, self.thetas[self.first], settings.states, network_states)
+        problem.state_scale = _state_scale(problem, self.states0)
+        self.costs = {k: problem.free_run_cost(th, self.states0[0]) for k, th in self.thetas.items()}
+        self.order = sorted(self.costs, key=lambda k: self.costs[k])
+        self.notes: list[str] = []
+        best = self.order[0]
+        if prefer in self.costs and best != prefer:
+            self.notes.append(f"PIDynNet's estimate simulates the record worse than {best}'s (cost "
+                              f"{self.costs[prefer]:.4g} against {self.costs[best]:.4g}); the refinement started "
+                              f"from {best}")
+            log.warning(self.notes[-1])
+
+    def run_from(self, label: str):
+        st = self.states0 if label == self.first else initial_states(
+            self.problem, self.thetas[label], self.settings.states, self.network_states)
+        s = self.settings
+        return solve(self.problem, self.problem.pack(self.cands[label], st), s.penalty_tol, s.max_nfev, s.gn_steps,
+                     s.penalty_start)
+
+    def solve_best(self):
+        rep, used = self.run_from(self.order[0]), self.order[0]
+        for other in self.order[1:]:
+            if self.costs[other] < rep.cost * (1 - 1e-6):
+                log.warning("%s's estimate simulates better (%.4g) than the refined one (%.4g): refining it too",
+                            other, self.costs[other], rep.cost)
+                alt = self.run_from(other)
+                if alt.cost < rep.cost:
+                    rep, used = alt, other
+        return rep, used

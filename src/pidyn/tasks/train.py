@@ -7,8 +7,8 @@ Every object with a ``_target_`` is instantiated here and nowhere else.
 from __future__ import annotations
 
 import logging
-import os
 import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -53,6 +53,32 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     ``record``: data already built from ``cfg.data.source`` (a caller that identifies
     several models on one record builds it once)."""
     t_wall = time.perf_counter()
+    run = _build(cfg, record)
+    results = run.ident.run(resume=cfg.get("resume", True))
+    # after PIDynNet: the classical baselines on the same record, then the refinement stage
+    params = run.module.net.params
+    pidyn_values = {n: params.as_floats()[n] for n in params.trainable_names}
+    baselines = run_baselines(cfg, run.system, run.record, run.run_dir, params.as_floats())
+    refined = run_refinement(cfg, run.system, run.record, pidyn_values, baselines, results)
+    metrics = _report(cfg, run, results, pidyn_values, baselines, refined, t_wall)
+    objects = {"module": run.module, "system": run.system, "record": run.record,
+               "trainer_factory": run.trainer_factory, "run_dir": run.run_dir, "logger": run.logger}
+    return metrics, objects
+
+
+@dataclass
+class _Run:
+    system: StructuralSystem
+    record: Record
+    module: PIDynNetModule
+    ident: SubperiodIdentifier
+    trainer_factory: Any
+    logger: Any
+    run_dir: Path
+
+
+def _build(cfg: DictConfig, record: Record | None) -> _Run:
+    """Every object of a run from the config (each ``_target_`` instantiated here)."""
     _quiet_framework_warnings()
     for name in ("lightning", "lightning.pytorch", "lightning.fabric"):
         logging.getLogger(name).setLevel(logging.WARNING)
@@ -77,15 +103,12 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     lnn = hydra.utils.instantiate(cfg.model.lnn, out_features=system.n_latent) if system.n_latent else None
     core = PIDynNet(system, rpn, lnn, normalize_losses=cfg.model.normalize_losses)
     # the truth is the data's: none for measurements, the simulated values for synthetic data
-    from dataclasses import replace as _replace
-
-    core.params.specs = [_replace(s, true=(record.truth or {}).get(s.name)) for s in core.params.specs]
+    core.params.specs = [replace(s, true=(record.truth or {}).get(s.name)) for s in core.params.specs]
     module: PIDynNetModule = hydra.utils.instantiate(cfg.model.module, net=core)
     schedule = Schedule(**OmegaConf.to_container(cfg.model.schedule, resolve=True))  # type: ignore[arg-type]
     clamp = hydra.utils.instantiate(cfg.callbacks.clamp) if cfg.callbacks.get("clamp") else None
     stopper = hydra.utils.instantiate(cfg.callbacks.early_stopping) if cfg.callbacks.get("early_stopping") else None
     logger = hydra.utils.instantiate(cfg.logger) if cfg.get("logger") else None
-
     progress = bool(cfg.trainer.get("enable_progress_bar", True)) and not _in_multirun()
 
     def trainer_factory(**kw: Any) -> L.Trainer:
@@ -93,34 +116,30 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
         return hydra.utils.instantiate(cfg.trainer, logger=logger if logger is not None else False, **kw)
 
     ident = SubperiodIdentifier(module, dm, trainer_factory, schedule, clamp, stopper, run_dir)
-    results = ident.run(resume=cfg.get("resume", True))
+    return _Run(system, record, module, ident, trainer_factory, logger, run_dir)
 
-    # ------------------------------------------------------------------ baselines, refinement
-    params = core.params
+
+def _report(cfg: DictConfig, run: _Run, results: list, pidyn_values: dict[str, float], baselines: list[dict],
+            refined: Any, t_wall: float) -> dict[str, Any]:
+    """identified_params.yaml, metrics.json, refinement.json, windows.json, figures, TensorBoard, log."""
+    system, record, run_dir = run.system, run.record, run.run_dir
+    params = run.module.net.params
     names = params.trainable_names
-    pidyn_values = {n: params.as_floats()[n] for n in names}
     truths = {n: (record.truth or {}).get(n) for n in names}
-    baselines = run_baselines(cfg, system, record, run_dir, params.as_floats())
-    refined = run_refinement(cfg, system, record, pidyn_values, baselines, results)
     values = dict(refined.params) if refined is not None else dict(pidyn_values)
     final = {**params.as_floats(), **values}
-
-    # ------------------------------------------------------------------ report
-    units = {n: params.spec(n).unit for n in names}
-    table = param_table(values, truths, units, None if refined is None else refined.intervals)
+    table = param_table(values, truths, {n: params.spec(n).unit for n in names},
+                        None if refined is None else refined.intervals)
     notes = [n for r in results for n in (r.notes or [])] + ([] if refined is None else refined.notes)
     identified = {"system": system.name, "equation": system.describe(final), "params": table, "notes": notes}
     if refined is not None:
         identified["correlation"] = {"names": refined.names, "matrix": refined.correlation}
         identified["noise_std"] = refined.noise_std
     write_yaml(run_dir / "identified_params.yaml", identified)
-    errors = relative_errors(values, truths)
-    pidyn_errors = relative_errors(pidyn_values, truths)
-
-    # Simulate the identified model over the whole record (the physics-only check)
+    errors, pidyn_errors = relative_errors(values, truths), relative_errors(pidyn_values, truths)
+    # the identified model simulated over the whole record (the physics-only check)
     sim_x = simulate_identified(system, final, record,
                                 state0=None if refined is None else np.array(refined.initial_state))
-    x_ref = record.clean.x if record.clean is not None else record.x
     metrics: dict[str, Any] = {
         "system": system.name,
         "record": record.name,
@@ -138,18 +157,13 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
         "mean_error_pct": float(np.mean(list(errors.values()))) if errors else None,
         "pidynnet": {"params": pidyn_values, "error_pct": pidyn_errors,
                      "max_error_pct": max(pidyn_errors.values()) if pidyn_errors else None},
-        "sim_nrmse_x": nrmse(sim_x, x_ref),
+        "sim_nrmse_x": nrmse(sim_x, record.clean.x if record.clean is not None else record.x),
         "notes": notes,
         "windows": len(results),
-        "iterations": int(module.iteration),
+        "iterations": int(run.module.iteration),
     }
     if refined is not None:
-        metrics["ci95"] = {n: refined.intervals[n]["ci95"] for n in names}
-        metrics["std"] = {n: refined.intervals[n]["std"] for n in names}
-        if truths and all(truths.values()):
-            metrics["covered"] = {n: bool(metrics["ci95"][n][0] <= truths[n] <= metrics["ci95"][n][1]) for n in names}
-        metrics["refinement"] = {k: v for k, v in refined.to_dict().items()
-                                 if k not in ("params", "intervals", "correlation", "history")}
+        metrics.update(_refined_metrics(refined, names, truths))
         write_json(run_dir / "refinement.json", refined.to_dict())
         torch.save({"names": names, "values": values, "ci95": metrics["ci95"]}, run_dir / "checkpoints" / "refined.pt")
     if baselines:
@@ -157,26 +171,44 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     metrics["wall_seconds"] = time.perf_counter() - t_wall
     write_json(run_dir / "metrics.json", metrics)
     write_json(run_dir / "windows.json", {"windows": [r.__dict__ for r in results]})
-    fig_dir = run_dir / "figures"
+    _figures(run, results, truths, baselines, refined, sim_x, metrics)
+    _log_summary(system.describe(final), errors, pidyn_errors, metrics, run_dir)
+    return metrics
+
+
+def _refined_metrics(refined: Any, names: list[str], truths: dict[str, float | None]) -> dict[str, Any]:
+    out: dict[str, Any] = {"ci95": {n: refined.intervals[n]["ci95"] for n in names},
+                           "std": {n: refined.intervals[n]["std"] for n in names}}
+    if truths and all(truths.values()):
+        out["covered"] = {n: bool(out["ci95"][n][0] <= truths[n] <= out["ci95"][n][1]) for n in names}
+    out["refinement"] = {k: v for k, v in refined.to_dict().items()
+                         if k not in ("params", "intervals", "correlation", "history")}
+    return out
+
+
+def _figures(run: _Run, results: list, truths: dict, baselines: list[dict], refined: Any, sim_x: np.ndarray,
+             metrics: dict) -> None:
+    system, record = run.system, run.record
+    fig_dir = run.run_dir / "figures"
     fig_dir.mkdir(exist_ok=True)
     ukf = next((b for b in baselines if b["method"] == "ukf" and b.get("trajectory")), None)
-    plot_convergence(fig_dir / "param_convergence.png", ident.trajectory, truths, [r.__dict__ for r in results],
+    plot_convergence(fig_dir / "param_convergence.png", run.ident.trajectory, truths, [r.__dict__ for r in results],
                      title=f"{system.name} under {record.name}", other=None if ukf is None else ("UKF", ukf["trajectory"]),
                      final=None if refined is None else refined.intervals)
     series = {"measured x": record.x[:, 0], "identified model (simulated)": sim_x[:, 0]}
     plot_response(fig_dir / "response.png", record.t, series, title=f"{system.name}: NRMSE {metrics['sim_nrmse_x']:.3g}")
-    _tb_figures(logger, fig_dir, int(module.iteration), metrics, refined)
-    log.info("identified: %s", system.describe(final))
+    _tb_figures(run.logger, fig_dir, int(run.module.iteration), metrics, refined)
+
+
+def _log_summary(equation: str, errors: dict, pidyn_errors: dict, metrics: dict, run_dir: Path) -> None:
+    log.info("identified: %s", equation)
     if errors:
         log.info("errors (%%): %s", ", ".join(f"{k}={v:.3f}" for k, v in errors.items()))
-        if refined is not None:
+        if "ci95" in metrics:
             log.info("PIDynNet alone (%%): %s", ", ".join(f"{k}={v:.3f}" for k, v in pidyn_errors.items()))
-    if refined is not None:
+    if "ci95" in metrics:
         log.info("95 %% intervals: %s", ", ".join(f"{n} [{lo:.5g}, {hi:.5g}]" for n, (lo, hi) in metrics["ci95"].items()))
     log.info("wall %.1f s, run folder %s", metrics["wall_seconds"], run_dir)
-    objects = {"module": module, "system": system, "record": record, "trainer_factory": trainer_factory,
-               "run_dir": run_dir, "logger": logger}
-    return metrics, objects
 
 
 def simulate_identified(system: StructuralSystem, values: dict[str, float], record: Record,
