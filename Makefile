@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # the default index would serve a CUDA build.
 TORCH_INDEX ?=
 
-.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench basin
+.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench basin robustness
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -56,3 +56,6 @@ basin: $(STAMP)
 	$(PY) experiments/basin.py --cell duffing $(ARGS)
 	$(PY) experiments/basin.py --cell bouc_wen_x1 $(ARGS)
 	$(PY) experiments/basin.py --cell bouc_wen_x3 $(ARGS)
+
+robustness: $(STAMP)
+	$(PY) experiments/robustness.py $(ARGS)
