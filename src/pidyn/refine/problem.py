@@ -267,9 +267,12 @@ class ShootingProblem:
         m = len(self.sel_s)
         return [slice(i * m, (i + 1) * m) for i in range(len(self.channels))]
 
-    def free_run(self, theta: np.ndarray, y0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The whole span as one trajectory from ``y0``: states (N_span, n_state) and rates."""
-        i0, i1 = self.bounds[0], self.bounds[-1]
+    def free_run(self, theta: np.ndarray, y0: np.ndarray, i0: int | None = None,
+                 i1: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Samples i0..i1 (default: the whole span) as one trajectory from ``y0``: states
+        (N_span, n_state) and rates."""
+        i0 = int(self.bounds[0]) if i0 is None else i0
+        i1 = int(self.bounds[-1]) if i1 is None else i1
         p = self._params(np.asarray(theta, float), False)
         with np.errstate(all="ignore"):
             Y, R = rk4(self.system, p, self.t[i0:i1 + 1], self.f[i0:i1 + 1], np.asarray(y0, float)[None, :],

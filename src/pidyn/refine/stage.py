@@ -107,7 +107,8 @@ def initial_states(problem: ShootingProblem, theta: np.ndarray, source: StateSou
             y = _measured_state(y, measured, i, n)
         states[s] = y
         if s + 1 < problem.S:
-            y = _run(problem, theta, y, i, int(problem.bounds[s + 1]))[0][-1]
+            end = problem.free_run(theta, y, i, int(problem.bounds[s + 1]))[0][-1]
+            y = np.nan_to_num(end, nan=0.0, posinf=0.0, neginf=0.0)
     return states
 
 
@@ -119,17 +120,6 @@ def _measured_state(y: np.ndarray, measured: dict, i: int, n: int) -> np.ndarray
         if ("v", d) in measured:
             y[n + d] = measured[("v", d)][i]
     return y
-
-
-def _run(problem: ShootingProblem, theta: np.ndarray, y0: np.ndarray, i: int, j: int):
-    from pidyn.integrate import rk4
-
-    p = problem._params(np.asarray(theta, float), False)
-    with np.errstate(all="ignore"):
-        Y, R = rk4(problem.system, p, problem.t[i:j + 1], problem.f[i:j + 1], np.asarray(y0, float)[None, :],
-                   problem.substeps, t0=float(problem.t[i]))
-    Y = np.nan_to_num(Y[:, 0], nan=0.0, posinf=0.0, neginf=0.0)
-    return Y, R[:, 0]
 
 
 def build_problem(system, record, settings: RefineSettings, t_start: float | None = None,
