@@ -169,13 +169,7 @@ class SubperiodIdentifier:
                 z0 = z_end if z_end is not None else x0[:1] * 0  # at rest before the record
                 net.set_latent_offset(z0, z_init[:1])
             if sch.ls_init == "every" or (sch.ls_init == "first" and not first_done):
-                est, rejected = net.least_squares_init(w)
-                log.info("window %d: least-squares init %s", w.index, {k: f"{v:.5g}" for k, v in est.items()})
-                for n, v in rejected.items():
-                    msg = (f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range; the "
-                           f"data do not decide its sign here, so {n} keeps {net.params.as_floats()[n]:.4g}")
-                    log.warning(msg)
-                    notes.append(msg)
+                notes += self._least_squares_start(w)
             cbs: list[L.Callback] = []
             if self.clamp is not None:
                 cbs.append(self.clamp)
@@ -229,6 +223,19 @@ class SubperiodIdentifier:
             self._log_window(res)
             self.save_state(next_window=w.index + 1)
         return self.results
+
+    def _least_squares_start(self, w: Window) -> list[str]:
+        """Least-squares values of the linear parameters; a value outside a parameter's range is
+        reported (and that parameter kept), not clipped."""
+        net = self.module.net
+        est, rejected = net.least_squares_init(w)
+        log.info("window %d: least-squares init %s", w.index, {k: f"{v:.5g}" for k, v in est.items()})
+        notes = []
+        for n, v in rejected.items():
+            notes.append(f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range; the "
+                         f"data do not decide its sign here, so {n} keeps {net.params.as_floats()[n]:.4g}")
+            log.warning(notes[-1])
+        return notes
 
     @staticmethod
     def _clamp_notes(names: list[str], estimate: dict[str, float], boxes: dict) -> list[str]:
