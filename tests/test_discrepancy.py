@@ -49,13 +49,13 @@ def test_every_effect_term_matches_its_regression_columns():
     for name, eff in EFFECTS.items():
         cand = next(iter(eff.candidates(s)))
         coef = {n: float(rng.uniform(0.5, 2.0)) for n in cand.coef_names}
-        params = eff.parameters(coef, cand.fixed, {"k": 15.0})
+        params = eff.parameters(coef, cand.fixed, {"k": 15.0, "c": 0.5})
         term = eff.term(params, s.context())
-        p = {"k": 15.0, **params}
+        p = {"k": 15.0, "c": 0.5, **params}
         z = bouc_wen_z(x, p["beta"], p["gamma"], p["n"]) if term.n_latent else None
         col = cand.columns @ np.array([coef[n] for n in cand.coef_names])
         got = term.force(t, x, v, z, p)
-        if name == "stiffness_loss":  # a smoothed step in the term, a sharp one in the column
+        if name in ("stiffness_loss", "damping_change"):  # a smoothed step in the term, a sharp one in the column
             far = np.abs(t - cand.fixed["t_d"]) > 1.0
             np.testing.assert_allclose(got[far], col[far], rtol=1e-6, atol=1e-9)
         else:
@@ -178,3 +178,97 @@ def test_diagnosis_of_a_users_csv_file(tmp_path):
     assert d["cause"] == "quadratic_damping"
     assert d["gain"]["extended"] < d["gain"]["nominal"]
     assert d["split"]["fit"][1] == pytest.approx(0.65 * r.t[-1], rel=1e-6)
+
+
+@pytest.mark.parametrize("effect,key", [("cubic_stiffness", "k3"), ("quadratic_stiffness", "k2")])
+def test_signed_effects_are_found_with_their_sign(effect, key):
+    """Softening (k3 < 0) and a negative k2 are findings, not errors: the screening names them
+    with the right sign and the extension term accepts the negative start."""
+    for seed in (3, 4):
+        case = hidden_case(effect, seed, noise=0.03, sign=-1)
+        assert case.truth[key] < 0
+        sc = _screen(case)
+        assert sc.cause == effect, sc.ranking[:2]
+        est = sc.ranking[0]["parameters"][key]
+        assert est == pytest.approx(case.truth[key], rel=0.3)
+        term = get_effect(effect).term(sc.ranking[0]["parameters"], {})
+        spec = term.specs()[0]
+        assert spec.transform == "identity" and spec.init < 0
+
+
+def test_a_sign_physics_fixes_cannot_be_flipped():
+    with pytest.raises(ValueError, match="fixed by physics"):
+        hidden_case("coulomb_friction", 1, sign=-1)
+
+
+def _change_rows(case, fit_end):
+    from pidyn.discrepancy.screening import weak_system
+
+    r = case.record
+    xs, vs = smooth_signals(r.t, r.x[:, 0], r.v[:, 0], PERIOD)
+    s = Signals(r.t, xs, vs, 1.0, 15.0, "k", t_fit_end=fit_end)
+    weak = WeakForm.for_record(r.t, PERIOD)
+    values = {"m": 1.0, "c": 0.5, "k": 15.0}
+    names, A0, y = weak_system(LinearSDOF(), values, s, r.f, r.x[:, 0], weak)
+    w = 2 * weak.half + 1
+    return s, weak, values, names, A0, y, weak.t[weak.starts], weak.t[weak.starts + w - 1]
+
+
+@pytest.mark.parametrize("t_d", [9.0, 20.0])
+def test_a_change_in_time_is_located_before_and_after_the_split(t_d):
+    """A stiffness loss hidden before (9 s) and after (20 s) the split at 16 s. The held-out
+    check fails when the change is after the split (the nominal model is fine on the fitting
+    part, wrong after it); the whole-record search finds the time inside its interval and the
+    size of the drop; the same search on a record with nothing hidden finds nothing."""
+    from pidyn.discrepancy.changes import heldout_check, locate_change
+    from pidyn.tasks.train import simulate_identified
+
+    case = hidden_case("stiffness_loss", 21, noise=0.02, params={"t_d": t_d})
+    r = case.record
+    s, weak, values, names, A0, y, t_first, t_last = _change_rows(case, float(r.t[-1]))
+    x_sim = simulate_identified(LinearSDOF(), values, r, x0=float(r.x[0, 0]), v0=float(r.v[0, 0]))[:, 0]
+    fit, held = r.t <= case.fit_end, r.t >= case.fit_end
+    check = heldout_check(r.x[:, 0], x_sim, fit, held, noise_std=0.02 * float(np.sqrt(np.mean(r.x[:, 0] ** 2))))
+    assert check.failed == (t_d > case.fit_end), check
+    rows = np.ones(len(y), bool)
+    n_eff = rows.sum() / weak.rows_per_independent
+    ch = locate_change(names, A0, y, t_first, t_last, rows, s.x, s.v, s.t, weak, n_eff,
+                       {"stiffness_loss": "k", "damping_change": "c"}, values)
+    assert ch is not None and ch.effect == "stiffness_loss" and ch.delta_bic < -10
+    assert ch.ci95[0] <= t_d <= ch.ci95[1] and ch.ci95[1] - ch.ci95[0] < 1.0, ch.ci95
+    assert -ch.fraction == pytest.approx(case.truth["drop"], rel=0.2)
+
+    nothing = hidden_case(None, 21, noise=0.02)
+    s0, weak0, _, names0, A00, y0, tf0, tl0 = _change_rows(nothing, float(r.t[-1]))
+    ch0 = locate_change(names0, A00, y0, tf0, tl0, np.ones(len(y0), bool), s0.x, s0.v, s0.t, weak0, n_eff,
+                        {"stiffness_loss": "k", "damping_change": "c"}, values)
+    assert ch0 is None or ch0.delta_bic > -10, ch0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ["softening_cubic", "change_after_split", "change_before_split"])
+def test_diagnosis_of_signed_effects_and_changes_in_time(case, tmp_path):
+    """End to end: a softening cubic (it used to crash the extension), a stiffness loss after
+    the split (the nominal model is fine on the fitting part and fails after it: the verdict
+    must not be none, the change is located and the gain measured on data no fit used) and
+    one late in the fitting part."""
+    from pidyn.tasks.diagnose import diagnose
+
+    over = {"softening_cubic": ["data.source.effect=cubic_stiffness", "data.source.sign=-1"],
+            "change_after_split": ["data.source.effect=stiffness_loss", "+data.source.params={t_d: 19.0}"],
+            "change_before_split": ["data.source.effect=stiffness_loss", "+data.source.params={t_d: 14.5}"]}[case]
+    cfg = make_cfg([*over, "noise=0.02", "data_seed=5", *FAST], tmp_path, config_name="diagnose")
+    d = diagnose(cfg)
+    truth = d["hidden"]["parameters"]
+    assert d["verdict"] == "discrepancy" and d["causes"] == [d["cause"]]
+    if case == "softening_cubic":
+        assert d["cause"] == "cubic_stiffness"
+        assert d["parameters"]["k3"] == pytest.approx(truth["k3"], rel=0.2) and d["parameters"]["k3"] < 0
+    else:
+        assert d["cause"] == "stiffness_loss"
+        lo, hi = d["parameters"]["t_change_ci95"]
+        assert lo <= truth["t_d"] <= hi
+        assert d["parameters"]["drop"] == pytest.approx(truth["drop"], rel=0.25)
+        assert d["split"]["heldout"][0] > truth["t_d"]  # the gain is measured after the change, on unused data
+        assert (tmp_path / "figures" / "running_estimate.png").exists()
+    assert d["gain"]["extended"] < 0.5 * d["gain"]["nominal"]

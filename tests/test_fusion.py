@@ -1,5 +1,6 @@
 """Fusion of window estimates: the Gaussian product where it interpolates, never an extrapolation."""
 
+import pytest
 import torch
 
 from pidyn.models.fusion import InformationFusion
@@ -39,3 +40,24 @@ def test_fusion_state_round_trip():
     g = InformationFusion()
     g.load_state_dict(f.state_dict())
     assert torch.allclose(g.add(torch.tensor([3.0]), torch.eye(1)), torch.tensor([2.0]))
+
+
+def test_a_parameter_no_window_informs_keeps_the_windows_estimate():
+    """A damage time before the damage: its rows and columns of J are exactly zero (float32).
+    The fused value must stay at the windows' estimates, finite, not fall to raw zero."""
+    f = InformationFusion()
+    J1 = torch.tensor([[4.0, 0.0], [0.0, 0.0]])
+    J2 = torch.tensor([[1.0, 0.0], [0.0, 0.0]])
+    f.add(torch.tensor([1.0, 0.8]), J1)
+    out = f.add(torch.tensor([1.2, 0.8]), J2)
+    assert torch.isfinite(out).all()
+    assert float(out[1]) == pytest.approx(0.8, rel=1e-5)
+    assert float(out[0]) == pytest.approx((4 * 1.0 + 1 * 1.2) / 5, rel=1e-5)
+    # the same when the convex fallback is taken (windows far apart in the informed parameter)
+    g = InformationFusion()
+    a = torch.tensor([1.0, 1.0, 0.0])
+    g.add(torch.tensor([0.5, 1.0, 0.3]), 1e4 * torch.outer(a, a) + torch.diag(torch.tensor([1e-2, 1e-2, 0.0])))
+    b = torch.tensor([1.0, 1.2, 0.0])
+    out = g.add(torch.tensor([0.55, 0.7, 0.3]), 1e4 * torch.outer(b, b) + torch.diag(torch.tensor([1e-2, 1e-2, 0.0])))
+    assert g.fallback and torch.isfinite(out).all()
+    assert float(out[2]) == pytest.approx(0.3, rel=1e-5)

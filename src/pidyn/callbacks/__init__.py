@@ -2,5 +2,6 @@
 
 from pidyn.callbacks.clamp import ParameterClamp
 from pidyn.callbacks.early_stopping import ParameterEarlyStopping
+from pidyn.callbacks.progress import LineProgress
 
-__all__ = ["ParameterClamp", "ParameterEarlyStopping"]
+__all__ = ["LineProgress", "ParameterClamp", "ParameterEarlyStopping"]

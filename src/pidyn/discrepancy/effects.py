@@ -25,6 +25,7 @@ from pidyn.systems.terms import (
     BoucWenHysteresis,
     CoulombFriction,
     CubicStiffness,
+    DampingChange,
     ForceTerm,
     GapContact,
     QuadraticDamping,
@@ -49,6 +50,7 @@ class Signals:
     stiffness: str = "k"
     t_fit_end: float | None = None
     v_noise: float = 0.0  # noise std left in the smoothed velocity
+    damping: str = "c"
 
     @property
     def x_peak(self) -> float:
@@ -66,7 +68,7 @@ class Signals:
     def context(self) -> dict:
         """What a force term needs to know about the record (plain numbers, for configs)."""
         return {"friction_eps": self.friction_eps, "t_min": float(self.t[0]), "t_max": float(self.t[-1]),
-                "stiffness": self.stiffness}
+                "stiffness": self.stiffness, "damping": self.damping}
 
 
 @dataclass
@@ -97,9 +99,15 @@ class Effect:
         """The force term at ``params``; ``ctx`` is ``Signals.context()``."""
         raise NotImplementedError
 
-    def sample(self, rng: np.random.Generator, s: Signals) -> dict[str, float]:
-        """Random true parameters of a hidden instance, sized against the response ``s``."""
+    def sample(self, rng: np.random.Generator, s: Signals, sign: float | None = None) -> dict[str, float]:
+        """Random true parameters of a hidden instance, sized against the response ``s``.
+
+        ``sign`` (+1 / -1) fixes the sign of an effect whose sign is a finding (cubic and
+        quadratic stiffness); None draws it. Effects whose sign physics fixes ignore it."""
         raise NotImplementedError
+
+    #: the effect's sign is a finding (its coefficient is identified with either sign)
+    signed: bool = False
 
     #: the parameter the tests check, and its relative tolerance
     key: str = ""
@@ -116,11 +124,16 @@ class Cubic(Effect):
     def candidates(self, s):
         yield Candidate(self.name, s.x[:, None] ** 3, ("k3",), positive=(False,))
 
-    def term(self, p, s):
-        return CubicStiffness(p["k3"])
+    signed = True
 
-    def sample(self, rng, s):
-        return {"k3": self._size(rng, s) / s.x_peak**3}
+    def term(self, p, s):
+        return CubicStiffness(p["k3"], signed=True)  # hardening or softening: the data decide
+
+    def sample(self, rng, s, sign=None):
+        sign = float(rng.choice([-1.0, 1.0])) if sign is None else float(np.sign(sign))
+        # softening is kept milder: its tangent stiffness k + 3 k3 x^2 must stay positive
+        size = self._size(rng, s) if sign > 0 else self._size(rng, s, 0.06, 0.15)
+        return {"k3": sign * size / s.x_peak**3}
 
 
 class Quadratic(Effect):
@@ -132,8 +145,12 @@ class Quadratic(Effect):
     def term(self, p, s):
         return QuadraticStiffness(p["k2"])
 
-    def sample(self, rng, s):
-        return {"k2": float(rng.choice([-1.0, 1.0])) * self._size(rng, s) / s.x_peak**2}
+    signed = True
+
+    def sample(self, rng, s, sign=None):
+        drawn = float(rng.choice([-1.0, 1.0]))
+        sign = drawn if sign is None else float(np.sign(sign))
+        return {"k2": sign * self._size(rng, s) / s.x_peak**2}
 
 
 class Coulomb(Effect):
@@ -148,7 +165,7 @@ class Coulomb(Effect):
     def term(self, p, s):
         return CoulombFriction(p["Fc"], eps=s["friction_eps"])
 
-    def sample(self, rng, s):
+    def sample(self, rng, s, sign=None):
         return {"Fc": self._size(rng, s, 0.04, 0.1)}
 
 
@@ -161,7 +178,7 @@ class QuadDamping(Effect):
     def term(self, p, s):
         return QuadraticDamping(p["c2"])
 
-    def sample(self, rng, s):
+    def sample(self, rng, s, sign=None):
         v_peak = float(np.max(np.abs(s.v)))
         return {"c2": self._size(rng, s, 0.08, 0.2) / v_peak**2}
 
@@ -218,7 +235,7 @@ class Hysteresis(Effect):
         return BoucWenHysteresis(p["kh"], p["beta"], p["gamma"], p["n"], param="kh",
                                  shape_scale=max(abs(p["beta"]) + abs(p["gamma"]), 1e-12) / 2, gamma_lower=0.0)
 
-    def sample(self, rng, s):
+    def sample(self, rng, s, sign=None):
         n = float(rng.choice([1.0, 2.0]))
         share = float(rng.uniform(0.2, 0.5))
         total = (share * s.x_peak) ** (-n)
@@ -253,9 +270,33 @@ class Damage(Effect):
         drop = min(max(p["drop"], 0.01), 0.9)
         return StiffnessLoss(drop, p["t_d"], t_min=s["t_min"], t_max=s["t_max"], stiffness=s["stiffness"])
 
-    def sample(self, rng, s):
+    def sample(self, rng, s, sign=None):
         lo, hi = self._span(s)
         return {"drop": float(rng.uniform(0.15, 0.4)), "t_d": float(rng.uniform(lo + 0.2 * (hi - lo), lo + 0.7 * (hi - lo)))}
+
+
+class DampChange(Damage):
+    """The damping changes by a fraction at an unknown time (grid over the time)."""
+
+    name, key, tolerance = "damping_change", "change", 0.35
+
+    def candidates(self, s):
+        lo, hi = self._span(s)
+        for t_d in np.linspace(lo, hi, self.n_times + 2)[1:-1]:
+            col = s.v * (s.t >= t_d)
+            yield Candidate(self.name, col[:, None], ("dc",), fixed={"t_d": float(t_d)}, positive=(False,))
+
+    def parameters(self, coef, fixed, nominal):
+        return {"change": coef["dc"] / nominal.get("c", 1.0), "t_d": fixed["t_d"]}
+
+    def term(self, p, s):
+        change = min(max(p["change"], -0.9), 9.0)
+        return DampingChange(change, p["t_d"], t_min=s["t_min"], t_max=s["t_max"], damping=s.get("damping", "c"))
+
+    def sample(self, rng, s, sign=None):
+        lo, hi = self._span(s)
+        # damage raises the dissipation: the damping doubles to triples
+        return {"change": float(rng.uniform(1.0, 2.0)), "t_d": float(rng.uniform(lo + 0.2 * (hi - lo), lo + 0.6 * (hi - lo)))}
 
 
 class Gap(Effect):
@@ -274,13 +315,14 @@ class Gap(Effect):
     def term(self, p, s):
         return GapContact(p["kg"], p["gap"])
 
-    def sample(self, rng, s):
+    def sample(self, rng, s, sign=None):
         share = float(rng.uniform(0.35, 0.7))
         kg = float(rng.uniform(0.5, 2.0)) * s.k_nominal
         return {"kg": kg, "gap": share * s.x_peak}
 
 
-EFFECTS: dict[str, Effect] = {e.name: e for e in (Cubic(), Quadratic(), Coulomb(), QuadDamping(), Hysteresis(), Damage(), Gap())}
+EFFECTS: dict[str, Effect] = {e.name: e for e in (Cubic(), Quadratic(), Coulomb(), QuadDamping(), Hysteresis(), Damage(),
+                                                  DampChange(), Gap())}
 """Every candidate effect by name; ``none`` is the verdict when none of them is needed."""
 
 

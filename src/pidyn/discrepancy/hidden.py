@@ -45,10 +45,14 @@ def hidden_case(
     k: float = 15.0,
     mass: float = 1.0,
     max_noise: float = 0.05,
+    sign: float | None = None,
+    params: dict[str, float] | None = None,
 ) -> HiddenCase:
     """Linear SDOF (m, c, k) plus ``effect`` (None: nothing hidden) under a random record.
 
     ``noise`` None draws it uniformly in [0, max_noise] (std as a share of each channel's RMS).
+    ``sign`` fixes the sign of a signed effect (softening cubic: -1); None draws it.
+    ``params`` overrides drawn effect parameters (a change after the split: ``{"t_d": 19.0}``).
     """
     rng = np.random.default_rng(seed)
     motion = str(rng.choice(RECORDS))
@@ -61,9 +65,16 @@ def hidden_case(
     hidden: dict[str, float] = {}
     if effect is not None:
         eff = get_effect(effect)
+        if sign is not None and not eff.signed:
+            raise ValueError(f"hidden effect '{effect}': its sign is fixed by physics; sign={sign} applies only to "
+                             "cubic_stiffness and quadratic_stiffness")
         base = simulate(nominal, truth_nom, gm, gm.t)
         s = Signals(base.t, base.x[:, 0], base.v[:, 0], mass, k, "k", t_fit_end=fit_end)
-        hidden = eff.sample(rng, s)
+        hidden = eff.sample(rng, s, sign=sign)
+        unknown = set(params or {}) - set(hidden)
+        if unknown:
+            raise ValueError(f"hidden effect '{effect}' has no parameter(s) {sorted(unknown)}; it has {sorted(hidden)}")
+        hidden.update({k: float(v) for k, v in (params or {}).items()})
         terms.append(eff.term(hidden, s.context()))
     system = SDOFSystem(terms, mass=mass, name=f"linear_sdof+{effect or 'none'}")
     truth = {**truth_nom, **{k_: v for k_, v in system.true_values().items() if k_ not in truth_nom}}
@@ -75,10 +86,12 @@ def hidden_case(
 
 
 def hidden_record(effect: str | None = "cubic_stiffness", seed: int = 0, noise: float | None = None,
-                  duration: float = 25.0, fit_end: float = 16.0, dt: float = 0.01) -> Record:
+                  duration: float = 25.0, fit_end: float = 16.0, dt: float = 0.01,
+                  sign: float | None = None, params: dict[str, float] | None = None) -> Record:
     """A hidden-effect case as a data source (``data=hidden``); ``effect: null`` hides nothing."""
     if effect in ("none", "null", ""):
         effect = None
-    case = hidden_case(effect, seed, noise=noise, duration=duration, fit_end=fit_end, dt=dt)
+    case = hidden_case(effect, seed, noise=noise, duration=duration, fit_end=fit_end, dt=dt, sign=sign,
+                       params=None if params is None else dict(params))
     case.record.meta["split"] = {"fit": [0.0, fit_end], "heldout": [fit_end, float(case.record.t[-1])]}
     return case.record

@@ -118,6 +118,31 @@ def plot_ranking(path: Path, ranking: list[dict], min_delta_bic: float) -> None:
     plt.close(fig)
 
 
+def plot_running_estimate(path: Path, running: dict, nominal: dict, fit, held, change=None) -> None:
+    """The nominal parameters refitted in sliding windows over the record, relative to the
+    nominal fit: a change in time shows as a step, located with its interval when found."""
+    import numpy as np
+
+    plt = _plt()
+    names = [n for n in running if n != "t" and n in nominal and n != "m"]
+    fig, ax = plt.subplots(figsize=(10, 3.8))
+    _shade(ax, fit, held)
+    for n in names:
+        ax.plot(running["t"], np.asarray(running[n]) / nominal[n], marker=".", lw=1, label=f"{n} / nominal {n}")
+    ax.axhline(1.0, color="k", lw=0.6)
+    if change is not None:
+        ax.axvspan(*change.ci95, color="tab:orange", alpha=0.25, label="change, 95 % interval")
+        ax.axvline(change.t_change, color="tab:orange", lw=1.2)
+        ax.axhline(1.0 + change.fraction, color="tab:orange", lw=0.8, ls="--",
+                   label=f"{change.parameter} after the change ({100 * change.fraction:+.0f} %)")
+    ax.set(xlabel="t [s] (window centre)", ylabel="running estimate / nominal",
+           title="Running estimate over the record (sliding weak-form fit)")
+    ax.legend(fontsize=8, loc="best")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def _num(v) -> str:
     return "-" if v is None else (f"{v:.4g}" if isinstance(v, (int, float)) else str(v))
 
@@ -128,6 +153,10 @@ def write_report(path: Path, d: dict, figures: list[str]) -> None:
     if d["verdict"] == "none":
         lines += ["**Verdict: none.** No candidate effect explains more of the residual than noise and the "
                   "model's own error would (thresholds below). The nominal model is adequate for these data.", ""]
+    elif d["verdict"] == "unexplained":
+        lines += ["**Verdict: unexplained.** The nominal model is clearly wrong on these data, but no effect of the "
+                  "library (nor a change of stiffness or damping in time) explains what it misses. Look at the "
+                  "residual force below before trusting this model.", ""]
     else:
         lines += [f"**Verdict: discrepancy. Cause: `{d['cause']}`**"
                   + (" (named by the user, not by the screening)" if d.get("forced") else ""), ""]
@@ -137,8 +166,22 @@ def write_report(path: Path, d: dict, figures: list[str]) -> None:
         lines.append(f"| extended | `{d['extended']}` | {_num(g['extended'])} |")
     lines += ["", f"Fitting part {d['split']['fit'][0]:.4g}-{d['split']['fit'][1]:.4g} s; held-out part "
               f"{d['split']['heldout'][0]:.4g}-{d['split']['heldout'][1]:.4g} s (not used for fitting).", ""]
+    hc = d.get("heldout_check")
+    if hc:
+        lines += [f"Held-out check: simulation error above the noise {hc['nrmse_heldout']:.3g} of the signal on the "
+                  f"held-out part against {hc['nrmse_fit']:.3g} on the fitting part (ratio {hc['ratio']:.3g}; "
+                  f"{'beyond' if hc['failed'] else 'within'} the threshold {hc['threshold']:g}).", ""]
+    ch = d.get("change")
+    if ch:
+        what = "stiffness" if ch["effect"] == "stiffness_loss" else "damping"
+        lines += ["## Change in time", "",
+                  f"The model held until t = {ch['t_change']:.2f} s (95 % interval {ch['t_change_ci95'][0]:.2f}-"
+                  f"{ch['t_change_ci95'][1]:.2f} s, from the profile of the weak-form residual over the change time); "
+                  f"then the {what} `{ch['parameter']}` changed by {100 * ch['fraction']:+.1f} % (screening estimate; "
+                  "the extended model's estimate is below).", ""]
     if d.get("parameters"):
-        lines += ["Estimated effect parameters: " + ", ".join(f"{k} = {v:.5g}" for k, v in d["parameters"].items()), ""]
+        lines += ["Estimated effect parameters: " + ", ".join(f"{k} = {_num(v) if not isinstance(v, list) else '[' + ', '.join(_num(u) for u in v) + ']'}"
+                                                          for k, v in d["parameters"].items()), ""]
     if d.get("hidden"):
         h = d["hidden"]
         if h.get("effect"):

@@ -67,11 +67,29 @@ def nominal_columns(system: SDOFSystem, s: Signals, values: dict[str, float]) ->
     return names, np.stack(cols, axis=1) if cols else np.zeros((len(s.x), 0)), remainder
 
 
+def weak_system(system: SDOFSystem, values: dict[str, float], s: Signals, f: np.ndarray, x_raw: np.ndarray,
+                weak: WeakForm, mass_known: bool = True) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """The nominal model's weak-form regression: parameter names, columns A0 and target y
+    (one row per window), so that A0 theta = y holds where the nominal model is right."""
+    m = values["m"]
+    forcing = -m * f if system.excitation == "ground" else f
+    names, cols, remainder = nominal_columns(system, s, values)
+    y = weak.project(forcing - remainder)[:, 0]
+    A0 = weak.project(cols)
+    inertia = weak.inertia(x_raw, 1.0)
+    if mass_known:
+        y = y - m * inertia
+    else:
+        A0 = np.column_stack([inertia, A0])
+        names = ["m", *names]
+    return names, A0, y
+
+
 def _is_linear_only(term) -> bool:
     return {sp.name for sp in term.specs()} == set(term.linear)
 
 
-def _lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
+def lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
     scale = np.sqrt((A**2).sum(0))
     scale[scale == 0] = 1.0
     sol, *_ = np.linalg.lstsq(A / scale, y, rcond=None)
@@ -98,17 +116,7 @@ def screen(
     """
     effects = EFFECTS if effects is None else effects
     th = thresholds or Thresholds()
-    m = values["m"]
-    forcing = -m * f if system.excitation == "ground" else f
-    names, cols, remainder = nominal_columns(system, s, values)
-    y = weak.project(forcing - remainder)[:, 0]
-    A0 = weak.project(cols)
-    inertia = weak.inertia(x_raw, 1.0)
-    if mass_known:
-        y = y - m * inertia
-    else:
-        A0 = np.column_stack([inertia, A0])
-        names = ["m", *names]
+    names, A0, y = weak_system(system, values, s, f, x_raw, weak, mass_known)
     starts = weak.starts
     w = 2 * weak.half + 1
     t_first, t_last = weak.t[starts], weak.t[starts + w - 1]
@@ -120,7 +128,7 @@ def screen(
     n_eff = max(fit.sum() / weak.rows_per_independent, 2.0)
     folds = _folds(fit, 5)
 
-    theta0 = _lstsq(A0[fit], y[fit])
+    theta0 = lstsq(A0[fit], y[fit])
     r0 = y - A0 @ theta0
     rss0, rss0_ho = float(np.sum(r0[fit] ** 2)), float(np.sum(r0[ho] ** 2)) if ho.any() else None
     rss0_cv = _cv_rss(A0, y, folds)
@@ -198,14 +206,14 @@ def _cv_rss(A: np.ndarray, y: np.ndarray, folds: list[np.ndarray]) -> float:
     everything = np.logical_or.reduce(folds)
     for test in folds:
         train = everything & ~test
-        theta = _lstsq(A[train], y[train])
+        theta = lstsq(A[train], y[train])
         total += float(np.sum((y[test] - A[test] @ theta) ** 2))
     return total
 
 
 def _fit_candidate(cand: Candidate, A0, B, y, fit, ho) -> dict | None:
     A = np.column_stack([A0, B])
-    theta = _lstsq(A[fit], y[fit])
+    theta = lstsq(A[fit], y[fit])
     coef = theta[A0.shape[1]:]
     pos = cand.positive or (False,) * len(coef)
     if any(p and c <= 0 for p, c in zip(pos, coef)):

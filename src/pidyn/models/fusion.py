@@ -76,14 +76,20 @@ class InformationFusion:
             self.weighted = self.weighted + info @ theta
         return self.estimate()
 
-    def _solve(self, info: torch.Tensor, rhs: torch.Tensor) -> torch.Tensor:
+    def _ridge(self, info: torch.Tensor) -> torch.Tensor:
         n = info.shape[0]
-        reg = self.ridge * torch.trace(info) / n * torch.eye(n, dtype=info.dtype)
-        return torch.linalg.solve(info + reg, rhs)
+        tiny = torch.finfo(info.dtype).tiny
+        return (self.ridge * torch.trace(info) / n).clamp_min(tiny ** 0.5) * torch.eye(n, dtype=info.dtype)
+
+    def _solve(self, info: torch.Tensor, rhs: torch.Tensor, prior: torch.Tensor) -> torch.Tensor:
+        """(info + R)^-1 (rhs + R prior): the ridge pulls a direction no window informs (a
+        damage time before the damage) to the windows' mean estimate, not to raw zero."""
+        reg = self._ridge(info)
+        return torch.linalg.solve(info + reg, rhs + reg @ prior)
 
     def estimate(self) -> torch.Tensor:
         assert self.info is not None and self.weighted is not None
-        joint = self._solve(self.info, self.weighted)
+        joint = self._solve(self.info, self.weighted, torch.stack(self.thetas).mean(0))
         if len(self.thetas) < 2:
             self.fallback = False
             return joint
@@ -94,9 +100,10 @@ class InformationFusion:
             self.fallback = False
             return joint
         self.fallback = True
-        prec = torch.stack([1.0 / torch.diagonal(torch.linalg.pinv(J, hermitian=True)).clamp_min(1e-300)
-                            for J in self.infos])
-        return (prec * T).sum(0) / prec.sum(0).clamp_min(1e-300)
+        # marginal precision 1 / (J_w + R_w)^-1_ii: a window with no information on a parameter
+        # has ~0 weight for it (a pseudo-inverse would give it an infinite one)
+        prec = torch.stack([1.0 / torch.diagonal(torch.linalg.inv(J + self._ridge(J))) for J in self.infos])
+        return (prec * T).sum(0) / prec.sum(0)
 
     def state_dict(self) -> dict:
         return {"info": self.info, "weighted": self.weighted, "thetas": self.thetas, "infos": self.infos}

@@ -135,10 +135,10 @@ def LinearSDOF(c: float = 0.5, k: float = 15.0, **kw) -> SDOFSystem:
     return SDOFSystem([ViscousDamping(c), LinearStiffness(k)], name=kw.pop("name", "linear_sdof"), **kw)
 
 
-def Duffing(c: float = 0.5, k1: float = 15.0, k3: float = 120.0, **kw) -> SDOFSystem:
-    """m x'' + c x' + k1 x + k3 x^3 = -m ag (paper Eq. 15)."""
+def Duffing(c: float = 0.5, k1: float = 15.0, k3: float = 120.0, signed_k3: bool = False, **kw) -> SDOFSystem:
+    """m x'' + c x' + k1 x + k3 x^3 = -m ag (paper Eq. 15); ``signed_k3`` admits softening (k3 < 0)."""
     return SDOFSystem(
-        [ViscousDamping(c), LinearStiffness(k1, param="k1"), CubicStiffness(k3)],
+        [ViscousDamping(c), LinearStiffness(k1, param="k1"), CubicStiffness(k3, signed=signed_k3)],
         name=kw.pop("name", "duffing"),
         **kw,
     )

@@ -101,11 +101,16 @@ class CubicStiffness(ForceTerm):
     name = "cubic_stiffness"
     linear = ("k3",)
 
-    def __init__(self, k3: float = 120.0) -> None:
-        self.k3 = k3
+    def __init__(self, k3: float = 120.0, signed: bool = False) -> None:
+        """``signed``: k3 may take either sign (hardening or softening is a finding, as when a
+        diagnosis discovers the term); otherwise it is positive (a hardening Duffing spring)."""
+        if not signed and k3 <= 0:
+            raise ValueError(f"cubic_stiffness: k3={k3} is softening; use signed=True to allow k3 <= 0")
+        self.k3, self.signed = k3, signed
 
     def specs(self):
-        return [ParamSpec("k3", init=self.k3, scale=abs(self.k3), true=self.k3, unit="N/m^3")]
+        return [ParamSpec("k3", init=self.k3, scale=abs(self.k3) or 1.0, true=self.k3, unit="N/m^3",
+                          transform="identity" if self.signed else "log")]
 
     def force(self, t, x, v, z, p):
         return p["k3"] * x**3
@@ -251,6 +256,38 @@ class StiffnessLoss(ForceTerm):
         return f"- {p['drop']:.4g} {p[self.stiffness]:.5g} x H(t - {p['t_d']:.4g})"
 
 
+class DampingChange(ForceTerm):
+    """change c x' H(t - t_d): the damping ``c`` changes by the fraction ``change`` at t_d.
+
+    Damage that opens cracks or loosens joints raises the dissipation (change > 0); a lost
+    damper lowers it (change < 0). The step is smoothed over ``tau`` seconds as in
+    :class:`StiffnessLoss`; ``damping`` names the nominal damping parameter it scales.
+    """
+
+    name = "damping_change"
+
+    def __init__(self, change: float = 0.5, t_d: float = 10.0, t_min: float = 0.0, t_max: float = 40.0,
+                 damping: str = "c", tau: float = 0.05) -> None:
+        if not t_min < t_d < t_max:
+            raise ValueError(f"damping_change: t_d={t_d} outside ({t_min}, {t_max})")
+        if not -0.95 < change < 10.0:
+            raise ValueError(f"damping_change: change={change} outside (-0.95, 10)")
+        self.change, self.t_d, self.t_min, self.t_max, self.damping, self.tau = change, t_d, t_min, t_max, damping, tau
+
+    def specs(self):
+        return [
+            ParamSpec("change", init=self.change, true=self.change, transform="box", lower=-0.95, upper=10.0),
+            ParamSpec("t_d", init=self.t_d, true=self.t_d, transform="box", lower=self.t_min, upper=self.t_max,
+                      unit="s"),
+        ]
+
+    def force(self, t, x, v, z, p):
+        return p["change"] * p[self.damping] * v * _sigmoid((t - p["t_d"]) / self.tau)
+
+    def formula(self, p):
+        return f"+ {p['change']:.4g} {p[self.damping]:.5g} x' H(t - {p['t_d']:.4g})"
+
+
 class GapContact(ForceTerm):
     """kg (|x| - gap)_+ sign(x): a symmetric stop that engages beyond a gap."""
 
@@ -276,5 +313,5 @@ class GapContact(ForceTerm):
 TERMS: dict[str, type[ForceTerm]] = {
     cls.name: cls
     for cls in (ViscousDamping, LinearStiffness, CubicStiffness, BoucWenHysteresis, QuadraticStiffness,
-                CoulombFriction, QuadraticDamping, StiffnessLoss, GapContact)
+                CoulombFriction, QuadraticDamping, StiffnessLoss, DampingChange, GapContact)
 }

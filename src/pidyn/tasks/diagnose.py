@@ -27,10 +27,11 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 
 from pidyn.baselines.least_squares import output_error
 from pidyn.data.sources import Record
+from pidyn.discrepancy.changes import heldout_check, locate_change, running_estimate
 from pidyn.discrepancy.effects import EFFECTS, Signals
-from pidyn.discrepancy.report import plot_ranking, plot_residual, plot_response, write_report
+from pidyn.discrepancy.report import plot_ranking, plot_residual, plot_response, plot_running_estimate, write_report
 from pidyn.discrepancy.residual import band_limited, dominant_period, unexplained_force
-from pidyn.discrepancy.screening import Thresholds, screen
+from pidyn.discrepancy.screening import Thresholds, screen, weak_system
 from pidyn.discrepancy.weak_form import WeakForm, smooth_signals, velocity_noise
 from pidyn.reporting import nrmse, write_json
 from pidyn.systems.sdof import SDOFSystem
@@ -181,11 +182,37 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
     cause = forced or sc.cause
     log.info("screening: %s", ", ".join(f"{r['effect']} {r['score']:.1f}" for r in sc.ranking[:4]))
 
+    # --- 3b. does the nominal model hold on the held-out part? if not, when did the structure change?
+    def free_run(system: SDOFSystem, values: dict[str, float]) -> np.ndarray:
+        """From the measured initial state over the whole record."""
+        return simulate_identified(system, values, record, x0=float(x_raw[0]), v0=float(s.v[0]),
+                                   substeps=int(dcfg.substeps))[:, 0]
+
+    x_nom = free_run(nominal, nominal_values)
+    held_mask = (record.t >= held[0]) & (record.t <= held[1])
+    check = heldout_check(x_raw, x_nom, fit_mask, held_mask, float(np.std(x_raw - s.x)),
+                          threshold=float(dcfg.changes.heldout_ratio))
+    log.info("%s", check.sentence())
+    change_row = None
+    time_effects = {n: p_ for n, p_ in {"stiffness_loss": stiff, "damping_change": "c"}.items()
+                    if n in effects and p_ in nominal_values}
+    if not forced and time_effects and ((check.failed and sc.cause is None) or sc.cause in time_effects):
+        change, fit, held = _locate_change(nominal, nominal_values, s, record, x_raw, weak, fit, held, mass_known,
+                                           {n: p_ for n, p_ in time_effects.items() if sc.cause in (None, n)},
+                                           thresholds, bool(check.failed and sc.cause is None))
+        if change is not None:
+            cause = change.effect
+            change_row = {"effect": change.effect, "parameters": change.effect_parameters(),
+                          "nominal_refit": {}, "score": -change.delta_bic, "change": change}
+            log.info("%s", change.sentence())
+            fit_mask = (record.t >= fit[0]) & (record.t <= fit[1])
+            held_mask = (record.t >= held[0]) & (record.t <= held[1])
+
     # --- 4. extended model
     ext_values = ext_metrics = ext_system = None
     ext_note = None
     if cause is not None and dcfg.extend:
-        row = next(r for r in sc.ranking if r["effect"] == cause)
+        row = change_row or next(r for r in sc.ranking if r["effect"] == cause)
         if not np.isfinite(row["score"]):
             raise ValueError(f"effect '{cause}' has no physical fit to this record ({row.get('note')})")
         refit = {k: v for k, v in row["nominal_refit"].items() if v > 0}
@@ -200,13 +227,6 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
             ext_values, ext_note = _polish(record, ext_system, ext_values, dcfg, fit)
 
     # --- 5. held-out gain
-    held_mask = (record.t >= held[0]) & (record.t <= held[1])
-    def free_run(system: SDOFSystem, values: dict[str, float]) -> np.ndarray:
-        """From the measured initial state over the whole record."""
-        return simulate_identified(system, values, record, x0=float(x_raw[0]), v0=float(s.v[0]),
-                                   substeps=int(dcfg.substeps))[:, 0]
-
-    x_nom = free_run(nominal, nominal_values)
     x_ext = free_run(ext_system, ext_values) if ext_system is not None else None
     gain = {"metric": "heldout_nrmse_x", "nominal": nrmse(x_nom[held_mask], x_raw[held_mask]),
             "extended": None if x_ext is None else nrmse(x_ext[held_mask], x_raw[held_mask])}
@@ -219,11 +239,19 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
     if ext_values is not None and ext_system is not None:
         nominal_names = {sp.name for sp in nominal.param_specs()}
         effect_params = {k: v for k, v in ext_values.items() if k not in nominal_names}
+    if change_row is not None:
+        ch = change_row["change"]
+        effect_params["t_change"] = effect_params.get("t_d", ch.t_change)
+        effect_params["t_change_ci95"] = list(ch.ci95)
+    verdict = "discrepancy" if cause is not None else ("unexplained" if check.failed else "none")
     truth = dict(record.meta.get("hidden_params") or {}) if "hidden_effect" in record.meta else None
     diagnosis = {
         "nominal": nominal.describe(nominal_values),
-        "verdict": "discrepancy" if cause is not None else "none",
+        "verdict": verdict,
         "cause": cause,
+        "causes": [] if cause is None else [cause],
+        "heldout_check": check.__dict__,
+        "change": None if change_row is None else change_row["change"].to_dict(),
         "forced": bool(forced),
         "ranking": sc.ranking,
         "extended": ext_system.describe(ext_values) if ext_system is not None else None,
@@ -249,17 +277,56 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
     plot_response(fig / "simulation_vs_measured.png", record.t, x_raw, x_nom, x_ext, fit, held, units.get("x", "m"), period)
     explained = None
     if cause is not None:
-        explained = _explained_force(nominal, nominal_values, next(r for r in sc.ranking if r["effect"] == cause), s,
-                                     pointwise)
+        explained = _explained_force(nominal, nominal_values,
+                                     change_row or next(r for r in sc.ranking if r["effect"] == cause), s, pointwise)
     plot_residual(fig / "residual.png", record.t, pointwise["r"], pointwise["x"], pointwise["v"], fit, cause,
                   explained, units, period)
     plot_ranking(fig / "ranking.png", sc.ranking, thresholds.min_delta_bic)
+    names, A0, y = weak_system(nominal, nominal_values, s, record.f, x_raw, weak, mass_known)
+    running = running_estimate(names, A0, y, weak.centers, max(4 * period, 3 * weak.dt * (2 * weak.half + 1)))
+    plot_running_estimate(fig / "running_estimate.png", running, nominal_values, fit, held,
+                          None if change_row is None else change_row["change"])
     write_report(run_dir / "report.md", diagnosis, [p.name for p in sorted(fig.glob("*.png"))])
     log.info("verdict: %s%s; held-out NRMSE nominal %.4g%s", diagnosis["verdict"],
              f" ({cause})" if cause else "", gain["nominal"],
              "" if gain["extended"] is None else f", extended {gain['extended']:.4g}")
     log.info("run folder %s (%.0f s)", run_dir, diagnosis["wall_seconds"])
     return diagnosis
+
+
+def _locate_change(nominal: SDOFSystem, values: dict[str, float], s: Signals, record: Record, x_raw: np.ndarray,
+                   weak: WeakForm, fit: tuple[float, float], held: tuple[float, float], mass_known: bool,
+                   candidates: dict[str, str], th: Thresholds, whole_record: bool):
+    """A step in stiffness or damping: its time, interval and size, and the split to measure it on.
+
+    ``whole_record`` (the nominal model failed on the held-out part): search every row of the
+    record; a change found late or after the split moves the split to halfway between the
+    change and the record's end, the change is then estimated again on the new fitting part
+    only, and the gain is measured on the rest, which no fit has used. Otherwise the search
+    runs on the fitting part (the screening already named the time-varying effect)."""
+    names, A0, y = weak_system(nominal, values, s, record.f, x_raw, weak, mass_known)
+    w = 2 * weak.half + 1
+    t_first, t_last = weak.t[weak.starts], weak.t[weak.starts + w - 1]
+
+    def search(end: float):
+        rows = t_last <= end + 1e-9
+        n_eff = max(rows.sum() / weak.rows_per_independent, 2.0)
+        return locate_change(names, A0, y, t_first, t_last, rows, s.x, s.v, s.t, weak, n_eff, candidates, values)
+
+    change = search(float(record.t[-1]) if whole_record else fit[1])
+    if change is None or change.delta_bic > -th.min_delta_bic or change.explained < th.min_cv_gain:
+        log.info("no step in %s explains the residual%s", " or ".join(sorted(set(candidates.values()))),
+                 "" if change is None else f" (best: {change.sentence()}, dBIC {change.delta_bic:.1f})")
+        return None, fit, held
+    if whole_record:
+        cut = max(fit[1], change.t_change + 0.5 * (float(record.t[-1]) - change.t_change))
+        if cut > fit[1]:
+            log.info("the change lies at %.4g s, beyond the fitting part: fitting now %.4g-%.4g s, held out %.4g-%.4g s",
+                     change.t_change, fit[0], cut, cut, held[1])
+            fit, held = (fit[0], cut), (cut, held[1])
+        again = search(fit[1])
+        change = again if again is not None else change
+    return change, fit, held
 
 
 def _explained_force(nominal: SDOFSystem, values: dict[str, float], row: dict, s: Signals,

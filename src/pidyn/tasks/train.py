@@ -7,6 +7,8 @@ Every object with a ``_target_`` is instantiated here and nowhere else.
 from __future__ import annotations
 
 import logging
+import os
+import sys
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -54,11 +56,17 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     several models on one record builds it once)."""
     t_wall = time.perf_counter()
     run = _build(cfg, record)
-    results = run.ident.run(resume=cfg.get("resume", True))
-    # after PIDynNet: the classical baselines on the same record, then the refinement stage
+    # the classical baselines need nothing from PIDynNet: they run beside it on another core
+    pending = BaselineJob(cfg, run.system, run.record)
+    try:
+        results = run.ident.run(resume=cfg.get("resume", True))
+    except BaseException:
+        pending.cancel()
+        raise
+    # after PIDynNet: the baselines' results, then the refinement stage
     params = run.module.net.params
     pidyn_values = {n: params.as_floats()[n] for n in params.trainable_names}
-    baselines = run_baselines(cfg, run.system, run.record, run.run_dir, params.as_floats())
+    baselines = run_baselines(cfg, run.system, run.record, run.run_dir, params.as_floats(), pending)
     refined = run_refinement(cfg, run.system, run.record, pidyn_values, baselines, results)
     metrics = _report(cfg, run, results, pidyn_values, baselines, refined, t_wall)
     objects = {"module": run.module, "system": run.system, "record": run.record,
@@ -108,14 +116,17 @@ def _build(cfg: DictConfig, record: Record | None) -> _Run:
     schedule = Schedule(**OmegaConf.to_container(cfg.model.schedule, resolve=True))  # type: ignore[arg-type]
     clamp = hydra.utils.instantiate(cfg.callbacks.clamp) if cfg.callbacks.get("clamp") else None
     stopper = hydra.utils.instantiate(cfg.callbacks.early_stopping) if cfg.callbacks.get("early_stopping") else None
+    extras = [hydra.utils.instantiate(node) for name, node in (cfg.get("callbacks") or {}).items()
+              if name not in ("clamp", "early_stopping") and node is not None and "_target_" in node]
     logger = hydra.utils.instantiate(cfg.logger) if cfg.get("logger") else None
-    progress = bool(cfg.trainer.get("enable_progress_bar", True)) and not _in_multirun()
+    # a redrawn bar only on a terminal; elsewhere LineProgress writes a line now and then
+    progress = bool(cfg.trainer.get("enable_progress_bar", True)) and sys.stdout.isatty() and not _in_multirun()
 
     def trainer_factory(**kw: Any) -> L.Trainer:
         kw.setdefault("enable_progress_bar", progress)
         return hydra.utils.instantiate(cfg.trainer, logger=logger if logger is not None else False, **kw)
 
-    ident = SubperiodIdentifier(module, dm, trainer_factory, schedule, clamp, stopper, run_dir)
+    ident = SubperiodIdentifier(module, dm, trainer_factory, schedule, clamp, stopper, run_dir, extra_callbacks=extras)
     return _Run(system, record, module, ident, trainer_factory, logger, run_dir)
 
 
@@ -269,20 +280,19 @@ def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pi
                   t_start=w.get("t_start"), t_end=w.get("t_end"))
 
 
-def run_baselines(cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path,
-                  identified: dict[str, float]) -> list[dict]:
-    """Run the configured classical methods on the same record; a failure is recorded, not raised."""
+def baseline_rows(bcfg: dict, noise: float, system: StructuralSystem, record: Record) -> list[dict]:
+    """The configured classical methods on one record (``bcfg``: the ``baselines`` config as a
+    plain dict); a method that fails gives a row saying so. Pure, so it runs in a worker."""
     from pidyn import baselines as B
 
-    bcfg = cfg.get("baselines") or {}
-    out: list[dict] = []
-    truth = record.truth or {}
     fns = {
         "equation_error": lambda: B.equation_error(record, system),
         "output_error": lambda: B.output_error(record, system, **dict(bcfg.get("output_error") or {})),
         "sindy": lambda: B.weak_sindy(record, system, **dict(bcfg.get("sindy") or {})),
-        "ukf": lambda: B.unscented_kalman_filter(record, system, noise_level=float(cfg.noise), **dict(bcfg.get("ukf") or {})),
+        "ukf": lambda: B.unscented_kalman_filter(record, system, noise_level=noise, **dict(bcfg.get("ukf") or {})),
     }
+    out: list[dict] = []
+    truth = record.truth or {}
     for name in bcfg.get("run") or []:
         if name not in fns:
             raise ValueError(f"unknown baseline '{name}'; choose from {sorted(fns)}")
@@ -293,13 +303,93 @@ def run_baselines(cfg: DictConfig, system: StructuralSystem, record: Record, run
             r = fns[name]()
             row = {"method": r.method, "params": r.params, "seconds": r.seconds, "note": r.note, "trajectory": r.trajectory}
         except Exception as exc:  # a failed baseline must not spoil the run
-            log.warning("baseline %s failed: %s", name, exc)
             row = {"method": name, "params": {}, "seconds": 0.0, "note": f"failed: {exc}"}
         if truth and row["params"]:
-            row["error_pct"] = {k: 100 * abs(v - truth[k]) / abs(truth[k]) for k, v in row["params"].items() if truth.get(k)}
+            row["error_pct"] = relative_errors(row["params"], truth)
         out.append(row)
-        log.info("baseline %s: %s (%.1f s) %s", row["method"],
-                 ", ".join(f"{k}={v:.5g}" for k, v in row["params"].items()), row["seconds"], row.get("note", ""))
+    return out
+
+
+class BaselineJob:
+    """The baselines of one run, started before PIDynNet.
+
+    With ``baselines.parallel`` (and a second core, outside a multirun whose jobs already use
+    the cores) they run in a spawned worker process while PIDynNet trains: on two cores the
+    default run's wall time is PIDynNet's, not PIDynNet's plus the baselines'. Otherwise, or
+    when the worker cannot start or dies, they run in this process when asked for."""
+
+    def __init__(self, cfg: DictConfig, system: StructuralSystem, record: Record) -> None:
+        bcfg = cfg.get("baselines") or {}
+        self._args = (OmegaConf.to_container(bcfg, resolve=True) if bcfg else {}, float(cfg.noise), system, record)
+        self._proc: Any = None
+        self._conn: Any = None
+        names = set(self._args[0].get("run") or [])
+        unknown = names - {"equation_error", "output_error", "sindy", "ukf"}
+        if unknown:  # a typo fails now, not after PIDynNet's minutes
+            raise ValueError(f"unknown baseline {sorted(unknown)}; choose from equation_error, output_error, sindy, ukf")
+        if names and bcfg.get("parallel", False) and (os.cpu_count() or 1) > 1 and not _in_multirun():
+            import multiprocessing as mp
+
+            ctx = mp.get_context("spawn")
+            try:
+                self._conn, child = ctx.Pipe(duplex=False)
+                self._proc = ctx.Process(target=_baseline_worker, args=(child, *self._args), daemon=True)
+                self._proc.start()
+                child.close()
+            except Exception as exc:  # no worker here: run them in this process afterwards
+                log.info("baselines run after PIDynNet (no worker process: %s)", exc)
+                self._proc = None
+
+    def result(self) -> list[dict]:
+        if self._proc is not None:
+            try:
+                while not self._conn.poll(1.0):
+                    if not self._proc.is_alive():
+                        raise RuntimeError(f"worker exited with code {self._proc.exitcode}")
+                ok, value = self._conn.recv()
+                if ok:
+                    return value
+                raise RuntimeError(value)
+            except Exception as exc:
+                log.warning("baseline worker failed (%s); running the baselines in this process", exc)
+            finally:
+                self.cancel()
+        return baseline_rows(*self._args)
+
+    def cancel(self) -> None:
+        """Stop the worker (PIDynNet failed or the run was interrupted)."""
+        if self._proc is not None:
+            if self._proc.is_alive():
+                self._proc.terminate()
+            self._proc.join(5)
+            self._conn.close()
+            self._proc = None
+
+
+def _baseline_worker(conn: Any, *args: Any) -> None:
+    try:
+        conn.send((True, baseline_rows(*args)))
+    except Exception as exc:
+        conn.send((False, f"{type(exc).__name__}: {exc}"))
+    finally:
+        conn.close()
+
+
+def run_baselines(cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path,
+                  identified: dict[str, float], pending: BaselineJob | None = None) -> list[dict]:
+    """The configured classical methods on the same record (``pending``: already started),
+    logged and written to baselines.json, and the Cramer-Rao bound to cramer_rao.json."""
+    from pidyn import baselines as B
+
+    bcfg = cfg.get("baselines") or {}
+    out = (pending if pending is not None else BaselineJob(cfg, system, record)).result()
+    truth = record.truth or {}
+    for row in out:
+        if row.get("note", "").startswith("failed"):
+            log.warning("baseline %s %s", row["method"], row["note"])
+        else:
+            log.info("baseline %s: %s (%.1f s) %s", row["method"],
+                     ", ".join(f"{k}={v:.5g}" for k, v in row["params"].items()), row["seconds"], row.get("note", ""))
     if bcfg.get("cramer_rao"):
         # the bound at the truth when it is known, else at the identified model
         ref = {**{s.name: s.init for s in system.param_specs()}, **identified, **(truth or {})}
