@@ -272,3 +272,27 @@ def test_diagnosis_of_signed_effects_and_changes_in_time(case, tmp_path):
         assert d["split"]["heldout"][0] > truth["t_d"]  # the gain is measured after the change, on unused data
         assert (tmp_path / "figures" / "running_estimate.png").exists()
     assert d["gain"]["extended"] < 0.5 * d["gain"]["nominal"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("pair", ["quadratic_stiffness+quadratic_damping", "gap_contact+coulomb_friction"])
+def test_diagnosis_names_two_hidden_effects_and_no_third(pair, tmp_path):
+    """Two effects hidden together: diagnose, extend, diagnose the extended model again. Both
+    are named (in either order), their parameters recovered, and the screening of the final
+    model passes nothing more."""
+    from pidyn.tasks.diagnose import diagnose
+
+    cfg = make_cfg([f"data.source.effect={pair}", "noise=0.02", "data_seed=5", *FAST], tmp_path,
+                   config_name="diagnose")
+    d = diagnose(cfg)
+    assert d["verdict"] == "discrepancy"
+    assert sorted(d["causes"]) == sorted(pair.split("+")), d["steps"]
+    assert d["cause"] == d["causes"][0]
+    for name in pair.split("+"):
+        eff = get_effect(name)
+        assert d["parameters"][eff.key] == pytest.approx(d["hidden"]["parameters"][eff.key], rel=eff.tolerance)
+    last = d["steps"][-1]["next_ranking"]
+    assert not any(r["passes"] for r in last), last
+    assert (tmp_path / "extended_2" / "config.yaml").exists()
+    assert d["gain"]["extended"] < 0.7 * d["gain"]["nominal"]
+    assert "Steps" in (tmp_path / "report.md").read_text()

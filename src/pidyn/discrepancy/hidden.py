@@ -48,7 +48,7 @@ def hidden_case(
     sign: float | None = None,
     params: dict[str, float] | None = None,
 ) -> HiddenCase:
-    """Linear SDOF (m, c, k) plus ``effect`` (None: nothing hidden) under a random record.
+    """Linear SDOF (m, c, k) plus ``effect`` (None: nothing hidden; "a+b": both) under a random record.
 
     ``noise`` None draws it uniformly in [0, max_noise] (std as a share of each channel's RMS).
     ``sign`` fixes the sign of a signed effect (softening cubic: -1); None draws it.
@@ -63,19 +63,24 @@ def hidden_case(
     truth_nom = nominal.true_values()
     terms = list(nominal.terms)
     hidden: dict[str, float] = {}
-    if effect is not None:
-        eff = get_effect(effect)
-        if sign is not None and not eff.signed:
-            raise ValueError(f"hidden effect '{effect}': its sign is fixed by physics; sign={sign} applies only to "
-                             "cubic_stiffness and quadratic_stiffness")
+    names = [] if effect is None else [e.strip() for e in effect.split("+")]
+    if names:
         base = simulate(nominal, truth_nom, gm, gm.t)
         s = Signals(base.t, base.x[:, 0], base.v[:, 0], mass, k, "k", t_fit_end=fit_end)
-        hidden = eff.sample(rng, s, sign=sign)
-        unknown = set(params or {}) - set(hidden)
-        if unknown:
-            raise ValueError(f"hidden effect '{effect}' has no parameter(s) {sorted(unknown)}; it has {sorted(hidden)}")
-        hidden.update({k: float(v) for k, v in (params or {}).items()})
-        terms.append(eff.term(hidden, s.context()))
+    for name in names:  # "gap_contact+coulomb_friction": several effects at once
+        eff = get_effect(name)
+        if sign is not None and not eff.signed and len(names) == 1:
+            raise ValueError(f"hidden effect '{name}': its sign is fixed by physics; sign={sign} applies only to "
+                             "cubic_stiffness and quadratic_stiffness")
+        drawn = eff.sample(rng, s, sign=sign if eff.signed else None)
+        if set(drawn) & set(hidden):
+            raise ValueError(f"hidden effects {names} share parameters {sorted(set(drawn) & set(hidden))}")
+        drawn.update({k_: float(v) for k_, v in (params or {}).items() if k_ in drawn})
+        hidden.update(drawn)
+        terms.append(eff.term(drawn, s.context()))
+    unknown = set(params or {}) - set(hidden)
+    if unknown:
+        raise ValueError(f"hidden effect '{effect}' has no parameter(s) {sorted(unknown)}; it has {sorted(hidden)}")
     system = SDOFSystem(terms, mass=mass, name=f"linear_sdof+{effect or 'none'}")
     truth = {**truth_nom, **{k_: v for k_, v in system.true_values().items() if k_ not in truth_nom}}
     truth.update(hidden)

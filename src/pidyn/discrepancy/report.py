@@ -158,8 +158,22 @@ def write_report(path: Path, d: dict, figures: list[str]) -> None:
                   "library (nor a change of stiffness or damping in time) explains what it misses. Look at the "
                   "residual force below before trusting this model.", ""]
     else:
-        lines += [f"**Verdict: discrepancy. Cause: `{d['cause']}`**"
+        causes = d.get("causes") or [d["cause"]]
+        lines += [f"**Verdict: discrepancy. Cause{'s' if len(causes) > 1 else ''}: "
+                  + ", ".join(f"`{c}`" for c in causes) + "**"
                   + (" (named by the user, not by the screening)" if d.get("forced") else ""), ""]
+    if len(d.get("steps") or []) > 1 or any(st.get("next_ranking") for st in d.get("steps") or []):
+        lines += ["## Steps: extend, screen the extended model again", "",
+                  "| step | effect added | score (-dBIC) | CV gain | model after the step | best next candidate |",
+                  "|---|---|---|---|---|---|"]
+        for st in d["steps"]:
+            ev = st["evidence"]
+            nxt = (st.get("next_ranking") or [{}])[0]
+            nxt_s = "-" if not nxt else (f"{nxt.get('effect')} {_num(nxt.get('score'))} "
+                                         f"({'passes' if nxt.get('passes') else 'below the thresholds: stop'})")
+            lines.append(f"| {st['step']} | {st['effect']} | {_num(ev.get('score'))} | {_num(ev.get('cv_gain'))} | "
+                         f"`{st['equation']}` | {nxt_s} |")
+        lines.append("")
     lines += ["| model | equation | held-out NRMSE of x |", "|---|---|---|",
               f"| nominal | `{d['nominal']}` | {_num(g['nominal'])} |"]
     if d.get("extended"):

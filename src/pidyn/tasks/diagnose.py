@@ -208,23 +208,13 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
             fit_mask = (record.t >= fit[0]) & (record.t <= fit[1])
             held_mask = (record.t >= held[0]) & (record.t <= held[1])
 
-    # --- 4. extended model
-    ext_values = ext_metrics = ext_system = None
-    ext_note = None
-    if cause is not None and dcfg.extend:
-        row = change_row or next(r for r in sc.ranking if r["effect"] == cause)
-        if not np.isfinite(row["score"]):
-            raise ValueError(f"effect '{cause}' has no physical fit to this record ({row.get('note')})")
-        refit = {k: v for k, v in row["nominal_refit"].items() if v > 0}
-        node = {"_target_": "pidyn.discrepancy.extend.extended_system",
-                "nominal": _system_node(OmegaConf.create(nominal_node), refit, refit.get("m", nominal_values["m"]),
-                                        not mass_known),
-                "effect": cause, "effect_params": row["parameters"], "context": s.context()}
-        ext_metrics, ext_obj = identify(_sub_cfg(cfg, node, run_dir / "extended", fit), record)
-        ext_system = ext_obj["system"]
-        ext_values = ext_obj["module"].net.params.as_floats()
-        if dcfg.polish:
-            ext_values, ext_note = _polish(record, ext_system, ext_values, dcfg, fit)
+    # --- 4. extended model(s): extend, screen the extended model again, until nothing more
+    #        passes the evidence thresholds or diagnosis.max_effects is reached
+    row = None if cause is None else (change_row or next(r for r in sc.ranking if r["effect"] == cause))
+    ext = _extend_until_explained(cfg, record, nominal_node, nominal_values, cause, row, s, weak, x_raw, fit,
+                                  effects, thresholds, mass_known, bool(forced))
+    ext_system, ext_values, ext_metrics = ext["system"], ext["values"], ext["metrics"]
+    causes = ext["causes"] if dcfg.extend else ([] if cause is None else [cause])
 
     # --- 5. held-out gain
     x_ext = free_run(ext_system, ext_values) if ext_system is not None else None
@@ -235,7 +225,7 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
         gain["nominal_vs_clean"] = nrmse(x_nom[held_mask], xc[held_mask])
         gain["extended_vs_clean"] = None if x_ext is None else nrmse(x_ext[held_mask], xc[held_mask])
 
-    effect_params = {}
+    effect_params: dict[str, Any] = {}
     if ext_values is not None and ext_system is not None:
         nominal_names = {sp.name for sp in nominal.param_specs()}
         effect_params = {k: v for k, v in ext_values.items() if k not in nominal_names}
@@ -244,12 +234,14 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
         effect_params["t_change"] = effect_params.get("t_d", ch.t_change)
         effect_params["t_change_ci95"] = list(ch.ci95)
     verdict = "discrepancy" if cause is not None else ("unexplained" if check.failed else "none")
+    cause = causes[0] if causes else cause
     truth = dict(record.meta.get("hidden_params") or {}) if "hidden_effect" in record.meta else None
     diagnosis = {
         "nominal": nominal.describe(nominal_values),
         "verdict": verdict,
         "cause": cause,
-        "causes": [] if cause is None else [cause],
+        "causes": causes,
+        "steps": ext["steps"],
         "heldout_check": check.__dict__,
         "change": None if change_row is None else change_row["change"].to_dict(),
         "forced": bool(forced),
@@ -264,7 +256,7 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
         "noise": (record.meta or {}).get("noise"),
         "natural_period": period,
         "thresholds": OmegaConf.to_container(dcfg.thresholds, resolve=True),
-        "polish": {"nominal": polish_note, "extended": ext_note},
+        "polish": {"nominal": polish_note, "extended": ext["note"]},
         "pidynnet": {"nominal_errors_pct": nom_metrics.get("error_pct"),
                      "extended_errors_pct": None if ext_metrics is None else ext_metrics.get("error_pct")},
         "hidden": None if truth is None else {"effect": record.meta.get("hidden_effect"), "parameters": truth},
@@ -292,6 +284,82 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
              "" if gain["extended"] is None else f", extended {gain['extended']:.4g}")
     log.info("run folder %s (%.0f s)", run_dir, diagnosis["wall_seconds"])
     return diagnosis
+
+
+EXTENSION = "pidyn.discrepancy.extend.extended_system"
+#: effects that cannot sit in one model together (both step at their own t_d)
+EXCLUSIVE = ({"stiffness_loss", "damping_change"},)
+
+
+def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict, nominal_values: dict[str, float],
+                            cause: str | None, row: dict | None, s: Signals, weak: WeakForm, x_raw: np.ndarray,
+                            fit: tuple[float, float], effects: dict, thresholds: Thresholds, mass_known: bool,
+                            forced: bool) -> dict[str, Any]:
+    """Extend the model with ``cause``, identify it (PIDynNet, polish), screen the extended
+    model against the effects not yet in it, and repeat while one passes the thresholds, up to
+    ``diagnosis.max_effects``. Each step's evidence is kept; the last model carries every
+    named effect. Step k's run is in ``extended/`` (k = 1) or ``extended_<k>/``."""
+    dcfg = cfg.diagnosis
+    run_dir = Path(cfg.paths.output_dir)
+    out: dict[str, Any] = {"system": None, "values": None, "metrics": None, "causes": [], "steps": [], "note": None}
+    node, values = nominal_node, nominal_values
+    limit = 1 if forced else int(dcfg.get("max_effects", 3))
+    while cause is not None and row is not None and dcfg.extend:
+        if not np.isfinite(row["score"]):
+            raise ValueError(f"effect '{cause}' has no physical fit to this record ({row.get('note')})")
+        k = len(out["causes"]) + 1
+        refit = {n: v for n, v in row["nominal_refit"].items() if v > 0} if k == 1 else {}
+        inner = _node_with_values(node, {**values, **refit})
+        if k == 1:
+            inner = _system_node(OmegaConf.create(inner), refit, refit.get("m", values["m"]), not mass_known)
+        ext_node = {"_target_": EXTENSION, "nominal": inner, "effect": cause,
+                    "effect_params": {n: float(v) for n, v in row["parameters"].items()}, "context": s.context()}
+        folder = run_dir / ("extended" if k == 1 else f"extended_{k}")
+        metrics, obj = identify(_sub_cfg(cfg, ext_node, folder, fit), record)
+        system: SDOFSystem = obj["system"]
+        ext_values = obj["module"].net.params.as_floats()
+        if dcfg.polish:
+            ext_values, out["note"] = _polish(record, system, ext_values, dcfg, fit)
+        out["causes"].append(cause)
+        out["steps"].append({"step": k, "effect": cause, "folder": folder.name, "equation": system.describe(ext_values),
+                             "evidence": {key: row.get(key) for key in ("score", "delta_bic", "explained", "cv_gain",
+                                                                        "heldout_gain", "force_share")}})
+        out.update(system=system, values=ext_values, metrics=metrics)
+        log.info("step %d: extended with %s: %s", k, cause, system.describe(ext_values))
+        node, values = ext_node, ext_values
+        if k >= limit:
+            if not forced:
+                log.info("stopping at diagnosis.max_effects=%d effects", limit)
+            break
+        present = set(out["causes"]) | {t.name for t in system.terms}
+        blocked = set().union(*[g for g in EXCLUSIVE if g & present])
+        remaining = {n: e for n, e in effects.items() if n not in present | blocked}
+        if not remaining:
+            break
+        sc = screen(system, ext_values, s, record.f, x_raw, weak, fit[1], mass_known, remaining, thresholds)
+        out["steps"][-1]["next_ranking"] = [{k_: r.get(k_) for k_ in ("effect", "score", "cv_gain", "passes")}
+                                            for r in sc.ranking[:4]]
+        log.info("screening the extended model: %s", ", ".join(f"{r['effect']} {r['score']:.1f}"
+                                                               for r in sc.ranking[:4] if r.get("score") is not None))
+        cause = sc.cause
+        row = None if cause is None else next(r for r in sc.ranking if r["effect"] == cause)
+    return out
+
+
+def _node_with_values(node: dict, values: dict[str, float]) -> dict:
+    """A copy of a (possibly nested) system node started from ``values``: the nominal
+    parameters as ``params.<name>.init``, each effect's as its ``effect_params``."""
+    node = copy.deepcopy(OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else node)
+    if node.get("_target_") == EXTENSION:
+        node["nominal"] = _node_with_values(node["nominal"], values)
+        node["effect_params"] = {n: float(values.get(n, v)) for n, v in node["effect_params"].items()}
+        return node
+    params = dict(node.get("params") or {})
+    for n in list(params):
+        if n in values and n != "m":
+            params[n] = {**dict(params[n] or {}), "init": float(values[n])}
+    node["params"] = params
+    return node
 
 
 def _locate_change(nominal: SDOFSystem, values: dict[str, float], s: Signals, record: Record, x_raw: np.ndarray,
