@@ -296,3 +296,56 @@ def test_diagnosis_names_two_hidden_effects_and_no_third(pair, tmp_path):
     assert (tmp_path / "extended_2" / "config.yaml").exists()
     assert d["gain"]["extended"] < 0.7 * d["gain"]["nominal"]
     assert "Steps" in (tmp_path / "report.md").read_text()
+
+
+#: library names a test accepts for an effect outside the library (physically equivalent)
+EQUIVALENT = {"trilinear_spring": {"gap_contact"},  # its hardening branch is a stop beyond a displacement
+              "stribeck_friction": {"coulomb_friction"}}  # dry friction, without the drop at low speed
+
+
+@pytest.mark.parametrize("effect", list(EQUIVALENT))
+def test_screening_never_gives_an_outside_effect_a_wrong_name(effect):
+    for seed in range(1, 7):
+        sc = _screen(hidden_case(effect, seed, noise=0.02))
+        assert sc.cause is None or sc.cause in EQUIVALENT[effect], (seed, sc.ranking[:2])
+        assert sc.verdict in ("none", "unexplained", "discrepancy")
+    # and a clearly structured residual no library effect explains is 'unexplained', not 'none'
+    if effect == "trilinear_spring":
+        sc = _screen(hidden_case(effect, 3, noise=0.02))
+        assert sc.verdict == "unexplained" and sc.structure["structured"], sc.structure
+
+
+def test_a_learned_force_term_starts_at_the_force_it_is_shown():
+    """The network term used for unexplained residuals: zero at construction (the extension
+    starts as the nominal model), fitted to a force it is shown, and the same in torch and NumPy."""
+    import torch
+
+    from pidyn.systems.terms import LearnedForce
+
+    rng = np.random.default_rng(0)
+    x, v = rng.uniform(-0.1, 0.1, 2000), rng.uniform(-0.5, 0.5, 2000)
+    f = 8.0 * np.maximum(np.abs(x) - 0.05, 0) * np.sign(x) + 0.2 * np.tanh(v / 0.05)
+    term = LearnedForce(0.1, 0.5, 1.0, seed=1)
+    assert np.all(term.force(0.0, x, v, None, {}) == 0.0)
+    assert term.fit_to(x, v, f, iters=400) < 0.1
+    torch_f = term.force(0.0, torch.as_tensor(x, dtype=torch.float32), torch.as_tensor(v, dtype=torch.float32), None, {})
+    np.testing.assert_allclose(torch_f.detach().numpy(), term.force(0.0, x, v, None, {}), rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("effect", list(EQUIVALENT))
+def test_diagnosis_of_an_effect_outside_the_library(effect, tmp_path):
+    """Hidden effects the library does not hold: the verdict is 'unexplained' (then a learned
+    force f(x, x') in PIDynNet's physics loss) or a physically equivalent library name, never
+    another; either way the extended model gains on the held-out data."""
+    from pidyn.tasks.diagnose import diagnose
+
+    cfg = make_cfg([f"data.source.effect={effect}", "noise=0.02", "data_seed=5", *FAST], tmp_path,
+                   config_name="diagnose")
+    d = diagnose(cfg)
+    assert d["verdict"] in ("unexplained", "discrepancy")
+    assert set(d["causes"]) <= EQUIVALENT[effect], d["causes"]
+    if d["verdict"] == "unexplained":
+        assert d["learned_force"] and (tmp_path / "figures" / "learned_force.png").exists()
+        assert "f_NN" in d["extended"]
+    assert d["gain"]["extended"] < 0.95 * d["gain"]["nominal"]

@@ -68,7 +68,8 @@ class Signals:
     def context(self) -> dict:
         """What a force term needs to know about the record (plain numbers, for configs)."""
         return {"friction_eps": self.friction_eps, "t_min": float(self.t[0]), "t_max": float(self.t[-1]),
-                "stiffness": self.stiffness, "damping": self.damping}
+                "stiffness": self.stiffness, "damping": self.damping, "x_scale": self.x_peak,
+                "v_scale": float(np.max(np.abs(self.v))), "f_scale": self.k_nominal * self.x_peak}
 
 
 @dataclass

@@ -11,8 +11,22 @@ from pidyn.systems.sdof import SDOFSystem
 
 
 def extended_system(nominal: SDOFSystem, effect: str, effect_params: dict, context: dict) -> SDOFSystem:
-    """``nominal`` + the ``effect`` term initialised at ``effect_params``."""
+    """``nominal`` + the ``effect`` term initialised at ``effect_params``; ``learned_force``
+    adds a network f(x, x'), started from the force saved at ``effect_params.init_from``."""
     if not isinstance(nominal, SDOFSystem):
         raise TypeError(f"the discrepancy library extends single-degree-of-freedom models, not {type(nominal).__name__}")
+    if effect == "learned_force":  # outside the library: a network f(x, x') (a universal differential equation)
+        from pidyn.systems.terms import LearnedForce
+
+        ctx = dict(context)
+        term = LearnedForce(ctx.get("x_scale", 1.0), ctx.get("v_scale", 1.0), ctx.get("f_scale", 1.0),
+                            **{k: int(v) for k, v in dict(effect_params).items() if k in ("hidden", "depth", "seed")})
+        start = dict(effect_params).get("init_from")
+        if start:  # the force the model could not explain, saved in the run folder: the network's start
+            import numpy as np
+
+            with np.load(start) as d:
+                term.fit_to(d["x"], d["v"], d["force"])
+        return nominal.with_term(term)
     term = get_effect(effect).term(dict(effect_params), dict(context))
     return nominal.with_term(term)

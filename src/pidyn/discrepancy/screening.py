@@ -37,6 +37,8 @@ class Thresholds:
     min_delta_bic: float = 10.0  # "very strong" evidence on Kass & Raftery's scale
     min_cv_gain: float = 0.05
     min_force_share: float = 1e-6
+    min_structure_gain: float = 0.3  # a generic f(x, x') removing this share (CV) marks the residual as structured
+    min_library_share: float = 0.5  # the named effect must explain this share of what the generic one does
 
 
 @dataclass
@@ -51,6 +53,7 @@ class Screening:
     rss_nominal_heldout: float | None
     n_independent: float
     residual_rows: dict[str, np.ndarray] = field(default_factory=dict)
+    structure: dict = field(default_factory=dict)  # how much a generic f(x, x') explains
 
 
 def nominal_columns(system: SDOFSystem, s: Signals, values: dict[str, float]) -> tuple[list[str], np.ndarray, np.ndarray]:
@@ -89,10 +92,19 @@ def _is_linear_only(term) -> bool:
     return {sp.name for sp in term.specs()} == set(term.linear)
 
 
-def lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
-    scale = np.sqrt((A**2).sum(0))
-    scale[scale == 0] = 1.0
-    sol, *_ = np.linalg.lstsq(A / scale, y, rcond=None)
+def lstsq(A: np.ndarray, y: np.ndarray, ridge: np.ndarray | None = None, scale: np.ndarray | None = None) -> np.ndarray:
+    """Least squares on unit-norm columns; ``ridge`` (per column, on that scale) damps the
+    columns of a flexible basis so that near-collinear ones cannot take huge opposite values.
+    ``scale``: fixed column scales (the whole record's), so that a column nearly silent in a
+    cross-validation training block is not blown up to unit norm there."""
+    if scale is None:
+        scale = np.sqrt((A**2).sum(0))
+    scale = np.where(scale == 0, 1.0, scale)
+    As = A / scale
+    if ridge is None:
+        sol, *_ = np.linalg.lstsq(As, y, rcond=None)
+    else:
+        sol = np.linalg.solve(As.T @ As + np.diag(ridge), As.T @ y)
     return sol / scale
 
 
@@ -165,21 +177,63 @@ def screen(
             "parameters": {k_: float(v) for k_, v in params.items()},
             "nominal_refit": {k_: float(v) for k_, v in nominal_fit.items()},
         })
+    structure = _structure(s, weak, A0, y, fit, ho, folds, rss0, rss0_cv, rss0_ho, n_eff)
     ranking.sort(key=lambda r: -np.inf if r["score"] is None else r["score"], reverse=True)
     top = ranking[0] if ranking else None
-    found = top is not None and _passes(top, th)
     for r in ranking:
         r["passes"] = bool(r["score"] is not None and _passes(r, th))
+    structured = structure["cv_gain"] >= th.min_structure_gain  # blocked CV: flexibility is not rewarded
+    structure["structured"] = bool(structured)
+    found = top is not None and _passes(top, th)
+    if found and structured and top["cv_gain"] < th.min_library_share * structure["cv_gain"]:
+        # the best library effect explains only a small part of a clearly structured residual:
+        # naming it would be naming the wrong thing
+        structure["note"] = (f"{top['effect']} passes but explains {top['cv_gain']:.2f} of the residual in "
+                             f"cross-validation against {structure['cv_gain']:.2f} for a generic f(x, x')")
+        found = False
+    verdict = "discrepancy" if found else ("unexplained" if structured else "none")
     return Screening(
         nominal_params=nominal,
         ranking=ranking,
-        verdict="discrepancy" if found else "none",
+        verdict=verdict,
         cause=top["effect"] if found else None,
         rss_nominal_fit=rss0,
         rss_nominal_heldout=rss0_ho,
         n_independent=float(n_eff),
         residual_rows={"t": weak.centers, "residual": r0, "fit": fit, "heldout": ho},
+        structure=structure,
     )
+
+
+def generic_columns(s: Signals, knots: int = 11) -> np.ndarray:
+    """A generic force f1(x) + f2(x') with no physics in it: piecewise-linear hat functions on
+    ``knots`` points over the range of x and of x' (bounded: they cannot blow up where a
+    cross-validation block reaches beyond the others' range), and a smoothed sign of x' for
+    any dry friction."""
+    cols = []
+    grid = np.linspace(-1.0, 1.0, knots)
+    h = grid[1] - grid[0]
+    for sig in (s.x, s.v):
+        u = sig / max(np.max(np.abs(sig)), 1e-300)
+        cols += [np.maximum(1.0 - np.abs(u - g) / h, 0.0) for g in grid]
+    cols.append(np.tanh(s.v / max(s.friction_eps, 1e-300)))
+    return np.stack(cols, axis=1)
+
+
+def _structure(s: Signals, weak: WeakForm, A0, y, fit, ho, folds, rss0, rss0_cv, rss0_ho, n_eff) -> dict:
+    """How much of the nominal residual a generic f(x, x') explains: the yardstick for
+    "clearly structured" and for whether a named effect explains a fair share of it."""
+    G = weak.project(generic_columns(s))
+    A = np.column_stack([A0, G])
+    ridge = np.r_[np.zeros(A0.shape[1]), np.full(G.shape[1], 1e-3)]
+    theta = lstsq(A[fit], y[fit], ridge)
+    r = y - A @ theta
+    rss = max(float(np.sum(r[fit] ** 2)), 1e-300)
+    return {"cv_gain": float(1 - _cv_rss(A, y, folds, ridge) / max(rss0_cv, 1e-300)),
+            "explained": float(1 - rss / max(rss0, 1e-300)),
+            "delta_bic": float(n_eff * np.log(rss / max(rss0, 1e-300)) + G.shape[1] * np.log(n_eff)),
+            "heldout_gain": None if rss0_ho is None else float(1 - np.sum(r[ho] ** 2) / max(rss0_ho, 1e-300)),
+            "columns": int(G.shape[1])}
 
 
 def _passes(r: dict, th: Thresholds) -> bool:
@@ -200,13 +254,14 @@ def _folds(fit: np.ndarray, k: int) -> list[np.ndarray]:
     return out
 
 
-def _cv_rss(A: np.ndarray, y: np.ndarray, folds: list[np.ndarray]) -> float:
+def _cv_rss(A: np.ndarray, y: np.ndarray, folds: list[np.ndarray], ridge: np.ndarray | None = None) -> float:
     """Residual sum of squares of each block predicted from the others."""
     total = 0.0
     everything = np.logical_or.reduce(folds)
+    scale = None if ridge is None else np.sqrt((A[everything] ** 2).sum(0))
     for test in folds:
         train = everything & ~test
-        theta = lstsq(A[train], y[train])
+        theta = lstsq(A[train], y[train], ridge, scale)
         total += float(np.sum((y[test] - A[test] @ theta) ** 2))
     return total
 

@@ -42,6 +42,8 @@ class PIDynNet(nn.Module):
             raise ValueError(f"{system.name} has latent states {system.latent_names}: an LNN is required")
         self.lnn = lnn if system.n_latent else None
         self.normalize_losses = normalize_losses
+        # networks inside the equations (a learned force term): trained with the networks, saved in checkpoints
+        self.learned = nn.ModuleList([t.net for t in getattr(system, "terms", []) if isinstance(getattr(t, "net", None), nn.Module)])
         nd, nz = system.n_dof, system.n_latent
         self.register_buffer("z_offset", torch.zeros(max(nz, 1)))
         self.register_buffer("scale_x", torch.ones(nd))
@@ -206,7 +208,7 @@ class PIDynNet(nn.Module):
         ps = list(self.rpn.parameters())
         if self.lnn is not None:
             ps += list(self.lnn.parameters())
-        return ps
+        return ps + list(self.learned.parameters())
 
     def physical_parameters(self) -> list[nn.Parameter]:
         return [p for p in self.params.raw.values() if p.requires_grad]

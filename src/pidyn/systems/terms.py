@@ -26,6 +26,10 @@ def _tanh(x: Array) -> Array:
     return torch.tanh(x) if isinstance(x, torch.Tensor) else np.tanh(x)
 
 
+def _exp(x: Array) -> Array:
+    return torch.exp(x) if isinstance(x, torch.Tensor) else np.exp(x)
+
+
 def _relu(x: Array) -> Array:
     return torch.relu(x) if isinstance(x, torch.Tensor) else np.maximum(x, 0.0)
 
@@ -310,8 +314,123 @@ class GapContact(ForceTerm):
         return f"{p['kg']:.5g} (|x| - {p['gap']:.4g})+ sign(x)"
 
 
+class TrilinearSpring(ForceTerm):
+    """dk1 (|x| - x1)+ sign(x) + dk2 (|x| - x2)+ sign(x): the stiffness changes at |x| = x1 and
+    again at x2 (softening at first yield, hardening at a stop). Not in the discrepancy library:
+    it hides an effect the library cannot name."""
+
+    name = "trilinear_spring"
+    linear = ("dk1", "dk2")
+
+    def __init__(self, dk1: float = -5.0, x1: float = 0.03, dk2: float = 10.0, x2: float = 0.06) -> None:
+        if not 0 < x1 < x2:
+            raise ValueError(f"trilinear_spring: need 0 < x1 < x2, got x1={x1}, x2={x2}")
+        self.dk1, self.x1, self.dk2, self.x2 = dk1, x1, dk2, x2
+
+    def specs(self):
+        return [ParamSpec("dk1", init=self.dk1, scale=abs(self.dk1) or 1.0, true=self.dk1, transform="identity"),
+                ParamSpec("dk2", init=self.dk2, scale=abs(self.dk2) or 1.0, true=self.dk2, transform="identity"),
+                ParamSpec("x1", init=self.x1, scale=self.x1, true=self.x1, trainable=False, unit="m"),
+                ParamSpec("x2", init=self.x2, scale=self.x2, true=self.x2, trainable=False, unit="m")]
+
+    def force(self, t, x, v, z, p):
+        return (p["dk1"] * (_relu(x - p["x1"]) - _relu(-x - p["x1"]))
+                + p["dk2"] * (_relu(x - p["x2"]) - _relu(-x - p["x2"])))
+
+    def formula(self, p):
+        return (f"{p['dk1']:.5g} (|x| - {p['x1']:.4g})+ sign(x) + {p['dk2']:.5g} (|x| - {p['x2']:.4g})+ sign(x)")
+
+
+class StribeckFriction(ForceTerm):
+    """(Fc + (Fs - Fc) exp(-(x'/vs)^2)) sign(x'): dry friction whose static level Fs exceeds the
+    sliding level Fc (the Stribeck drop at low speed). Not in the discrepancy library."""
+
+    name = "stribeck_friction"
+
+    def __init__(self, Fc: float = 0.1, Fs: float = 0.25, vs: float = 0.02, eps: float = 1e-3) -> None:
+        self.Fc, self.Fs, self.vs, self.eps = Fc, Fs, vs, eps
+
+    def specs(self):
+        return [ParamSpec("Fc", init=self.Fc, scale=self.Fc, true=self.Fc, unit="N"),
+                ParamSpec("Fs", init=self.Fs, scale=self.Fs, true=self.Fs, unit="N"),
+                ParamSpec("vs", init=self.vs, scale=self.vs, true=self.vs, trainable=False, unit="m/s")]
+
+    def force(self, t, x, v, z, p):
+        level = p["Fc"] + (p["Fs"] - p["Fc"]) * _exp(-((v / p["vs"]) ** 2))
+        return level * _tanh(v / self.eps)
+
+    def formula(self, p):
+        return f"({p['Fc']:.4g} + ({p['Fs']:.4g} - {p['Fc']:.4g}) exp(-(x'/{p['vs']:.3g})^2)) sign(x')"
+
+
+class LearnedForce(ForceTerm):
+    """f(x, x') by a small network inside the equation of motion: a universal differential
+    equation. What the diagnosis adds when the residual force is clearly structured but no
+    library effect explains it. Its weights are trained in PIDynNet's physics loss (they sit
+    with the networks' parameters); the last layer starts at zero, so the extension starts
+    as the nominal model. Inputs and output are scaled by the record's x, x' and force scales."""
+
+    name = "learned_force"
+
+    def __init__(self, x_scale: float = 1.0, v_scale: float = 1.0, f_scale: float = 1.0, hidden: int = 24,
+                 depth: int = 2, seed: int = 0) -> None:
+        from torch import nn
+
+        self.x_scale, self.v_scale, self.f_scale = float(x_scale), float(v_scale), float(f_scale)
+        gen = torch.random.fork_rng()
+        with gen:
+            torch.manual_seed(seed)
+            layers: list[nn.Module] = []
+            d = 2
+            for _ in range(depth):
+                layers += [nn.Linear(d, hidden), nn.Tanh()]
+                d = hidden
+            layers.append(nn.Linear(d, 1))
+            self.net = nn.Sequential(*layers)
+        nn.init.zeros_(self.net[-1].weight)
+        nn.init.zeros_(self.net[-1].bias)
+
+    def specs(self):
+        return []
+
+    def fit_to(self, x: np.ndarray, v: np.ndarray, f: np.ndarray, iters: int = 300) -> float:
+        """Start the network at a force measured pointwise (the force the model could not
+        explain), by L-BFGS on all samples; returns the relative RMS misfit."""
+        dtype = self.net[0].weight.dtype
+        u = torch.as_tensor(np.stack([x / self.x_scale, v / self.v_scale], -1), dtype=dtype)
+        target = torch.as_tensor(f / self.f_scale, dtype=dtype)
+        opt = torch.optim.LBFGS(self.net.parameters(), lr=1.0, max_iter=iters, line_search_fn="strong_wolfe",
+                                tolerance_grad=1e-12, tolerance_change=1e-14)
+
+        def closure():
+            opt.zero_grad()
+            loss = ((self.net(u)[..., 0] - target) ** 2).mean()
+            loss.backward()
+            return loss
+
+        opt.step(closure)
+        with torch.no_grad():
+            return float(((self.net(u)[..., 0] - target) ** 2).mean().sqrt() / target.pow(2).mean().sqrt().clamp_min(1e-300))
+
+    def force(self, t, x, v, z, p):
+        if isinstance(x, torch.Tensor):
+            u = torch.stack([x / self.x_scale, v / self.v_scale], dim=-1)
+            return self.net(u)[..., 0] * self.f_scale
+        u = np.stack([np.asarray(x, float) / self.x_scale, np.asarray(v, float) / self.v_scale], axis=-1)
+        for layer in self.net:  # the same weights, evaluated in NumPy for simulations
+            if isinstance(layer, torch.nn.Linear):
+                u = u @ layer.weight.detach().cpu().double().numpy().T + layer.bias.detach().cpu().double().numpy()
+            else:
+                u = np.tanh(u)
+        return u[..., 0] * self.f_scale
+
+    def formula(self, p):
+        return "f_NN(x, x')"
+
+
 TERMS: dict[str, type[ForceTerm]] = {
     cls.name: cls
     for cls in (ViscousDamping, LinearStiffness, CubicStiffness, BoucWenHysteresis, QuadraticStiffness,
-                CoulombFriction, QuadraticDamping, StiffnessLoss, DampingChange, GapContact)
+                CoulombFriction, QuadraticDamping, StiffnessLoss, DampingChange, GapContact, TrilinearSpring,
+                StribeckFriction, LearnedForce)
 }

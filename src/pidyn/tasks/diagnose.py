@@ -29,7 +29,8 @@ from pidyn.baselines.least_squares import output_error
 from pidyn.data.sources import Record
 from pidyn.discrepancy.changes import heldout_check, locate_change, running_estimate
 from pidyn.discrepancy.effects import EFFECTS, Signals
-from pidyn.discrepancy.report import plot_ranking, plot_residual, plot_response, plot_running_estimate, write_report
+from pidyn.discrepancy.report import (plot_learned_force, plot_ranking, plot_residual, plot_response,
+                                     plot_running_estimate, write_report)
 from pidyn.discrepancy.residual import band_limited, dominant_period, unexplained_force
 from pidyn.discrepancy.screening import Thresholds, screen, weak_system
 from pidyn.discrepancy.weak_form import WeakForm, smooth_signals, velocity_noise
@@ -210,11 +211,17 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
 
     # --- 4. extended model(s): extend, screen the extended model again, until nothing more
     #        passes the evidence thresholds or diagnosis.max_effects is reached
-    row = None if cause is None else (change_row or next(r for r in sc.ranking if r["effect"] == cause))
+    learn = bool(dcfg.get("learn_unexplained", True)) and not forced
+    if cause is None and learn and (sc.verdict == "unexplained" or check.failed):
+        cause = LEARNED  # structured, but nothing in the library explains it: learn the force
+    row = None if cause is None else (_learned_row(sc) if cause == LEARNED else
+                                      change_row or next(r for r in sc.ranking if r["effect"] == cause))
     ext = _extend_until_explained(cfg, record, nominal_node, nominal_values, cause, row, s, weak, x_raw, fit,
                                   effects, thresholds, mass_known, bool(forced))
     ext_system, ext_values, ext_metrics = ext["system"], ext["values"], ext["metrics"]
     causes = ext["causes"] if dcfg.extend else ([] if cause is None else [cause])
+    learned = LEARNED in causes
+    causes = [c for c in causes if c != LEARNED]
 
     # --- 5. held-out gain
     x_ext = free_run(ext_system, ext_values) if ext_system is not None else None
@@ -233,8 +240,9 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
         ch = change_row["change"]
         effect_params["t_change"] = effect_params.get("t_d", ch.t_change)
         effect_params["t_change_ci95"] = list(ch.ci95)
-    verdict = "discrepancy" if cause is not None else ("unexplained" if check.failed else "none")
-    cause = causes[0] if causes else cause
+    verdict = ("discrepancy" if causes or (cause is not None and cause != LEARNED) else
+               "unexplained" if learned or check.failed or sc.verdict == "unexplained" else "none")
+    cause = causes[0] if causes else (None if cause == LEARNED else cause)
     truth = dict(record.meta.get("hidden_params") or {}) if "hidden_effect" in record.meta else None
     diagnosis = {
         "nominal": nominal.describe(nominal_values),
@@ -242,6 +250,8 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
         "cause": cause,
         "causes": causes,
         "steps": ext["steps"],
+        "learned_force": learned,
+        "structure": {k: v for k, v in sc.structure.items()},
         "heldout_check": check.__dict__,
         "change": None if change_row is None else change_row["change"].to_dict(),
         "forced": bool(forced),
@@ -278,6 +288,8 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
     running = running_estimate(names, A0, y, weak.centers, max(4 * period, 3 * weak.dt * (2 * weak.half + 1)))
     plot_running_estimate(fig / "running_estimate.png", running, nominal_values, fit, held,
                           None if change_row is None else change_row["change"])
+    if learned and ext_system is not None and ext_system.n_latent == 0:
+        _plot_learned(fig / "learned_force.png", nominal, nominal_values, ext_system, ext_values, pointwise, units)
     write_report(run_dir / "report.md", diagnosis, [p.name for p in sorted(fig.glob("*.png"))])
     log.info("verdict: %s%s; held-out NRMSE nominal %.4g%s", diagnosis["verdict"],
              f" ({cause})" if cause else "", gain["nominal"],
@@ -305,15 +317,20 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
     node, values = nominal_node, nominal_values
     limit = 1 if forced else int(dcfg.get("max_effects", 3))
     while cause is not None and row is not None and dcfg.extend:
-        if not np.isfinite(row["score"]):
+        if row.get("score") is not None and not np.isfinite(row["score"]):
             raise ValueError(f"effect '{cause}' has no physical fit to this record ({row.get('note')})")
         k = len(out["causes"]) + 1
         refit = {n: v for n, v in row["nominal_refit"].items() if v > 0} if k == 1 else {}
+        if cause == LEARNED:  # start the network at the force the current model cannot explain
+            row = {**row, "parameters": {"init_from": str(_save_unexplained(run_dir / f"unexplained_{k}.npz", record,
+                                                                          _current_system(node), values, x_raw, fit,
+                                                                          dcfg))}}
         inner = _node_with_values(node, {**values, **refit})
         if k == 1:
             inner = _system_node(OmegaConf.create(inner), refit, refit.get("m", values["m"]), not mass_known)
         ext_node = {"_target_": EXTENSION, "nominal": inner, "effect": cause,
-                    "effect_params": {n: float(v) for n, v in row["parameters"].items()}, "context": s.context()}
+                    "effect_params": {n: (v if isinstance(v, str) else float(v)) for n, v in row["parameters"].items()},
+                    "context": s.context()}
         folder = run_dir / ("extended" if k == 1 else f"extended_{k}")
         metrics, obj = identify(_sub_cfg(cfg, ext_node, folder, fit), record)
         system: SDOFSystem = obj["system"]
@@ -331,6 +348,8 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
             if not forced:
                 log.info("stopping at diagnosis.max_effects=%d effects", limit)
             break
+        if cause == LEARNED:
+            break  # the learned force takes whatever is left: nothing to screen after it
         present = set(out["causes"]) | {t.name for t in system.terms}
         blocked = set().union(*[g for g in EXCLUSIVE if g & present])
         remaining = {n: e for n, e in effects.items() if n not in present | blocked}
@@ -342,8 +361,43 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
         log.info("screening the extended model: %s", ", ".join(f"{r['effect']} {r['score']:.1f}"
                                                                for r in sc.ranking[:4] if r.get("score") is not None))
         cause = sc.cause
-        row = None if cause is None else next(r for r in sc.ranking if r["effect"] == cause)
+        if cause is None and sc.verdict == "unexplained" and LEARNED not in out["causes"] and dcfg.get("learn_unexplained", True):
+            cause = LEARNED  # what remains is structured but no library effect: learn it
+        row = None if cause is None else (_learned_row(sc) if cause == LEARNED else
+                                          next(r for r in sc.ranking if r["effect"] == cause))
+        if cause == LEARNED and LEARNED in out["causes"]:
+            break
     return out
+
+
+LEARNED = "learned_force"
+
+
+def _current_system(node: dict) -> SDOFSystem:
+    return hydra.utils.instantiate(OmegaConf.create(node))
+
+
+def _save_unexplained(path: Path, record: Record, system: SDOFSystem, values: dict[str, float], x_raw: np.ndarray,
+                      fit: tuple[float, float], dcfg: DictConfig) -> Path:
+    """The force ``system`` cannot explain on the fitting part (band-limited, the ringing ends
+    left out), with x and x' beside it: what a learned force term starts from."""
+    period = 2 * np.pi * np.sqrt(values["m"] / max(values.get("k", values.get("k1", 1.0)), 1e-300))
+    pw = unexplained_force(system, values, record.t, x_raw, record.f, period)
+    dt = float(record.t[1] - record.t[0])
+    edge = max(1, int(round(period / dt)))
+    m = (record.t >= fit[0]) & (record.t <= fit[1])
+    m[:edge] = False
+    m[-edge:] = False
+    np.savez(path, x=pw["x"][m], v=pw["v"][m], force=pw["r"][m])
+    return path
+
+
+def _learned_row(sc) -> dict:
+    """The extension row of a learned force: its evidence is the generic f(x, x')'s."""
+    st = sc.structure or {}
+    return {"effect": LEARNED, "parameters": {}, "nominal_refit": {}, "score": -st.get("delta_bic", 0.0),
+            "delta_bic": st.get("delta_bic"), "explained": st.get("explained"), "cv_gain": st.get("cv_gain"),
+            "heldout_gain": st.get("heldout_gain")}
 
 
 def _node_with_values(node: dict, values: dict[str, float]) -> dict:
@@ -395,6 +449,21 @@ def _locate_change(nominal: SDOFSystem, values: dict[str, float], s: Signals, re
         again = search(fit[1])
         change = again if again is not None else change
     return change, fit, held
+
+
+def _plot_learned(path: Path, nominal: SDOFSystem, nominal_values: dict[str, float], ext: SDOFSystem,
+                  ext_values: dict[str, float], pw: dict[str, np.ndarray], units: dict) -> None:
+    """The extended model's restoring force minus the nominal one (the learned force plus the
+    shift of the nominal parameters that came with it) on the residual's band-limited signals."""
+    t, x, v = np.arange(len(pw["x"])), pw["x"], pw["v"]
+    dev = ext.restoring_force(t, x, v, None, ext_values) - nominal.restoring_force(t, x, v, None, nominal_values)
+    gx = np.linspace(x.min(), x.max(), 60)
+    gv = np.linspace(v.min(), v.max(), 60)
+    X, V = np.meshgrid(gx, gv)
+    F = (ext.restoring_force(0.0, X, V, None, ext_values) - nominal.restoring_force(0.0, X, V, None, nominal_values))
+    edge = max(1, len(x) // 50)
+    inner = slice(edge, len(x) - edge)  # the band-limited ends ring
+    plot_learned_force(path, x[inner], v[inner], pw["r"][inner], dev[inner], {"x": X, "v": V, "f": F}, units)
 
 
 def _explained_force(nominal: SDOFSystem, values: dict[str, float], row: dict, s: Signals,
