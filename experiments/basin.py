@@ -178,6 +178,7 @@ def write_summary(df: pd.DataFrame, stem: Path, a, cell: dict, truth: dict) -> N
     if "pidynnet" in rates:
         best_other = max((v for k, v in rates.items() if k != "pidynnet"), default=np.nan)
         verdict = ("PIDynNet's start beats every other method here" if rates["pidynnet"] > best_other else
+                   "PIDynNet's start ties with the best other method here" if rates["pidynnet"] == best_other else
                    "PIDynNet's start does **not** beat the best other method here")
         lines.append(f"\n{verdict} ({rates['pidynnet']:.2f} against {best_other:.2f}).")
     fig = stem.parent / "figures" / f"{stem.name}.png"

@@ -15,11 +15,13 @@ from pidyn.tasks.train import train  # noqa: E402
 
 SMOKE = ["debug=smoke", "logger=none", "baselines=none"]
 # PIDynNet's estimate for these smoke settings before the refinement stage existed (1 window, 50
-# iterations: far from the truth on purpose; these pin the PIDynNet path, not its accuracy)
+# iterations: far from the truth on purpose; these pin the PIDynNet path, not its accuracy).
+# Bouc-Wen's beta, gamma, n moved by 2e-4 relative when the fusion's ridge stopped pulling
+# ill-determined directions toward raw zero (it now pulls them to the windows' own estimate).
 BEFORE = {
     "duffing": {"c": 1.0630919933319092, "k1": 14.65009880065918, "k3": 63.29417419433594},
-    "bouc_wen": {"c": 2.133432388305664, "k": 1.5203810930252075, "beta": 0.4900875687599182,
-                 "gamma": 0.407318115234375, "n": 1.6714000701904297},
+    "bouc_wen": {"c": 2.133432388305664, "k": 1.5203810930252075, "beta": 0.4899733066558838,
+                 "gamma": 0.4072237014770508, "n": 1.671323537826538},
 }
 
 
