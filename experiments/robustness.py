@@ -135,12 +135,16 @@ def main() -> None:
     ap.add_argument("--systems", nargs="*", default=list(SYSTEMS))
     ap.add_argument("--noise", nargs="*", type=float, default=[0.0, 0.025])
     ap.add_argument("--out", type=Path, default=ROOT / "experiments" / "results" / "robustness")
+    ap.add_argument("--finished-only", action="store_true",
+                    help="summarise the cases already run (an interrupted study), run nothing")
     a = ap.parse_args()
     work = ROOT / "outputs" / "robustness"
     rows = []
     for system in a.systems:
         for record in a.records:
             for noise in a.noise:
+                if a.finished_only and not (work / f"{system}_{record}_noise{noise:g}" / "case.json").exists():
+                    continue
                 r = run_case(record, system, noise, seed=1, work=work)
                 rows.append(r)
                 print(f"{system:9s} {record:14s} noise {noise:<6g} final ok {r.get('final_ok')} "
@@ -162,6 +166,9 @@ def write_md(df: pd.DataFrame, path: Path, a) -> None:
              "with noise.\n",
              "| system | noise % | cases | PIDynNet alone | final (refined) | EE | SINDy | OE | UKF | final worse than best baseline beyond its interval |",
              "|---|---|---|---|---|---|---|---|---|---|"]
+    if a.finished_only:
+        lines.insert(3, f"Cases run: {len(df)} of {len(a.systems) * len(a.records) * len(a.noise)} "
+                        "(an interrupted study; `make robustness` runs the rest, finished cases are kept).\n")
     for (system, noise), g in df.groupby(["system", "noise"], sort=False):
         def rate(col: str) -> str:
             return f"{g[col].fillna(False).astype(bool).mean():.2f}" if col in g else "-"

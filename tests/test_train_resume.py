@@ -84,3 +84,22 @@ def test_resume_of_a_latent_system_carries_z_across(tmp_path):
     state = json.loads((tmp_path / "subperiod_state.json").read_text())
     assert len(state["windows"]) == 2 and state["windows"][0]["z_end"] == z_end
     assert all(len(w["z_end"]) == 1 for w in state["windows"])
+
+
+def test_baselines_take_the_noise_a_data_source_drew(tmp_path):
+    """``noise=null`` lets the data source draw the level (the diagnosis benchmark does): the
+    baselines and the bound read it from the record, not from the config."""
+    from pidyn.tasks.train import BaselineJob, record_noise
+
+    cfg = make_cfg(["data=hidden", "noise=null", "baselines.run=[equation_error]", "baselines.parallel=false",
+                    "logger=none"], tmp_path)
+    import hydra
+
+    from pidyn.tasks.train import build_record
+
+    system = hydra.utils.instantiate(cfg.system)
+    record = build_record(cfg, system)
+    level = record_noise(cfg, record)
+    assert 0.0 <= level <= 0.05 and level == record.meta["noise"]
+    rows = BaselineJob(cfg, system, record).result()
+    assert rows[0]["method"] == "equation_error" and rows[0]["params"]

@@ -154,7 +154,7 @@ def _report(cfg: DictConfig, run: _Run, results: list, pidyn_values: dict[str, f
     metrics: dict[str, Any] = {
         "system": system.name,
         "record": record.name,
-        "noise": float((record.meta or {}).get("noise", cfg.noise) or 0.0),  # a data source may draw it
+        "noise": record_noise(cfg, record),
         "seed": int(cfg.seed),
         "data_seed": int(cfg.data_seed),
         "batch_size": int(cfg.batch_size),
@@ -241,6 +241,12 @@ def simulate_identified(system: StructuralSystem, values: dict[str, float], reco
     return Y[:, 0, :n]
 
 
+def record_noise(cfg: DictConfig, record: Record) -> float:
+    """The measurement-noise level of the record: what its data source drew or was given
+    (``noise=null`` lets a source draw it), else the config's, else 0."""
+    return float((record.meta or {}).get("noise", cfg.get("noise")) or 0.0)
+
+
 def relative_errors(values: dict[str, float], truths: dict[str, float | None]) -> dict[str, float]:
     """|value - truth| / |truth| in %, for the parameters whose truth is known and nonzero."""
     return {n: float(100 * abs(v - truths[n]) / abs(truths[n])) for n, v in values.items() if truths.get(n)}
@@ -320,7 +326,7 @@ class BaselineJob:
 
     def __init__(self, cfg: DictConfig, system: StructuralSystem, record: Record) -> None:
         bcfg = cfg.get("baselines") or {}
-        self._args = (OmegaConf.to_container(bcfg, resolve=True) if bcfg else {}, float(cfg.noise), system, record)
+        self._args = (OmegaConf.to_container(bcfg, resolve=True) if bcfg else {}, record_noise(cfg, record), system, record)
         self._proc: Any = None
         self._conn: Any = None
         names = set(self._args[0].get("run") or [])
@@ -393,7 +399,7 @@ def run_baselines(cfg: DictConfig, system: StructuralSystem, record: Record, run
     if bcfg.get("cramer_rao"):
         # the bound at the truth when it is known, else at the identified model
         ref = {**{s.name: s.init for s in system.param_specs()}, **identified, **(truth or {})}
-        crb = B.cramer_rao(system, ref, record.t, record.f, float(cfg.noise),
+        crb = B.cramer_rao(system, ref, record.t, record.f, record_noise(cfg, record),
                            channels=tuple(c for c in ("x", "v", "a") if getattr(record, c) is not None))
         write_json(run_dir / "cramer_rao.json", crb)
     if out:
