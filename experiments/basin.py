@@ -32,6 +32,8 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from pidyn.errors import errors_pct  # noqa: E402
+
 CELLS = {
     "duffing": {"system": "duffing", "excitation": "kobe", "eq_scale": 1.0},
     "bouc_wen_x1": {"system": "bouc_wen", "excitation": "el_centro", "eq_scale": 1.0},
@@ -146,7 +148,7 @@ def main() -> None:
                     r = {"params": {}, "seconds": float("nan"), "error": str(exc)[:300]}
                 r["start"] = start
                 f.write_text(json.dumps(r, default=float))
-            errs = {k: 100 * abs(r["params"].get(k, np.nan) - v) / abs(v) for k, v in truth.items()}
+            errs = errors_pct(r["params"], truth)
             max_err = max(errs.values()) if r["params"] else float("inf")
             rows.append({"start": i, "method": method, "max_error_pct": max_err,
                          "success": bool(np.isfinite(max_err) and max_err <= 1.0), "seconds": r["seconds"],

@@ -31,6 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from pidyn.discrepancy.effects import EFFECTS  # noqa: E402
+from pidyn.errors import error_pct  # noqa: E402
 
 NAMES = ["none", *sorted(EFFECTS)]
 FAST = ["model.schedule.pretrain_iters=300", "model.schedule.pretrain_iters_window=300",
@@ -104,7 +105,7 @@ def run_case(i: int, out: Path, extra: list[str], kinds: list[Kind]) -> dict:
         est = d["parameters"].get(key)
         if truth and est is not None:
             row["param"] = key
-            row["param_error_pct"] = 100 * abs(est - truth) / abs(truth)
+            row["param_error_pct"] = error_pct(est, truth)
     if kind.change_after_split and d.get("change"):
         t_true = (hidden.get("parameters") or {}).get("t_d")
         lo, hi = d["change"]["t_change_ci95"]

@@ -30,6 +30,8 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from pidyn.errors import errors_pct  # noqa: E402
+
 #: one parameter set per system that the tables do not use (Bouc-Wen: a clear hysteretic share)
 SYSTEMS = {
     "duffing": {"target": "pidyn.systems.Duffing", "truth": {"c": 0.3, "k1": 25.0, "k3": 400.0},
@@ -87,7 +89,7 @@ def run_case(record: str, system: str, noise: float, seed: int, work: Path) -> d
 
 
 def _errors(values: dict, truth: dict) -> dict:
-    return {k: 100 * abs(values.get(k, np.nan) - v) / abs(v) for k, v in truth.items()}
+    return errors_pct(values, truth)
 
 
 def _ok(err: dict, crb: dict) -> bool:

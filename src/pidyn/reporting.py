@@ -9,6 +9,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from pidyn.errors import error_pct
+
 
 def param_table(values: dict[str, float], truths: dict[str, float | None], units: dict[str, str],
                 intervals: dict[str, dict] | None = None) -> dict:
@@ -22,7 +24,7 @@ def param_table(values: dict[str, float], truths: dict[str, float | None], units
         t = truths.get(n)
         if t is not None:
             row["truth"] = float(t)
-            row["error_pct"] = float(100 * abs(v - t) / abs(t)) if t != 0 else None
+            row["error_pct"] = error_pct(v, t) if t != 0 else None
             if "ci95" in row:
                 row["covered"] = bool(row["ci95"][0] <= t <= row["ci95"][1])
         out[n] = row
@@ -84,10 +86,10 @@ def plot_convergence(path: Path, trajectory: list[dict], truths: dict[str, float
             vo = np.array([p[n] for p in other[1]])
             ax.plot(to, vo, lw=0.8, color="tab:orange", label=other[0])
             if truths.get(n) is not None:
-                axe.semilogy(to, 100 * np.abs(vo - truths[n]) / abs(truths[n]) + 1e-6, lw=0.8, color="tab:orange")
+                axe.semilogy(to, error_pct(vo, truths[n]) + 1e-6, lw=0.8, color="tab:orange")
         if truths.get(n) is not None:
             ax.axhline(truths[n], color="k", ls="--", lw=0.8, label="truth")
-            axe.semilogy(t, 100 * np.abs(v - truths[n]) / abs(truths[n]) + 1e-6, lw=1, color="tab:blue")
+            axe.semilogy(t, error_pct(v, truths[n]) + 1e-6, lw=1, color="tab:blue")
             axe.set_ylabel(f"|err| {n} (%)")
         if final and n in final:
             lo, hi = final[n]["ci95"]
@@ -125,7 +127,7 @@ def plot_convergence_seeds(path: Path, runs: dict[str, list[list[dict]]], truths
                 v = np.array([p[n] for p in tr])
                 ax.plot(t, v, lw=0.7, alpha=0.6, color=colors[method], label=method if s_i == 0 else None)
                 if truths.get(n):
-                    axe.semilogy(t, 100 * np.abs(v - truths[n]) / abs(truths[n]) + 1e-6, lw=0.7, alpha=0.6,
+                    axe.semilogy(t, error_pct(v, truths[n]) + 1e-6, lw=0.7, alpha=0.6,
                                  color=colors[method])
         if truths.get(n) is not None:
             ax.axhline(truths[n], color="k", ls="--", lw=0.8, label="truth")

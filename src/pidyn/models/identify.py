@@ -26,6 +26,7 @@ from pidyn.callbacks.clamp import ParameterClamp
 from pidyn.callbacks.early_stopping import ParameterEarlyStopping
 from pidyn.data.datamodule import SubperiodDataModule
 from pidyn.data.windows import Window
+from pidyn.errors import error_pct
 from pidyn.models.fusion import InformationFusion, residual_information
 from pidyn.models.lit_module import PIDynNetModule
 
@@ -256,7 +257,7 @@ class SubperiodIdentifier:
         truth = self.module.net.params.truths()
         parts = []
         for n, v in r.fused.items():
-            e = f" ({100 * abs(v - truth[n]) / abs(truth[n]):.2f}%)" if truth.get(n) else ""
+            e = f" ({error_pct(v, truth[n]):.2f}%)" if truth.get(n) else ""
             parts.append(f"{n}={v:.5g}{e}")
         log.info(
             "window %d [%.1f-%.1f s] %d it, %.1f s%s: %s",

@@ -22,6 +22,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from pidyn.data.datamodule import SubperiodDataModule
 from pidyn.data.sources import Record
+from pidyn.errors import errors_pct
 from pidyn.models.identify import Schedule, SubperiodIdentifier
 from pidyn.models.lit_module import PIDynNetModule
 from pidyn.models.pidynnet import PIDynNet
@@ -248,8 +249,8 @@ def record_noise(cfg: DictConfig, record: Record) -> float:
 
 
 def relative_errors(values: dict[str, float], truths: dict[str, float | None]) -> dict[str, float]:
-    """|value - truth| / |truth| in %, for the parameters whose truth is known and nonzero."""
-    return {n: float(100 * abs(v - truths[n]) / abs(truths[n])) for n, v in values.items() if truths.get(n)}
+    """|value - truth| / |truth| in %, for the estimated parameters whose truth is known and nonzero."""
+    return errors_pct(values, {n: truths.get(n) for n in values})
 
 
 DEFAULT_STARTS = ("output_error", "equation_error", "sindy", "ukf")
