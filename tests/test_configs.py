@@ -59,3 +59,12 @@ def test_diagnose_configs_compose(overrides, tmp_path):
         assert cfg.diagnosis.polish_seconds == 10.0
     else:
         assert cfg.model.schedule.max_windows is None and cfg.diagnosis.polish_seconds is None
+
+
+def test_a_misspelled_schedule_option_names_the_valid_ones(tmp_path):
+    from pidyn.tasks.train import train
+
+    for over, word in (("model.schedule.fusion=informaton", "information, last"),
+                       ("model.schedule.ls_init=frist", "none, first, every")):
+        with pytest.raises(ValueError, match=word):
+            train(make_cfg(["debug=smoke", "logger=none", "baselines=none", over], tmp_path))

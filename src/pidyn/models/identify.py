@@ -46,6 +46,18 @@ class Schedule:
     max_windows: int | None = None
     transfer_lnn: bool = True  # LNN <- RPN after pretraining (paper's transfer-learning init)
 
+    def __post_init__(self) -> None:
+        """A misspelled option fails here, naming the valid ones, instead of silently changing behaviour."""
+        for name, allowed in (("ls_init", ("none", "first", "every")), ("fusion", ("information", "last"))):
+            value = getattr(self, name)
+            if value not in allowed:
+                raise ValueError(f"model.schedule.{name}: '{value}' is not one of {', '.join(allowed)}")
+        for name in ("pretrain_iters", "pretrain_iters_window", "max_iters"):
+            if int(getattr(self, name)) < 0:
+                raise ValueError(f"model.schedule.{name} must be >= 0, got {getattr(self, name)}")
+        if self.max_windows is not None and int(self.max_windows) < 1:
+            raise ValueError(f"model.schedule.max_windows must be >= 1 or null, got {self.max_windows}")
+
 
 @dataclass
 class WindowResult:
