@@ -109,3 +109,28 @@ def test_config_typos_in_parameter_overrides_fail():
         Duffing(params={"k3": {"intit": 1.0}})
     with pytest.raises(ValueError, match="cannot be identified under ground excitation"):
         Duffing(identify_mass=True)
+
+
+def test_least_squares_standard_errors_see_a_weak_column():
+    """A cubic term in a window of small motion: x^3 is 1e-4 of x. Its standard error must
+    come out large (the window does not determine k3), not dropped by a float32 inverse."""
+    import torch
+
+    from pidyn.systems import Duffing
+    from pidyn.systems.base import Kinematics
+    from pidyn.systems.lstsq import solve_linear_params
+
+    system = Duffing()
+    t = torch.linspace(0, 3, 1000)
+    x = 0.03 * torch.sin(4 * t)
+    v = 0.12 * torch.cos(4 * t)
+    a = -0.48 * torch.sin(4 * t)
+    g = torch.Generator().manual_seed(0)
+    f = -(a + 0.3 * v + 25 * x + 400 * x**3) + 0.05 * torch.randn(1000, generator=g)  # ag from the motion, noisy
+    k = Kinematics(t=t[:, None], x=x[:, None], v=v[:, None], a=a[:, None])
+    std: dict = {}
+    est = solve_linear_params(system, k, f, {"m": torch.tensor(1.0), "c": torch.tensor(0.5),
+                                                       "k1": torch.tensor(15.0), "k3": torch.tensor(120.0)},
+                              ["c", "k1", "k3"], std=std)
+    assert abs(est["k1"] - 25) < 1.0
+    assert std["k3"] > 0.5 * abs(est["k3"]) and std["k3"] > 100, (est, std)

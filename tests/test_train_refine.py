@@ -18,8 +18,10 @@ SMOKE = ["debug=smoke", "logger=none", "baselines=none"]
 # iterations: far from the truth on purpose; these pin the PIDynNet path, not its accuracy).
 # Bouc-Wen's beta, gamma, n moved by 2e-4 relative when the fusion's ridge stopped pulling
 # ill-determined directions toward raw zero (it now pulls them to the windows' own estimate).
+# Duffing's changed when the least-squares start stopped taking a k3 its window does not
+# determine (after 50 pretraining iterations k3 = 72 +- more than half of it: k3 keeps its start).
 BEFORE = {
-    "duffing": {"c": 1.0630919933319092, "k1": 14.65009880065918, "k3": 63.29417419433594},
+    "duffing": {"c": 1.0588386058807373, "k1": 15.065049171447754, "k3": 45.12295913696289},
     "bouc_wen": {"c": 2.133432388305664, "k": 1.5203810930252075, "beta": 0.4899733066558838,
                  "gamma": 0.4072237014770508, "n": 1.671323537826538},
 }

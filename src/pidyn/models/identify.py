@@ -245,8 +245,9 @@ class SubperiodIdentifier:
         log.info("window %d: least-squares init %s", w.index, {k: f"{v:.5g}" for k, v in est.items()})
         notes = []
         for n, v in rejected.items():
-            notes.append(f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range; the "
-                         f"data do not decide its sign here, so {n} keeps {net.params.as_floats()[n]:.4g}")
+            notes.append(f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range or not "
+                         f"determined by this window (standard error above half the value); {n} keeps "
+                         f"{net.params.as_floats()[n]:.4g}")
             log.warning(notes[-1])
         return notes
 

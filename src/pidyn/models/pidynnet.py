@@ -241,7 +241,8 @@ class PIDynNet(nn.Module):
                             None if w.qd_pool is None else w.qd_pool[:1], order=0, latent=False)
         return k.x[0]
 
-    def least_squares_init(self, w: Window, names: list[str] | None = None) -> tuple[dict[str, float], dict[str, float]]:
+    def least_squares_init(self, w: Window, names: list[str] | None = None,
+                           max_rel_std: float = 0.5) -> tuple[dict[str, float], dict[str, float]]:
         """Solve for the parameters the motion residual is linear in, with the current networks.
 
         r(p) = r(0) + J p exactly for those parameters, so one linear least-squares solve
@@ -249,7 +250,10 @@ class PIDynNet(nn.Module):
         outside a parameter's range (a negative value for a log-parameter) is not clipped to
         the bound, where a log-parameter would be stuck: that parameter keeps its current
         value, the others are solved again, and the rejected values are returned for the
-        log. Returns (accepted, rejected)."""
+        log. A value the window does not determine (standard error above ``max_rel_std`` of it:
+        a cubic stiffness in a window of small motion, whose estimate is then near zero) is
+        rejected the same way: a log-parameter started near zero could not come back under the
+        clamp. Returns (accepted, rejected)."""
         names = list(names if names is not None else self.system.linear_params())
         rejected: dict[str, float] = {}
         if not names:
@@ -257,8 +261,10 @@ class PIDynNet(nn.Module):
         with torch.no_grad():
             k = self.kinematics(w.t_pool, w.f_pool, w.q_pool, w.qd_pool)
         while names:
-            est = solve_linear_params(self.system, k, w.f_pool, self.params.values(), names)
-            bad = {n: v for n, v in est.items() if not _in_range(self.params.spec(n), v)}
+            std: dict[str, float] = {}
+            est = solve_linear_params(self.system, k, w.f_pool, self.params.values(), names, std=std)
+            bad = {n: v for n, v in est.items() if not _in_range(self.params.spec(n), v)
+                   or std.get(n, 0.0) > max_rel_std * abs(v)}
             if not bad:
                 self.params.set_values(est)
                 return est, rejected

@@ -19,8 +19,10 @@ def solve_linear_params(
     values: dict[str, torch.Tensor],
     names: list[str],
     residual: str = "motion",
+    std: dict[str, float] | None = None,
 ) -> dict[str, float]:
-    """Least-squares values of ``names`` (others fixed at ``values``) for one named residual."""
+    """Least-squares values of ``names`` (others fixed at ``values``) for one named residual.
+    ``std``: filled with each value's standard error (residual variance times (J^T J)^-1)."""
     vals = {n: v.detach() for n, v in values.items()}
     theta0 = torch.zeros(len(names), dtype=f.dtype)
 
@@ -32,4 +34,13 @@ def solve_linear_params(
     r0 = r(theta0).detach()
     J = torch.autograd.functional.jacobian(r, theta0)
     sol = torch.linalg.lstsq(J, -r0[:, None]).solution[:, 0]
+    if std is not None:
+        # in float64 on unit-norm columns: x^3 beside x can be 1e-4 of its size, and a float32
+        # pseudo-inverse would drop that direction and call it exactly determined
+        Jd, res = J.double(), (r0 + J @ sol).double()
+        scale = Jd.norm(dim=0).clamp_min(1e-300)
+        dof = max(J.shape[0] - J.shape[1], 1)
+        cov = torch.linalg.pinv((Jd / scale).T @ (Jd / scale), hermitian=True) * float(res @ res) / dof
+        var = torch.diagonal(cov) / scale**2
+        std.update({n: float(var[i].clamp_min(0).sqrt()) for i, n in enumerate(names)})
     return {n: float(sol[i]) for i, n in enumerate(names)}
