@@ -257,11 +257,14 @@ class Damage(Effect):
         t_end = s.t_fit_end if s.t_fit_end is not None else float(s.t[-1])
         return float(s.t[0]) + 0.05 * (t_end - s.t[0]), t_end
 
+    signal, coef = "x", "dk"  # the force that steps: k x (a damping change steps c x')
+
     def candidates(self, s):
         lo, hi = self._span(s)
+        sig = getattr(s, self.signal)
         for t_d in np.linspace(lo, hi, self.n_times + 2)[1:-1]:
-            col = s.x * (s.t >= t_d)
-            yield Candidate(self.name, col[:, None], ("dk",), fixed={"t_d": float(t_d)}, positive=(False,))
+            col = sig * (s.t >= t_d)
+            yield Candidate(self.name, col[:, None], (self.coef,), fixed={"t_d": float(t_d)}, positive=(False,))
 
     def parameters(self, coef, fixed, nominal):
         k = nominal.get("k", nominal.get("k1", 1.0))
@@ -280,12 +283,7 @@ class DampChange(Damage):
     """The damping changes by a fraction at an unknown time (grid over the time)."""
 
     name, key, tolerance = "damping_change", "change", 0.35
-
-    def candidates(self, s):
-        lo, hi = self._span(s)
-        for t_d in np.linspace(lo, hi, self.n_times + 2)[1:-1]:
-            col = s.v * (s.t >= t_d)
-            yield Candidate(self.name, col[:, None], ("dc",), fixed={"t_d": float(t_d)}, positive=(False,))
+    signal, coef = "v", "dc"
 
     def parameters(self, coef, fixed, nominal):
         return {"change": coef["dc"] / nominal.get("c", 1.0), "t_d": fixed["t_d"]}
