@@ -179,9 +179,27 @@ def screen(
         })
     structure = _structure(s, weak, A0, y, fit, ho, folds, rss0, rss0_cv, rss0_ho, n_eff)
     ranking.sort(key=lambda r: -np.inf if r["score"] is None else r["score"], reverse=True)
-    top = ranking[0] if ranking else None
     for r in ranking:
         r["passes"] = bool(r["score"] is not None and _passes(r, th))
+    verdict, cause = _verdict(ranking, structure, th)
+    return Screening(
+        nominal_params=nominal,
+        ranking=ranking,
+        verdict=verdict,
+        cause=cause,
+        rss_nominal_fit=rss0,
+        rss_nominal_heldout=rss0_ho,
+        n_independent=float(n_eff),
+        residual_rows={"t": weak.centers, "residual": r0, "fit": fit, "heldout": ho},
+        structure=structure,
+    )
+
+
+def _verdict(ranking: list[dict], structure: dict, th: Thresholds) -> tuple[str, str | None]:
+    """``discrepancy`` when the top effect passes and explains a fair share of what a generic
+    f(x, x') explains; ``unexplained`` when the residual is structured but no effect does;
+    else ``none``. Marks ``structure['structured']`` (and a note when the top effect is refused)."""
+    top = ranking[0] if ranking else None
     structured = structure["cv_gain"] >= th.min_structure_gain  # blocked CV: flexibility is not rewarded
     structure["structured"] = bool(structured)
     found = top is not None and _passes(top, th)
@@ -191,18 +209,9 @@ def screen(
         structure["note"] = (f"{top['effect']} passes but explains {top['cv_gain']:.2f} of the residual in "
                              f"cross-validation against {structure['cv_gain']:.2f} for a generic f(x, x')")
         found = False
-    verdict = "discrepancy" if found else ("unexplained" if structured else "none")
-    return Screening(
-        nominal_params=nominal,
-        ranking=ranking,
-        verdict=verdict,
-        cause=top["effect"] if found else None,
-        rss_nominal_fit=rss0,
-        rss_nominal_heldout=rss0_ho,
-        n_independent=float(n_eff),
-        residual_rows={"t": weak.centers, "residual": r0, "fit": fit, "heldout": ho},
-        structure=structure,
-    )
+    if found:
+        return "discrepancy", top["effect"]
+    return ("unexplained" if structured else "none"), None
 
 
 def generic_columns(s: Signals, knots: int = 11) -> np.ndarray:

@@ -289,7 +289,8 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
     plot_running_estimate(fig / "running_estimate.png", running, nominal_values, fit, held,
                           None if change_row is None else change_row["change"])
     if learned and ext_system is not None and ext_system.n_latent == 0:
-        _plot_learned(fig / "learned_force.png", nominal, nominal_values, ext_system, ext_values, pointwise, units)
+        _plot_learned(fig / "learned_force.png", record.t, nominal, nominal_values, ext_system, ext_values, pointwise,
+                      units)
     write_report(run_dir / "report.md", diagnosis, [p.name for p in sorted(fig.glob("*.png"))])
     log.info("verdict: %s%s; held-out NRMSE nominal %.4g%s", diagnosis["verdict"],
              f" ({cause})" if cause else "", gain["nominal"],
@@ -451,16 +452,17 @@ def _locate_change(nominal: SDOFSystem, values: dict[str, float], s: Signals, re
     return change, fit, held
 
 
-def _plot_learned(path: Path, nominal: SDOFSystem, nominal_values: dict[str, float], ext: SDOFSystem,
+def _plot_learned(path: Path, t: np.ndarray, nominal: SDOFSystem, nominal_values: dict[str, float], ext: SDOFSystem,
                   ext_values: dict[str, float], pw: dict[str, np.ndarray], units: dict) -> None:
     """The extended model's restoring force minus the nominal one (the learned force plus the
     shift of the nominal parameters that came with it) on the residual's band-limited signals."""
-    t, x, v = np.arange(len(pw["x"])), pw["x"], pw["v"]
+    x, v = pw["x"], pw["v"]  # on the record's samples: a time-dependent term (a change) evaluates right
     dev = ext.restoring_force(t, x, v, None, ext_values) - nominal.restoring_force(t, x, v, None, nominal_values)
     gx = np.linspace(x.min(), x.max(), 60)
     gv = np.linspace(v.min(), v.max(), 60)
     X, V = np.meshgrid(gx, gv)
-    F = (ext.restoring_force(0.0, X, V, None, ext_values) - nominal.restoring_force(0.0, X, V, None, nominal_values))
+    t_end = float(t[-1])  # the surface: the model as it stands at the end of the record
+    F = (ext.restoring_force(t_end, X, V, None, ext_values) - nominal.restoring_force(t_end, X, V, None, nominal_values))
     edge = max(1, len(x) // 50)
     inner = slice(edge, len(x) - edge)  # the band-limited ends ring
     plot_learned_force(path, x[inner], v[inner], pw["r"][inner], dev[inner], {"x": X, "v": V, "f": F}, units)
