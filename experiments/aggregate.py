@@ -157,6 +157,14 @@ def _refined_columns(js: list[dict], n: str, truth: float | None, crb: float) ->
     }
 
 
+def _compared_rms(js: list[dict], source: str, n: str) -> float:
+    """RMS error of the refinement from PIDynNet's parameters with segment states from
+    ``source`` (``model.refine.compare_states``), where the runs have it."""
+    e = [j["refine_compare"][source]["error_pct"].get(n) for j in js if source in (j.get("refine_compare") or {})]
+    e = [x for x in e if x is not None]
+    return float(np.sqrt(np.mean(np.square(e)))) if e else np.nan
+
+
 def table(cells: dict[tuple, list[dict]]) -> pd.DataFrame:
     """One row per cell and parameter."""
     rows = []
@@ -181,6 +189,7 @@ def table(cells: dict[tuple, list[dict]]) -> pd.DataFrame:
                 "pidynnet_seconds": np.mean([j["wall_seconds"] for j in js]),
             }
             row.update(_refined_columns(js, n, truth, row["crb_std_pct"]))
+            row["integrated_rms_err"] = _compared_rms(js, "integrated", n)
             for mth in METHODS:
                 e = [b.get("error_pct", {}).get(n) for j in js for b in j["_baselines"] if b["method"] == mth]
                 e = [x for x in e if x is not None]
@@ -245,6 +254,10 @@ def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str],
                    "95 % interval coverage (mean half width %) | EE RMS err % | SINDy RMS err % | OE RMS err % | "
                    "UKF RMS err % |")
         out.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+        integrated = bool(g.integrated_rms_err.notna().any())
+        if integrated:  # the refinement from the same parameters, states from integrated accelerations
+            out[-2] = out[-2][:-1] + " refinement from integrated accelerations RMS err % |"
+            out[-1] += "---|"
         for _, r in g.iterrows():
             out.append(
                 f"| {r.param} | {f(r.truth, 4)} | {f(r.paper_pidynnet, 3)} ({f(r.paper_pidynnet_err, 2)}) | "
@@ -253,6 +266,7 @@ def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str],
                 f"{f(r.refined_over_crb, 2)} | {f(r.coverage, 2)} ({f(r.ci_half_pct, 3)}) | "
                 f"{f(r.equation_error_rms_err, 2)} | "
                 f"{f(r.sindy_rms_err, 2)} | {f(r.output_error_rms_err, 2)} | {f(r.ukf_rms_err, 2)} |"
+                + (f" {f(r.integrated_rms_err, 3)} |" if integrated else "")
             )
         r0 = g.iloc[0]
         out.append(f"\nWall seconds per run: PIDynNet run {f(r0.pidynnet_seconds, 0)} (of which refinement "
@@ -267,6 +281,29 @@ def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str],
     if failed:
         out.append(f"\nFailed jobs (no metrics.json): {', '.join(failed)}")
     return "\n".join(out) + "\n"
+
+
+def modes_summary(cells: dict[tuple, list[dict]]) -> str:
+    """For buildings: the final estimate's natural frequencies and damping ratios against the
+    truth's, RMS error % over seeds per mode, and the smallest mode-shape MAC."""
+    out = []
+    for key, js in sorted(cells.items()):
+        ms = [j["modes"] for j in js if j.get("modes", {}).get("frequency_error_pct")]
+        if not ms:
+            continue
+        first = ms[0]  # seed 0's identified frequencies label the modes
+        n = len(ms[0]["frequency_error_pct"])
+        out.append(f"\n## Modes, {key[0]} under {key[1]} x{key[4]:g}, noise {100 * key[2]:g} %: final estimate, "
+                   f"{len(ms)} seeds\n")
+        out.append("| mode | f (Hz), seed 0 | frequency RMS err % | damping ratio RMS err % | min MAC |")
+        out.append("|---|---|---|---|---|")
+        for r in range(n):
+            fe = np.sqrt(np.mean([m["frequency_error_pct"][r] ** 2 for m in ms]))
+            de = np.sqrt(np.mean([m["damping_error_pct"][r] ** 2 for m in ms]))
+            mac = min(m["mac"][r] for m in ms)
+            out.append(f"| {r + 1} | {first['identified']['frequency_hz'][r]:.4f} | {_short(fe)} | {_short(de)} | "
+                       f"{mac:.6f} |")
+    return "\n".join(out) + ("\n" if out else "")
 
 
 def main() -> None:
@@ -285,8 +322,8 @@ def main() -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     df.to_csv(out.with_suffix(".csv"), index=False)
     figures = {} if a.no_figures else plot_cells(cells, out.parent / "figures", out.name)
-    out.with_suffix(".md").write_text(to_markdown(df, a.title or a.root[0].parent.parent.name, a.command, failed,
-                                                  figures))
+    text = to_markdown(df, a.title or a.root[0].parent.parent.name, a.command, failed, figures)
+    out.with_suffix(".md").write_text(text + modes_summary(cells))
     print(out.with_suffix(".md").read_text())
 
 

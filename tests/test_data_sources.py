@@ -26,7 +26,8 @@ def test_good_csv(tmp_path):
     [
         (lambda s: s.replace("0.0500,", "0.0550,"), "non-uniform time step"),
         (lambda s: s.replace(",ag\n", ",u\n").replace("t,x,v,u", "t,x,v,ag,u"), "exactly one excitation"),
-        (lambda s: s.replace("t,x,v,ag", "t,y,v,ag"), "missing column 'x'"),
+        (lambda s: s.replace("t,x,v,ag", "t,y,v,ag"), "unknown column(s) ['y']"),
+        (lambda s: s.replace("t,x,v,ag", "t,y,w,ag"), "unknown column(s) ['y', 'w']"),
         (lambda s: s.replace(s.splitlines()[5], s.splitlines()[5].rsplit(",", 1)[0] + ",nan"), "NaN"),
         (lambda s: s + "0.2000,0.1\n", "NaN"),  # a short row: mismatched column lengths
         (lambda s: s.replace("0.0300,", "0.0100,"), "not strictly increasing"),
@@ -54,3 +55,21 @@ def test_csv_response_with_an_at2_record(tmp_path):
         tt = np.arange(0, 60, 0.01)
         pd.DataFrame({"t": tt, "x": np.sin(tt)}).to_csv(long, index=False)
         from_csv(long, at2="el_centro")
+
+
+def test_floor_columns_give_a_building_record_with_absolute_accelerations_made_relative(tmp_path):
+    t = np.arange(30) * 0.01
+    ag = 0.3 * np.sin(5 * t)
+    a1, a3 = np.cos(3 * t), np.sin(2 * t)
+    df = pd.DataFrame({"t": t, "ag": ag, "a1": a1 + ag, "a3": a3 + ag, "x3": 0.01 * t})
+    p = tmp_path / "building.csv"
+    df.to_csv(p, index=False)
+    r = from_csv(p)
+    assert r.a.shape == (30, 3) and r.x.shape == (30, 3)
+    assert np.allclose(r.a[:, 0], a1) and np.allclose(r.a[:, 2], a3) and np.all(np.isnan(r.a[:, 1]))
+    assert r.sensors() == {"x": [3], "a": [1, 3]}
+    rel = from_csv(p, acceleration="relative")
+    assert np.allclose(rel.a[:, 0], a1 + ag)
+    df.drop(columns=["a1", "a3", "x3"]).to_csv(p, index=False)
+    with pytest.raises(DataError, match="no response column"):
+        from_csv(p)

@@ -75,19 +75,22 @@ def simulate(
 
 
 def add_noise(
-    channels: dict[str, np.ndarray], level: float, seed: int
+    channels: dict[str, np.ndarray], level: float | dict[str, float], seed: int
 ) -> dict[str, np.ndarray]:
-    """Gaussian measurement noise with std = ``level`` x RMS of each channel (column-wise).
+    """Gaussian measurement noise with std = ``level`` x RMS of each channel (column-wise);
+    ``level`` is one fraction for all channels or one per channel name.
 
     One generator seeded by ``seed`` draws every channel in a fixed order (sorted names),
     so a noise realisation is reproducible and independent of the network's seed.
     """
-    if level < 0:
+    levels = level if isinstance(level, dict) else {name: level for name in channels}
+    if any(v < 0 for v in levels.values()):
         raise ValueError(f"noise level must be >= 0, got {level}")
     rng = np.random.default_rng(seed)
     out = {}
     for name in sorted(channels):
         y = np.asarray(channels[name], dtype=float)
         rms = np.sqrt(np.mean(y**2, axis=0, keepdims=True))
-        out[name] = y + level * rms * rng.standard_normal(y.shape) if level > 0 else y.copy()
+        lv = float(levels[name])
+        out[name] = y + lv * rms * rng.standard_normal(y.shape) if lv > 0 else y.copy()
     return out

@@ -22,28 +22,35 @@ def cramer_rao(
     params: dict[str, float],
     t: np.ndarray,
     f: np.ndarray,
-    noise_level: float,
-    channels: tuple[str, ...] = ("x", "v"),
+    noise_level: float | dict[str, float],
+    channels: tuple[str, ...] | dict[str, list[int]] = ("x", "v"),
     substeps: int = 4,
 ) -> dict:
     """Relative standard deviations (%) and the correlation matrix of the parameter estimates.
 
-    ``noise_level``: noise std as a fraction of each channel's RMS (as in ``add_noise``),
-    channels of every degree of freedom.
+    ``channels``: kinds measured on every degree of freedom (``("x", "v")``), or the measured
+    floors per kind (``{"a": [1, 3, 5]}``, 1-based, as ``Record.sensors()`` gives them).
+    ``noise_level``: noise std as a fraction of each sensor's RMS (as in ``add_noise``; an
+    accelerometer's RMS is that of the absolute acceleration under ground excitation), one
+    value or one per kind.
     """
     n = system.n_dof
+    layout = dict(channels) if isinstance(channels, dict) else {c: list(range(1, n + 1)) for c in channels}
+    levels = dict(noise_level) if isinstance(noise_level, dict) else {c: float(noise_level) for c in layout}
     probe = ShootingProblem(system, t, f, [Channel("x", 0, np.zeros(len(t)), 1.0)], segment_bounds(t, None),
                             substeps, fixed_state0=np.zeros(system.n_state), fixed=params)
     u = probe.pack({s.name: params[s.name] for s in probe.specs}, np.zeros((1, system.n_state)))
     Y, R = probe.simulate(u)
     clean = {"x": Y[:, 0, :n], "v": Y[:, 0, n:2 * n], "a": R[:, 0, n:2 * n]}
-    chans = [Channel(c, d, clean[c][:, d], 1.0) for c in channels for d in range(n)]
+    chans = [Channel(c, fl - 1, clean[c][:, fl - 1], 1.0) for c, floors in layout.items() for fl in floors]
     names = probe.names
-    if noise_level <= 0:
+    if max(levels.values(), default=0.0) <= 0:
         return {"names": names, "std_pct": {k: 0.0 for k in names}, "correlation": np.eye(len(names)).tolist(),
-                "noise_level": noise_level}
+                "noise_level": noise_level, "channels": layout}
+    ground = np.asarray(f, float) if system.excitation == "ground" else 0.0
     for ch in chans:
-        ch.sigma = noise_level * float(np.sqrt(np.mean(ch.data**2)))
+        sensed = ch.data + (ground if ch.kind == "a" else 0.0)  # an accelerometer measures x'' + ag
+        ch.sigma = max(levels.get(ch.kind, 0.0), 1e-12) * float(np.sqrt(np.mean(sensed**2)))
     prob = ShootingProblem(system, t, f, chans, segment_bounds(t, None), substeps, fixed_state0=np.zeros(system.n_state),
                            fixed=params)
     _, J, _, _ = prob.linearize(u)
@@ -54,5 +61,4 @@ def cramer_rao(
     std = np.sqrt(np.clip(np.diag(cov), 0, None))
     corr = cov / np.outer(std, std).clip(1e-300)
     return {"names": names, "std_pct": {k: float(100 * s) for k, s in zip(names, std)},
-            "correlation": corr.tolist(), "noise_level": noise_level}
-
+            "correlation": corr.tolist(), "noise_level": noise_level, "channels": layout}

@@ -29,6 +29,9 @@ def equation_error(record: Record, system) -> BaselineResult:
     t0 = time.perf_counter()
     if system.n_latent:
         return BaselineResult("equation_error", {}, 0.0, note="not applicable: unmeasured latent state")
+    if record.x is None or np.isnan(record.x).any() or (record.v is not None and np.isnan(record.v).any()):
+        return BaselineResult("equation_error", {}, 0.0,
+                              note="not applicable: needs the displacement of every degree of freedom")
     dt = record.dt
     x = record.x
     v = record.v if record.v is not None else np.gradient(x, dt, axis=0)

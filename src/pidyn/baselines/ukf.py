@@ -1,9 +1,10 @@
 """Unscented Kalman filter for joint state-parameter estimation (the paper's comparison).
 
-Augmented state [x, x', z, theta] with theta in the same unconstrained coordinates as
+Augmented state [x, x', z, theta] (every degree of freedom) with theta in the same unconstrained coordinates as
 PIDynNet (log / logit), a random walk on theta (process noise ``q_param`` per step in those
 coordinates, so every parameter is equally free to move in relative terms), RK4 prediction
-of all sigma points as one batch, and measurements x, x' (and x'' if recorded) with noise
+of all sigma points as one batch, and every measured channel (x, x', x'' of any floor; a
+floor accelerometer's absolute acceleration is x'' + ag, the same innovation) with noise
 variance from the known noise level (a floor keeps the filter consistent on clean data).
 Scaled sigma points (van der Merwe): alpha, beta, kappa.
 
@@ -21,8 +22,9 @@ import time
 import numpy as np
 
 from pidyn.baselines.common import BaselineResult, from_theta, starting_point
-from pidyn.baselines.fastsim import simulate_batch
 from pidyn.data.sources import Record
+from pidyn.integrate import rk4
+from pidyn.refine.problem import record_channels
 
 
 def unscented_kalman_filter(
@@ -49,25 +51,24 @@ def unscented_kalman_filter(
         return _tuned(record, system, list(tune), kw)
     t0 = time.perf_counter()
     specs, fixed, theta0 = starting_point(system, init)
-    nz, npar = system.n_latent, len(specs)
-    n = 2 + nz + npar
-    chans = [("x", record.x[:, 0])]
-    if record.v is not None:
-        chans.append(("v", record.v[:, 0]))
-    if record.a is not None:
-        chans.append(("a", record.a[:, 0]))
-    rms = {c: float(np.sqrt(np.mean(y**2))) for c, y in chans}
-    R = np.diag([max(noise_level, r_floor) ** 2 * rms[c] ** 2 for c, _ in chans])
+    nd, nz, npar = system.n_dof, system.n_latent, len(specs)
+    ns = 2 * nd + nz
+    n = ns + npar
+    chans = record_channels(record, nd)
+    levels = dict((record.meta or {}).get("noise_levels") or {})
+    R = np.diag([max(levels.get(c.kind, noise_level), r_floor) ** 2 * _sensor_rms(record, c) ** 2 for c in chans])
+    xs, vs = record.state_scales()
     m = np.zeros(n)
-    m[2 + nz :] = theta0
-    P = np.diag([1e-12, 1e-12] + [1e-12] * nz + [init_param_std**2] * npar)
-    Q = np.diag([q_state * rms["x"] ** 2, q_state * rms.get("v", rms["x"]) ** 2] + [q_state * rms["x"] ** 2] * nz
+    m[ns:] = theta0
+    P = np.diag([1e-12] * ns + [init_param_std**2] * npar)
+    Q = np.diag(list(q_state * xs**2) + list(q_state * vs**2) + [q_state * float(np.max(xs)) ** 2] * nz
                 + [q_param] * npar)
     lam = alpha**2 * (n + kappa) - n
     wm = np.full(2 * n + 1, 1 / (2 * (n + lam)))
     wc = wm.copy()
     wm[0] = lam / (n + lam)
     wc[0] = lam / (n + lam) + 1 - alpha**2 + beta
+    rows = {"x": lambda Yp, Rp, d: Yp[:, d], "v": lambda Yp, Rp, d: Yp[:, nd + d], "a": lambda Yp, Rp, d: Rp[:, nd + d]}
     traj: list[dict] = []
     loglik = 0.0
     t, f = record.t, record.f
@@ -79,30 +80,26 @@ def unscented_kalman_filter(
             P = 0.5 * (P + P.T) + 1e-12 * np.eye(n)
             S = np.linalg.cholesky((n + lam) * P + 1e-9 * np.eye(n))
         X = np.concatenate([m[:, None], m[:, None] + S, m[:, None] - S], axis=1)  # (n, 2n+1)
-        p = from_theta(specs, X[2 + nz :])
+        p = from_theta(specs, X[ns:])
         p.update({k: np.full(X.shape[1], v) for k, v in fixed.items()})
-        state0 = (X[0], X[1], X[2 : 2 + nz].T if nz else np.zeros((X.shape[1], 0)))
-        out = simulate_batch(system, p, t[i : i + 2], f[i : i + 2], substeps=substeps, state0=state0)
+        with np.errstate(all="ignore"):
+            Ys, Rs = rk4(system, p, t[i : i + 2], f[i : i + 2], X[:ns].T.copy(), substeps=substeps)
         Xp = X.copy()
-        Xp[0], Xp[1] = out["x"][1], out["v"][1]
-        if nz:
-            Xp[2 : 2 + nz] = out["z"][1].T
+        Xp[:ns] = Ys[1].T
         Xp = np.nan_to_num(Xp, nan=0.0, posinf=1e6, neginf=-1e6)
         m = Xp @ wm
         D = Xp - m[:, None]
         P = (wc * D) @ D.T + Q
         # --- update with the measurement at t[i+1]
-        Y = [Xp[0], Xp[1]] if record.v is not None else [Xp[0]]
-        if record.a is not None:
-            Y.append(out["a"][1])
-        Y = np.array(Y)
+        Y = np.nan_to_num(np.array([rows[c.kind](Ys[1], Rs[1], c.dof) for c in chans]), nan=0.0, posinf=1e6,
+                          neginf=-1e6)
         y_mean = Y @ wm
         DY = Y - y_mean[:, None]
         Syy = (wc * DY) @ DY.T + R
         Cxy = (wc * D) @ DY.T
         Sinv = np.linalg.inv(Syy)
         K = Cxy @ Sinv
-        y = np.array([c[1][i + 1] for c in chans])
+        y = np.array([c.data[i + 1] for c in chans])
         nu = y - y_mean
         sign, logdet = np.linalg.slogdet(Syy)
         loglik += -0.5 * (logdet + float(nu @ Sinv @ nu)) if sign > 0 else -np.inf
@@ -110,12 +107,19 @@ def unscented_kalman_filter(
         P = P - K @ Syy @ K.T
         P = 0.5 * (P + P.T)
         if i % thin == 0 or i == len(t) - 2:
-            vals = from_theta(specs, m[2 + nz :])
+            vals = from_theta(specs, m[ns:])
             traj.append({"t": float(t[i + 1]), **{k: float(v) for k, v in vals.items()}})
-    est = {k: float(v) for k, v in from_theta(specs, m[2 + nz :]).items()}
+    est = {k: float(v) for k, v in from_theta(specs, m[ns:]).items()}
     res = BaselineResult("ukf", est, time.perf_counter() - t0, trajectory=traj)
     res.loglik = float(loglik)
     return res
+
+
+def _sensor_rms(record: Record, ch) -> float:
+    """RMS of what the sensor measured: an accelerometer under ground excitation measures
+    x'' + ag, the noise level is a fraction of that."""
+    y = ch.data + (record.f if ch.kind == "a" and record.excitation == "ground" else 0.0)
+    return float(np.sqrt(np.mean(y**2)))
 
 
 def _tuned(record: Record, system, grid: list[float], kw: dict) -> BaselineResult:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 import pandas as pd
@@ -21,14 +22,19 @@ class DataError(ValueError):
 class Record:
     """A measured (or simulated-and-measured) response record on a uniform time grid.
 
-    ``f`` is the excitation (ground acceleration in m/s^2, or force in N). ``truth`` holds
-    the true parameters and the noise-free trajectory when the data are synthetic.
+    ``f`` is the excitation (ground acceleration in m/s^2, or force in N). The response
+    channels ``x`` (displacement), ``v`` (velocity) and ``a`` (acceleration), all relative to
+    the ground, are (N, n_dof) arrays or None; a floor without that sensor is a column of NaN.
+    An accelerometer measures the absolute acceleration; under ground excitation the record
+    keeps ``a`` relative (absolute minus ag, exact since ag is measured too) so that every
+    estimator compares it with the model's x''. ``truth`` holds the true parameters and the
+    noise-free trajectory when the data are synthetic.
     """
 
     name: str
     t: np.ndarray
     f: np.ndarray
-    x: np.ndarray
+    x: np.ndarray | None = None
     v: np.ndarray | None = None
     a: np.ndarray | None = None
     excitation: str = "ground"
@@ -38,19 +44,61 @@ class Record:
 
     def __post_init__(self) -> None:
         """Response channels are (N, n_dof); a 1-D series is one degree of freedom."""
-        for name in ("x", "v", "a"):
+        self.t = np.asarray(self.t, dtype=float)
+        self.f = np.asarray(self.f, dtype=float)
+        for name in CHANNEL_KINDS:
             arr = getattr(self, name)
             if arr is not None:
                 arr = np.asarray(arr, dtype=float)
-                setattr(self, name, arr[:, None] if arr.ndim == 1 else arr)
-        self.f = np.asarray(self.f, dtype=float)
-        if len(self.x) != len(self.t) or len(self.f) != len(self.t):
-            raise DataError(f"record '{self.name}': {len(self.t)} times, {len(self.x)} displacements, "
-                            f"{len(self.f)} excitation samples; they must match")
+                arr = arr[:, None] if arr.ndim == 1 else arr
+                if np.all(np.isnan(arr)):
+                    arr = None
+                setattr(self, name, arr)
+        measured = {k: getattr(self, k) for k in CHANNEL_KINDS if getattr(self, k) is not None}
+        if not measured:
+            raise DataError(f"record '{self.name}': no response channel (x, v or a)")
+        for kind, arr in measured.items():
+            if len(arr) != len(self.t) or len(self.f) != len(self.t):
+                raise DataError(f"record '{self.name}': {len(self.t)} times, {len(arr)} samples of '{kind}', "
+                                f"{len(self.f)} excitation samples; they must match")
+        widths = {arr.shape[1] for arr in measured.values()}
+        if len(widths) > 1:
+            raise DataError(f"record '{self.name}': channels cover different numbers of floors "
+                            f"({ {k: a.shape[1] for k, a in measured.items()} }); pad missing floors with NaN")
 
     @property
     def dt(self) -> float:
         return float(self.t[1] - self.t[0])
+
+    @property
+    def n_dof(self) -> int:
+        return next(getattr(self, k).shape[1] for k in CHANNEL_KINDS if getattr(self, k) is not None)
+
+    def sensors(self) -> dict[str, list[int]]:
+        """Measured floors (1-based) per channel kind."""
+        out = {}
+        for kind in CHANNEL_KINDS:
+            arr = getattr(self, kind)
+            if arr is not None:
+                out[kind] = [j + 1 for j in range(arr.shape[1]) if not np.all(np.isnan(arr[:, j]))]
+        return out
+
+    def reference(self) -> tuple[str, np.ndarray]:
+        """The channel that best shows the response: displacement if measured, else velocity,
+        else acceleration (name, (N, n_dof))."""
+        kind = next(k for k in CHANNEL_KINDS if getattr(self, k) is not None)
+        return kind, getattr(self, kind)
+
+    def state_scales(self) -> tuple[np.ndarray, np.ndarray]:
+        """Spread of the displacement and the velocity per degree of freedom: measured where a
+        sensor gives it, else integrated (and detrended) from velocity or acceleration, else
+        the nearest floor's. Scales for filters and solvers, never data."""
+        from pidyn.data.windows import spread_by_integration
+
+        def spread(order: int) -> np.ndarray:
+            return spread_by_integration(self.t, [(k, getattr(self, k)) for k in CHANNEL_KINDS], order)
+
+        return spread(0), spread(1)
 
     def segment(self, t0: float | None, t1: float | None) -> "Record":
         """The samples with t0 <= t <= t1 (times kept absolute; the truth travels along)."""
@@ -62,8 +110,11 @@ class Record:
         if keep.sum() < 10:
             raise ValueError(f"record '{self.name}': only {int(keep.sum())} samples in [{t0}, {t1}] s")
         cut = lambda a: None if a is None else a[keep]  # noqa: E731
-        return replace(self, t=self.t[keep], f=self.f[keep], x=self.x[keep], v=cut(self.v), a=cut(self.a),
+        return replace(self, t=self.t[keep], f=self.f[keep], x=cut(self.x), v=cut(self.v), a=cut(self.a),
                        clean=None, meta={**self.meta, "segment": [t0, t1]})
+
+
+CHANNEL_KINDS = ("x", "v", "a")
 
 
 def synthetic(
@@ -73,44 +124,78 @@ def synthetic(
     stretch: float = 1.0,
     duration: float | None = 40.0,
     dt: float | None = 0.01,
-    noise: float = 0.0,
+    noise: float | dict[str, float] = 0.0,
     data_seed: int = 0,
-    channels: tuple[str, ...] = ("x", "v"),
+    channels: Sequence[str] = ("x", "v"),
+    sensors: Sequence[int] | None = None,
 ) -> Record:
     """Simulate ``system`` at its true parameters under a ground-motion record and measure it.
 
-    Noise of std ``noise`` x RMS is added to each measured channel (seeded by ``data_seed``).
+    Noise of std ``noise`` x RMS is added to each measured channel (seeded by ``data_seed``);
+    ``noise`` may give each channel kind its own level (``{a: 0.025, x: 0.01}``).
+    ``sensors``: the floors (1-based) that carry the sensors, default every floor.
     """
     gm = prepare(record, scale=eq_scale, stretch=stretch, duration=duration, dt=dt)
-    return synthetic_from_motion(system, gm, noise=noise, data_seed=data_seed, channels=channels)
+    return synthetic_from_motion(system, gm, noise=noise, data_seed=data_seed, channels=channels, sensors=sensors)
 
 
 def synthetic_from_motion(
     system: StructuralSystem,
     gm: GroundMotion,
-    noise: float = 0.0,
+    noise: float | dict[str, float] = 0.0,
     data_seed: int = 0,
-    channels: tuple[str, ...] = ("x", "v"),
+    channels: Sequence[str] = ("x", "v"),
     params: dict[str, float] | None = None,
+    sensors: Sequence[int] | None = None,
 ) -> Record:
-    bad = set(channels) - {"x", "v", "a"}
-    if bad or "x" not in channels:
-        raise ValueError(f"channels must include 'x' and be among x, v, a; got {list(channels)}")
+    channels = tuple(channels)
+    bad = set(channels) - set(CHANNEL_KINDS)
+    if bad or not channels:
+        raise ValueError(f"data.channels must be among x, v, a (a: accelerometers); got {list(channels)}")
+    n = system.n_dof
+    floors = list(range(1, n + 1)) if sensors is None else [int(s) for s in sensors]
+    if not floors or any(not 1 <= s <= n for s in floors) or len(set(floors)) != len(floors):
+        raise ValueError(f"data.sensors must be distinct floors among 1..{n}; got {list(sensors or [])}")
+    levels = _noise_levels(noise, channels)
     truth = params or system.true_values()
     clean = simulate(system, truth, gm, gm.t)
-    meas = add_noise({c: getattr(clean, c) for c in channels}, noise, data_seed)
+    ground = clean.f[:, None] if system.excitation == "ground" else 0.0
+    sensed = {c: getattr(clean, c)[:, [s - 1 for s in floors]] for c in channels}
+    if "a" in sensed:
+        sensed["a"] = sensed["a"] + ground  # an accelerometer measures the absolute acceleration
+    meas = add_noise(sensed, levels, data_seed)
+    if "a" in meas:
+        meas["a"] = meas["a"] - ground
+    full = {}
+    for c in channels:
+        arr = np.full((len(clean.t), n), np.nan)
+        arr[:, [s - 1 for s in floors]] = meas[c]
+        full[c] = arr
     return Record(
         name=gm.name,
         t=clean.t,
         f=clean.f,
-        x=meas["x"],
-        v=meas.get("v"),
-        a=meas.get("a"),
+        x=full.get("x"),
+        v=full.get("v"),
+        a=full.get("a"),
         excitation=system.excitation,
         truth=dict(truth),
         clean=clean,
-        meta={"record": gm.name, "pga": gm.pga, "dt": gm.dt, "noise": noise, "data_seed": data_seed},
+        meta={"record": gm.name, "pga": gm.pga, "dt": gm.dt, "noise": max(levels.values()), "noise_levels": levels,
+              "data_seed": data_seed, "sensors": floors, "channels": list(channels)},
     )
+
+
+def _noise_levels(noise: float | dict[str, float] | None, channels: Sequence[str]) -> dict[str, float]:
+    if noise is None:
+        noise = 0.0
+    if isinstance(noise, (int, float)):
+        return {c: float(noise) for c in channels}
+    levels = {str(k): float(v) for k, v in dict(noise).items()}
+    missing, extra = set(channels) - set(levels), set(levels) - set(channels)
+    if missing or extra:
+        raise ValueError(f"noise levels given for {sorted(levels)}; the measured channels are {list(channels)}")
+    return levels
 
 
 def from_csv(
@@ -120,9 +205,14 @@ def from_csv(
     units: dict[str, float] | None = None,
     t_end: float | None = None,
     at2: str | Path | None = None,
+    acceleration: str = "absolute",
 ) -> Record:
-    """Read a measured record: columns ``t`` (s), ``x`` (m), optional ``v``, ``a``, and
-    the excitation as ``ag`` (m/s^2, ground) or ``u`` (N, force).
+    """Read a measured record: columns ``t`` (s), the excitation as ``ag`` (m/s^2, ground) or
+    ``u`` (N, force), and any response channels: ``x`` (m), ``v`` (m/s), ``a`` (m/s^2) for a
+    single degree of freedom, or per floor ``x1.., v1.., a1..`` (floors without a sensor are
+    simply absent). Displacements and velocities are relative to the ground;
+    ``acceleration`` says what the ``a`` columns hold: ``absolute`` (what an accelerometer
+    measures; ag is subtracted) or ``relative``.
 
     ``units`` multiplies columns into SI (e.g. ``{"x": 0.001}`` for millimetres). ``at2``
     takes the ground acceleration from a PEER AT2 record (a path or a shipped record's
@@ -154,9 +244,11 @@ def from_csv(
             raise DataError(f"{path}: spans {t_csv[-1] - t_csv[0]:.4g} s, longer than the AT2 record {at2} "
                             f"({gm.duration:.4g} s)")
         df["ag"] = gm(t_csv - t_csv[0])
-    for need in (time_col, "x"):
-        if need not in df.columns:
-            raise DataError(f"{path}: missing column '{need}' (columns: {list(df.columns)})")
+    if time_col not in df.columns:
+        raise DataError(f"{path}: missing column '{time_col}' (columns: {list(df.columns)})")
+    if acceleration not in ("absolute", "relative"):
+        raise DataError(f"{path}: acceleration must be 'absolute' or 'relative', got '{acceleration}'")
+    layout = _channel_columns(path, [c for c in df.columns if c != time_col])
     has = [c for c in ("ag", "u") if c in df.columns]
     if excitation is None:
         if len(has) != 1:
@@ -185,14 +277,51 @@ def from_csv(
     if t_end is not None:
         keep = t <= t_end + 1e-12
         df, t = df.loc[keep], t[keep]
-    get = lambda c: df[c].to_numpy(float) if c in df.columns else None  # noqa: E731
+    n = max(j for cols in layout.values() for j in cols)
+    f = df[col].to_numpy(float)
+    arrays: dict[str, np.ndarray] = {}
+    for kind, cols in layout.items():
+        arr = np.full((len(t), n), np.nan)
+        for j, name in cols.items():
+            arr[:, j - 1] = df[name].to_numpy(float)
+        if kind == "a" and acceleration == "absolute" and col == "ag":
+            arr = arr - f[:, None]  # kept relative to the ground, like x and v
+        arrays[kind] = arr
     return Record(
         name=path.stem,
         t=t - t[0],
-        f=get(col),
-        x=get("x"),
-        v=get("v"),
-        a=get("a"),
+        f=f,
+        x=arrays.get("x"),
+        v=arrays.get("v"),
+        a=arrays.get("a"),
         excitation="ground" if col == "ag" else "force",
-        meta={"path": str(path), "dt": float(dt.mean())},
+        meta={"path": str(path), "dt": float(dt.mean()), "acceleration": acceleration,
+              "sensors": {k: sorted(c) for k, c in layout.items()}},
     )
+
+
+def _channel_columns(path: Path, columns) -> dict[str, dict[int, str]]:
+    """Response columns by kind and floor: ``x`` alone is floor 1, ``x3`` floor 3. A file may
+    not mix the two spellings of a kind, and needs at least one response column."""
+    import re
+
+    out: dict[str, dict[int, str]] = {}
+    unknown = [c for c in columns if c not in ("t", "ag", "u") and not re.fullmatch(r"[xva]\d*", c)]
+    if unknown:
+        raise DataError(f"{path}: unknown column(s) {unknown}; a record holds t, ag or u, and x, v, a (one degree "
+                        f"of freedom) or x1.., v1.., a1.. per floor")
+    for c in columns:
+        m = re.fullmatch(r"([xva])(\d*)", c)
+        if not m:
+            continue
+        kind, num = m.group(1), m.group(2)
+        floor = int(num) if num else 1
+        if num and floor < 1:
+            raise DataError(f"{path}: column '{c}': floors are numbered from 1")
+        if floor in out.setdefault(kind, {}):
+            raise DataError(f"{path}: columns '{out[kind][floor]}' and '{c}' both give {kind} of floor {floor}")
+        out[kind][floor] = c
+    if not out:
+        raise DataError(f"{path}: no response column; give x, v or a (one degree of freedom) or x1.., v1.., a1.. "
+                        f"per floor (columns: {list(columns)})")
+    return out

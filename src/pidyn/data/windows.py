@@ -21,7 +21,7 @@ class Window:
     t1: float
     t_data: torch.Tensor
     f_data: torch.Tensor
-    x: torch.Tensor
+    x: torch.Tensor | None
     v: torch.Tensor | None
     a: torch.Tensor | None
     t_pool: torch.Tensor
@@ -35,11 +35,74 @@ class Window:
     qd_pool: torch.Tensor | None = None
 
     def scales(self) -> dict[str, torch.Tensor]:
-        """Per-window scales that make every loss term O(1) (x, v per channel; f overall)."""
-        s = {"x": self.x.std(0).clamp_min(1e-12), "f": self.f_pool.std().clamp_min(1e-12)}
-        s["v"] = self.v.std(0).clamp_min(1e-12) if self.v is not None else s["x"] * 2 * np.pi / (self.t1 - self.t0)
-        s["a"] = self.a.std(0).clamp_min(1e-12) if self.a is not None else s["f"]
+        """Per-window scales that make every loss term O(1) (x, v, a per degree of freedom; f
+        overall). A floor without a displacement sensor gets the spread of its velocity or
+        acceleration integrated and detrended (a scale only, never a target), a floor without
+        any sensor that of the nearest floor with one."""
+        s = {"f": self.f_pool.std().clamp_min(1e-12)}
+        if self.x is not None and not torch.isnan(self.x).any():
+            s["x"] = self.x.std(0).clamp_min(1e-12)
+        else:
+            s["x"] = torch.as_tensor(self.displacement_scale(), dtype=self.t_data.dtype).clamp_min(1e-12)
+        w = 2 * np.pi / (self.t1 - self.t0)
+        s["v"] = _fill(_nanstd(self.v), s["x"] * w) if self.v is not None else s["x"] * w
+        s["a"] = _fill(_nanstd(self.a), s["v"] * w) if self.a is not None else s["f"] * torch.ones_like(s["x"])
         return s
+
+    def displacement_scale(self) -> np.ndarray:
+        """Spread of the displacement per degree of freedom, measured or estimated."""
+        chans = [(k, None if c is None else c.double().numpy()) for k, c in (("x", self.x), ("v", self.v), ("a", self.a))]
+        return spread_by_integration(self.t_data.double().numpy(), chans, 0)
+
+
+def spread_by_integration(t: np.ndarray, channels: list[tuple[str, np.ndarray | None]], order: int) -> np.ndarray:
+    """Spread of the ``order``-th derivative (0: displacement, 1: velocity) per degree of
+    freedom from the channels (kind, (N, n_dof) with NaN columns where a floor has no
+    sensor): the channel of that order where measured, else a higher one integrated and
+    detrended, else the nearest floor's value."""
+    levels = {"x": 0, "v": 1, "a": 2}
+    n = next(c.shape[1] for _, c in channels if c is not None)
+    out = np.full(n, np.nan)
+    for j in range(n):
+        for kind, chan in sorted(channels, key=lambda kc: levels[kc[0]]):
+            col = None if chan is None or levels[kind] < order else np.asarray(chan, float)[:, j]
+            if col is None or np.all(np.isnan(col)):
+                continue
+            times = levels[kind] - order
+            out[j] = np.std(col, ddof=1) if times == 0 else np.std(_integrate(t, col, times))
+            break
+    known = np.flatnonzero(np.isfinite(out))
+    if not known.size:
+        return np.ones(n)
+    for j in np.flatnonzero(~np.isfinite(out)):
+        out[j] = out[known[np.argmin(np.abs(known - j))]]
+    return out
+
+
+def _nanstd(arr: torch.Tensor) -> torch.Tensor:
+    """Column spread over the samples that were measured (NaN for an unmeasured column)."""
+    m = ~torch.isnan(arr)
+    if bool(m.all()):
+        return arr.std(0)
+    cnt = m.sum(0).clamp_min(1)
+    mean = torch.where(m, arr, 0.0).sum(0) / cnt
+    var = torch.where(m, (arr - mean) ** 2, 0.0).sum(0) / (cnt - 1).clamp_min(1)
+    return torch.where(m.any(0), var.sqrt(), torch.full_like(mean, float("nan")))
+
+
+def _fill(primary: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:
+    return torch.where(torch.isfinite(primary), primary, fallback).clamp_min(1e-12)
+
+
+def _integrate(t: np.ndarray, y: np.ndarray, times: int) -> np.ndarray:
+    """Integrate ``times`` times by the trapezoidal rule, removing a polynomial trend of the
+    integration order after each pass (the unknown initial values and the drift of noise)."""
+    out = np.asarray(y, float)
+    tau = (t - t[0]) / max(t[-1] - t[0], 1e-12)
+    for k in range(times):
+        out = np.concatenate([[0.0], np.cumsum(0.5 * (out[1:] + out[:-1]) * np.diff(t))])
+        out = out - np.polyval(np.polyfit(tau, out, k + 1), tau)
+    return out
 
 
 def double_integral(t: np.ndarray, s: np.ndarray, tq: np.ndarray, t0: float) -> tuple[np.ndarray, np.ndarray]:
@@ -69,7 +132,7 @@ def double_integral(t: np.ndarray, s: np.ndarray, tq: np.ndarray, t0: float) -> 
 def make_windows(
     t: np.ndarray,
     f: np.ndarray,
-    x: np.ndarray,
+    x: np.ndarray | None,
     v: np.ndarray | None,
     a: np.ndarray | None,
     length: float,
@@ -90,24 +153,27 @@ def make_windows(
     The collocation pool holds ``pool_size`` equally spaced times per window with the
     excitation linearly interpolated between samples. A window whose peak |x| is below
     ``min_peak_fraction`` of the record's peak is marked uninformative (it carries almost
-    no information on stiffness nonlinearity) but still listed.
+    no information on stiffness nonlinearity) but still listed. Without a displacement channel
+    the peak is that of the first measured one (velocity, else acceleration).
     """
     dtype = dtype or torch.get_default_dtype()
     t = np.asarray(t, float)
-    x = np.asarray(x, float).reshape(len(t), -1)
+    as2d = lambda arr: None if arr is None else np.asarray(arr, float).reshape(len(t), -1)  # noqa: E731
+    x, v, a = as2d(x), as2d(v), as2d(a)
+    ref = next(c for c in (x, v, a) if c is not None)
     t_start = t[0] if t_start is None else t_start
     t_end = t[-1] if t_end is None else min(t_end, t[-1])
     n_win = max(1, int(np.floor((t_end - t_start) / length + 1e-9)))
     bounds = [(t_start + i * length, t_start + (i + 1) * length) for i in range(n_win)]
     if cover_tail and t_end - bounds[-1][1] > 2 * (t[1] - t[0]):
         bounds.append((bounds[-1][1], t_end))  # a shorter last window so that every sample is covered
-    record_peak = float(np.max(np.abs(x[(t >= t_start) & (t <= t_end)])))
+    record_peak = float(np.nanmax(np.abs(ref[(t >= t_start) & (t <= t_end)])))
     T = lambda arr: None if arr is None else torch.as_tensor(np.asarray(arr, float), dtype=dtype)  # noqa: E731
     out = []
     for i, (t0, t1) in enumerate(bounds):
         m = (t >= t0 - 1e-9) & (t <= t1 + 1e-9)
         tp = np.linspace(t0, t1, pool_size)
-        peak = float(np.max(np.abs(x[m])))
+        peak = float(np.nanmax(np.abs(ref[m])))
         qd_ = qdd_ = qp_ = qpd_ = None
         if accel_signal is not None:
             qd_, qdd_ = double_integral(t, np.asarray(accel_signal, float), t[m], t0)
@@ -119,9 +185,9 @@ def make_windows(
                 t1=t1,
                 t_data=T(t[m]),
                 f_data=T(np.asarray(f, float)[m]),
-                x=T(x[m]),
-                v=None if v is None else T(np.asarray(v, float).reshape(len(t), -1)[m]),
-                a=None if a is None else T(np.asarray(a, float).reshape(len(t), -1)[m]),
+                x=None if x is None else T(x[m]),
+                v=None if v is None else T(v[m]),
+                a=None if a is None else T(a[m]),
                 t_pool=T(tp),
                 f_pool=T(np.interp(tp, t, f)),
                 peak_x=peak,

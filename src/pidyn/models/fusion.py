@@ -14,6 +14,7 @@ import torch
 
 from pidyn.data.windows import Window
 from pidyn.models.pidynnet import PIDynNet
+from pidyn.systems.lstsq import forward_jacobian
 
 
 def residual_information(net: PIDynNet, w: Window) -> torch.Tensor:
@@ -37,7 +38,7 @@ def residual_information(net: PIDynNet, w: Window) -> torch.Tensor:
         return torch.cat(parts)
 
     r = stacked(raw0).detach()
-    G = torch.autograd.functional.jacobian(stacked, raw0)
+    G = forward_jacobian(stacked, raw0)
     sigma2 = (r**2).mean().clamp_min(1e-12)
     return (G.T @ G) / sigma2
 

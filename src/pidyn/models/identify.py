@@ -181,7 +181,10 @@ class SubperiodIdentifier:
                     z_init = net.latent_state_at(w, end=False)  # = x0 right after the transfer
                 z0 = z_end if z_end is not None else x0[:1] * 0  # at rest before the record
                 net.set_latent_offset(z0, z_init[:1])
-            if sch.ls_init == "every" or (sch.ls_init == "first" and not first_done):
+            ls_now = sch.ls_init == "every" or (sch.ls_init == "first" and not first_done)
+            if net.use_drift:  # displacement not measured: the physics pins the networks' drift
+                notes += self._drift_start(w, ls_now)
+            elif ls_now:
                 notes += self._least_squares_start(w)
             cbs: list[L.Callback] = []
             if self.clamp is not None:
@@ -248,6 +251,19 @@ class SubperiodIdentifier:
             notes.append(f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range or not "
                          f"determined by this window (standard error above half the value); {n} keeps "
                          f"{net.params.as_floats()[n]:.4g}")
+            log.warning(notes[-1])
+        return notes
+
+    def _drift_start(self, w: Window, with_params: bool) -> list[str]:
+        net = self.module.net
+        est, rejected = net.solve_drift(w, net.system.linear_params() if with_params else [])
+        if est:
+            log.info("window %d: least-squares init with the displacement drift %s", w.index,
+                     {k: f"{v:.5g}" for k, v in est.items()})
+        notes = []
+        for n, v in rejected.items():
+            notes.append(f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range or not "
+                         f"determined by this window; {n} keeps {net.params.as_floats()[n]:.4g}")
             log.warning(notes[-1])
         return notes
 

@@ -14,7 +14,7 @@ from pidyn.data.windows import Window
 from pidyn.nets import TaylorMLP
 from pidyn.params import PhysicalParameters
 from pidyn.systems.base import Kinematics, StructuralSystem
-from pidyn.systems.lstsq import solve_linear_params
+from pidyn.systems.lstsq import forward_jacobian, solve_linear_params
 
 
 class PIDynNet(nn.Module):
@@ -50,6 +50,11 @@ class PIDynNet(nn.Module):
         self.register_buffer("scale_v", torch.ones(nd))
         self.register_buffer("scale_a", torch.ones(nd))
         self.register_buffer("scale_f", torch.ones(()))
+        # displacement drift of the current window, x += scale_x (d0 + d1 tau): used where the
+        # displacement is not measured (floor accelerometers), where the data leave x + a + b t
+        # free and the physics alone pins a and b (see ``solve_drift``)
+        self.drift = nn.Parameter(torch.zeros(2, nd))
+        self.use_drift = False
         # hard initial condition for prediction: (t0, x0, v0, z0) or None
         self.anchor: tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None] | None = None
 
@@ -68,8 +73,15 @@ class PIDynNet(nn.Module):
         for net in (self.rpn, self.lnn):
             if net is not None:
                 net.set_window(w.t0, w.t1)
-        y = w.x + (w.q_data[:, None] if w.q_data is not None else 0.0)
-        self.rpn.set_output_scale(y.std(0).clamp_min(1e-12), y.mean(0))
+        self.use_drift = w.x is None or bool(torch.isnan(w.x).any())
+        self.drift.zero_()
+        q = w.q_data[:, None] if w.q_data is not None else torch.zeros_like(w.t_data)[:, None]
+        if w.x is not None and not torch.isnan(w.x).any():
+            y = w.x + q
+            self.rpn.set_output_scale(y.std(0).clamp_min(1e-12), y.mean(0))
+        else:  # displacement not measured everywhere: its estimated spread beside the ground's
+            self.rpn.set_output_scale(torch.sqrt(s["x"] ** 2 + q.std() ** 2).clamp_min(1e-12),
+                                      q.mean() * torch.ones_like(s["x"]))
         if self.lnn is not None and transfer_lnn:
             self.transfer_rpn_to_lnn()
 
@@ -121,6 +133,10 @@ class PIDynNet(nn.Module):
             xs = self._anchored(self.rpn, t, xs, f)
         x, v = xs[0], xs[1] if order >= 1 else None
         a = xs[2] if order >= 2 else None
+        if self.use_drift:
+            tau = ((t - self.rpn.t_mid) / self.rpn.t_half)[:, None]
+            x = x + self.scale_x * (self.drift[0] + self.drift[1] * tau)
+            v = v + self.scale_x * self.drift[1] / self.rpn.t_half if v is not None else None
         if q is not None:
             assert qd is not None and f is not None
             x = x - q[:, None]
@@ -169,11 +185,11 @@ class PIDynNet(nn.Module):
     def data_losses(self, w: Window, order: int = 1) -> dict[str, torch.Tensor]:
         need = 2 if w.a is not None else (1 if w.v is not None else 0)
         k = self.kinematics(w.t_data, w.f_data, w.q_data, w.qd_data, order=need, latent=False)
-        out = {"data/x": (((k.x - w.x) / self.scale_x) ** 2).mean()}
-        if w.v is not None:
-            out["data/v"] = (((k.v - w.v) / self.scale_v) ** 2).mean()
-        if w.a is not None:
-            out["data/a"] = (((k.a - w.a) / self.scale_a) ** 2).mean()
+        out = {}
+        for name, pred, meas, scale in (("x", k.x, w.x, self.scale_x), ("v", k.v, w.v, self.scale_v),
+                                        ("a", k.a, w.a, self.scale_a)):
+            if meas is not None:
+                out[f"data/{name}"] = _masked_mse(pred, meas, scale)
         return out
 
     @torch.no_grad()
@@ -186,6 +202,8 @@ class PIDynNet(nn.Module):
         """
         self.scale_x.copy_(x_scale)
         self.scale_v.copy_(v_scale)
+        self.use_drift = False
+        self.drift.zero_()
         mass = self.params.values().get("m", torch.ones(()))
         self.scale_f.copy_(f_scale.clamp_min(1e-12) * (mass if self.system.excitation == "ground" else 1.0))
         for net in (self.rpn, self.lnn):
@@ -205,7 +223,7 @@ class PIDynNet(nn.Module):
 
     # ----------------------------------------------------------------- helpers
     def net_parameters(self) -> list[nn.Parameter]:
-        ps = list(self.rpn.parameters())
+        ps = list(self.rpn.parameters()) + ([self.drift] if self.use_drift else [])
         if self.lnn is not None:
             ps += list(self.lnn.parameters())
         return ps + list(self.learned.parameters())
@@ -241,6 +259,30 @@ class PIDynNet(nn.Module):
                             None if w.qd_pool is None else w.qd_pool[:1], order=0, latent=False)
         return k.x[0]
 
+    def solve_drift(self, w: Window, names: list[str] | None = None,
+                    max_rel_std: float = 0.5) -> tuple[dict[str, float], dict[str, float]]:
+        """The window's displacement drift, and the linear parameters ``names`` with it, from the
+        physics residuals (Gauss-Newton: the residual is bilinear in stiffness and drift).
+
+        Accelerations determine x only up to a + b t per degree of freedom; a network fitted to
+        them carries an arbitrary such drift, and a least-squares start on it is biased
+        (measured on a 3-storey building from floor accelerometers: c1 3.2 for 0.5). The
+        physics pins the drift, so the two are solved together. A value outside its range or
+        not determined by the window is rejected as in ``least_squares_init``. Returns
+        (accepted, rejected)."""
+        names = list(names or [])
+        rejected: dict[str, float] = {}
+        while True:
+            std: dict[str, float] = {}
+            est = _drift_solve(self, w, names, std=std)
+            bad = {n: v for n, v in est.items() if not _in_range(self.params.spec(n), v)
+                   or std.get(n, 0.0) > max_rel_std * abs(v)}
+            if not bad:
+                self.params.set_values(est)
+                return est, rejected
+            rejected.update(bad)
+            names = [n for n in names if n not in bad]
+
     def least_squares_init(self, w: Window, names: list[str] | None = None,
                            max_rel_std: float = 0.5) -> tuple[dict[str, float], dict[str, float]]:
         """Solve for the parameters the motion residual is linear in, with the current networks.
@@ -271,6 +313,64 @@ class PIDynNet(nn.Module):
             rejected.update(bad)
             names = [n for n in names if n not in bad]
         return {}, rejected
+
+
+def _drift_solve(net: "PIDynNet", w: Window, names: list[str], iters: int = 10,
+                 std: dict[str, float] | None = None) -> dict[str, float]:
+    """Gauss-Newton on all physics residuals over the window's pool for the drift (2 n_dof
+    numbers) and the parameters ``names``; sets the drift, returns the parameter values
+    (``std``: filled with their standard errors, residual variance times (J^T J)^-1)."""
+    with torch.no_grad():
+        saved = net.use_drift
+        net.use_drift = False
+        k = net.kinematics(w.t_pool, w.f_pool, w.q_pool, w.qd_pool)
+        net.use_drift = saved
+    vals = {n: v.detach().double() for n, v in net.params.values().items()}
+    tau = ((w.t_pool - net.rpn.t_mid) / net.rpn.t_half).double()[:, None]
+    sx, th = net.scale_x.double(), float(net.rpn.t_half)
+    D = lambda a: None if a is None else a.detach().double()  # noqa: E731
+    x0, v0, a0, z0, zd0, f = D(k.x), D(k.v), D(k.a), D(k.z), D(k.zd), w.f_pool.double()
+    nd = x0.shape[1]
+    sf, sv = float(net.scale_f), float(net.scale_v[0])
+
+    def residual(u: torch.Tensor) -> torch.Tensor:
+        d0, d1 = u[:nd], u[nd:2 * nd]
+        p = dict(vals)
+        p.update({n: u[2 * nd + i] for i, n in enumerate(names)})
+        kk = Kinematics(t=k.t.double(), x=x0 + sx * (d0 + d1 * tau), v=v0 + sx * d1 / th, a=a0, z=z0, zd=zd0)
+        res = net.system.residual(kk, f, p)
+        parts = [res.pop("motion").reshape(-1) / sf] + [r.reshape(-1) / sv for r in res.values()]
+        return torch.cat(parts)
+
+    u = torch.cat([torch.zeros(2 * nd, dtype=torch.float64), torch.stack([vals[n] for n in names]) if names
+                   else torch.zeros(0, dtype=torch.float64)])
+    scale = torch.cat([torch.ones(2 * nd, dtype=torch.float64), u[2 * nd:].abs().clamp_min(1e-12)])
+    for _ in range(iters):
+        r = residual(u)
+        J = forward_jacobian(residual, u) * scale
+        step = torch.linalg.lstsq(J, -r[:, None], driver="gelsd").solution[:, 0] * scale
+        u = u + step
+        if float(step.abs().div(scale).max()) < 1e-10:
+            break
+    if std is not None and names:
+        r = residual(u)
+        J = forward_jacobian(residual, u) * scale
+        dof = max(J.shape[0] - J.shape[1], 1)
+        cov = torch.linalg.pinv(J.T @ J, hermitian=True) * float(r @ r) / dof
+        var = torch.diagonal(cov)[2 * nd:] * scale[2 * nd:] ** 2
+        std.update({n: float(var[i].clamp_min(0).sqrt()) for i, n in enumerate(names)})
+    with torch.no_grad():
+        net.drift.copy_(torch.stack([u[:nd], u[nd:2 * nd]]).to(net.drift.dtype))
+    return {n: float(u[2 * nd + i]) for i, n in enumerate(names)}
+
+
+def _masked_mse(pred: torch.Tensor, meas: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
+    """Mean squared scaled error over the measured entries (a floor without the sensor is NaN)."""
+    seen = ~torch.isnan(meas)
+    if bool(seen.all()):
+        return (((pred - meas) / scale) ** 2).mean()
+    err = torch.where(seen, (pred - torch.nan_to_num(meas)) / scale, torch.zeros_like(pred))
+    return (err**2).sum() / seen.sum().clamp_min(1)
 
 
 def _in_range(spec, value: float) -> bool:

@@ -83,7 +83,8 @@ def predict_response(
         p.requires_grad_(False)
     accel = net.system.excitation_as_acceleration(record.f)
     # the DataModule needs response columns for its windows: zeros (never used in fine-tuning)
-    blank = Record(name=record.name, t=record.t, f=record.f, x=np.zeros_like(record.x), excitation=record.excitation)
+    blank = Record(name=record.name, t=record.t, f=record.f, x=np.zeros((len(record.t), net.system.n_dof)),
+                   excitation=record.excitation)
     dm = SubperiodDataModule(blank, window_length=window_length, pool_size=pool_size, batch_size=batch_size,
                              min_peak_fraction=0.0, data_seed=data_seed, accel_signal=accel,
                              cover_tail=True)
@@ -93,7 +94,7 @@ def predict_response(
     fs = torch.as_tensor(float(np.std(record.f)), dtype=dt)
     state = (torch.zeros(net.system.n_dof, dtype=dt), torch.zeros(net.system.n_dof, dtype=dt),
              torch.zeros(net.system.n_latent, dtype=dt) if net.system.n_latent else None)
-    x_pred = np.zeros_like(record.x, dtype=float)
+    x_pred = np.zeros((len(record.t), net.system.n_dof))
     saved = _nets_state(net)
     if start_from == "fresh":
         with torch.random.fork_rng():

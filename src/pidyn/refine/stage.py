@@ -33,7 +33,8 @@ from pidyn.refine.uncertainty import (
 
 log = logging.getLogger(__name__)
 
-StateSource = Literal["networks", "measured", "simulated"]
+StateSource = Literal["networks", "measured", "simulated", "integrated"]
+STATE_SOURCES = ("networks", "measured", "simulated", "integrated")
 
 
 @dataclass
@@ -41,7 +42,7 @@ class RefineSettings:
     """How the shooting problem is set up and solved (``conf/model/refine/multiple_shooting.yaml``)."""
 
     segment_length: float = 1.0  # s; shorter segments give a smoother cost (Ribeiro et al. 2020)
-    states: StateSource = "networks"  # where segment initial states start: networks | measured | simulated
+    states: StateSource = "networks"  # segment initial states: networks | measured | simulated | integrated
     substeps: int = 4  # RK4 steps per sample interval
     free_initial_state: bool = True  # the record's initial state is an unknown too
     penalty_start: float = 100.0  # first continuity weight, relative to a segment's data term
@@ -51,8 +52,8 @@ class RefineSettings:
     reweight: bool = True  # weight each channel by its estimated noise and finish again
 
     def __post_init__(self) -> None:
-        if self.states not in ("networks", "measured", "simulated"):
-            raise ValueError(f"refine.states must be networks, measured or simulated; got '{self.states}'")
+        if self.states not in STATE_SOURCES:
+            raise ValueError(f"refine.states must be one of {', '.join(STATE_SOURCES)}; got '{self.states}'")
         if self.segment_length is not None and self.segment_length <= 0:
             raise ValueError(f"refine.segment_length must be > 0 s, got {self.segment_length}")
 
@@ -76,6 +77,7 @@ class RefineResult:
     seconds: float
     state_source: str
     history: list[dict] = field(default_factory=list)
+    compared: dict = field(default_factory=dict)  # the same refinement from other segment states (by source)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -90,12 +92,16 @@ def _lookup(network_states: np.ndarray | None, t: float, tol: float) -> np.ndarr
 
 def initial_states(problem: ShootingProblem, theta: np.ndarray, source: StateSource,
                    network_states: np.ndarray | None = None) -> np.ndarray:
-    """Segment initial states (S, n_state): from the networks or the measured x, x' where they
-    exist, otherwise carried from the previous segment's simulated end (at ``theta``)."""
+    """Segment initial states (S, n_state): from the networks, the measured x, x' or the
+    integrated measurements where they exist, otherwise carried from the previous segment's
+    simulated end (at ``theta``)."""
     n, ns = problem.system.n_dof, problem.ns
     t = problem.t
     tol = 0.5 * float(t[1] - t[0])
     measured = {(ch.kind, ch.dof): ch.data for ch in problem.channels if ch.kind in ("x", "v")}
+    if source == "integrated":
+        measured = integrated_states(problem)
+        source = "measured"
     states = np.zeros((problem.S, ns))
     y = np.zeros(ns)
     for s in range(problem.S):
@@ -110,6 +116,33 @@ def initial_states(problem: ShootingProblem, theta: np.ndarray, source: StateSou
             end = problem.free_run(theta, y, i, int(problem.bounds[s + 1]))[0][-1]
             y = np.nan_to_num(end, nan=0.0, posinf=0.0, neginf=0.0)
     return states
+
+
+def integrated_states(problem: ShootingProblem) -> dict[tuple[str, int], np.ndarray]:
+    """x and x' of every floor with a sensor, as a practitioner gets them from accelerometers:
+    the acceleration integrated (trapezoidal rule) with a linear baseline correction of the
+    velocity and of the displacement; a measured velocity or displacement is used as it is.
+    This is the refinement's start without networks (integration drifts, see the README)."""
+    t = problem.t
+    by = {(ch.kind, ch.dof): ch.data for ch in problem.channels}
+    out: dict[tuple[str, int], np.ndarray] = {}
+
+    def integral(y: np.ndarray) -> np.ndarray:
+        z = np.concatenate([[0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))])
+        return z - np.polyval(np.polyfit(t, z, 1), t)
+
+    for d in range(problem.system.n_dof):
+        v = by.get(("v", d))
+        if v is None and ("a", d) in by:
+            v = integral(by[("a", d)])
+        x = by.get(("x", d))
+        if x is None and v is not None:
+            x = integral(v)
+        if x is not None:
+            out[("x", d)] = x
+        if v is not None:
+            out[("v", d)] = v
+    return out
 
 
 def _measured_state(y: np.ndarray, measured: dict, i: int, n: int) -> np.ndarray:

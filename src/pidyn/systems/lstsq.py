@@ -12,6 +12,20 @@ import torch
 from pidyn.systems.base import Kinematics, StructuralSystem
 
 
+def forward_jacobian(fn, u: torch.Tensor) -> torch.Tensor:
+    """d fn / d u, (len(fn(u)), len(u)), exact, one forward-mode product per unknown.
+
+    A residual over a window has thousands of entries and a handful of unknowns: reverse mode
+    (one backward pass per entry) took 10 s on a 5-storey window, vectorised forward mode
+    3 s, this loop 0.35 s."""
+    from torch.func import jvp
+
+    eye = torch.eye(u.numel(), dtype=u.dtype)
+    if not u.numel():
+        return torch.zeros(fn(u).numel(), 0, dtype=u.dtype)
+    return torch.stack([jvp(fn, (u,), (eye[i],))[1] for i in range(u.numel())], dim=1)
+
+
 def solve_linear_params(
     system: StructuralSystem,
     k: Kinematics,
@@ -32,7 +46,7 @@ def solve_linear_params(
         return system.residual(k, f, p)[residual].reshape(-1)
 
     r0 = r(theta0).detach()
-    J = torch.autograd.functional.jacobian(r, theta0)
+    J = forward_jacobian(r, theta0)
     sol = torch.linalg.lstsq(J, -r0[:, None]).solution[:, 0]
     if std is not None:
         # in float64 on unit-norm columns: x^3 beside x can be 1e-4 of its size, and a float32

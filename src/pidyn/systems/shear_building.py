@@ -1,104 +1,318 @@
-"""Linear N-storey shear building (paper Eq. 4-5): M x'' + C x' + K x = -M 1 ag.
+"""N-storey shear buildings (paper Eq. 4-5) whose storeys carry the same force terms as the
+single-degree-of-freedom systems, acting on the inter-storey drift.
 
-Storey i has mass m_i, inter-storey damping c_i and stiffness k_i between floor i-1 and i
-(floor 0 is the ground), giving the usual tridiagonal C and K.
+Storey i joins floor i-1 (floor 0 is the ground) to floor i. Its restoring force F_i is the
+sum of its terms evaluated on the drift d_i = x_i - x_{i-1} and its rate; a hysteretic storey
+has its own latent z_i. Floor i then obeys
+
+    m_i x_i'' + F_i - F_{i+1} = -m_i ag(t)        (F_{N+1} = 0; ground excitation)
+
+With viscous dampers and linear springs in every storey this is M x'' + C x' + K x = -M 1 ag
+with the usual tridiagonal C and K. The equations are written once, on array operations, so
+torch tensors (the physics loss), NumPy arrays (simulation) and dual arrays (exact
+sensitivities for the refinement and the Cramer-Rao bound) all run the same code.
+
+Parameters carry their storey's number: ``c1, k1`` for storey 1, ``beta1, gamma1, n1`` for a
+Bouc-Wen storey, ``k3_2`` for a cubic spring in storey 2 (an underscore after a base name that
+ends in a digit).
 """
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+import re
+from dataclasses import replace
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 import torch
 
 from pidyn.params import ParamSpec
 from pidyn.systems.base import ExcitationKind, Kinematics, StructuralSystem, merge_specs
+from pidyn.systems.terms import TERMS, BoucWenHysteresis, ForceTerm, LinearStiffness, ViscousDamping
 
 
-def _tridiag(vals: Sequence, lib) -> object:
-    n = len(vals)
-    rows = []
-    for i in range(n):
-        row = []
-        for j in range(n):
-            if i == j:
-                row.append(vals[i] + (vals[i + 1] if i + 1 < n else 0.0 * vals[i]))
-            elif j == i + 1:
-                row.append(-vals[i + 1])
-            elif j == i - 1:
-                row.append(-vals[i])
-            else:
-                row.append(0.0 * vals[i])
-        rows.append(lib.stack(row) if lib is torch else row)
-    return torch.stack(rows) if lib is torch else np.array(rows, dtype=float)
+def storey_param(base: str, storey: int) -> str:
+    """The name of parameter ``base`` of storey ``storey`` (1-based): c1, beta2, k3_1."""
+    return f"{base}_{storey}" if base[-1].isdigit() else f"{base}{storey}"
+
+
+class OnStorey(ForceTerm):
+    """A force term acting on one storey's drift, its parameters renamed with the storey number."""
+
+    def __init__(self, term: ForceTerm, storey: int) -> None:
+        self.term, self.storey = term, storey
+        self.name = f"{term.name}{storey}"
+        self.n_latent = term.n_latent
+        self.rename = {s.name: storey_param(s.name, storey) for s in term.specs()}
+        self.linear = tuple(self.rename[n] for n in term.linear)
+
+    def specs(self) -> list[ParamSpec]:
+        return [replace(s, name=self.rename[s.name]) for s in self.term.specs()]
+
+    def _local(self, p: Mapping[str, Any]) -> dict[str, Any]:
+        return {base: p[full] for base, full in self.rename.items()}
+
+    def force(self, t, x, v, z, p):
+        return self.term.force(t, x, v, z, self._local(p))
+
+    def latent_rate(self, t, x, v, z, p):
+        return self.term.latent_rate(t, x, v, z, self._local(p))
+
+    def formula(self, p):
+        out = re.sub(r"\bx\b", f"d{self.storey}", self.term.formula(self._local(p)))
+        return re.sub(r"\bz\b", f"z{self.storey}", out)
+
+    @property
+    def initial_stiffness_param(self) -> str | None:
+        """The parameter that is this term's stiffness about rest (dF/dd at d = 0, z = 0)."""
+        if isinstance(self.term, (LinearStiffness, BoucWenHysteresis)):
+            return self.rename[self.term.param]
+        return None
+
+    @property
+    def damping_param(self) -> str | None:
+        return self.rename["c"] if isinstance(self.term, ViscousDamping) else None
+
+
+def _per_storey(value: float | Sequence[float], n: int, what: str) -> list[float]:
+    if isinstance(value, (int, float)):
+        return [float(value)] * n
+    vals = [float(v) for v in value]
+    if len(vals) != n:
+        raise ValueError(f"shear_building: {what} has {len(vals)} values for {n} storeys; give {n} or one scalar")
+    return vals
+
+
+def _stack(parts: list, like) -> Any:
+    return torch.stack(parts, dim=-1) if isinstance(like, torch.Tensor) else np.stack(parts, axis=-1)
+
+
+def _storey_term(spec: Mapping[str, Any], k: float) -> ForceTerm:
+    """A term from its config entry ``{term: <name>, <param>: value, ...}`` (names as in ``TERMS``)."""
+    spec = dict(spec)
+    name = spec.pop("term", None)
+    if name not in TERMS or name in ("viscous_damping", "linear_stiffness", "learned_force"):
+        allowed = sorted(set(TERMS) - {"viscous_damping", "linear_stiffness", "learned_force"})
+        raise ValueError(f"shear_building: storey term '{name}' is not one of {', '.join(allowed)}")
+    if name == "hysteresis":
+        spec.setdefault("k", k)  # the storey's stiffness becomes the hysteretic spring's
+    try:
+        return TERMS[name](**spec)
+    except TypeError as exc:
+        raise ValueError(f"shear_building: storey term '{name}': {exc}") from None
 
 
 class ShearBuilding(StructuralSystem):
-    """Linear MDOF shear building with storey-wise masses, dampings and stiffnesses."""
+    """N-storey shear building; every storey a viscous damper plus a spring (linear, or
+    hysteretic) plus any further force terms, all on its drift.
+
+    Args:
+        n_storeys: number of storeys (None: the length of the per-storey lists, else 3).
+        masses, dampings, stiffnesses: per storey (kg, N s/m, N/m); a scalar means every storey.
+        stiffness_taper: with a scalar stiffness, the top storey's stiffness as a share of the
+            first's, linear in between (1: uniform).
+        storey_terms: ``{storey: [ {term: hysteresis, beta: .., gamma: .., n: ..}, ...]}``
+            (1-based storeys; ``hysteresis`` replaces the storey's linear spring, its k being
+            the storey stiffness; other terms add to it).
+        guess: starting values by base name for every storey (``{c: 1.0, k: 100.0}``);
+            ``params`` overrides any single parameter (``{k2: {init: 80}}``).
+    """
 
     def __init__(
         self,
-        masses: Sequence[float] = (1.0, 1.0, 1.0),
-        dampings: Sequence[float] = (0.5, 0.5, 0.5),
-        stiffnesses: Sequence[float] = (200.0, 150.0, 100.0),
+        n_storeys: int | None = None,
+        masses: float | Sequence[float] = 1.0,
+        dampings: float | Sequence[float] = 0.5,
+        stiffnesses: float | Sequence[float] = 200.0,
+        stiffness_taper: float = 0.5,
+        storey_terms: Mapping[Any, Sequence[Mapping[str, Any]] | Mapping[str, Any]] | None = None,
+        guess: Mapping[str, float] | None = None,
         excitation: ExcitationKind = "ground",
         params: dict | None = None,
         name: str = "shear_building",
     ) -> None:
         super().__init__(excitation)
-        if not len(masses) == len(dampings) == len(stiffnesses):
-            raise ValueError(f"{name}: masses, dampings and stiffnesses need the same length")
         self.name = name
-        self.n_dof = len(masses)
-        defaults: list[ParamSpec] = []
-        for i, m in enumerate(masses, 1):
-            defaults.append(ParamSpec(f"m{i}", init=m, scale=m, true=m, trainable=False, unit="kg"))
-        for i, c in enumerate(dampings, 1):
-            defaults.append(ParamSpec(f"c{i}", init=c, scale=c, true=c, unit="N s/m"))
-        for i, k in enumerate(stiffnesses, 1):
-            defaults.append(ParamSpec(f"k{i}", init=k, scale=k, true=k, unit="N/m"))
+        lists = [v for v in (masses, dampings, stiffnesses) if not isinstance(v, (int, float))]
+        n = int(n_storeys) if n_storeys is not None else (len(lists[0]) if lists else 3)
+        if n < 1:
+            raise ValueError(f"shear_building: n_storeys must be >= 1, got {n}")
+        self.n_dof = n
+        self.masses = _per_storey(masses, n, "masses")
+        c = _per_storey(dampings, n, "dampings")
+        if isinstance(stiffnesses, (int, float)):
+            k = [float(stiffnesses) * (1 - (1 - stiffness_taper) * i / max(n - 1, 1)) for i in range(n)]
+        else:
+            k = _per_storey(stiffnesses, n, "stiffnesses")
+        extra = self._extra_terms(storey_terms, n, k)
+        self.storeys: list[list[OnStorey]] = []
+        for i in range(n):
+            terms: list[ForceTerm] = [ViscousDamping(c[i])]
+            if not any(isinstance(t, BoucWenHysteresis) for t in extra[i]):
+                terms.append(LinearStiffness(k[i]))
+            terms += extra[i]
+            self.storeys.append([OnStorey(t, i + 1) for t in terms])
+        defaults = [ParamSpec(f"m{i + 1}", init=m, scale=m, true=m, trainable=False, unit="kg")
+                    for i, m in enumerate(self.masses)]
+        for storey in self.storeys:
+            for term in storey:
+                defaults += term.specs()
+        defaults = self._apply_guess(defaults, guess or {})
         self._specs = merge_specs(defaults, params)
+        self.n_latent = sum(t.n_latent for s in self.storeys for t in s)
+        self.latent_names = tuple(t.name for s in self.storeys for t in s if t.n_latent)
 
+    @staticmethod
+    def _extra_terms(storey_terms, n: int, k: list[float]) -> list[list[ForceTerm]]:
+        extra: list[list[ForceTerm]] = [[] for _ in range(n)]
+        for key, entries in dict(storey_terms or {}).items():
+            i = int(key)
+            if not 1 <= i <= n:
+                raise ValueError(f"shear_building: storey_terms names storey {i}; storeys are 1..{n}")
+            entries = [entries] if isinstance(entries, Mapping) else list(entries)
+            extra[i - 1] = [_storey_term(e, k[i - 1]) for e in entries]
+        return extra
+
+    @staticmethod
+    def _apply_guess(specs: list[ParamSpec], guess: Mapping[str, float]) -> list[ParamSpec]:
+        """Starting values by base name (``k`` sets k1..kN): an unknown base name fails."""
+        bases = {re.sub(r"_?\d+$", "", s.name) for s in specs if s.trainable}
+        unknown = set(guess) - bases
+        if unknown:
+            raise ValueError(f"shear_building: guess for {sorted(unknown)}; the parameters' base names are {sorted(bases)}")
+        out = []
+        for s in specs:
+            base = re.sub(r"_?\d+$", "", s.name)
+            if s.trainable and base in guess:
+                g = float(guess[base])
+                s = replace(s, init=g, scale=abs(g) or s.scale) if s.transform != "box" else replace(s, init=g)
+            out.append(s)
+        return out
+
+    # ------------------------------------------------------------------ structure
     def param_specs(self) -> list[ParamSpec]:
         return list(self._specs)
 
+    @property
+    def terms(self) -> list[OnStorey]:
+        return [t for s in self.storeys for t in s]
+
     def linear_params(self) -> list[str]:
-        return [s.name for s in self._specs if s.trainable and s.name[0] in "ck"]
+        trainable = {s.name for s in self._specs if s.trainable}
+        return [n for t in self.terms for n in t.linear if n in trainable]
 
-    def _mck(self, p, lib):
+    def _latent_slices(self) -> list[list[slice | None]]:
+        out, i = [], 0
+        for storey in self.storeys:
+            row = []
+            for t in storey:
+                row.append(slice(i, i + t.n_latent) if t.n_latent else None)
+                i += t.n_latent
+            out.append(row)
+        return out
+
+    def _drifts(self, x, v):
         n = self.n_dof
-        m = [p[f"m{i}"] for i in range(1, n + 1)]
-        c = [p[f"c{i}"] for i in range(1, n + 1)]
-        k = [p[f"k{i}"] for i in range(1, n + 1)]
-        return m, _tridiag(c, lib), _tridiag(k, lib)
+        d = [x[..., i] - x[..., i - 1] if i else x[..., 0] for i in range(n)]
+        dv = [v[..., i] - v[..., i - 1] if i else v[..., 0] for i in range(n)]
+        return d, dv
 
-    def residual(self, k: Kinematics, f: torch.Tensor, p: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-        m, C, K = self._mck(p, torch)
-        M = torch.stack(m)
-        rhs = -M[None, :] * f[:, None] if self.excitation == "ground" else f[:, None] * (torch.arange(self.n_dof) == self.n_dof - 1)
-        return {"motion": M[None, :] * k.a + k.v @ C.T + k.x @ K.T - rhs}
+    def storey_forces(self, t, x, v, z, p) -> list:
+        """Restoring force of every storey, each shaped like ``x[..., 0]``."""
+        d, dv = self._drifts(x, v)
+        out = []
+        for i, (storey, slices) in enumerate(zip(self.storeys, self._latent_slices())):
+            total = 0.0
+            for term, sl in zip(storey, slices):
+                total = total + term.force(t, d[i], dv[i], None if sl is None else z[..., sl], p)
+            out.append(total)
+        return out
 
-    def state_rate(self, t, y, p, f):
-        """Storey forces on the inter-storey drifts, element by element (no matrices), so
-        the same code runs on NumPy and dual arrays."""
+    def _floor_forces(self, t, x, v, z, p, f) -> list:
+        """Net force on every floor from the storeys and the excitation (right-hand side minus
+        restoring): m_i x_i'' = this."""
         n = self.n_dof
-        x = [y[..., i] for i in range(n)]
-        v = [y[..., n + i] for i in range(n)]
-        storey = []
+        F = self.storey_forces(t, x, v, z, p)
+        out = []
         for i in range(n):
-            drift = x[i] - x[i - 1] if i else x[i]
-            rate = v[i] - v[i - 1] if i else v[i]
-            storey.append(p[f"k{i + 1}"] * drift + p[f"c{i + 1}"] * rate)
-        acc = []
-        for i in range(n):
-            net = storey[i] - storey[i + 1] if i + 1 < n else storey[i]
+            net = F[i] - F[i + 1] if i + 1 < n else F[i]
             m = p[f"m{i + 1}"]
             ext = -m * f if self.excitation == "ground" else (f if i == n - 1 else 0.0 * f)
-            acc.append((ext - net) / m)
-        return np.stack(v + acc, axis=-1)
+            out.append(ext - net)
+        return out
+
+    # ------------------------------------------------------------------ equations
+    def residual(self, k: Kinematics, f: torch.Tensor, p: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        if self.n_latent and k.z is None:
+            raise ValueError(f"{self.name}: latent states {self.latent_names} are required")
+        rhs = self._floor_forces(k.t, k.x, k.v, k.z, p, f)
+        motion = [p[f"m{i + 1}"] * k.a[..., i] - rhs[i] for i in range(self.n_dof)]
+        out = {"motion": _stack(motion, k.x)}
+        d, dv = self._drifts(k.x, k.v)
+        for i, (storey, slices) in enumerate(zip(self.storeys, self._latent_slices())):
+            for term, sl in zip(storey, slices):
+                if sl is not None:
+                    assert k.z is not None and k.zd is not None
+                    out[term.name] = k.zd[:, sl] - term.latent_rate(k.t, d[i], dv[i], k.z[:, sl], p)
+        return out
+
+    def state_rate(self, t, y, p, f):
+        n = self.n_dof
+        x, v, z = y[..., :n], y[..., n:2 * n], y[..., 2 * n:]
+        rhs = self._floor_forces(t, x, v, z, p, f)
+        acc = [rhs[i] / p[f"m{i + 1}"] for i in range(n)]
+        parts = [v[..., i] for i in range(n)] + acc
+        d, dv = self._drifts(x, v)
+        for i, (storey, slices) in enumerate(zip(self.storeys, self._latent_slices())):
+            for term, sl in zip(storey, slices):
+                if sl is not None:
+                    rate = term.latent_rate(t, d[i], dv[i], z[..., sl], p)
+                    parts += [rate[..., j] for j in range(term.n_latent)]
+        return np.stack(parts, axis=-1)
 
     def rhs(self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]) -> np.ndarray:
         return self.state_rate(t, np.asarray(y, dtype=float), p, f(t))
 
+    # ------------------------------------------------------------------ for engineers
+    def storey_equations(self, p: Mapping[str, float]) -> list[str]:
+        """One line per storey: its restoring force on the drift d_i (and its latent rate)."""
+        lines = []
+        for i, storey in enumerate(self.storeys, 1):
+            lines.append(f"storey {i}: F{i} = " + " + ".join(t.formula(p) for t in storey))
+            for t in storey:
+                if isinstance(t.term, BoucWenHysteresis):
+                    q = t._local(p)
+                    lines.append(f"  z{i}' = d{i}' - {q['gamma']:.5g} |d{i}'| |z{i}|^({q['n']:.5g}-1) z{i} "
+                                 f"- {q['beta']:.5g} d{i}' |z{i}|^{q['n']:.5g}")
+        return lines
+
     def describe(self, p: dict[str, float]) -> str:
-        return "M x'' + C x' + K x = -M 1 ag; " + ", ".join(f"{k}={v:.5g}" for k, v in p.items())
+        eq = "m_i x_i'' + F_i - F_(i+1) = " + ("-m_i ag(t)" if self.excitation == "ground" else "u(t) on the top floor")
+        return eq + "; " + "; ".join(s.strip() for s in self.storey_equations(p))
+
+    def linear_matrices(self, p: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """M, C, K of the linear part about rest: the viscous dampers and each storey's
+        initial stiffness (a Bouc-Wen storey's k, since dz/dd = 1 at z = 0)."""
+        n = self.n_dof
+        c, k = np.zeros(n), np.zeros(n)
+        for i, storey in enumerate(self.storeys):
+            for t in storey:
+                if t.damping_param:
+                    c[i] += float(p[t.damping_param])
+                if t.initial_stiffness_param:
+                    k[i] += float(p[t.initial_stiffness_param])
+        M = np.diag([float(p[f"m{i + 1}"]) for i in range(n)])
+        return M, _tridiagonal(c), _tridiagonal(k)
+
+
+def _tridiagonal(s: np.ndarray) -> np.ndarray:
+    """Storey values -> the floor matrix of springs (or dampers) in series up the building."""
+    n = len(s)
+    A = np.zeros((n, n))
+    for i in range(n):
+        A[i, i] += s[i]
+        if i > 0:
+            A[i - 1, i - 1] += s[i]
+            A[i - 1, i] -= s[i]
+            A[i, i - 1] -= s[i]
+    return A

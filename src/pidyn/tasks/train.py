@@ -144,14 +144,15 @@ def _report(cfg: DictConfig, run: _Run, results: list, pidyn_values: dict[str, f
                         None if refined is None else refined.intervals)
     notes = [n for r in results for n in (r.notes or [])] + ([] if refined is None else refined.notes)
     identified = {"system": system.name, "equation": system.describe(final), "params": table, "notes": notes}
+    if hasattr(system, "storey_equations"):
+        identified["storey_equations"] = system.storey_equations(final)
     if refined is not None:
         identified["correlation"] = {"names": refined.names, "matrix": refined.correlation}
         identified["noise_std"] = refined.noise_std
     write_yaml(run_dir / "identified_params.yaml", identified)
     errors, pidyn_errors = relative_errors(values, truths), relative_errors(pidyn_values, truths)
     # the identified model simulated over the whole record (the physics-only check)
-    sim_x = simulate_identified(system, final, record,
-                                state0=None if refined is None else np.array(refined.initial_state))
+    sim = simulate_response(system, final, record, state0=None if refined is None else np.array(refined.initial_state))
     metrics: dict[str, Any] = {
         "system": system.name,
         "record": record.name,
@@ -169,7 +170,8 @@ def _report(cfg: DictConfig, run: _Run, results: list, pidyn_values: dict[str, f
         "mean_error_pct": float(np.mean(list(errors.values()))) if errors else None,
         "pidynnet": {"params": pidyn_values, "error_pct": pidyn_errors,
                      "max_error_pct": max(pidyn_errors.values()) if pidyn_errors else None},
-        "sim_nrmse_x": nrmse(sim_x, record.clean.x if record.clean is not None else record.x),
+        "sim_nrmse_x": _sim_nrmse_x(sim, record),
+        "sim_nrmse": channel_nrmse(sim, record),
         "notes": notes,
         "windows": len(results),
         "iterations": int(run.module.iteration),
@@ -183,7 +185,15 @@ def _report(cfg: DictConfig, run: _Run, results: list, pidyn_values: dict[str, f
     metrics["wall_seconds"] = time.perf_counter() - t_wall
     write_json(run_dir / "metrics.json", metrics)
     write_json(run_dir / "windows.json", {"windows": [r.__dict__ for r in results]})
-    _figures(run, results, truths, baselines, refined, sim_x, metrics)
+    if hasattr(system, "storey_equations"):
+        from pidyn.tasks.building_report import write_building_report
+
+        modes = write_building_report(system, record, final, {**final, **truths} if any(truths.values()) else None,
+                                      None if refined is None else np.array(refined.initial_state), run_dir,
+                                      run.logger, int(run.module.iteration))
+        metrics["modes"] = {k: v for k, v in modes.items() if k != "truth"}
+        write_json(run_dir / "metrics.json", metrics)
+    _figures(run, results, truths, baselines, refined, sim, metrics)
     _log_summary(system.describe(final), errors, pidyn_errors, metrics, run_dir)
     return metrics
 
@@ -195,10 +205,12 @@ def _refined_metrics(refined: Any, names: list[str], truths: dict[str, float | N
         out["covered"] = {n: bool(out["ci95"][n][0] <= truths[n] <= out["ci95"][n][1]) for n in names}
     out["refinement"] = {k: v for k, v in refined.to_dict().items()
                          if k not in ("params", "intervals", "correlation", "history")}
+    if getattr(refined, "compared", None):
+        out["refine_compare"] = refined.compared
     return out
 
 
-def _figures(run: _Run, results: list, truths: dict, baselines: list[dict], refined: Any, sim_x: np.ndarray,
+def _figures(run: _Run, results: list, truths: dict, baselines: list[dict], refined: Any, sim: dict[str, np.ndarray],
              metrics: dict) -> None:
     system, record = run.system, run.record
     fig_dir = run.run_dir / "figures"
@@ -207,8 +219,12 @@ def _figures(run: _Run, results: list, truths: dict, baselines: list[dict], refi
     plot_convergence(fig_dir / "param_convergence.png", run.ident.trajectory, truths, [r.__dict__ for r in results],
                      title=f"{system.name} under {record.name}", other=None if ukf is None else ("UKF", ukf["trajectory"]),
                      final=None if refined is None else refined.intervals)
-    series = {"measured x": record.x[:, 0], "identified model (simulated)": sim_x[:, 0]}
-    plot_response(fig_dir / "response.png", record.t, series, title=f"{system.name}: NRMSE {metrics['sim_nrmse_x']:.3g}")
+    kind, meas = record.reference()
+    floor = max(record.sensors()[kind])  # the highest measured floor moves the most
+    label = f"{kind}{floor}" if system.n_dof > 1 else kind
+    series = {f"measured {label}": meas[:, floor - 1], "identified model (simulated)": sim[kind][:, floor - 1]}
+    plot_response(fig_dir / "response.png", record.t, series,
+                  title=f"{system.name}: NRMSE {metrics['sim_nrmse'][label]:.3g} ({label})")
     _tb_figures(run.logger, fig_dir, int(run.module.iteration), metrics, refined)
 
 
@@ -223,23 +239,54 @@ def _log_summary(equation: str, errors: dict, pidyn_errors: dict, metrics: dict,
     log.info("wall %.1f s, run folder %s", metrics["wall_seconds"], run_dir)
 
 
+def simulate_response(system: StructuralSystem, values: dict[str, float], record: Record, substeps: int = 4,
+                      state0: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """The identified model's response over the record: ``x, v, a`` (relative, (N, n_dof))
+    by the fixed-step batched RK4 (bounded cost: a model that blows up gives NaNs rather
+    than an adaptive integrator crawling) from ``state0`` (the full state, default rest)."""
+    from pidyn.integrate import rk4
+
+    n = system.n_dof
+    y0 = np.zeros(system.n_state) if state0 is None else np.asarray(state0, float)
+    with np.errstate(all="ignore"):
+        Y, R = rk4(system, dict(values), record.t, record.f, y0[None, :], substeps=substeps)
+    return {"x": Y[:, 0, :n], "v": Y[:, 0, n:2 * n], "a": R[:, 0, n:2 * n]}
+
+
 def simulate_identified(system: StructuralSystem, values: dict[str, float], record: Record,
                         x0: float = 0.0, v0: float = 0.0, substeps: int = 4,
                         state0: np.ndarray | None = None) -> np.ndarray:
-    """The identified model's displacement over the record, (N, n_dof), by the fixed-step
-    batched RK4 (bounded cost: a model that blows up gives NaNs rather than an adaptive
-    integrator crawling) from ``state0`` (the full state), else from (x0, v0) with z = 0."""
-    from pidyn.integrate import rk4
-
+    """The identified model's displacement (N, n_dof) from ``state0``, else from (x0, v0), z = 0."""
     n = system.n_dof
     y0 = np.zeros(system.n_state)
     if state0 is not None:
         y0[:] = state0
     else:
         y0[:n], y0[n:2 * n] = x0, v0
-    with np.errstate(all="ignore"):
-        Y, _ = rk4(system, dict(values), record.t, record.f, y0[None, :], substeps=substeps)
-    return Y[:, 0, :n]
+    return simulate_response(system, values, record, substeps, y0)["x"]
+
+
+def channel_nrmse(sim: dict[str, np.ndarray], record: Record) -> dict[str, float]:
+    """NRMSE of the simulated response against every measured channel (``x``, or ``a3`` for
+    floor 3 of a building)."""
+    out = {}
+    multi = sim["x"].shape[1] > 1
+    for kind, floors in record.sensors().items():
+        meas = getattr(record, kind)
+        for fl in floors:
+            out[f"{kind}{fl}" if multi else kind] = nrmse(sim[kind][:, fl - 1], meas[:, fl - 1])
+    return out
+
+
+def _sim_nrmse_x(sim: dict[str, np.ndarray], record: Record) -> float | None:
+    """Displacement NRMSE over every floor: against the noise-free truth when simulated, else
+    against the measured displacement (None when no displacement was measured)."""
+    if record.clean is not None:
+        return nrmse(sim["x"], record.clean.x)
+    if record.x is None:
+        return None
+    seen = ~np.isnan(record.x)
+    return nrmse(sim["x"][seen], record.x[seen])
 
 
 def record_noise(cfg: DictConfig, record: Record) -> float:
@@ -277,14 +324,25 @@ def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pi
     if method != "multiple_shooting":
         raise ValueError(f"model.refine: unknown method '{method}'; choose multiple_shooting or none")
     allowed = set(rcfg.pop("starts", DEFAULT_STARTS))
+    compare = list(rcfg.pop("compare_states", None) or [])
     settings = RefineSettings(**rcfg)
     starts = {"pidynnet": pidyn_values}
     for b in baselines:
         if b["method"] in allowed and b.get("params"):
             starts[b["method"]] = b["params"]
     w = cfg.data.windows
-    return refine(system, record, starts, settings, network_states=network_states(results),
-                  t_start=w.get("t_start"), t_end=w.get("t_end"))
+    span = {"t_start": w.get("t_start"), "t_end": w.get("t_end")}
+    out = refine(system, record, starts, settings, network_states=network_states(results), **span)
+    # the same refinement from PIDynNet's parameters with its segment states taken elsewhere
+    # (e.g. accelerations integrated twice): what the networks' states buy
+    out.compared = {}
+    for source in compare:
+        alt = refine(system, record, {"pidynnet": pidyn_values}, replace(settings, states=source), **span)
+        out.compared[source] = {"params": alt.params, "cost": alt.cost, "converged": alt.converged,
+                                "max_defect": alt.max_defect, "seconds": alt.seconds,
+                                "error_pct": relative_errors(alt.params, record.truth or {})}
+        log.info("refinement from %s states: %s", source, ", ".join(f"{k}={v:.5g}" for k, v in alt.params.items()))
+    return out
 
 
 def baseline_rows(bcfg: dict, noise: float, system: StructuralSystem, record: Record) -> list[dict]:
@@ -303,9 +361,6 @@ def baseline_rows(bcfg: dict, noise: float, system: StructuralSystem, record: Re
     for name in bcfg.get("run") or []:
         if name not in fns:
             raise ValueError(f"unknown baseline '{name}'; choose from {sorted(fns)}")
-        if not hasattr(system, "terms") and name not in ("equation_error", "sindy"):
-            out.append({"method": name, "params": {}, "seconds": 0.0, "note": "SDOF systems only"})
-            continue
         try:
             r = fns[name]()
             row = {"method": r.method, "params": r.params, "seconds": r.seconds, "note": r.note, "trajectory": r.trajectory}
@@ -400,8 +455,8 @@ def run_baselines(cfg: DictConfig, system: StructuralSystem, record: Record, run
     if bcfg.get("cramer_rao"):
         # the bound at the truth when it is known, else at the identified model
         ref = {**{s.name: s.init for s in system.param_specs()}, **identified, **(truth or {})}
-        crb = B.cramer_rao(system, ref, record.t, record.f, record_noise(cfg, record),
-                           channels=tuple(c for c in ("x", "v", "a") if getattr(record, c) is not None))
+        levels = (record.meta or {}).get("noise_levels") or record_noise(cfg, record)
+        crb = B.cramer_rao(system, ref, record.t, record.f, levels, channels=record.sensors())
         write_json(run_dir / "cramer_rao.json", crb)
     if out:
         write_json(run_dir / "baselines.json", {"baselines": out})
