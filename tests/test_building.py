@@ -173,3 +173,4 @@ def test_pidynnet_pins_the_drift_that_accelerations_leave_free():
         assert v_ == pytest.approx(truth[n], rel=2e-2), n
     recovered = (net.scale_x * net.drift[0]).detach().numpy()
     assert np.allclose(recovered, -np.array([0.02, -0.01, 0.03]), atol=2e-3)
+

@@ -23,12 +23,6 @@ class Trajectory:
     z: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
 
-    def channels(self) -> dict[str, np.ndarray]:
-        out = {"x": self.x, "v": self.v, "a": self.a}
-        if self.z is not None:
-            out["z"] = self.z
-        return out
-
 
 def simulate(
     system: StructuralSystem,

@@ -49,6 +49,21 @@ class Window:
         s["a"] = _fill(_nanstd(self.a), s["v"] * w) if self.a is not None else s["f"] * torch.ones_like(s["x"])
         return s
 
+    def filled(self, kind: str) -> torch.Tensor | None:
+        """Channel ``kind`` with the floors that lack the sensor filled by linear interpolation
+        over the floor number from the floors that have it (nearest floor beyond the ends): a
+        starting shape for the networks' pretraining, never a target of the identification."""
+        arr = getattr(self, kind)
+        if arr is None:
+            return None
+        seen = ~torch.isnan(arr).all(0)
+        if bool(seen.all()) or not bool(seen.any()):
+            return arr
+        have = torch.nonzero(seen)[:, 0].numpy()
+        a = arr.double().numpy()
+        out = np.stack([np.interp(np.arange(a.shape[1]), have, a[i, have]) for i in range(a.shape[0])])
+        return torch.as_tensor(out, dtype=arr.dtype)
+
     def displacement_scale(self) -> np.ndarray:
         """Spread of the displacement per degree of freedom, measured or estimated."""
         chans = [(k, None if c is None else c.double().numpy()) for k, c in (("x", self.x), ("v", self.v), ("a", self.a))]

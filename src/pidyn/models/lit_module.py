@@ -97,7 +97,8 @@ class PIDynNetModule(L.LightningModule):
         assert self.window is not None
         out: dict[str, torch.Tensor] = {}
         if self.phase != "finetune":
-            out.update(self.net.data_losses(self.window))
+            # pretraining shapes floors without a sensor after their neighbours; the fit itself sees data only
+            out.update(self.net.data_losses(self.window, fill=self.phase == "pretrain"))
         if self.phase != "pretrain":
             assert t_c is not None and f_c is not None
             out.update(self.net.physics_losses(t_c, f_c, q_c, qd_c))

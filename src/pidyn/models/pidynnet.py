@@ -182,12 +182,16 @@ class PIDynNet(nn.Module):
             out[f"physics/{name}"] = ((r / self.scale_v[0]) ** 2).mean()
         return out
 
-    def data_losses(self, w: Window, order: int = 1) -> dict[str, torch.Tensor]:
+    def data_losses(self, w: Window, order: int = 1, fill: bool = False) -> dict[str, torch.Tensor]:
+        """Supervised terms over the measured entries; ``fill`` (pretraining only) also fits the
+        floors without a sensor to their neighbours' signals interpolated over the floor number."""
         need = 2 if w.a is not None else (1 if w.v is not None else 0)
         k = self.kinematics(w.t_data, w.f_data, w.q_data, w.qd_data, order=need, latent=False)
         out = {}
         for name, pred, meas, scale in (("x", k.x, w.x, self.scale_x), ("v", k.v, w.v, self.scale_v),
                                         ("a", k.a, w.a, self.scale_a)):
+            if fill and meas is not None:
+                meas = w.filled(name)
             if meas is not None:
                 out[f"data/{name}"] = _masked_mse(pred, meas, scale)
         return out
