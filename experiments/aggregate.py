@@ -256,7 +256,7 @@ def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str],
         out.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         integrated = bool(g.integrated_rms_err.notna().any())
         if integrated:  # the refinement from the same parameters, states from integrated accelerations
-            out[-2] = out[-2][:-1] + " refinement from integrated accelerations RMS err % |"
+            out[-2] += " refinement from integrated accelerations RMS err % |"
             out[-1] += "---|"
         for _, r in g.iterrows():
             out.append(
