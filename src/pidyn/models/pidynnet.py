@@ -274,18 +274,8 @@ class PIDynNet(nn.Module):
         physics pins the drift, so the two are solved together. A value outside its range or
         not determined by the window is rejected as in ``least_squares_init``. Returns
         (accepted, rejected)."""
-        names = list(names or [])
-        rejected: dict[str, float] = {}
-        while True:
-            std: dict[str, float] = {}
-            est = _drift_solve(self, w, names, std=std)
-            bad = {n: v for n, v in est.items() if not _in_range(self.params.spec(n), v)
-                   or std.get(n, 0.0) > max_rel_std * abs(v)}
-            if not bad:
-                self.params.set_values(est)
-                return est, rejected
-            rejected.update(bad)
-            names = [n for n in names if n not in bad]
+        return self._accept_determined(lambda ns, std: _drift_solve(self, w, ns, std=std), list(names or []),
+                                       max_rel_std, always=True)
 
     def least_squares_init(self, w: Window, names: list[str] | None = None,
                            max_rel_std: float = 0.5) -> tuple[dict[str, float], dict[str, float]]:
@@ -301,14 +291,24 @@ class PIDynNet(nn.Module):
         rejected the same way: a log-parameter started near zero could not come back under the
         clamp. Returns (accepted, rejected)."""
         names = list(names if names is not None else self.system.linear_params())
-        rejected: dict[str, float] = {}
         if not names:
-            return {}, rejected
+            return {}, {}
         with torch.no_grad():
             k = self.kinematics(w.t_pool, w.f_pool, w.q_pool, w.qd_pool)
-        while names:
+        return self._accept_determined(
+            lambda ns, std: solve_linear_params(self.system, k, w.f_pool, self.params.values(), ns, std=std),
+            names, max_rel_std)
+
+    def _accept_determined(self, solve, names: list[str], max_rel_std: float,
+                           always: bool = False) -> tuple[dict[str, float], dict[str, float]]:
+        """Solve for ``names`` (``solve(names, std) -> values``, filling standard errors), drop the
+        values out of range or with a standard error above ``max_rel_std`` of them, solve again
+        without them; set and return the accepted values and the rejected ones. ``always``: solve
+        even when no name is left (the solve has other unknowns, the drift)."""
+        rejected: dict[str, float] = {}
+        while names or always:
             std: dict[str, float] = {}
-            est = solve_linear_params(self.system, k, w.f_pool, self.params.values(), names, std=std)
+            est = solve(names, std)
             bad = {n: v for n, v in est.items() if not _in_range(self.params.spec(n), v)
                    or std.get(n, 0.0) > max_rel_std * abs(v)}
             if not bad:
