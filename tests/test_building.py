@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import torch
 
-from pidyn.autodiff import Dual
 from pidyn.baselines import cramer_rao, unscented_kalman_filter
 from pidyn.data.sources import Record, synthetic
 from pidyn.data.windows import make_windows
@@ -47,9 +46,9 @@ def test_parameters_carry_their_storey_and_guesses_apply_to_every_storey():
 
 @pytest.mark.parametrize("system", [five_storey(), ShearBuilding(storey_terms={2: {"term": "cubic_stiffness", "k3": 5e3}})],
                          ids=["bouc_wen_storey", "cubic_storey"])
-def test_torch_residual_numpy_rate_and_dual_rate_are_one_equation(system):
-    """The residual vanishes on a solve_ivp trajectory and the dual-array rate matches finite
-    differences: the same code serves the loss, the simulation and the sensitivities."""
+def test_torch_residual_and_numpy_rate_are_one_equation(system):
+    """The residual vanishes on a solve_ivp trajectory: the same code serves the loss and the
+    simulation (the dual-array rate against finite differences: ``test_refine.py``)."""
     gm = prepare("el_centro", scale=2.0, duration=6.0, dt=0.01)
     p = system.true_values()
     tr = simulate(system, p, gm, gm.t)
@@ -64,16 +63,6 @@ def test_torch_residual_numpy_rate_and_dual_rate_are_one_equation(system):
     for name, r in res.items():
         assert float(r.abs().max()) < 1e-9, name
     assert np.abs(rate[:, n:2 * n] - tr.a).max() < 1e-9
-    ns = system.n_state
-    y0 = y[100:103]
-    yd = Dual(y0, np.broadcast_to(np.eye(ns), (3, ns, ns)).copy())
-    out = system.state_rate(0.3, yd, p, np.full(3, 0.7))
-    h = 1e-7
-    for j in range(ns):
-        e = np.zeros(ns)
-        e[j] = h
-        fd = (system.state_rate(0.3, y0 + e, p, 0.7) - system.state_rate(0.3, y0 - e, p, 0.7)) / (2 * h)
-        np.testing.assert_allclose(out.d[..., j], fd, rtol=1e-5, atol=1e-6)
 
 
 def test_modal_properties_match_closed_forms():

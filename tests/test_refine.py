@@ -24,7 +24,10 @@ def _problem(system, record, length, settings=None):
     return p
 
 
-@pytest.mark.parametrize("system", [BoucWen(), Duffing(), ShearBuilding()])
+@pytest.mark.parametrize("system", [BoucWen(), Duffing(), ShearBuilding(), ShearBuilding(
+    n_storeys=5, storey_terms={1: [{"term": "hysteresis", "beta": 20.0, "gamma": 40.0, "n": 2.0, "shape_scale": 20.0}],
+                               2: [{"term": "cubic_stiffness", "k3": 5e3}]})],
+    ids=["bouc_wen", "duffing", "shear3", "shear5_bouc_wen_cubic"])
 def test_dual_state_rate_matches_finite_differences(system):
     rng = np.random.default_rng(0)
     ns = system.n_state

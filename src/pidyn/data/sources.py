@@ -219,6 +219,37 @@ def from_csv(
     name) instead of a column: interpolated at the CSV's times, which start with the record.
     """
     path = Path(path)
+    df = _read_table(path, units)
+    if at2 is not None:
+        _ground_from_at2(path, df, time_col, at2)
+    if time_col not in df.columns:
+        raise DataError(f"{path}: missing column '{time_col}' (columns: {list(df.columns)})")
+    if acceleration not in ("absolute", "relative"):
+        raise DataError(f"{path}: acceleration must be 'absolute' or 'relative', got '{acceleration}'")
+    layout = _channel_columns(path, [c for c in df.columns if c != time_col])
+    col = _excitation_column(path, df, excitation)
+    _check_values(path, df)
+    t = _uniform_time(path, df[time_col].to_numpy(float), time_col)
+    if t_end is not None:
+        keep = t <= t_end + 1e-12
+        df, t = df.loc[keep], t[keep]
+    f = df[col].to_numpy(float)
+    arrays = _floor_arrays(df, layout, len(t), f if acceleration == "absolute" and col == "ag" else None)
+    return Record(
+        name=path.stem,
+        t=t - t[0],
+        f=f,
+        x=arrays.get("x"),
+        v=arrays.get("v"),
+        a=arrays.get("a"),
+        excitation="ground" if col == "ag" else "force",
+        meta={"path": str(path), "dt": float(np.mean(np.diff(t))), "acceleration": acceleration,
+              "sensors": {k: sorted(c) for k, c in layout.items()}},
+    )
+
+
+def _read_table(path: Path, units: dict[str, float] | None) -> pd.DataFrame:
+    """The CSV with stripped column names, index columns dropped, ``units`` applied."""
     if not path.is_file():
         raise DataError(f"{path}: no such file")
     try:
@@ -231,40 +262,49 @@ def from_csv(
         if col not in df.columns:
             raise DataError(f"{path}: units given for '{col}', which is not a column ({list(df.columns)})")
         df[col] = df[col] * factor
-    if at2 is not None:
-        from pidyn.excitation.ground_motion import load_record
+    return df
 
-        if "ag" in df.columns or "u" in df.columns:
-            raise DataError(f"{path}: has an excitation column and an AT2 record ({at2}) was given too; use one")
-        if time_col not in df.columns:
-            raise DataError(f"{path}: missing column '{time_col}' (columns: {list(df.columns)})")
-        gm = load_record(at2)
-        t_csv = df[time_col].to_numpy(float)
-        if t_csv[-1] - t_csv[0] > gm.duration + 1e-9:
-            raise DataError(f"{path}: spans {t_csv[-1] - t_csv[0]:.4g} s, longer than the AT2 record {at2} "
-                            f"({gm.duration:.4g} s)")
-        df["ag"] = gm(t_csv - t_csv[0])
+
+def _ground_from_at2(path: Path, df: pd.DataFrame, time_col: str, at2: str | Path) -> None:
+    """Add column ``ag`` from a PEER AT2 record, interpolated at the CSV's times."""
+    from pidyn.excitation.ground_motion import load_record
+
+    if "ag" in df.columns or "u" in df.columns:
+        raise DataError(f"{path}: has an excitation column and an AT2 record ({at2}) was given too; use one")
     if time_col not in df.columns:
         raise DataError(f"{path}: missing column '{time_col}' (columns: {list(df.columns)})")
-    if acceleration not in ("absolute", "relative"):
-        raise DataError(f"{path}: acceleration must be 'absolute' or 'relative', got '{acceleration}'")
-    layout = _channel_columns(path, [c for c in df.columns if c != time_col])
+    gm = load_record(at2)
+    t_csv = df[time_col].to_numpy(float)
+    if t_csv[-1] - t_csv[0] > gm.duration + 1e-9:
+        raise DataError(f"{path}: spans {t_csv[-1] - t_csv[0]:.4g} s, longer than the AT2 record {at2} "
+                        f"({gm.duration:.4g} s)")
+    df["ag"] = gm(t_csv - t_csv[0])
+
+
+def _excitation_column(path: Path, df: pd.DataFrame, excitation: str | None) -> str:
     has = [c for c in ("ag", "u") if c in df.columns]
     if excitation is None:
         if len(has) != 1:
             raise DataError(f"{path}: need exactly one excitation column 'ag' (ground) or 'u' (force); found {has}")
-        col = has[0]
-    else:
-        col = {"ground": "ag", "force": "u"}[excitation]
-        if col not in df.columns:
-            raise DataError(f"{path}: excitation '{excitation}' needs a column '{col}'")
+        return has[0]
+    col = {"ground": "ag", "force": "u"}[excitation]
+    if col not in df.columns:
+        raise DataError(f"{path}: excitation '{excitation}' needs a column '{col}'")
+    return col
+
+
+def _check_values(path: Path, df: pd.DataFrame) -> None:
+    """Every column numeric and finite; the first bad row is named."""
     for c in df.columns:
         if not np.issubdtype(df[c].dtype, np.number):
             raise DataError(f"{path}: column '{c}' is not numeric")
         bad = ~np.isfinite(df[c].to_numpy(float))
         if bad.any():
-            raise DataError(f"{path}: column '{c}' has {int(bad.sum())} NaN/infinite value(s), first at row {int(np.flatnonzero(bad)[0]) + 2}")
-    t = df[time_col].to_numpy(float)
+            raise DataError(f"{path}: column '{c}' has {int(bad.sum())} NaN/infinite value(s), first at row "
+                            f"{int(np.flatnonzero(bad)[0]) + 2}")
+
+
+def _uniform_time(path: Path, t: np.ndarray, time_col: str) -> np.ndarray:
     if t.size < 10:
         raise DataError(f"{path}: only {t.size} rows")
     dt = np.diff(t)
@@ -274,30 +314,23 @@ def from_csv(
         raise DataError(
             f"{path}: non-uniform time step (from {dt.min():.6g} to {dt.max():.6g} s); resample to a uniform grid first"
         )
-    if t_end is not None:
-        keep = t <= t_end + 1e-12
-        df, t = df.loc[keep], t[keep]
+    return t
+
+
+def _floor_arrays(df: pd.DataFrame, layout: dict[str, dict[int, str]], n_rows: int,
+                  ground: np.ndarray | None) -> dict[str, np.ndarray]:
+    """(N, n_floors) arrays per kind, NaN for floors without the sensor; ``ground`` (ag) is
+    subtracted from absolute accelerations so that ``a`` is relative like x and v."""
     n = max(j for cols in layout.values() for j in cols)
-    f = df[col].to_numpy(float)
-    arrays: dict[str, np.ndarray] = {}
+    out: dict[str, np.ndarray] = {}
     for kind, cols in layout.items():
-        arr = np.full((len(t), n), np.nan)
+        arr = np.full((n_rows, n), np.nan)
         for j, name in cols.items():
             arr[:, j - 1] = df[name].to_numpy(float)
-        if kind == "a" and acceleration == "absolute" and col == "ag":
-            arr = arr - f[:, None]  # kept relative to the ground, like x and v
-        arrays[kind] = arr
-    return Record(
-        name=path.stem,
-        t=t - t[0],
-        f=f,
-        x=arrays.get("x"),
-        v=arrays.get("v"),
-        a=arrays.get("a"),
-        excitation="ground" if col == "ag" else "force",
-        meta={"path": str(path), "dt": float(dt.mean()), "acceleration": acceleration,
-              "sensors": {k: sorted(c) for k, c in layout.items()}},
-    )
+        if kind == "a" and ground is not None:
+            arr = arr - ground[:, None]
+        out[kind] = arr
+    return out
 
 
 def _channel_columns(path: Path, columns) -> dict[str, dict[int, str]]:
