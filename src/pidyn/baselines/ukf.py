@@ -63,23 +63,14 @@ def unscented_kalman_filter(
     P = np.diag([1e-12] * ns + [init_param_std**2] * npar)
     Q = np.diag(list(q_state * xs**2) + list(q_state * vs**2) + [q_state * float(np.max(xs)) ** 2] * nz
                 + [q_param] * npar)
-    lam = alpha**2 * (n + kappa) - n
-    wm = np.full(2 * n + 1, 1 / (2 * (n + lam)))
-    wc = wm.copy()
-    wm[0] = lam / (n + lam)
-    wc[0] = lam / (n + lam) + 1 - alpha**2 + beta
+    lam, wm, wc = _weights(n, alpha, beta, kappa)
     rows = {"x": lambda Yp, Rp, d: Yp[:, d], "v": lambda Yp, Rp, d: Yp[:, nd + d], "a": lambda Yp, Rp, d: Rp[:, nd + d]}
     traj: list[dict] = []
     loglik = 0.0
     t, f = record.t, record.f
     for i in range(len(t) - 1):
         # --- predict
-        try:
-            S = np.linalg.cholesky((n + lam) * P)
-        except np.linalg.LinAlgError:
-            P = 0.5 * (P + P.T) + 1e-12 * np.eye(n)
-            S = np.linalg.cholesky((n + lam) * P + 1e-9 * np.eye(n))
-        X = np.concatenate([m[:, None], m[:, None] + S, m[:, None] - S], axis=1)  # (n, 2n+1)
+        X = _sigma_points(m, P, lam)
         p = from_theta(specs, X[ns:])
         p.update({k: np.full(X.shape[1], v) for k, v in fixed.items()})
         with np.errstate(all="ignore"):
@@ -93,19 +84,8 @@ def unscented_kalman_filter(
         # --- update with the measurement at t[i+1]
         Y = np.nan_to_num(np.array([rows[c.kind](Ys[1], Rs[1], c.dof) for c in chans]), nan=0.0, posinf=1e6,
                           neginf=-1e6)
-        y_mean = Y @ wm
-        DY = Y - y_mean[:, None]
-        Syy = (wc * DY) @ DY.T + R
-        Cxy = (wc * D) @ DY.T
-        Sinv = np.linalg.inv(Syy)
-        K = Cxy @ Sinv
-        y = np.array([c.data[i + 1] for c in chans])
-        nu = y - y_mean
-        sign, logdet = np.linalg.slogdet(Syy)
-        loglik += -0.5 * (logdet + float(nu @ Sinv @ nu)) if sign > 0 else -np.inf
-        m = m + K @ nu
-        P = P - K @ Syy @ K.T
-        P = 0.5 * (P + P.T)
+        m, P, ll = _update(m, P, D, Y, np.array([c.data[i + 1] for c in chans]), R, wm, wc)
+        loglik += ll
         if i % thin == 0 or i == len(t) - 2:
             vals = from_theta(specs, m[ns:])
             traj.append({"t": float(t[i + 1]), **{k: float(v) for k, v in vals.items()}})
@@ -113,6 +93,43 @@ def unscented_kalman_filter(
     res = BaselineResult("ukf", est, time.perf_counter() - t0, trajectory=traj)
     res.loglik = float(loglik)
     return res
+
+
+def _weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """Scaled sigma-point spread lambda and the mean and covariance weights (van der Merwe)."""
+    lam = alpha**2 * (n + kappa) - n
+    wm = np.full(2 * n + 1, 1 / (2 * (n + lam)))
+    wc = wm.copy()
+    wm[0] = lam / (n + lam)
+    wc[0] = lam / (n + lam) + 1 - alpha**2 + beta
+    return lam, wm, wc
+
+
+def _sigma_points(m: np.ndarray, P: np.ndarray, lam: float) -> np.ndarray:
+    """(n, 2n+1) sigma points; a covariance that lost definiteness to round-off is repaired."""
+    n = len(m)
+    try:
+        S = np.linalg.cholesky((n + lam) * P)
+    except np.linalg.LinAlgError:
+        P = 0.5 * (P + P.T) + 1e-12 * np.eye(n)
+        S = np.linalg.cholesky((n + lam) * P + 1e-9 * np.eye(n))
+    return np.concatenate([m[:, None], m[:, None] + S, m[:, None] - S], axis=1)
+
+
+def _update(m: np.ndarray, P: np.ndarray, D: np.ndarray, Y: np.ndarray, y: np.ndarray, R: np.ndarray,
+            wm: np.ndarray, wc: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Measurement update from the predicted sigma deviations ``D`` and their measurements
+    ``Y``; returns the new mean, covariance and the innovation log-likelihood term."""
+    y_mean = Y @ wm
+    DY = Y - y_mean[:, None]
+    Syy = (wc * DY) @ DY.T + R
+    Sinv = np.linalg.inv(Syy)
+    K = ((wc * D) @ DY.T) @ Sinv
+    nu = y - y_mean
+    sign, logdet = np.linalg.slogdet(Syy)
+    ll = -0.5 * (logdet + float(nu @ Sinv @ nu)) if sign > 0 else -np.inf
+    P = P - K @ Syy @ K.T
+    return m + K @ nu, 0.5 * (P + P.T), ll
 
 
 def _sensor_rms(record: Record, ch) -> float:
