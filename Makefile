@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # the default index would serve a CUDA build.
 TORCH_INDEX ?=
 
-.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench basin robustness
+.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench basin robustness efficiency
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -59,3 +59,8 @@ basin: $(STAMP)
 
 robustness: $(STAMP)
 	$(PY) experiments/robustness.py $(ARGS)
+
+efficiency: $(STAMP)
+	$(PY) experiments/efficiency.py --cell duffing --noise 0.025 $(ARGS)
+	$(PY) experiments/efficiency.py --cell bouc_wen_x1 --noise 0.025 $(ARGS)
+	$(PY) experiments/efficiency.py --cell bouc_wen_x3 --noise 0.025 $(ARGS)

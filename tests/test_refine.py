@@ -102,7 +102,8 @@ def test_covariance_matches_finite_difference_hessian():
     Hessian of the single-shooting cost over (theta, y0) at the same solution."""
     s = LinearSDOF()
     r = synthetic(s, "kobe", duration=6.0, noise=0.05, data_seed=4)
-    res = refine(s, r, {"guess": {"c": 0.45, "k": 16.0}}, RefineSettings(states="measured", reweight=False))
+    res = refine(s, r, {"guess": {"c": 0.45, "k": 16.0}},
+                 RefineSettings(states="measured", reweight=False, initial_state="free"))
     single = ShootingProblem(s, r.t, r.f, record_channels(r, 1), segment_bounds(r.t, None), 4)
     for ch in single.channels:
         ch.sigma = res.noise_std[ch.name]
@@ -151,6 +152,56 @@ def test_interval_coverage_over_seeds():
         ratios += [res.intervals[n]["rel_std_pct"] / crb[n] for n in truth]
     assert covered >= 20, covered  # of 24 (95 % expects 22.8)
     assert 0.7 < np.median(ratios) < 1.4, ratios
+
+
+def _cut(record, t0: float, t1: float):
+    """The record from its largest displacement within [t0, t1] on, its clock restarted: a
+    structure already moving at its start."""
+    from dataclasses import replace
+
+    i0, i1 = np.searchsorted(record.t, [t0, t1])
+    i = int(i0 + np.argmax(np.abs(record.clean.x[i0:i1, 0])))
+    return replace(record, t=record.t[i:] - record.t[i], f=record.f[i:], x=record.x[i:], v=record.v[i:], clean=None)
+
+
+def test_initial_state_is_held_at_rest_only_when_the_data_allow_it():
+    """auto: a record that starts at rest keeps its initial state at rest (likelihood-ratio
+    test passed, narrower intervals than with the state free); the same structure cut in
+    mid-motion is rejected as at rest, its state estimated, and the estimate stays right."""
+    s = Duffing()
+    truth = {k: v for k, v in s.true_values().items() if k != "m"}
+    r = synthetic(s, "kobe", duration=12.0, noise=0.02, data_seed=7)
+    guess = {"c": 0.55, "k1": 14.0, "k3": 110.0}
+    auto = refine(s, r, {"guess": guess}, RefineSettings(states="measured"))
+    assert auto.initial_state_mode == "rest" and auto.rest_test["at_rest"], auto.rest_test
+    assert auto.initial_state == [0.0] * s.n_state
+    free = refine(s, r, {"guess": guess}, RefineSettings(states="measured", initial_state="free"))
+    assert free.initial_state_mode == "free" and not free.rest_test
+    for n in truth:
+        assert auto.intervals[n]["std"] <= free.intervals[n]["std"] * 1.0001, n
+    moving = _cut(r, 4.0, 8.0)
+    assert abs(moving.x[0, 0]) > 5 * 0.02 * np.std(moving.x)  # plainly not at rest
+    cut = refine(s, moving, {"guess": guess}, RefineSettings(states="measured"))
+    assert cut.initial_state_mode == "free" and not cut.rest_test["at_rest"], cut.rest_test
+    assert any("does not start at rest" in n for n in cut.notes)
+    for n, v in truth.items():
+        lo, hi = cut.intervals[n]["ci95"]
+        assert lo - 2 * (hi - lo) < v < hi + 2 * (hi - lo), (n, v, lo, hi)
+
+
+def test_cramer_rao_with_an_unknown_start_is_wider_on_a_hysteretic_system():
+    """The latent z remembers its start: freeing the initial state costs Bouc-Wen's beta,
+    gamma and n much of their information, a linear system almost none."""
+    bw = BoucWen()
+    r = synthetic(bw, "el_centro", duration=40.0)
+    crb = cramer_rao(bw, bw.true_values(), r.t, r.f, 0.025)
+    for n in crb["names"]:
+        assert crb["std_pct_unknown_start"][n] >= crb["std_pct"][n] * 0.9999, n
+    assert crb["std_pct_unknown_start"]["beta"] > 1.5 * crb["std_pct"]["beta"], crb
+    lin = LinearSDOF()
+    r = synthetic(lin, "kobe", duration=20.0)
+    crb = cramer_rao(lin, lin.true_values(), r.t, r.f, 0.025)
+    assert crb["std_pct_unknown_start"]["k"] < 1.2 * crb["std_pct"]["k"], crb
 
 
 def test_cramer_rao_is_the_shooting_information():

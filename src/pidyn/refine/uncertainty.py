@@ -23,7 +23,7 @@ Z95 = 1.959963984540054
 def estimate_noise(problem: ShootingProblem, r: np.ndarray) -> dict[str, float]:
     """Per-channel noise std from the residuals (r in the channels' current units), corrected
     for the degrees of freedom the fit used."""
-    free = problem.n_theta + problem.ns
+    free = problem.n_theta + (problem.ns if problem.free_state0 else 0)
     m_total = len(r)
     out = {}
     for ch, sl in zip(problem.channels, problem.channel_slices()):

@@ -140,16 +140,9 @@ def _report(cfg: DictConfig, run: _Run, results: list, pidyn_values: dict[str, f
     truths = {n: (record.truth or {}).get(n) for n in names}
     values = dict(refined.params) if refined is not None else dict(pidyn_values)
     final = {**params.as_floats(), **values}
-    table = param_table(values, truths, {n: params.spec(n).unit for n in names},
-                        None if refined is None else refined.intervals)
     notes = [n for r in results for n in (r.notes or [])] + ([] if refined is None else refined.notes)
-    identified = {"system": system.name, "equation": system.describe(final), "params": table, "notes": notes}
-    if hasattr(system, "storey_equations"):
-        identified["storey_equations"] = system.storey_equations(final)
-    if refined is not None:
-        identified["correlation"] = {"names": refined.names, "matrix": refined.correlation}
-        identified["noise_std"] = refined.noise_std
-    write_yaml(run_dir / "identified_params.yaml", identified)
+    units = {n: params.spec(n).unit for n in names}
+    write_yaml(run_dir / "identified_params.yaml", identified_params(system, final, values, truths, units, refined, notes))
     errors, pidyn_errors = relative_errors(values, truths), relative_errors(pidyn_values, truths)
     # the identified model simulated over the whole record (the physics-only check)
     sim = simulate_response(system, final, record, state0=None if refined is None else np.array(refined.initial_state))
@@ -196,6 +189,20 @@ def _report(cfg: DictConfig, run: _Run, results: list, pidyn_values: dict[str, f
     _figures(run, results, truths, baselines, refined, sim, metrics)
     _log_summary(system.describe(final), errors, pidyn_errors, metrics, run_dir)
     return metrics
+
+
+def identified_params(system: StructuralSystem, final: dict[str, float], values: dict[str, float],
+                      truths: dict[str, float | None], units: dict[str, str], refined: Any, notes: list[str]) -> dict:
+    """The content of ``identified_params.yaml``: the equation, every estimated parameter with
+    its interval (and its error when the truth is known), the notes, the correlations."""
+    table = param_table(values, truths, units, None if refined is None else refined.intervals)
+    out = {"system": system.name, "equation": system.describe(final), "params": table, "notes": notes}
+    if hasattr(system, "storey_equations"):
+        out["storey_equations"] = system.storey_equations(final)
+    if refined is not None:
+        out["correlation"] = {"names": refined.names, "matrix": refined.correlation}
+        out["noise_std"] = refined.noise_std
+    return out
 
 
 def _refined_metrics(refined: Any, names: list[str], truths: dict[str, float | None]) -> dict[str, Any]:
