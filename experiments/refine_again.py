@@ -45,7 +45,7 @@ def _settings(saved: dict | str | None, overrides: list[str]) -> dict:
 def refine_job(job: Path, overrides: list[str]) -> dict:
     from pidyn.models.identify import WindowResult
     from pidyn.tasks.train import (
-        _refined_metrics,
+        refined_metrics,
         build_record,
         channel_nrmse,
         identified_params,
@@ -82,7 +82,7 @@ def refine_job(job: Path, overrides: list[str]) -> dict:
     metrics.update({"params": values, "error_pct": errors, "max_error_pct": max(errors.values()) if errors else None,
                     "mean_error_pct": float(np.mean(list(errors.values()))) if errors else None,
                     "sim_nrmse": channel_nrmse(sim, record), "notes": notes, "refine": "multiple_shooting"})
-    metrics.update(_refined_metrics(refined, names, truths))
+    metrics.update(refined_metrics(refined, names, truths))
     write_json(job / "metrics.json", metrics)
     write_json(job / "refinement.json", refined.to_dict())
     units = {s.name: s.unit for s in system.param_specs()}

@@ -294,9 +294,9 @@ class SubperiodIdentifier:
         )
 
     def _log_window(self, r: WindowResult) -> None:
-        from pidyn.models.lit_module import _tensorboard
+        from pidyn.models.lit_module import tensorboard_writer
 
-        tb = _tensorboard(self.module.logger) if self.module._trainer is not None else None
+        tb = tensorboard_writer(self.module.logger)  # None when no trainer or no TensorBoard
         if tb is None:
             return
         step = int(self.module.iteration)

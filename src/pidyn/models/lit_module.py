@@ -178,7 +178,7 @@ class PIDynNetModule(L.LightningModule):
             self.trainer.should_stop = True
 
     def _tb_scalars(self) -> None:
-        tb = _tensorboard(self.logger)
+        tb = tensorboard_writer(self.logger)
         if tb is None:
             return
         step = int(self.iteration)
@@ -204,7 +204,7 @@ class PIDynNetModule(L.LightningModule):
         return torch.stack([from_raw(s, raw[:, i]) for i, s in enumerate(specs)], dim=1)
 
 
-def _tensorboard(logger: Any) -> Any:
+def tensorboard_writer(logger: Any) -> Any:
     if logger is None:
         return None
     exp = getattr(logger, "experiment", None)

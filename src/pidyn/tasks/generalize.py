@@ -18,7 +18,7 @@ from pidyn.excitation.ground_motion import load_record, prepare
 from pidyn.models.predict import pearson, predict_response
 from pidyn.reporting import write_json
 from pidyn.simulate import simulate
-from pidyn.tasks.train import _tb_figures, identify
+from pidyn.tasks.train import identify, tb_figures
 
 log = logging.getLogger(__name__)
 
@@ -92,7 +92,7 @@ def generalize(cfg: DictConfig) -> dict[str, Any]:
     write_json(run_dir / "generalization.json", summary)
     _write_markdown(run_dir / "generalization.md", cfg, df, summary)
     _figures(run_dir / "figures", record, module, df, _examples(pred_dir, df))
-    _tb_figures(obj["logger"], run_dir / "figures", int(module.iteration), {})
+    tb_figures(obj["logger"], run_dir / "figures", int(module.iteration), {})
     log.info("generalisation: %d cases, share gamma >= 0.95: PIDynNet %.2f, simulation %.2f", len(df), share,
              summary["share_gamma_ge_0.95_simulation"])
     return summary

@@ -170,7 +170,7 @@ def _report(cfg: DictConfig, run: _Run, results: list, pidyn_values: dict[str, f
         "iterations": int(run.module.iteration),
     }
     if refined is not None:
-        metrics.update(_refined_metrics(refined, names, truths))
+        metrics.update(refined_metrics(refined, names, truths))
         write_json(run_dir / "refinement.json", refined.to_dict())
         torch.save({"names": names, "values": values, "ci95": metrics["ci95"]}, run_dir / "checkpoints" / "refined.pt")
     if baselines:
@@ -205,7 +205,7 @@ def identified_params(system: StructuralSystem, final: dict[str, float], values:
     return out
 
 
-def _refined_metrics(refined: Any, names: list[str], truths: dict[str, float | None]) -> dict[str, Any]:
+def refined_metrics(refined: Any, names: list[str], truths: dict[str, float | None]) -> dict[str, Any]:
     out: dict[str, Any] = {"ci95": {n: refined.intervals[n]["ci95"] for n in names},
                            "std": {n: refined.intervals[n]["std"] for n in names}}
     if truths and all(truths.values()):
@@ -232,7 +232,7 @@ def _figures(run: _Run, results: list, truths: dict, baselines: list[dict], refi
     series = {f"measured {label}": meas[:, floor - 1], "identified model (simulated)": sim[kind][:, floor - 1]}
     plot_response(fig_dir / "response.png", record.t, series,
                   title=f"{system.name}: NRMSE {metrics['sim_nrmse'][label]:.3g} ({label})")
-    _tb_figures(run.logger, fig_dir, int(run.module.iteration), metrics, refined)
+    tb_figures(run.logger, fig_dir, int(run.module.iteration), metrics, refined)
 
 
 def _log_summary(equation: str, errors: dict, pidyn_errors: dict, metrics: dict, run_dir: Path) -> None:
@@ -490,7 +490,7 @@ def _quiet_framework_warnings() -> None:
         warnings.filterwarnings("ignore", message=msg)
 
 
-def _tb_figures(logger: Any, fig_dir: Path, step: int, metrics: dict, refined: Any = None) -> None:
+def tb_figures(logger: Any, fig_dir: Path, step: int, metrics: dict, refined: Any = None) -> None:
     exp = getattr(logger, "experiment", None) if logger is not None else None
     if exp is None or not hasattr(exp, "add_image"):
         return
