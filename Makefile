@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # the default index would serve a CUDA build.
 TORCH_INDEX ?=
 
-.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench basin robustness efficiency
+.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench basin robustness efficiency benchmarks
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -64,3 +64,9 @@ efficiency: $(STAMP)
 	$(PY) experiments/efficiency.py --cell duffing --noise 0.025 $(ARGS)
 	$(PY) experiments/efficiency.py --cell bouc_wen_x1 --noise 0.025 $(ARGS)
 	$(PY) experiments/efficiency.py --cell bouc_wen_x3 --noise 0.025 $(ARGS)
+
+benchmarks: $(STAMP)
+	$(PY) diagnose.py data=bouc_wen_benchmark system=linear hydra.run.dir=outputs/bouc_wen_benchmark
+	$(PY) experiments/benchmark_test_signals.py bouc_wen outputs/bouc_wen_benchmark
+	$(PY) diagnose.py data=silverbox system=linear hydra.run.dir=outputs/silverbox
+	$(PY) experiments/benchmark_test_signals.py silverbox outputs/silverbox

@@ -40,10 +40,15 @@ CELLS = {
 
 
 def _system(name: str):
+    """The system exactly as ``python train.py system=<name>`` builds it (truth and guesses)."""
     import hydra
-    from omegaconf import OmegaConf
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
 
-    return hydra.utils.instantiate(OmegaConf.load(ROOT / "conf" / "system" / f"{name}.yaml"))
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose("train", overrides=[f"system={name}"])
+    return hydra.utils.instantiate(cfg.system)
 
 
 def draw(cell: dict, noise: float, seed: int, duration: float, dt: float) -> dict:

@@ -50,11 +50,12 @@ def test_config_typos_fail_loudly(bad, tmp_path):
 
 
 @pytest.mark.parametrize("overrides", [[], ["data=silverbox", "system=linear"],
+                                       ["data=bouc_wen_benchmark", "system=linear"],
                                        ["data=csv", "data.path=x.csv", "data.mass=2.0"]])
 def test_diagnose_configs_compose(overrides, tmp_path):
     cfg = make_cfg(overrides, tmp_path, config_name="diagnose")
     assert cfg.task_name == "diagnose" and cfg.diagnosis.thresholds.min_delta_bic > 0
-    if "data=silverbox" in overrides:
+    if "data=silverbox" in overrides or "data=bouc_wen_benchmark" in overrides:
         assert cfg.data.mass is None and cfg.model.schedule.max_windows == 10
         assert cfg.diagnosis.polish_seconds == 10.0
     else:

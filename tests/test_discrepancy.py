@@ -196,6 +196,69 @@ def test_signed_effects_are_found_with_their_sign(effect, key):
         assert spec.transform == "identity" and spec.init < 0
 
 
+def test_bouc_wen_benchmark_screening_names_the_hysteresis():
+    """The Bouc-Wen benchmark (force in, displacement out, mass unknown): starting from a
+    linear oscillator, the screening names the hysteresis; the term it would add lets beta
+    and gamma take either sign (the benchmark's own x'|z|^n coefficient is negative)."""
+    from pidyn.data.measured.bouc_wen_benchmark import load_bouc_wen_benchmark
+    from pidyn.discrepancy.residual import dominant_period
+
+    r = load_bouc_wen_benchmark()
+    fit_end = r.meta["split"]["fit"][1]
+    m = r.t <= fit_end
+    period = dominant_period(r.t[m], r.x[m])
+    xs, vs = smooth_signals(r.t, r.x[:, 0], None, period)
+    s = Signals(r.t, xs, vs, 1.0, 1.0, "k", t_fit_end=fit_end)
+    sys_ = LinearSDOF(excitation="force", identify_mass=True)
+    sc = screen(sys_, {"m": 1.0, "c": 1.0, "k": 1.0}, s, r.f, r.x[:, 0], WeakForm.for_record(r.t, period), fit_end,
+                mass_known=False)
+    assert sc.cause == "hysteresis", [row["effect"] for row in sc.ranking]
+    params = sc.ranking[0]["parameters"]
+    specs = {sp.name: sp for sp in get_effect("hysteresis").term(params, s.context()).specs()}
+    assert specs["beta"].lower < 0 and specs["gamma"].lower < 0
+    assert specs["beta"].lower < -1100 < specs["beta"].upper  # the benchmark's own beta fits inside
+
+
+def test_the_bouc_wen_benchmark_data_match_its_equations():
+    """The shipped test signal against the benchmark's equations in the project's notation
+    (PROVENANCE.md): simulated from rest, one repeated period of the validation multisine
+    matches its output to about 1 %."""
+    from pidyn.data.measured.bouc_wen_benchmark import FS, PERIOD as P, load_bouc_wen_benchmark, load_bouc_wen_validation
+    from pidyn.discrepancy.extend import extended_system
+    from pidyn.integrate import rk4
+
+    train = load_bouc_wen_benchmark()
+    assert len(train.t) == 5 * P and abs(train.meta["dt"] - 1 / FS) < 1e-15
+    assert train.meta["split"]["fit"][1] < train.meta["split"]["heldout"][0]
+    rec = load_bouc_wen_validation("val_multisine")
+    system = extended_system(LinearSDOF(mass=2.0, excitation="force", identify_mass=True), "hysteresis",
+                             {"kh": 5e4, "beta": -1100.0, "gamma": 800.0, "n": 1.0}, {})
+    truth = {"m": 2.0, "c": 10.0, "k": 5e4, "kh": 5e4, "beta": -1100.0, "gamma": 800.0, "n": 1.0}
+    assert "+ 1100 x' |z|^1" in system.describe(truth)
+    f = np.tile(rec.f, 3)
+    Y, _ = rk4(system, truth, np.arange(len(f)) / FS, f, np.zeros((1, system.n_state)), substeps=4)
+    y = rec.x[:, 0]
+    nrms = np.sqrt(np.mean((Y[-P:, 0, 0] - y) ** 2)) / np.std(y)
+    assert nrms < 0.02, nrms
+    with pytest.raises(Exception, match="unknown signal"):
+        load_bouc_wen_validation("val_chirp")
+
+
+def test_the_latent_state_along_the_measured_motion_matches_the_ode():
+    """An extended model with a latent term (a hysteresis found in an earlier step) is screened
+    again: its z is integrated along the measured motion, as the simulation has it."""
+    from pidyn.discrepancy.screening import latent_path
+
+    gm = prepare("el_centro", duration=15.0, dt=0.01)
+    sys_ = BoucWen()
+    p = sys_.true_values()
+    tr = simulate(sys_, p, gm, gm.t)
+    s = Signals(gm.t, tr.x[:, 0], tr.v[:, 0], 1.0, 12.0, "k")
+    term = next(t for t in sys_.terms if t.n_latent)
+    z = latent_path(term, s, p)[:, 0]
+    assert np.max(np.abs(z - tr.z[:, 0])) < 2e-3 * np.max(np.abs(tr.z))
+
+
 def test_a_sign_physics_fixes_cannot_be_flipped():
     with pytest.raises(ValueError, match="fixed by physics"):
         hidden_case("coulomb_friction", 1, sign=-1)

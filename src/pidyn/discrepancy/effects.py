@@ -233,8 +233,10 @@ class Hysteresis(Effect):
         return out
 
     def term(self, p, s):
-        return BoucWenHysteresis(p["kh"], p["beta"], p["gamma"], p["n"], param="kh",
-                                 shape_scale=max(abs(p["beta"]) + abs(p["gamma"]), 1e-12) / 2, gamma_lower=0.0)
+        # beta and gamma with either sign: which loop shape (softening, hardening) is a finding
+        S = max(abs(p["beta"]) + abs(p["gamma"]), 1e-12) / 2
+        return BoucWenHysteresis(p["kh"], p["beta"], p["gamma"], p["n"], param="kh", shape_scale=S,
+                                 gamma_lower=-10.0 * S, beta_lower=-10.0 * S)
 
     def sample(self, rng, s, sign=None):
         n = float(rng.choice([1.0, 2.0]))

@@ -61,13 +61,35 @@ def nominal_columns(system: SDOFSystem, s: Signals, values: dict[str, float]) ->
     names, cols = [], []
     remainder = np.zeros_like(s.x)
     for term in system.terms:
-        if term.n_latent or len(term.linear) != 1 or not _is_linear_only(term):
+        if term.n_latent:  # e.g. a hysteresis found in an earlier step: its z along the measured motion
+            remainder = remainder + term.force(s.t, s.x, s.v, latent_path(term, s, values), values)
+            continue
+        if len(term.linear) != 1 or not _is_linear_only(term):
             remainder = remainder + term.force(s.t, s.x, s.v, None, values)
             continue
         name = term.linear[0]
         cols.append(term.force(s.t, s.x, s.v, None, {**values, name: 1.0}))
         names.append(name)
     return names, np.stack(cols, axis=1) if cols else np.zeros((len(s.x), 0)), remainder
+
+
+def latent_path(term, s: Signals, values: dict[str, float], substeps: int = 4) -> np.ndarray:
+    """A latent state (N, n_latent) integrated along the measured x, x' from zero (Heun's
+    rule, x and x' interpolated linearly between samples): what the term's z was, given the
+    motion the structure made."""
+    z = np.zeros((len(s.t), term.n_latent))
+    zi = np.zeros(term.n_latent)
+    for i in range(len(s.t) - 1):
+        h = (s.t[i + 1] - s.t[i]) / substeps
+        for j in range(substeps):
+            a, b = j / substeps, (j + 1) / substeps
+            x0, v0 = s.x[i] + a * (s.x[i + 1] - s.x[i]), s.v[i] + a * (s.v[i + 1] - s.v[i])
+            x1, v1 = s.x[i] + b * (s.x[i + 1] - s.x[i]), s.v[i] + b * (s.v[i + 1] - s.v[i])
+            k1 = np.asarray(term.latent_rate(s.t[i], x0, v0, zi, values), float).reshape(term.n_latent)
+            k2 = np.asarray(term.latent_rate(s.t[i], x1, v1, zi + h * k1, values), float).reshape(term.n_latent)
+            zi = zi + 0.5 * h * (k1 + k2)
+        z[i + 1] = zi
+    return z
 
 
 def weak_system(system: SDOFSystem, values: dict[str, float], s: Signals, f: np.ndarray, x_raw: np.ndarray,

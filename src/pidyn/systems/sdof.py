@@ -124,9 +124,9 @@ class SDOFSystem(StructuralSystem):
         eqs = [f"{lhs} = {rhs}"]
         for t in self.terms:
             if isinstance(t, BoucWenHysteresis):
-                eqs.append(
-                    f"z' = x' - {p['gamma']:.5g} |x'| |z|^({p['n']:.5g}-1) z - {p['beta']:.5g} x' |z|^{p['n']:.5g}"
-                )
+                g, b, n = p["gamma"], p["beta"], p["n"]
+                eqs.append(f"z' = x' {'-' if g >= 0 else '+'} {abs(g):.5g} |x'| |z|^({n:.5g}-1) z "
+                           f"{'-' if b >= 0 else '+'} {abs(b):.5g} x' |z|^{n:.5g}")
         return "; ".join(eqs)
 
 
