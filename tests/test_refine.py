@@ -193,13 +193,13 @@ def test_cramer_rao_with_an_unknown_start_is_wider_on_a_hysteretic_system():
     """The latent z remembers its start: freeing the initial state costs Bouc-Wen's beta,
     gamma and n much of their information, a linear system almost none."""
     bw = BoucWen()
-    r = synthetic(bw, "el_centro", duration=40.0)
+    r = synthetic(bw, "el_centro", duration=20.0)
     crb = cramer_rao(bw, bw.true_values(), r.t, r.f, 0.025)
     for n in crb["names"]:
         assert crb["std_pct_unknown_start"][n] >= crb["std_pct"][n] * 0.9999, n
     assert crb["std_pct_unknown_start"]["beta"] > 1.5 * crb["std_pct"]["beta"], crb
     lin = LinearSDOF()
-    r = synthetic(lin, "kobe", duration=20.0)
+    r = synthetic(lin, "kobe", duration=10.0)
     crb = cramer_rao(lin, lin.true_values(), r.t, r.f, 0.025)
     assert crb["std_pct_unknown_start"]["k"] < 1.2 * crb["std_pct"]["k"], crb
 
