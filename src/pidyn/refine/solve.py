@@ -82,6 +82,52 @@ def solve_penalty(problem: ShootingProblem, u0: np.ndarray, mu0: float = 100.0, 
     return u, nfev, njev
 
 
+def _max_abs(a: np.ndarray) -> float:
+    return float(np.max(np.abs(a))) if a.size else 0.0
+
+
+def _damped_step(problem: ShootingProblem, u: np.ndarray, lin: tuple, lam: float, rho: float,
+                 defect_slack: float) -> tuple[np.ndarray | None, float]:
+    """One accepted step d of stage 2 from ``u`` (None when no damping up to 1e12 gives one),
+    and the damping it took. ``lin`` = (r, J, c, C) at ``u``."""
+    r, J, c, C = lin
+    if C.shape[0]:  # restore the linearised continuity exactly, move within its null space
+        dp = np.linalg.lstsq(C, -c, rcond=None)[0]
+        N = null_space(C)
+    else:
+        dp, N = np.zeros(u.size), np.eye(u.size)
+    A = J @ N
+    g = A.T @ (r + J @ dp)
+    H = A.T @ A
+    D = np.diag(np.maximum(np.diag(H), 1e-12 * max(float(np.max(np.diag(H), initial=0.0)), 1e-300)))
+    cost0, merit0 = float(r @ r), float(r @ r) + rho * float(c @ c)
+    slack = max(defect_slack, _max_abs(c))
+
+    def acceptable(v: np.ndarray) -> tuple[bool, np.ndarray]:
+        # the merit falls, or (filter) the misfit falls while the defects stay within the
+        # slack that the next step's restoration closes
+        rn, cn = problem.residuals(v)
+        ok = (float(rn @ rn) + rho * float(cn @ cn) <= merit0 * (1 + 1e-12)
+              or (float(rn @ rn) <= cost0 * (1 + 1e-12) and _max_abs(cn) <= slack))
+        return ok, cn
+
+    while lam <= 1e12:
+        try:
+            xi = np.linalg.solve(H + lam * D, -g)
+        except np.linalg.LinAlgError:
+            xi = np.linalg.lstsq(H + lam * D, -g, rcond=None)[0]
+        d = dp + N @ xi
+        ok, cn = acceptable(u + d)
+        if ok:
+            return d, lam
+        if C.shape[0]:  # second-order correction: the step's own curvature reopens the defects
+            d = d + np.linalg.lstsq(C, -cn, rcond=None)[0]
+            if acceptable(u + d)[0]:
+                return d, lam
+        lam *= 4.0
+    return None, lam
+
+
 def solve_constrained(problem: ShootingProblem, u0: np.ndarray, max_steps: int = 40, step_tol: float = 1e-10,
                       defect_tol: float = 1e-8, defect_slack: float = 1e-7,
                       history: list[dict] | None = None) -> tuple[np.ndarray, int, bool]:
@@ -94,67 +140,28 @@ def solve_constrained(problem: ShootingProblem, u0: np.ndarray, max_steps: int =
     second-order correction before the damping grows."""
     u = np.asarray(u0, float).copy()
     rho = 1e12 * max(len(problem.sel_s) / max(problem.S, 1), 1.0)
-    lam = 1e-6
-    converged = False
-    steps = 0
-    r, J, c, C = problem.linearize(u)
+    lam, converged, steps = 1e-6, False, 0
+    lin = problem.linearize(u)
     for steps in range(1, max_steps + 1):
-        merit0 = float(r @ r) + rho * float(c @ c)
-        if C.shape[0]:
-            dp = np.linalg.lstsq(C, -c, rcond=None)[0]
-            N = null_space(C)
-        else:
-            dp, N = np.zeros(u.size), np.eye(u.size)
-        A = J @ N
-        g = A.T @ (r + J @ dp)
-        H = A.T @ A
-        D = np.maximum(np.diag(H), 1e-12 * max(float(np.max(np.diag(H), initial=0.0)), 1e-300))
-        cost0, dmax0 = float(r @ r), (float(np.max(np.abs(c))) if c.size else 0.0)
-
-        def acceptable(rn: np.ndarray, cn: np.ndarray) -> bool:
-            # the merit falls, or (filter) the misfit falls while the defects stay within the
-            # slack that the next step's restoration closes
-            dn = float(np.max(np.abs(cn))) if cn.size else 0.0
-            return (float(rn @ rn) + rho * float(cn @ cn) <= merit0 * (1 + 1e-12)
-                    or (float(rn @ rn) <= cost0 * (1 + 1e-12) and dn <= max(defect_slack, dmax0)))
-
-        moved = False
-        while lam <= 1e12:
-            try:
-                xi = np.linalg.solve(H + lam * np.diag(D), -g)
-            except np.linalg.LinAlgError:
-                xi = np.linalg.lstsq(H + lam * np.diag(D), -g, rcond=None)[0]
-            d = dp + N @ xi
-            un = u + d
-            rn, cn = problem.residuals(un)
-            if acceptable(rn, cn):
-                moved = True
-                break
-            if C.shape[0]:  # second-order correction: the step's own curvature reopens the defects
-                un2 = un + np.linalg.lstsq(C, -cn, rcond=None)[0]
-                rn2, cn2 = problem.residuals(un2)
-                if acceptable(rn2, cn2):
-                    d, un, moved = un2 - u, un2, True
-                    break
-            lam *= 4.0
+        r, J, c, _ = lin
+        d, lam = _damped_step(problem, u, lin, lam, rho, defect_slack)
+        if d is None:  # no damping lowers the merit: stay, converged if only round-off is left to gain
+            converged = _max_abs(c) < defect_tol
+            if history is not None:
+                history.append({"stage": "constrained", "cost": float(r @ r), "max_defect": _max_abs(c),
+                                "step": 0.0, "lam": lam})
+            break
         rp = r + J @ d
         decrease = float(r @ r - rp @ rp)  # the model's predicted decrease of the misfit
-        if not moved:  # no damping lowers the merit: stay, converged if only round-off is left to gain
-            dmax = float(np.max(np.abs(c))) if c.size else 0.0
-            converged = dmax < defect_tol
-            if history is not None:
-                history.append({"stage": "constrained", "cost": float(r @ r), "max_defect": dmax, "step": 0.0,
-                                "lam": lam})
-            break
-        u = un
+        u = u + d
         lam = max(lam / 3.0, 1e-12)
-        r, J, c, C = problem.linearize(u)
-        dmax = float(np.max(np.abs(c))) if c.size else 0.0
+        lin = problem.linearize(u)
+        r, c = lin[0], lin[2]
         if history is not None:
-            history.append({"stage": "constrained", "cost": float(r @ r), "max_defect": dmax,
-                            "step": float(np.max(np.abs(d))), "lam": lam})
-        small = float(np.max(np.abs(d))) < step_tol * max(1.0, float(np.max(np.abs(u))))
-        if (small or abs(decrease) < 1e-10 * (1.0 + float(r @ r))) and dmax < defect_tol:
+            history.append({"stage": "constrained", "cost": float(r @ r), "max_defect": _max_abs(c),
+                            "step": _max_abs(d), "lam": lam})
+        small = _max_abs(d) < step_tol * max(1.0, _max_abs(u))
+        if (small or abs(decrease) < 1e-10 * (1.0 + float(r @ r))) and _max_abs(c) < defect_tol:
             converged = True
             break
     return u, steps, converged
