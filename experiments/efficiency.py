@@ -42,13 +42,9 @@ CELLS = {
 def _system(name: str):
     """The system exactly as ``python train.py system=<name>`` builds it (truth and guesses)."""
     import hydra
-    from hydra import compose, initialize_config_dir
-    from hydra.core.global_hydra import GlobalHydra
+    from basin import compose  # the experiments' one way to compose the train config
 
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
-        cfg = compose("train", overrides=[f"system={name}"])
-    return hydra.utils.instantiate(cfg.system)
+    return hydra.utils.instantiate(compose([f"system={name}"], ROOT / "outputs" / "efficiency").system)
 
 
 def draw(cell: dict, noise: float, seed: int, duration: float, dt: float) -> dict:
