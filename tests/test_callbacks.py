@@ -1,3 +1,5 @@
+import math
+
 import pytest
 import torch
 
@@ -40,6 +42,21 @@ def test_literal_clamp_locks_a_flat_trajectory():
     clamp.update_from_trajectory(["c"], torch.tensor([[0.7]] * 4), {"c": 0.7})
     lo, hi = clamp.bounds["c"]
     assert lo == hi == pytest.approx(0.7)
+
+
+def test_clamp_box_opens_for_a_parameter_the_windows_did_not_determine():
+    """A flat trajectory of an undetermined k3 (posterior std 2 in log k3) must not lock it: the
+    box spans exp(+-6) around it, in its log coordinate; a determined c keeps its tight box."""
+    m = module()
+    specs = {n: m.net.params.spec(n) for n in ("c", "k3")}
+    clamp = ParameterClamp(n_sigma=3.0, min_rel_width=0.05)
+    flat = torch.tensor([[0.5, 50.0]] * 5)
+    clamp.update_from_trajectory(["c", "k3"], flat, {"c": 0.5, "k3": 50.0}, {"c": 1e-4, "k3": 2.0}, specs)
+    lo, hi = clamp.bounds["k3"]
+    assert lo == pytest.approx(50.0 * math.exp(-6.0), rel=1e-6) and hi == pytest.approx(50.0 * math.exp(6.0), rel=1e-6)
+    assert clamp.bounds["c"] == pytest.approx((0.475, 0.525))  # the floor; 3 x 1e-4 in log c is inside it
+    m.net.params.set_values({"c": 0.5, "k3": 400.0})
+    assert clamp.apply(m) == 0  # the truth of k3 is reachable
 
 
 def test_early_stopping_eq10_fixed_reference():

@@ -135,6 +135,15 @@ class PhysicalParameters(nn.Module):
         return torch.stack([self.raw[n] for n in names])
 
 
+def in_range(spec: ParamSpec, value: float) -> bool:
+    """Whether ``value`` is a value the parameter's transform can represent (inside its bounds)."""
+    if spec.transform == "log" and value <= 0:
+        return False
+    lo = spec.lower if spec.lower is not None else -float("inf")
+    hi = spec.upper if spec.upper is not None else float("inf")
+    return lo < value < hi
+
+
 def clip_to_bounds(spec: ParamSpec, value: float) -> float:
     lo = spec.lower if spec.lower is not None else -math.inf
     hi = spec.upper if spec.upper is not None else math.inf

@@ -12,7 +12,7 @@ from torch import nn
 
 from pidyn.data.windows import Window
 from pidyn.nets import TaylorMLP
-from pidyn.params import PhysicalParameters
+from pidyn.params import PhysicalParameters, in_range
 from pidyn.systems.base import Kinematics, StructuralSystem
 from pidyn.systems.lstsq import forward_jacobian, solve_linear_params
 
@@ -309,7 +309,7 @@ class PIDynNet(nn.Module):
         while names or always:
             std: dict[str, float] = {}
             est = solve(names, std)
-            bad = {n: v for n, v in est.items() if not _in_range(self.params.spec(n), v)
+            bad = {n: v for n, v in est.items() if not in_range(self.params.spec(n), v)
                    or std.get(n, 0.0) > max_rel_std * abs(v)}
             if not bad:
                 self.params.set_values(est)
@@ -375,11 +375,3 @@ def _masked_mse(pred: torch.Tensor, meas: torch.Tensor, scale: torch.Tensor) -> 
         return (((pred - meas) / scale) ** 2).mean()
     err = torch.where(seen, (pred - torch.nan_to_num(meas)) / scale, torch.zeros_like(pred))
     return (err**2).sum() / seen.sum().clamp_min(1)
-
-
-def _in_range(spec, value: float) -> bool:
-    if spec.transform == "log" and value <= 0:
-        return False
-    lo = spec.lower if spec.lower is not None else -float("inf")
-    hi = spec.upper if spec.upper is not None else float("inf")
-    return lo < value < hi
