@@ -158,6 +158,15 @@ def main() -> None:
                 print(f"{system:9s} {record:14s} noise {noise:<6g} final ok {r.get('final_ok')} "
                       f"PIDynNet ok {r.get('pidynnet_ok')} {r.get('error', '')[:80]}", flush=True)
     df = pd.DataFrame(rows)
+    previous = a.out.with_suffix(".csv")
+    if previous.exists() and not a.finished_only:
+        # the summary covers every case run so far: rows of cases not run now are kept as they were
+        old = pd.read_csv(previous)
+        ran = set(zip(df["system"], df["record"], df["noise"].astype(float)))
+        old = old[[(s, r, float(n)) not in ran for s, r, n in zip(old["system"], old["record"], old["noise"])]]
+        df = pd.concat([old, df], ignore_index=True)
+        order = {s: i for i, s in enumerate(SYSTEMS)}
+        df = df.sort_values("system", key=lambda c: c.map(order), kind="stable").reset_index(drop=True)
     a.out.parent.mkdir(parents=True, exist_ok=True)
     df.drop(columns=[c for c in ("notes", "truth", "crb_std_pct") if c in df], errors="ignore").to_csv(
         a.out.with_suffix(".csv"), index=False)
@@ -167,7 +176,8 @@ def main() -> None:
 def write_md(df: pd.DataFrame, path: Path, a) -> None:
     lines = ["# Robustness across records\n",
              f"Command: `python experiments/robustness.py --systems {' '.join(a.systems)} --noise "
-             f"{' '.join(f'{n:g}' for n in a.noise)}`  ",
+             f"{' '.join(f'{n:g}' for n in a.noise)}` (systems run by earlier invocations are kept from the CSV: "
+             f"{', '.join(sorted(set(df['system']) - set(a.systems))) or 'none'})  ",
              f"Machine: {platform.machine()}, one thread. Records: {len(a.records)} shipped ground motions, strong part "
              f"({DURATION:g} s from 2 s before 5 % Arias intensity), PGA {PGA:g} m/s^2. PIDynNet schedule: "
              f"{' '.join(SHORT)}. Success: max error <= 1 % noise-free, every parameter within 3x its Cramer-Rao std "
