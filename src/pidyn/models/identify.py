@@ -53,7 +53,7 @@ class Schedule:
     fusion: str = "information"  # information | last (paper: carry the last window's values)
     max_windows: int | None = None
     transfer_lnn: bool = True  # LNN <- RPN after pretraining (paper's transfer-learning init)
-    latent_init: bool = True  # with ls_init: start latent shape parameters (beta, gamma, n) by variable projection
+    latent_init: bool = False  # with ls_init: start latent shape parameters (beta, gamma, n) by variable projection
 
     def __post_init__(self) -> None:
         """A misspelled option fails here, naming the valid ones, instead of silently changing behaviour."""
