@@ -159,7 +159,7 @@ def main() -> None:
                       f"PIDynNet ok {r.get('pidynnet_ok')} {r.get('error', '')[:80]}", flush=True)
     df = pd.DataFrame(rows)
     previous = a.out.with_suffix(".csv")
-    if previous.exists() and not a.finished_only:
+    if previous.exists():
         # the summary covers every case run so far: rows of cases not run now are kept as they were
         old = pd.read_csv(previous)
         ran = set(zip(df["system"], df["record"], df["noise"].astype(float)))
@@ -185,7 +185,8 @@ def write_md(df: pd.DataFrame, path: Path, a) -> None:
              "| system | noise % | cases | PIDynNet alone | final (refined) | EE | SINDy | OE | UKF | final worse than best baseline beyond its interval |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     if a.finished_only:
-        lines.insert(3, f"Cases run: {len(df)} of {len(a.systems) * len(a.records) * len(a.noise)} "
+        mine = df[df["system"].isin(a.systems) & df["noise"].astype(float).isin([float(n) for n in a.noise])]
+        lines.insert(3, f"Cases of {', '.join(a.systems)} run: {len(mine)} of {len(a.systems) * len(a.records) * len(a.noise)} "
                         "(an interrupted study; `make robustness` runs the rest, finished cases are kept).\n")
     for (system, noise), g in df.groupby(["system", "noise"], sort=False):
         def rate(col: str) -> str:

@@ -16,7 +16,7 @@ from pidyn.data.sources import synthetic_from_motion  # noqa: E402
 from pidyn.excitation import prepare  # noqa: E402
 from pidyn.models.lit_module import PIDynNetModule  # noqa: E402
 from pidyn.models.pidynnet import PIDynNet  # noqa: E402
-from pidyn.models.predict import pearson, predict_response  # noqa: E402
+from pidyn.models.predict import PredictSettings, pearson, predict_response  # noqa: E402
 from pidyn.nets import TaylorMLP  # noqa: E402
 from pidyn.systems import Duffing  # noqa: E402
 
@@ -45,7 +45,7 @@ def test_physics_only_prediction_tracks_the_true_response():
     module = PIDynNetModule(PIDynNet(s, TaylorMLP()))  # parameters at their (true) initial values
     module.net.params.set_values(s.true_values())
     before = {k: v.clone() for k, v in module.net.rpn.state_dict().items()}
-    pred = predict_response(module, truth, trainer, iterations=300, x_scale=0.1, v_scale=0.5)
+    pred = predict_response(module, truth, trainer, PredictSettings(iterations=300), x_scale=0.1, v_scale=0.5)
     strong = truth.t > 7.0
     assert pearson(pred.x[strong], truth.x[strong]) > 0.9
     assert np.all(pred.x[truth.t < 0.01] == pytest.approx(0.0, abs=1e-6))  # starts at rest, exactly
@@ -60,9 +60,9 @@ def test_lbfgs_finish_solves_a_strongly_nonlinear_window_that_adam_alone_does_no
     leaves the forward problem unsolved, and the wrong state is handed on."""
     module, truth = duffing_with_true_params(scale=1.5, duration=12.0)
     strong = truth.t > 6.0
-    kw = dict(iterations=300, x_scale=0.1, v_scale=0.5, split_tol=float("inf"))  # no window splitting here
-    adam = predict_response(module, truth, trainer, lbfgs_steps=0, **kw)
-    both = predict_response(module, truth, trainer, lbfgs_steps=30, **kw)
+    kw = dict(iterations=300, split_tol=float("inf"))  # no window splitting here
+    adam = predict_response(module, truth, trainer, PredictSettings(lbfgs_steps=0, **kw), x_scale=0.1, v_scale=0.5)
+    both = predict_response(module, truth, trainer, PredictSettings(lbfgs_steps=30, **kw), x_scale=0.1, v_scale=0.5)
     g_adam, g_both = pearson(adam.x[strong], truth.x[strong]), pearson(both.x[strong], truth.x[strong])
     assert g_both > 0.99, (g_adam, g_both)
     assert g_adam < g_both
@@ -97,15 +97,16 @@ def test_a_window_left_unsolved_is_solved_again_as_two_halves():
     """With a tolerance no window can meet, every window is halved down to min_window, the
     halves tile the record without gap or overlap, and the state is handed across them."""
     module, truth = duffing_with_true_params(scale=0.5, duration=3.0)
-    pred = predict_response(module, truth, trainer, iterations=5, window_length=1.5, lbfgs_steps=0,
-                            x_scale=0.1, v_scale=0.5, split_tol=0.0, min_window=0.75)
+    pred = predict_response(module, truth, trainer, PredictSettings(iterations=5, lbfgs_steps=0, split_tol=0.0,
+                                                                    min_window=0.75),
+                            window_length=1.5, x_scale=0.1, v_scale=0.5)
     spans = [(a, b) for a, b, _ in pred.windows]
     assert spans == [(0.0, 0.75), (0.75, 1.5), (1.5, 2.25), (2.25, 3.0)]
     assert all(np.isfinite(loss) and loss > 0 for _, _, loss in pred.windows)
     assert np.all(np.isfinite(pred.x))
     # never-failing tolerance: the windows are left as they are
-    pred = predict_response(module, truth, trainer, iterations=5, window_length=1.5, lbfgs_steps=0,
-                            x_scale=0.1, v_scale=0.5, split_tol=float("inf"))
+    pred = predict_response(module, truth, trainer, PredictSettings(iterations=5, lbfgs_steps=0, split_tol=float("inf")),
+                            window_length=1.5, x_scale=0.1, v_scale=0.5)
     assert [(a, b) for a, b, _ in pred.windows] == [(0.0, 1.5), (1.5, 3.0)]
 
 
@@ -123,3 +124,20 @@ def test_unseen_records_start_before_their_strong_motion_and_match_the_pga():
     assert seg.pga == pytest.approx(8.0, rel=1e-9)  # the predicted segment itself carries the target PGA
     cfg.generalization.align = False
     assert all(c["start"] == 0.0 for c in unseen_cases(cfg, "kobe", 8.0))
+
+
+def test_prediction_settings_have_one_source_of_truth():
+    """conf/generalize.yaml's prediction fields and PredictSettings' defaults are the same, and a
+    misspelled option names the valid ones before any identification runs."""
+    from dataclasses import fields
+
+    from pidyn.tasks.generalize import prediction_settings
+
+    cfg = make_cfg([], config_name="generalize")
+    from_yaml = prediction_settings(cfg.generalization)
+    for f in fields(PredictSettings):
+        assert f.name in cfg.generalization, f"generalization.{f.name} missing from conf/generalize.yaml"
+        assert getattr(from_yaml, f.name) == f.default, (f.name, getattr(from_yaml, f.name), f.default)
+    cfg.generalization.start_from = "identifed"
+    with pytest.raises(ValueError, match="fresh, identified"):
+        prediction_settings(cfg.generalization)

@@ -39,33 +39,16 @@ class Prediction:
         return max((w[2] for w in self.windows), default=float("nan"))
 
 
-def predict_response(
-    module: PIDynNetModule,
-    record: Record,
-    trainer_factory: Callable[..., L.Trainer],
-    iterations: int = 1500,
-    window_length: float = 3.0,
-    pool_size: int = 1000,
-    batch_size: int = 500,
-    x_scale: float | None = None,
-    v_scale: float | None = None,
-    data_seed: int = 0,
-    start_from: str = "fresh",
-    seed: int = 0,
-    lbfgs_steps: int = 30,
-    split_tol: float = 1e-3,
-    min_window: float = 0.75,
-) -> Prediction:
-    """Fine-tune the networks on the physics of ``record``'s excitation; returns predicted x.
-
-    The state handed over between windows is imposed exactly through the output (see
-    ``PIDynNet._anchored``), so the only loss is the physics residual, as in Eq. 14.
+@dataclass
+class PredictSettings:
+    """How an unseen response is solved; ``generalization`` in ``conf/generalize.yaml`` mirrors
+    these fields and a test holds the two equal.
 
     ``start_from="identified"`` fine-tunes the identification networks literally; "fresh"
     (default) re-initialises them (seeded) once per excitation. Measured: a network carried
     from a strongly excited identification window can settle on a spurious free vibration
     in the quiet first window of a new record (Kobe x0.5, stretched 0.8: gamma 0.19 against
-    0.98 from a fresh start). The identification networks are restored afterwards.
+    0.98 from a fresh start).
 
     ``lbfgs_steps``: L-BFGS steps on the whole collocation pool after Adam in each window
     (0 = Adam only). Measured on Kobe x1.5, window 9-12 s from the true state: Adam's
@@ -77,6 +60,51 @@ def predict_response(
     that low is ~1e-5 on a solved window). Measured on Kobe x1.5 stretched 1.25 (k3 x^2 / k1
     up to 5): 3 s windows left one window at 0.05 and gave gamma 0.26; with splitting, 1.00.
     """
+
+    iterations: int = 500  # physics-only Adam iterations per window
+    lbfgs_steps: int = 30
+    split_tol: float = 1e-3
+    min_window: float = 0.75
+    start_from: str = "fresh"  # fresh | identified
+
+    def __post_init__(self) -> None:
+        if self.start_from not in ("fresh", "identified"):
+            raise ValueError(f"generalization.start_from: '{self.start_from}' is not one of fresh, identified")
+        if int(self.iterations) < 0 or int(self.lbfgs_steps) < 0:
+            raise ValueError("generalization.iterations and lbfgs_steps must be >= 0")
+        if not self.min_window > 0:
+            raise ValueError(f"generalization.min_window must be > 0, got {self.min_window}")
+
+
+@dataclass
+class _Scales:
+    x: torch.Tensor
+    v: torch.Tensor
+    f: torch.Tensor
+
+
+def predict_response(
+    module: PIDynNetModule,
+    record: Record,
+    trainer_factory: Callable[..., L.Trainer],
+    settings: PredictSettings | None = None,
+    window_length: float = 3.0,
+    pool_size: int = 1000,
+    batch_size: int = 500,
+    x_scale: float | None = None,
+    v_scale: float | None = None,
+    data_seed: int = 0,
+    seed: int = 0,
+) -> Prediction:
+    """Fine-tune the networks on the physics of ``record``'s excitation; returns predicted x.
+
+    The state handed over between windows is imposed exactly through the output (see
+    ``PIDynNet._anchored``), so the only loss is the physics residual, as in Eq. 14. The
+    identified parameters are held and the identification networks restored afterwards.
+    ``x_scale``, ``v_scale``: the response scales (the identification record's), since the new
+    response is not measured.
+    """
+    cfg = settings or PredictSettings()
     t_start = time.perf_counter()
     net = module.net
     for p in net.physical_parameters():
@@ -86,25 +114,17 @@ def predict_response(
     blank = Record(name=record.name, t=record.t, f=record.f, x=np.zeros((len(record.t), net.system.n_dof)),
                    excitation=record.excitation)
     dm = SubperiodDataModule(blank, window_length=window_length, pool_size=pool_size, batch_size=batch_size,
-                             min_peak_fraction=0.0, data_seed=data_seed, accel_signal=accel,
-                             cover_tail=True)
+                             min_peak_fraction=0.0, data_seed=data_seed, accel_signal=accel, cover_tail=True)
     dt = net.scale_x.dtype
-    xs = torch.full_like(net.scale_x, float(x_scale)) if x_scale else net.scale_x.clone()
-    vs = torch.full_like(net.scale_v, float(v_scale)) if v_scale else net.scale_v.clone()
-    fs = torch.as_tensor(float(np.std(record.f)), dtype=dt)
+    scales = _Scales(x=torch.full_like(net.scale_x, float(x_scale)) if x_scale else net.scale_x.clone(),
+                     v=torch.full_like(net.scale_v, float(v_scale)) if v_scale else net.scale_v.clone(),
+                     f=torch.as_tensor(float(np.std(record.f)), dtype=dt))
     state = (torch.zeros(net.system.n_dof, dtype=dt), torch.zeros(net.system.n_dof, dtype=dt),
              torch.zeros(net.system.n_latent, dtype=dt) if net.system.n_latent else None)
     x_pred = np.zeros((len(record.t), net.system.n_dof))
     saved = _nets_state(net)
-    if start_from == "fresh":
-        with torch.random.fork_rng():
-            torch.manual_seed(seed)
-            for m in (net.rpn, net.lnn):
-                if m is not None:
-                    for layer in m.layers:
-                        layer.reset_parameters()
-    elif start_from != "identified":
-        raise ValueError(f"start_from must be 'fresh' or 'identified', got '{start_from}'")
+    if cfg.start_from == "fresh":
+        _reset_networks(net, seed)
     spans = deque((w.t0, w.t1) for w in dm.windows)
     done: list[tuple[float, float, float]] = []
     try:
@@ -115,15 +135,10 @@ def predict_response(
                                       accel_signal=accel)
             w = wdm.windows[0]
             before = _nets_state(net)
-            net.enter_prediction_window(w, xs, vs, fs)
-            net.anchor = (w.t0 * torch.ones((), dtype=dt), state[0], state[1], state[2])
-            module.start(w, "finetune", iterations)
-            wdm.activate(w.index, iterations, module.inner_steps, physics=True)
-            trainer_factory(max_steps=-1, callbacks=[]).fit(module, datamodule=wdm)
-            loss = _lbfgs_finish(module, wdm, w, trainer_factory, lbfgs_steps)
-            if not (loss <= split_tol) and (t1 - t0) / 2 >= min_window - 1e-9:
+            loss = _solve_window(module, wdm, w, state, scales, trainer_factory, cfg)
+            if not (loss <= cfg.split_tol) and (t1 - t0) / 2 >= cfg.min_window - 1e-9:
                 log.info("%s: window %.2f-%.2f s ended at physics loss %.3g > %.3g: solving it as two halves",
-                         record.name, t0, t1, loss, split_tol)
+                         record.name, t0, t1, loss, cfg.split_tol)
                 _load_nets(net, before)
                 mid = 0.5 * (t0 + t1)
                 spans.extendleft([(mid, t1), (t0, mid)])
@@ -131,10 +146,7 @@ def predict_response(
             done.append((float(t0), float(t1), float(loss)))
             state = net.state_at_end(w)
             log.debug("window %.2f-%.2f s: physics loss %.3g", t0, t1, loss)
-            with torch.no_grad():
-                m = (record.t >= w.t0 - 1e-9) & (record.t <= w.t1 + 1e-9)
-                k = net.kinematics(w.t_data, w.f_data, w.q_data, w.qd_data, order=0, latent=False)
-                x_pred[m] = k.x.numpy()
+            _write_window(net, w, record.t, x_pred)
         log.info("predicted %s: %d windows, %.1f s", record.name, len(done), time.perf_counter() - t_start)
     finally:
         net.anchor = None
@@ -142,6 +154,36 @@ def predict_response(
         for p in net.physical_parameters():
             p.requires_grad_(True)
     return Prediction(record.name, record.t, x_pred, time.perf_counter() - t_start, done)
+
+
+def _reset_networks(net, seed: int) -> None:
+    """A fresh (seeded) start of the RPN and LNN for a new excitation."""
+    with torch.random.fork_rng():
+        torch.manual_seed(seed)
+        for m in (net.rpn, net.lnn):
+            if m is not None:
+                for layer in m.layers:
+                    layer.reset_parameters()
+
+
+def _solve_window(module: PIDynNetModule, wdm: SubperiodDataModule, w, state, scales: _Scales,
+                  trainer_factory, cfg: PredictSettings) -> float:
+    """Adam, then L-BFGS, on the physics of one window from the handed-over state; returns the
+    window's final physics loss."""
+    net = module.net
+    net.enter_prediction_window(w, scales.x, scales.v, scales.f)
+    net.anchor = (w.t0 * torch.ones((), dtype=net.scale_x.dtype), state[0], state[1], state[2])
+    module.start(w, "finetune", cfg.iterations)
+    wdm.activate(w.index, cfg.iterations, module.inner_steps, physics=True)
+    trainer_factory(max_steps=-1, callbacks=[]).fit(module, datamodule=wdm)
+    return _lbfgs_finish(module, wdm, w, trainer_factory, cfg.lbfgs_steps)
+
+
+@torch.no_grad()
+def _write_window(net, w, t: np.ndarray, x_pred: np.ndarray) -> None:
+    m = (t >= w.t0 - 1e-9) & (t <= w.t1 + 1e-9)
+    k = net.kinematics(w.t_data, w.f_data, w.q_data, w.qd_data, order=0, latent=False)
+    x_pred[m] = k.x.numpy()
 
 
 def _nets_state(net) -> dict:

@@ -6,16 +6,18 @@ simulation of the identified model.
 from __future__ import annotations
 
 import logging
+from dataclasses import fields
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from pidyn.data.sources import synthetic_from_motion
 from pidyn.excitation.ground_motion import load_record, prepare
-from pidyn.models.predict import pearson, predict_response
+from pidyn.models.predict import PredictSettings, pearson, predict_response
 from pidyn.reporting import write_json
 from pidyn.simulate import simulate
 from pidyn.tasks.train import identify, tb_figures
@@ -50,11 +52,19 @@ def strong_motion_start(record: str, lead: float) -> float:
     return float(np.floor(max(0.0, load_record(record).arias_time(0.05) - lead)))
 
 
+def prediction_settings(g: DictConfig) -> PredictSettings:
+    """The prediction fields of ``generalization`` as validated settings (a misspelled value
+    fails here, before the identification runs)."""
+    names = {f.name for f in fields(PredictSettings)}
+    return PredictSettings(**{k: v for k, v in OmegaConf.to_container(g, resolve=True).items() if k in names})
+
+
 def generalize(cfg: DictConfig) -> dict[str, Any]:
+    g = cfg.generalization
+    settings = prediction_settings(g)
     metrics, obj = identify(cfg)
     module, system, record, make_trainer = obj["module"], obj["system"], obj["record"], obj["trainer_factory"]
     run_dir: Path = obj["run_dir"]
-    g = cfg.generalization
     identified = module.net.params.as_floats()
     ident_pga = float(np.max(np.abs(record.f)))
     cases = unseen_cases(cfg, cfg.excitation.record, ident_pga)
@@ -67,12 +77,9 @@ def generalize(cfg: DictConfig) -> dict[str, Any]:
         gm = prepare(case["record"], scale=case["scale"], stretch=case["stretch"], duration=g.duration,
                      dt=cfg.excitation.dt, start=case["start"])
         truth = synthetic_from_motion(system, gm)  # the true response (true parameters), never shown to the networks
-        pred = predict_response(module, truth, make_trainer, iterations=g.iterations,
-                                window_length=cfg.data.windows.window_length, batch_size=cfg.batch_size,
-                                x_scale=float(np.std(record.x)), v_scale=float(np.std(record.v)) if record.v is not None else None,
-                                start_from=str(g.start_from), seed=int(cfg.seed),
-                                lbfgs_steps=int(g.lbfgs_steps), split_tol=float(g.split_tol),
-                                min_window=float(g.min_window))
+        pred = predict_response(module, truth, make_trainer, settings, window_length=cfg.data.windows.window_length,
+                                batch_size=cfg.batch_size, x_scale=float(np.std(record.x)),
+                                v_scale=float(np.std(record.v)) if record.v is not None else None, seed=int(cfg.seed))
         sim = simulate(system, identified, gm, gm.t)
         row = {"case": i, **case, "pga": gm.pga, "gamma_pidynnet": pearson(pred.x, truth.x),
                "gamma_simulation": pearson(sim.x, truth.x), "peak_x_true": float(np.max(np.abs(truth.x))),
