@@ -15,6 +15,7 @@ import lightning as L
 import torch
 
 from pidyn.data.windows import Window
+from pidyn.errors import error_pct
 from pidyn.models.pidynnet import PIDynNet
 
 Phase = Literal["pretrain", "identify", "finetune", "finetune_lbfgs"]
@@ -191,7 +192,7 @@ class PIDynNetModule(L.LightningModule):
                     continue
                 tb.add_scalar(f"params/{name}", v, step)
                 if truths[name]:
-                    tb.add_scalar(f"params_relerr/{name}", abs(v - truths[name]) / abs(truths[name]), step)
+                    tb.add_scalar(f"params_relerr/{name}", error_pct(v, truths[name]) / 100.0, step)
 
     def trajectory_values(self) -> torch.Tensor:
         """Physical-value trajectory of the trainable parameters in this fit, (iters, n)."""

@@ -14,6 +14,8 @@ from typing import Mapping
 import numpy as np
 from scipy.linalg import eigh
 
+from pidyn.errors import error_pct
+
 
 def modal_properties(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> dict:
     """Frequencies (Hz), periods (s), damping ratios and mode shapes (columns) of M, C, K."""
@@ -46,8 +48,8 @@ def compare_modes(system, identified: Mapping[str, float], truth: Mapping[str, f
         tr = modal_properties(*system.linear_matrices(truth))
         out["truth"] = tr
         idf = out["identified"]
-        out["frequency_error_pct"] = [100 * abs(a - b) / b for a, b in zip(idf["frequency_hz"], tr["frequency_hz"])]
-        out["damping_error_pct"] = [100 * abs(a - b) / b for a, b in zip(idf["damping_ratio"], tr["damping_ratio"])]
+        out["frequency_error_pct"] = [error_pct(a, b) for a, b in zip(idf["frequency_hz"], tr["frequency_hz"])]
+        out["damping_error_pct"] = [error_pct(a, b) for a, b in zip(idf["damping_ratio"], tr["damping_ratio"])]
         out["mac"] = [mac(a, b) for a, b in zip(idf["mode_shapes"], tr["mode_shapes"])]
     return out
 
