@@ -124,10 +124,12 @@ def _score(run: Path, known: dict) -> dict:
     if best is not None and "ci95" in m:
         for k, v in truth.items():
             lo, hi = m["ci95"][k]
-            # beyond the interval, and by more than the solvers' precision (noise-free intervals are
-            # near zero wide: 1e-9 % against 1e-8 % is not a worse estimate)
+            # beyond the interval, and by more than the integrators' precision: noise-free intervals
+            # are near zero wide, and two estimates 1e-3 % apart are the same estimate (measured on
+            # noise-free Bouc-Wen: the refinement and output error differ by up to 3e-4 %, both 1e-3 %
+            # from the truth; the |z|^n kink limits the integrators there, not the estimators)
             gap = (abs(m["params"][k] - v) - abs(best[2][k] - v)) / abs(v)
-            if gap > 1e-8 and not (lo <= best[2][k] <= hi):
+            if gap > 1e-5 and not (lo <= best[2][k] <= hi):
                 worse = True
     out["best_baseline"] = None if best is None else best[0]
     out["final_worse_than_best_baseline"] = worse
