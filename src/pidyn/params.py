@@ -135,6 +135,13 @@ class PhysicalParameters(nn.Module):
         return torch.stack([self.raw[n] for n in names])
 
 
+def dvalue_draw(spec: ParamSpec, raw: float) -> float:
+    """d value / d raw at ``raw``: maps a standard error between the two coordinates."""
+    r = torch.tensor(raw, dtype=torch.float64, requires_grad=True)
+    (g,) = torch.autograd.grad(from_raw(spec, r), r)
+    return float(g)
+
+
 def in_range(spec: ParamSpec, value: float) -> bool:
     """Whether ``value`` is a value the parameter's transform can represent (inside its bounds)."""
     if spec.transform == "log" and value <= 0:

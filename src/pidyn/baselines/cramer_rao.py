@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from pidyn.params import dvalue_draw
 from pidyn.refine.problem import Channel, ShootingProblem, segment_bounds
-from pidyn.refine.uncertainty import _dvalue_draw
 
 
 def cramer_rao(
@@ -62,7 +62,7 @@ def cramer_rao(
     _, J, _, _ = prob.linearize(prob.pack(params, np.zeros((1, system.n_state))))
     # unconstrained -> relative coordinates: dr/d ln(value) = dr/draw * value / (dvalue/draw)
     nt = prob.n_theta
-    rel = np.array([params[s.name] / _dvalue_draw(s, float(u[i])) for i, s in enumerate(prob.specs)])
+    rel = np.array([params[s.name] / dvalue_draw(s, float(u[i])) for i, s in enumerate(prob.specs)])
     Jr = J.copy()
     Jr[:, :nt] *= rel[None, :]
     cov = np.linalg.pinv(Jr[:, :nt].T @ Jr[:, :nt])  # the record is known to start at rest

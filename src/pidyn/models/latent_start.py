@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from pidyn.data.windows import Window
-from pidyn.params import ParamSpec, PhysicalParameters, from_raw, in_range, to_raw
+from pidyn.params import ParamSpec, PhysicalParameters, dvalue_draw, from_raw, in_range, to_raw
 from pidyn.systems.base import Kinematics
 
 log = logging.getLogger(__name__)
@@ -241,10 +241,7 @@ class LatentStart:
         dof = max(J.shape[0] - J.shape[1] - len(lin), 1)
         cov = np.linalg.pinv(J.T @ J) * cost / dof
         for i, s in enumerate(self.specs):
-            h = 1e-6
-            dv = (float(from_raw(s, torch.tensor(u[i] + h, dtype=torch.float64)))
-                  - float(from_raw(s, torch.tensor(u[i] - h, dtype=torch.float64)))) / (2 * h)
-            std[s.name] = float(np.sqrt(max(cov[i, i], 0.0)) * abs(dv))
+            std[s.name] = float(np.sqrt(max(cov[i, i], 0.0)) * abs(dvalue_draw(s, float(u[i]))))
         return {"params": pb, "z": z[0], "std": std, "cost": cost, "cost_start": cost0}
 
 

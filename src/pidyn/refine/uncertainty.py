@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import null_space
 
-from pidyn.params import ParamSpec, from_raw
+from pidyn.params import ParamSpec, dvalue_draw, from_raw
 from pidyn.refine.problem import ShootingProblem
 
 Z95 = 1.959963984540054
@@ -52,15 +52,6 @@ def covariance(problem: ShootingProblem, J: np.ndarray, C: np.ndarray) -> tuple[
     return cov_u[:nt, :nt], cond
 
 
-def _dvalue_draw(spec: ParamSpec, raw: float) -> float:
-    import torch
-
-    r = torch.tensor(raw, dtype=torch.float64, requires_grad=True)
-    v = from_raw(spec, r)
-    (g,) = torch.autograd.grad(v, r)
-    return float(g)
-
-
 def intervals(specs: list[ParamSpec], theta: np.ndarray, cov: np.ndarray) -> dict[str, dict]:
     """Value, std (delta method), 95 % interval (mapped from the unconstrained coordinates)."""
     import torch
@@ -70,7 +61,7 @@ def intervals(specs: list[ParamSpec], theta: np.ndarray, cov: np.ndarray) -> dic
     for i, s in enumerate(specs):
         to_v = lambda x: float(from_raw(s, torch.tensor(float(x), dtype=torch.float64)))  # noqa: E731
         value = to_v(theta[i])
-        std = abs(_dvalue_draw(s, float(theta[i]))) * sd[i]
+        std = abs(dvalue_draw(s, float(theta[i]))) * sd[i]
         lo, hi = sorted((to_v(theta[i] - Z95 * sd[i]), to_v(theta[i] + Z95 * sd[i])))
         out[s.name] = {"value": value, "std": float(std), "ci95": [lo, hi],
                        "rel_std_pct": float(100 * std / abs(value)) if value != 0 else None}
