@@ -40,6 +40,7 @@ def test_bouc_wen_shape_recovered_from_a_far_start():
         assert abs(out["params"][n] / truth[n] - 1) < 0.03, (n, out["params"][n])
     assert out["cost"] < 1e-3 * out["cost_start"]
     assert out["std"]["beta"] < 0.1
+    assert out["at_edge"] == []
 
 
 def test_unknown_initial_latent_state_is_estimated():

@@ -166,108 +166,31 @@ class SubperiodIdentifier:
 
     def run(self, resume: bool = True) -> list[WindowResult]:
         start = self.try_resume() if resume else 0
-        sch = self.schedule
         net = self.module.net
-        windows = self.dm.windows
-        todo = [w for w in windows if (w.informative or not sch.skip_uninformative)]
-        if sch.max_windows is not None:
-            todo = todo[: sch.max_windows]
-        if not todo:
-            raise ValueError("no informative window: lower data.min_peak_fraction or check the record")
         z_end: torch.Tensor | None = None
         if start > 0 and net.lnn is not None:
             z_end = torch.tensor(self.results[-1].z_end if self.results[-1].z_end is not None else [0.0])
         first_done = start > 0
-        for w in todo:
+        for w in self._todo():
             if w.index < start:
                 continue
             t_start = time.perf_counter()
             it0 = int(self.module.iteration)
-            notes: list[str] = []
             net.enter_window(w)
-            pre = sch.pretrain_iters if not first_done else sch.pretrain_iters_window
-            if pre > 0:
-                self._fit(w, "pretrain", pre, physics=False, callbacks=[])
-            if net.lnn is not None and sch.transfer_lnn:
-                net.transfer_rpn_to_lnn()
-                net.set_latent_offset(torch.zeros(1), torch.zeros(1))
-                with torch.no_grad():
-                    x0 = net.response_at_start(w)
-                    z_init = net.latent_state_at(w, end=False)  # = x0 right after the transfer
-                z0 = z_end if z_end is not None else x0[:1] * 0  # at rest before the record
-                net.set_latent_offset(z0, z_init[:1])
-            ls_now = sch.ls_init == "every" or (sch.ls_init == "first" and (not first_done or bool(self.ls_pending)))
-            pending_before = set(self.ls_pending) if first_done else set()
-            latent = (latent_shape_params(net.system)
-                      if (net.lnn is not None and sch.latent_init and sch.ls_init != "none") else [])
-            if latent and first_done and z_end is not None and not set(self.ls_pending) & set(latent):
-                misfit = teach_current_path(net, w, z_end)
-                log.info("window %d: LNN started on the latent path of the held shape parameters (relative misfit %.2g)",
-                         w.index, misfit)
-            if net.use_drift:  # displacement not measured: the physics pins the networks' drift
-                notes += self._drift_start(w, ls_now)
-            elif ls_now:
-                notes += self._least_squares_start(w)
-            if ls_now and latent:
-                notes += self._latent_start(w)
-            if ls_now:
-                self._release_clamp(pending_before - set(self.ls_pending), w.index, notes)
-            cbs: list[L.Callback] = []
-            if self.clamp is not None:
-                cbs.append(self.clamp)
-            if self.early_stopping is not None:
-                cbs.append(self.early_stopping)
+            self._pretrain(w, first_done, z_end)
+            notes = self._starts(w, first_done, z_end)
             box = dict(self.clamp.bounds) if self.clamp is not None else {}
-            # a determined latent shape is held while later windows train: its gradient through a
-            # network-made z is not information (measured: a quiet window moved beta from 15 to 60 %
-            # off), and a longer variable projection on the networks' motion drifts (latent_start)
-            held = [n for n in latent if n not in self.ls_pending]
-            held_values = {n: net.params.as_floats()[n] for n in held}
-            for n in held:
-                net.params.raw[n].requires_grad_(False)
-                if self.clamp is not None:
-                    self.clamp.bounds.pop(n, None)
-            try:
-                self._fit(w, "identify", sch.max_iters, physics=True, callbacks=cbs)
-            finally:
-                for n in held:
-                    net.params.raw[n].requires_grad_(True)
+            held = self._train(w)
             stopped = bool(self.early_stopping and self.early_stopping.stopped_at is not None)
             names = net.params.trainable_names
             estimate = net.params.as_floats()
             states = net.states_at_samples(w)
-            traj = self.module.trajectory_values()
-            info = residual_information(net, w) if (sch.fusion == "information" or self.clamp is not None) else None
-            if self.clamp is not None:
-                # what the windows so far know: the fused information where it is kept (a quiet
-                # window alone knows little, and must not open the box of a parameter that
-                # earlier windows pinned), this window's otherwise
-                known = self.fusion.info + info if (self.fusion.info is not None and info is not None) else info
-                self.clamp.update_from_trajectory(names, traj, estimate, posterior_std(known, names),
-                                                  {n: net.params.spec(n) for n in names})
-            # per-iteration trajectory (thinned) for the convergence figure
-            dt_it = (w.t1 - w.t0) / max(len(traj), 1)
-            for j in range(0, len(traj), max(1, len(traj) // 50)):
-                self.trajectory.append(
-                    {"iteration": it0 + j, "t": w.t0 + j * dt_it, **{n: float(traj[j, i]) for i, n in enumerate(names)}}
-                )
-            if sch.fusion == "information":
-                assert info is not None
-                theta = self.fusion.add(net.params.raw_vector(names).detach(), info)
-                if self.fusion.fallback:
-                    log.info("window %d: the joint information product fell outside the windows' estimates "
-                             "(ill-conditioned parameters); fused by each window's marginal precision", w.index)
-                with torch.no_grad():
-                    for i, n in enumerate(names):
-                        net.params.raw[n].copy_(theta[i])
-            if held_values:  # the variable projection over the record so far is the estimate
-                net.params.set_values(held_values)
+            self._combine(w, it0, names, estimate, held)
             fused = net.params.as_floats()
-            self.trajectory.append({"iteration": int(self.module.iteration), "t": w.t1, **{n: fused[n] for n in names}})
             if net.lnn is not None:
                 with torch.no_grad():
                     z_end = net.latent_state_at(w).detach()
-                if sch.latent_init and sch.ls_init != "none":
+                if self._latent_names():
                     self.motions.append(motion_on_samples(net, w))
             res = WindowResult(
                 index=w.index, t0=w.t0, t1=w.t1,
@@ -288,6 +211,115 @@ class SubperiodIdentifier:
             self._log_window(res)
             self.save_state(next_window=w.index + 1)
         return self.results
+
+    def _todo(self) -> list[Window]:
+        """The windows to run: the informative ones (unless told otherwise), at most max_windows."""
+        sch = self.schedule
+        todo = [w for w in self.dm.windows if (w.informative or not sch.skip_uninformative)]
+        if sch.max_windows is not None:
+            todo = todo[: sch.max_windows]
+        if not todo:
+            raise ValueError("no informative window: lower data.min_peak_fraction or check the record")
+        return todo
+
+    def _latent_names(self) -> list[str]:
+        """Latent shape parameters the variable-projection start handles (empty when it is off)."""
+        sch, net = self.schedule, self.module.net
+        if net.lnn is None or not sch.latent_init or sch.ls_init == "none":
+            return []
+        return latent_shape_params(net.system)
+
+    def _pretrain(self, w: Window, first_done: bool, z_end: torch.Tensor | None) -> None:
+        """Supervised pretraining of the RPN, then the paper's transfer of the RPN to the LNN with
+        the (z0 - x0) offset, z0 carried from the last window (at rest before the record)."""
+        sch, net = self.schedule, self.module.net
+        pre = sch.pretrain_iters if not first_done else sch.pretrain_iters_window
+        if pre > 0:
+            self._fit(w, "pretrain", pre, physics=False, callbacks=[])
+        if net.lnn is not None and sch.transfer_lnn:
+            net.transfer_rpn_to_lnn()
+            net.set_latent_offset(torch.zeros(1), torch.zeros(1))
+            with torch.no_grad():
+                x0 = net.response_at_start(w)
+                z_init = net.latent_state_at(w, end=False)  # = x0 right after the transfer
+            z0 = z_end if z_end is not None else x0[:1] * 0
+            net.set_latent_offset(z0, z_init[:1])
+
+    def _starts(self, w: Window, first_done: bool, z_end: torch.Tensor | None) -> list[str]:
+        """The least-squares starts of the window (linear parameters, the drift, a latent shape),
+        tried again while an earlier window left a parameter undetermined; returns the notes."""
+        sch, net = self.schedule, self.module.net
+        notes: list[str] = []
+        latent = self._latent_names()
+        ls_now = sch.ls_init == "every" or (sch.ls_init == "first" and (not first_done or bool(self.ls_pending)))
+        pending_before = set(self.ls_pending) if first_done else set()
+        if latent and first_done and z_end is not None and not set(self.ls_pending) & set(latent):
+            misfit = teach_current_path(net, w, z_end)
+            log.info("window %d: LNN started on the latent path of the held shape parameters (relative misfit %.2g)",
+                     w.index, misfit)
+        if net.use_drift:  # displacement not measured: the physics pins the networks' drift
+            notes += self._drift_start(w, ls_now)
+        elif ls_now:
+            notes += self._least_squares_start(w)
+        if ls_now and latent:
+            notes += self._latent_start(w)
+        if ls_now:
+            self._release_clamp(pending_before - set(self.ls_pending), w.index, notes)
+        return notes
+
+    def _train(self, w: Window) -> dict[str, float]:
+        """Physics + data training of the window under the clamp and early stopping. A
+        determined latent shape is held: its gradient through a network-made z is not
+        information (measured: a quiet window moved beta from 15 to 60 % off), and a longer
+        variable projection on the networks' motion drifts (``latent_start``). Returns the
+        held values."""
+        net = self.module.net
+        cbs: list[L.Callback] = [c for c in (self.clamp, self.early_stopping) if c is not None]
+        held = {n: net.params.as_floats()[n] for n in self._latent_names() if n not in self.ls_pending}
+        for n in held:
+            net.params.raw[n].requires_grad_(False)
+            if self.clamp is not None:
+                self.clamp.bounds.pop(n, None)
+        try:
+            self._fit(w, "identify", self.schedule.max_iters, physics=True, callbacks=cbs)
+        finally:
+            for n in held:
+                net.params.raw[n].requires_grad_(True)
+        return held
+
+    def _combine(self, w: Window, it0: int, names: list[str], estimate: dict[str, float],
+                 held: dict[str, float]) -> None:
+        """The next window's clamp box, the convergence trajectory, and the fusion of this
+        window's estimate with the earlier ones (the held latent shape stays as it is)."""
+        sch, net = self.schedule, self.module.net
+        traj = self.module.trajectory_values()
+        info = residual_information(net, w) if (sch.fusion == "information" or self.clamp is not None) else None
+        if self.clamp is not None:
+            # what the windows so far know: the fused information where it is kept (a quiet
+            # window alone knows little, and must not open the box of a parameter that
+            # earlier windows pinned), this window's otherwise
+            known = self.fusion.info + info if (self.fusion.info is not None and info is not None) else info
+            self.clamp.update_from_trajectory(names, traj, estimate, posterior_std(known, names),
+                                              {n: net.params.spec(n) for n in names})
+        # per-iteration trajectory (thinned) for the convergence figure
+        dt_it = (w.t1 - w.t0) / max(len(traj), 1)
+        for j in range(0, len(traj), max(1, len(traj) // 50)):
+            self.trajectory.append(
+                {"iteration": it0 + j, "t": w.t0 + j * dt_it, **{n: float(traj[j, i]) for i, n in enumerate(names)}}
+            )
+        if sch.fusion == "information":
+            assert info is not None
+            theta = self.fusion.add(net.params.raw_vector(names).detach(), info)
+            if self.fusion.fallback:
+                log.info("window %d: the joint information product fell outside the windows' estimates "
+                         "(ill-conditioned parameters); fused by each window's marginal precision", w.index)
+            with torch.no_grad():
+                for i, n in enumerate(names):
+                    net.params.raw[n].copy_(theta[i])
+        if held:
+            net.params.set_values(held)
+        fused = net.params.as_floats()
+        self.trajectory.append({"iteration": int(self.module.iteration), "t": w.t1, **{n: fused[n] for n in names}})
 
     def _least_squares_start(self, w: Window) -> list[str]:
         """Least-squares values of the linear parameters; a value outside a parameter's range is

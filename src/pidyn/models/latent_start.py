@@ -242,7 +242,10 @@ class LatentStart:
         cov = np.linalg.pinv(J.T @ J) * cost / dof
         for i, s in enumerate(self.specs):
             std[s.name] = float(np.sqrt(max(cov[i, i], 0.0)) * abs(dvalue_draw(s, float(u[i]))))
-        return {"params": pb, "z": z[0], "std": std, "cost": cost, "cost_start": cost0}
+        # a value at the edge of its transform's range (a log-parameter driven to 0, a box one to a
+        # bound) has a vanishing d value / d raw: its small standard error says nothing
+        edge = [s.name for i, s in enumerate(self.specs) if abs(u[i]) > 12.0]
+        return {"params": pb, "z": z[0], "std": std, "cost": cost, "cost_start": cost0, "at_edge": edge}
 
 
 def fit_latent_network(net, w: Window, z_path: np.ndarray, iters: int = 400, lr: float = 3e-3) -> float:
@@ -318,6 +321,7 @@ def latent_least_squares_start(net, w: Window, history: list[dict[str, torch.Ten
     bad = {n: p[n] for n in names
            if not np.isfinite(p[n]) or std.get(n, 0.0) > max_rel_std * max(abs(p[n]), 1e-300)}
     bad.update({n: p[n] for n in names if not in_range(net.params.spec(n), p[n])})
+    bad.update({n: p[n] for n in out["at_edge"]})
     line = (f"window {w.index}: latent least-squares start over {m['t'][0]:.1f}-{m['t'][-1]:.1f} s "
             f"(integrated motion misfit {out['cost_start']:.3g} -> {out['cost']:.3g}): "
             + ", ".join(f"{n}={p[n]:.4g} +- {std.get(n, 0.0):.2g}" for n in names))
