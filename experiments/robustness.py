@@ -189,7 +189,7 @@ def write_md(df: pd.DataFrame, path: Path, a) -> None:
     if a.finished_only:
         mine = df[df["system"].isin(a.systems) & df["noise"].astype(float).isin([float(n) for n in a.noise])]
         lines.insert(3, f"Cases of {', '.join(a.systems)} run: {len(mine)} of {len(a.systems) * len(a.records) * len(a.noise)} "
-                        "(an interrupted study; `make robustness` runs the rest, finished cases are kept).\n")
+                        "(summarised from the finished cases; `make robustness` runs any that are missing).\n")
     for (system, noise), g in df.groupby(["system", "noise"], sort=False):
         def rate(col: str) -> str:
             return f"{g[col].fillna(False).astype(bool).mean():.2f}" if col in g else "-"
