@@ -11,9 +11,9 @@ the previous ones (or simply carried, as in the paper) and the state is written 
 
 A parameter the first window does not determine (a cubic stiffness before the strong motion)
 is not frozen at its guess: its least-squares start is tried again in the next windows until
-one determines it, and the clamp box that follows a window widens by the window's posterior
-standard deviation (see ``ParameterClamp``), so an uninformed start cannot lock the rest of
-the record.
+one determines it, and the clamp box that follows a window is at least three posterior
+standard deviations of what the windows so far know (see ``ParameterClamp``), so an
+uninformed start cannot lock the rest of the record.
 """
 
 from __future__ import annotations

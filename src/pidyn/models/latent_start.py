@@ -17,17 +17,12 @@ terms and storey terms of a shear building alike.
 
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 import torch
 
 from pidyn.data.windows import Window
 from pidyn.params import ParamSpec, PhysicalParameters, dvalue_draw, from_raw, in_range, to_raw
 from pidyn.systems.base import Kinematics
-
-log = logging.getLogger(__name__)
-
 
 def latent_shape_params(system) -> list[str]:
     """Trainable parameters of latent-state terms that the motion residual is not linear in."""
@@ -68,26 +63,17 @@ def integrate_latent(system, t: np.ndarray, x: np.ndarray, v: np.ndarray, z0: np
     return z, zd
 
 
-def _segment_starts(t: np.ndarray, length: float) -> np.ndarray:
-    """Index of the start of each sample's integration segment (segments of ``length`` s)."""
-    seg = np.floor((t - t[0]) / length + 1e-9).astype(int)
-    first = np.r_[0, np.flatnonzero(np.diff(seg)) + 1]
-    return first[np.searchsorted(first, np.arange(len(t)), side="right") - 1]
-
-
-def _cumtrapz(y: np.ndarray, t: np.ndarray, starts: np.ndarray) -> np.ndarray:
-    """Trapezoidal integral of y from each sample's segment start to the sample."""
+def _cumtrapz(y: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Trapezoidal integral of y from t[0] to each sample."""
     inc = 0.5 * (y[1:] + y[:-1]) * (t[1:] - t[:-1])[:, None]
-    total = np.concatenate([np.zeros_like(y[:1]), np.cumsum(inc, 0)], 0)
-    return total - total[starts]
+    return np.concatenate([np.zeros_like(y[:1]), np.cumsum(inc, 0)], 0)
 
 
 class LatentStart:
     """The variable-projection problem of one window, built on the networks' motion.
 
-    The residual is the equation of motion integrated once, M (x'(t) - x'(ts)) +
-    int_ts^t (restoring - forcing) dt = 0, from the start ts of the motion (or of each
-    ``segment`` s): it needs the networks' x and x', which fit the data closely, and not their
+    The residual is the equation of motion integrated once from the start ts of the motion,
+    M (x'(t) - x'(ts)) + int_ts^t (restoring - forcing) dt = 0: it needs the networks' x and x', which fit the data closely, and not their
     x'', which after pretraining is still 10 % off (measured on Bouc-Wen under El Centro) and
     drowns what z says about beta, gamma, n. Measured on the networks' motion of El Centro:
     from the start over 6 s, beta, gamma, n 10, 11, 2 % off; over 12 s the networks' small
@@ -97,7 +83,7 @@ class LatentStart:
     """
 
     def __init__(self, system, params: PhysicalParameters, t: torch.Tensor, x: torch.Tensor, v: torch.Tensor,
-                 f: torch.Tensor, z0: np.ndarray | None, segment: float | None = None) -> None:
+                 f: torch.Tensor, z0: np.ndarray | None) -> None:
         """The motion (t, x, x', excitation), from the networks or measured; ``z0``: the latent
         state at t[0] when known (at rest at a record's start), None to estimate it. The
         parameters' current values are the first start."""
@@ -108,16 +94,13 @@ class LatentStart:
         self.t, self.x, self.v = (a.detach().double().numpy() for a in (t, x, v))
         self.f = f.detach().double()
         self.fn = self.f.numpy()
-        span = float(self.t[-1] - self.t[0]) + 1.0
-        segment = span if segment is None else segment
-        self.starts = _segment_starts(self.t, segment)
         self.nz = self.system.n_latent
         self.at_rest = z0 is not None
         self.z0_guess = np.zeros(self.nz) if z0 is None else np.asarray(z0, float).reshape(self.nz)
         self.z_scale = max(float(np.abs(self.x).max()), 1e-12)
         self.values = {n: float(v) for n, v in params.as_floats().items()}
         mass = self.values.get("m", 1.0) if self.system.excitation == "ground" else 1.0
-        self.scale = max(float(self.f.std()) * mass, 1e-12) * segment
+        self.scale = max(float(self.f.std()) * mass, 1e-12) * max(float(self.t[-1] - self.t[0]), 1e-12)
         self.nu = len(self.specs) + (0 if self.at_rest else self.nz)
 
     # unknowns u = [raw latent params..., z0 / z_scale (unless at rest)]
@@ -138,14 +121,14 @@ class LatentStart:
     def _linear_fit(self, pb: dict, z: np.ndarray, zd: np.ndarray, std: dict | None = None):
         """Solve the integrated motion residual for the linear parameters on one latent path
         (NumPy: it is affine in them, so n + 1 evaluations give its columns)."""
-        dv = self.v - self.v[self.starts]
+        dv = self.v - self.v[:1]
 
         def r(values: dict) -> np.ndarray:
             k0 = Kinematics(t=self.t, x=self.x, v=self.v, a=np.zeros_like(self.x), z=z, zd=zd)  # type: ignore[arg-type]
             kv = Kinematics(t=self.t, x=self.x, v=self.v, a=dv, z=z, zd=zd)  # type: ignore[arg-type]
             r0 = np.asarray(self.system.residual(k0, self.fn, values)["motion"])
             rv = np.asarray(self.system.residual(kv, self.fn, values)["motion"])
-            return ((_cumtrapz(r0, self.t, self.starts) + rv - r0) / self.scale).reshape(-1)
+            return ((_cumtrapz(r0, self.t) + rv - r0) / self.scale).reshape(-1)
 
         zero = {**pb, **{n: 0.0 for n in self.linear}}
         r0 = r(zero)
@@ -219,8 +202,7 @@ class LatentStart:
 
     def solve(self, n_screen: int = 32, n_local: int = 4, seed: int = 0) -> dict:
         """Screen random starts around the current values in one batched pass, polish the
-        best few by Levenberg-Marquardt; return the best solution and its standard errors.
-        ``n_screen=0``: from the current values only (an update of a determined start)."""
+        best few by Levenberg-Marquardt; return the best solution and its standard errors."""
         rng = np.random.default_rng(seed)
         u0 = self.start_vector()
         U = np.tile(u0, (n_screen + 1, 1))
@@ -302,20 +284,19 @@ def join_motions(parts: list[dict[str, torch.Tensor]]) -> dict[str, torch.Tensor
 
 
 def latent_least_squares_start(net, w: Window, history: list[dict[str, torch.Tensor]], at_rest: bool,
-                               max_rel_std: float = 0.5, screen: bool = True
-                               ) -> tuple[dict[str, float], dict[str, float], str]:
+                               max_rel_std: float = 0.5) -> tuple[dict[str, float], dict[str, float], str]:
     """Solve the variable-projection problem on the motion so far (earlier windows' ``history``
     and this window's networks): one window alone does not pin beta, gamma, n down (measured:
     beta 0.49 +- 1.5 from 3 s of El Centro), the record so far does. Set the parameters when
     every one is determined, and teach the LNN this window's part of the latent path.
     ``at_rest``: the motion starts at the record's start, at rest. Returns (accepted, rejected,
-    a line for the log). ``screen=False``: an update from the current values (no random starts)."""
+    a line for the log)."""
     now = motion_on_samples(net, w)
     m = join_motions([*history, now])
     prob = LatentStart(net.system, net.params, m["t"], m["x"], m["v"], m["f"], np.zeros(net.system.n_latent) if at_rest else None)
     if not prob.names:
         return {}, {}, ""
-    out = prob.solve() if screen else prob.solve(n_screen=0)
+    out = prob.solve()
     p, std = out["params"], out["std"]
     names = prob.names + prob.linear
     bad = {n: p[n] for n in names
