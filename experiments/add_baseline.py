@@ -28,7 +28,7 @@ def main() -> None:
     ap.add_argument("--keep-saved-settings", action="store_true",
                     help="use the method's settings from each job's saved config, not today's conf/baselines/default.yaml")
     a = ap.parse_args()
-    current = OmegaConf.load(ROOT / "conf" / "baselines" / "default.yaml")
+    current = OmegaConf.load(ROOT / "src" / "pidyn" / "conf" / "baselines" / "default.yaml")
     from pidyn.tasks.train import build_record, run_baselines
 
     done = 0

@@ -13,7 +13,10 @@ start the same record is identified by
     the measured x and x' (no networks);
   * ``ukf``: the unscented Kalman filter, its random walk tuned by the innovation likelihood.
 Success: every parameter within 1 % of the truth. Each start's result is saved as it
-finishes (``outputs/basin/<cell>/<method>_<i>.json``), so an interrupted study resumes.
+finishes (``outputs/basin/<cell>/<method>_<i>.json``), so an interrupted study resumes; rows of
+the committed ``basin_<cell>.csv`` whose start matches the drawn one are kept, so a study can be
+extended to more starts. ``--shard k/n`` runs only starts i with i % n == k (for parallel
+processes) and writes no summary; a last run without ``--shard`` collects them.
 Writes experiments/results/basin_<cell>.{md,csv} and a figure of the starts coloured by outcome.
 """
 
@@ -32,6 +35,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from pidyn.cli import CONF_DIR  # noqa: E402
 from pidyn.errors import errors_pct  # noqa: E402
 
 CELLS = {
@@ -54,7 +58,7 @@ def compose(overrides: list[str], out: Path):
     from omegaconf import open_dict
 
     GlobalHydra.instance().clear()
-    with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
+    with initialize_config_dir(CONF_DIR, version_base="1.3"):
         cfg = hcompose("train", overrides=overrides, return_hydra_config=True)
     with open_dict(cfg):
         cfg.paths.output_dir = str(out)
@@ -120,7 +124,9 @@ def main() -> None:
     ap.add_argument("--starts", type=int, default=50)
     ap.add_argument("--methods", nargs="*", default=METHODS)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--shard", default=None, help="k/n: run only starts i with i %% n == k, no summary")
     a = ap.parse_args()
+    shard = tuple(int(v) for v in a.shard.split("/")) if a.shard else (0, 1)
     import logging
 
     logging.basicConfig(level=logging.WARNING)
@@ -135,10 +141,17 @@ def main() -> None:
     truth = hydra.utils.instantiate(cfg0.system).true_values()
     truth = {s.name: truth[s.name] for s in hydra.utils.instantiate(cfg0.system).param_specs() if s.trainable}
     starts = [_clip_start(cfg0, s) for s in draw_starts(truth, a.starts, a.seed)]
+    stem = ROOT / "experiments" / "results" / f"basin_{a.cell}"
+    kept = committed_rows(stem.with_suffix(".csv"), starts, truth)
     rows = []
     for i, start in enumerate(starts):
+        if i % shard[1] != shard[0]:
+            continue
         for method in a.methods:
             f = work / f"{method}_{i:03d}.json"
+            if (i, method) in kept:
+                rows.append(kept[(i, method)])
+                continue
             if f.exists():
                 r = json.loads(f.read_text())
             else:
@@ -154,10 +167,23 @@ def main() -> None:
                          "success": bool(np.isfinite(max_err) and max_err <= 1.0), "seconds": r["seconds"],
                          **{f"start_{k}": start[k] / truth[k] for k in truth}})
             print(f"start {i:3d} {method:13s} max error {max_err:10.4g} %  {r['seconds']:.0f} s", flush=True)
+    if a.shard:
+        return
     df = pd.DataFrame(rows)
-    stem = ROOT / "experiments" / "results" / f"basin_{a.cell}"
     df.to_csv(stem.with_suffix(".csv"), index=False)
     write_summary(df, stem, a, cell, truth)
+
+
+def committed_rows(path: Path, starts: list[dict[str, float]], truth: dict[str, float]) -> dict:
+    """Rows of an earlier study's CSV, keyed (start, method), kept where the start is the same draw."""
+    if not path.exists():
+        return {}
+    kept = {}
+    for r in pd.read_csv(path).to_dict("records"):
+        i = int(r["start"])
+        if i < len(starts) and all(np.isclose(r[f"start_{k}"], starts[i][k] / truth[k], rtol=1e-9) for k in truth):
+            kept[(i, r["method"])] = r
+    return kept
 
 
 def write_summary(df: pd.DataFrame, stem: Path, a, cell: dict, truth: dict) -> None:

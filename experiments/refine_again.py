@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT / "src"))
 
 
 def _settings(saved: dict | str | None, overrides: list[str]) -> dict:
-    current = OmegaConf.to_container(OmegaConf.load(ROOT / "conf" / "model" / "refine" / "multiple_shooting.yaml"))
+    current = OmegaConf.to_container(OmegaConf.load(ROOT / "src" / "pidyn" / "conf" / "model" / "refine" / "multiple_shooting.yaml"))
     assert isinstance(current, dict)
     if isinstance(saved, dict):
         for key in ("starts", "compare_states"):

@@ -4,11 +4,15 @@ from pathlib import Path
 
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
-from omegaconf import DictConfig, open_dict
+from omegaconf import DictConfig
 
-CONF = str(Path(__file__).resolve().parents[1] / "conf")
+from pidyn.config import CONF_DIR as CONF_PATH
+from pidyn.config import compose
+
+CONF = str(CONF_PATH)
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(autouse=True)
@@ -22,15 +26,5 @@ def _clean_state():
 
 def make_cfg(overrides: list[str], out: Path | None = None, config_name: str = "train") -> DictConfig:
     """Compose ``conf/<config_name>.yaml`` as ``python <config_name>.py <overrides>`` would."""
-    with initialize_config_dir(CONF, version_base="1.3"):
-        cfg = compose(config_name, overrides=overrides, return_hydra_config=True)
-    with open_dict(cfg):
-        if out is not None:
-            cfg.paths.output_dir = str(out)
-            cfg.paths.root_dir = str(Path(CONF).parent)
-        cfg.trainer.enable_progress_bar = False
-        cfg.raise_errors = True
-    from hydra.core.hydra_config import HydraConfig
-
-    HydraConfig.instance().set_config(cfg)
-    return cfg
+    return compose(config_name, overrides=overrides, output_dir=out, root_dir=ROOT,
+                   values={"trainer.enable_progress_bar": False, "raise_errors": True})

@@ -1,4 +1,9 @@
-"""Console entry points (``train.py`` at the repository root is a shim to ``train_main``)."""
+"""Console entry points ``pidyn-train``, ``pidyn-diagnose``, ``pidyn-generalize``.
+
+The configs ship inside the package (``pidyn/conf``, Hydra's ``pkg://pidyn.conf``), so the
+commands work from any directory and from an installed wheel; ``train.py``, ``diagnose.py`` and
+``generalize.py`` at the repository root are shims to these functions.
+"""
 
 from __future__ import annotations
 
@@ -9,7 +14,10 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig
 
-CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
+from pidyn.config import CONF_DIR as _CONF_PATH
+
+#: the package's config directory, for ``hydra.initialize_config_dir``
+CONF_DIR = str(_CONF_PATH)
 log = logging.getLogger("pidyn")
 
 
@@ -24,7 +32,7 @@ def _guarded(task, cfg: DictConfig) -> dict:
         sys.exit(2)
 
 
-@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="train")
+@hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def train_main(cfg: DictConfig) -> float | None:
     from pidyn.tasks.train import train
 
@@ -33,7 +41,7 @@ def train_main(cfg: DictConfig) -> float | None:
     return float(value) if value is not None else None
 
 
-@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="generalize")
+@hydra.main(version_base="1.3", config_path="conf", config_name="generalize")
 def generalize_main(cfg: DictConfig) -> float | None:
     from pidyn.tasks.generalize import generalize
 
@@ -41,7 +49,7 @@ def generalize_main(cfg: DictConfig) -> float | None:
     return summary.get("share_gamma_ge_0.95_pidynnet")
 
 
-@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="diagnose")
+@hydra.main(version_base="1.3", config_path="conf", config_name="diagnose")
 def diagnose_main(cfg: DictConfig) -> float | None:
     from pidyn.tasks.diagnose import diagnose
 

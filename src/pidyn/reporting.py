@@ -45,21 +45,27 @@ def nrmse(pred: np.ndarray, true: np.ndarray) -> float:
 
 def _param_grid(n_params: int):
     """One row per parameter: estimate (left), relative error (right), shared record-time axis."""
+    import sys
+
     import matplotlib
 
-    matplotlib.use("Agg")
+    if "matplotlib.pyplot" not in sys.modules:  # a notebook has chosen its backend already
+        matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     return plt.subplots(n_params, 2, figsize=(10, 2.2 * n_params), squeeze=False, sharex=True)
 
 
-def _finish_grid(fig, axes, title: str, path: Path, dpi: int, palette: bool = False) -> None:
+def _finish_grid(fig, axes, title: str, path: Path | None, dpi: int, palette: bool = False) -> None:
+    """Label and save the grid; ``path=None`` leaves the figure open for the caller."""
     import matplotlib.pyplot as plt
 
     axes[-1][0].set_xlabel("record time (s)")
     axes[-1][1].set_xlabel("record time (s)")
     fig.suptitle(title)
     fig.tight_layout()
+    if path is None:
+        return
     if palette:
         _save_small(fig, path, dpi)
     else:
@@ -67,14 +73,15 @@ def _finish_grid(fig, axes, title: str, path: Path, dpi: int, palette: bool = Fa
     plt.close(fig)
 
 
-def plot_convergence(path: Path, trajectory: list[dict], truths: dict[str, float | None], windows: list[dict],
+def plot_convergence(path: Path | None, trajectory: list[dict], truths: dict[str, float | None], windows: list[dict],
                      title: str = "", other: tuple[str, list[dict]] | None = None,
-                     final: dict[str, dict] | None = None) -> None:
+                     final: dict[str, dict] | None = None):
     """Parameter estimates over record time with window boundaries (cf. paper Figure 3);
-    ``final``: the refined estimate with its 95 % interval, drawn at the record's end."""
+    ``final``: the refined estimate with its 95 % interval, drawn at the record's end.
+    ``path=None`` returns the open figure (notebooks) instead of writing a file."""
     names = [k for k in trajectory[0] if k not in ("iteration", "t")] if trajectory else []
     if not names:
-        return
+        return None
     fig, axes = _param_grid(len(names))
     t = np.array([p["t"] for p in trajectory])
     for i, n in enumerate(names):
@@ -103,6 +110,7 @@ def plot_convergence(path: Path, trajectory: list[dict], truths: dict[str, float
         if i == 0:
             ax.legend(fontsize=8)
     _finish_grid(fig, axes, title, path, dpi=110)
+    return fig if path is None else None
 
 
 def plot_convergence_seeds(path: Path, runs: dict[str, list[list[dict]]], truths: dict[str, float | None],

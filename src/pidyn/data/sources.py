@@ -100,6 +100,39 @@ class Record:
 
         return spread(0), spread(1)
 
+    @classmethod
+    def from_csv(cls, path: str | Path, **kwargs) -> "Record":
+        """A measured record from a CSV file (see ``from_csv`` for the columns and options)."""
+        return from_csv(path, **kwargs)
+
+    @classmethod
+    def simulate(cls, system: "StructuralSystem | str", excitation: str | Path = "kobe", *, scale: float = 1.0,
+                 stretch: float = 1.0, duration: float | None = 40.0, dt: float | None = 0.01,
+                 noise: float | dict[str, float] = 0.0, seed: int = 0, channels: Sequence[str] = ("x", "v"),
+                 sensors: Sequence[int] | None = None, **system_values) -> "Record":
+        """``system`` (a system object, or a name from the package's configs with
+        ``system_values`` setting its keys, e.g. ``n_storeys=5``) at its true parameters under
+        ``excitation`` (a shipped record's name or an AT2 path), measured with noise of std
+        ``noise`` x RMS on each channel (seeded by ``seed``)."""
+        if isinstance(system, str):
+            from pidyn.config import make_system  # names resolve through the configs, at the edge
+
+            system = make_system(system, **system_values)
+        elif system_values:
+            raise ValueError(f"settings {sorted(system_values)} need a system name, not a system object")
+        return synthetic(system, record=str(excitation), eq_scale=scale, stretch=stretch, duration=duration, dt=dt,
+                         noise=noise, data_seed=seed, channels=tuple(channels),
+                         sensors=None if sensors is None else list(sensors))
+
+    @classmethod
+    def from_at2(cls, path: str | Path, system: "StructuralSystem | str", **kwargs) -> "Record":
+        """The response of ``system`` to the ground motion of a PEER AT2 file, simulated and
+        measured as in ``simulate`` (to pair an AT2 file with measured responses, use
+        ``from_csv(path, at2=...)``)."""
+        if not Path(path).exists():
+            raise FileNotFoundError(f"{path}: no such AT2 file")
+        return cls.simulate(system, excitation=path, **kwargs)
+
     def segment(self, t0: float | None, t1: float | None) -> "Record":
         """The samples with t0 <= t <= t1 (times kept absolute; the truth travels along)."""
         from dataclasses import replace

@@ -105,7 +105,9 @@ def _polish(record: Record, system: SDOFSystem, values: dict[str, float], dcfg: 
     return out, f"output error on {seg.t[0]:.4g}-{seg.t[-1]:.4g} s: {res.note}, {res.seconds:.1f} s"
 
 
-def diagnose(cfg: DictConfig) -> dict[str, Any]:
+def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
+    """What the nominal model ``cfg.system`` misses on ``record`` (default: built from
+    ``cfg.data``); writes diagnosis.json, report.md and figures to the run folder."""
     t_wall = time.perf_counter()
     run_dir = Path(cfg.paths.output_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -124,7 +126,7 @@ def diagnose(cfg: DictConfig) -> dict[str, Any]:
     if already:  # an effect the nominal model already has cannot be what it misses
         log.info("not screening %s: already in the nominal model", sorted(already))
         effects = {n: e for n, e in effects.items() if n not in already}
-    record = build_record(cfg, base)
+    record = build_record(cfg, base) if record is None else record
     if record.excitation != base.excitation:
         base = hydra.utils.instantiate(cfg.system, excitation=record.excitation)
     mass = cfg.data.get("mass", 1.0)

@@ -71,7 +71,8 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     refined = run_refinement(cfg, run.system, run.record, pidyn_values, baselines, results)
     metrics = _report(cfg, run, results, pidyn_values, baselines, refined, t_wall)
     objects = {"module": run.module, "system": run.system, "record": run.record,
-               "trainer_factory": run.trainer_factory, "run_dir": run.run_dir, "logger": run.logger}
+               "trainer_factory": run.trainer_factory, "run_dir": run.run_dir, "logger": run.logger,
+               "trajectory": run.ident.trajectory, "windows": [r.__dict__ for r in results]}
     return metrics, objects
 
 

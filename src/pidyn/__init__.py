@@ -1,0 +1,46 @@
+"""pidyn: physics-informed structural system identification (PIDynNet) with baselines and diagnosis.
+
+The public surface, for notebooks and scripts (the command line is ``pidyn-train``,
+``pidyn-diagnose``, ``pidyn-generalize``):
+
+- ``Record``: a measured record; ``Record.from_csv``, ``Record.from_at2``, ``Record.simulate``.
+- ``identify(record, system, **options) -> Result``: PIDynNet and the refinement stage; a
+  ``Result`` carries the parameters with their 95 % intervals, the identified equation, the
+  estimate's history, ``.to_frame()``, ``.plot()``, ``.save(dir)`` and ``Result.load(run_dir)``.
+- ``predict(result, excitation) -> ResponsePrediction``: the response to an unseen record.
+- ``diagnose(record, nominal) -> Diagnosis``: what the nominal model misses, and the gain.
+- ``make_system(name, **values)``, ``system_names()``: the structural systems of the configs.
+
+Names load on first use, so ``import pidyn`` stays light for the command line.
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import Any
+
+__version__ = "0.1.0"
+
+_PUBLIC = {
+    "Record": "pidyn.data.sources",
+    "identify": "pidyn.api",
+    "predict": "pidyn.api",
+    "diagnose": "pidyn.api",
+    "Result": "pidyn.api",
+    "ResponsePrediction": "pidyn.api",
+    "Diagnosis": "pidyn.api",
+    "system_names": "pidyn.api",
+    "make_system": "pidyn.config",
+}
+__all__ = sorted(_PUBLIC) + ["__version__"]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _PUBLIC:
+        return getattr(import_module(_PUBLIC[name]), name)
+    raise AttributeError(f"module 'pidyn' has no attribute '{name}'")
+
+
+def __dir__() -> list[str]:
+    return __all__
+

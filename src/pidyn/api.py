@@ -1,0 +1,238 @@
+"""The Python API: identify, diagnose and predict from a notebook or a script.
+
+    import pidyn
+    rec = pidyn.Record.simulate("duffing", excitation="kobe", noise=0.025)
+    res = pidyn.identify(rec, "duffing")
+    res.to_frame()                       # value, 95 % interval, std, truth, error per parameter
+    res.plot()                           # PIDynNet's estimate over the record, the final interval
+    pred = pidyn.predict(res, "el_centro", scale=0.5)
+    diag = pidyn.diagnose(rec, nominal="linear")
+
+Each call composes the same configs as the command line (``pidyn-train``), with the
+keyword values checked against them, and runs the same task code; every run still writes
+its run folder (``Result.run_dir``), so a notebook run can be reopened with
+``Result.load(run_dir)`` and compared with command-line runs.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from pidyn.config import compose, group_options
+from pidyn.data.sources import Record
+
+#: short names for settings a notebook user sets often (any other key: ``model__schedule__max_windows=4``)
+ALIASES = {"refine": "model/refine", "baselines": "baselines", "logger": "logger", "debug": "debug",
+           "trainer": "trainer", "excitation": "excitation"}
+
+
+def _split_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Keyword options -> (group choices, dotted settings); ``a__b`` is the key ``a.b``."""
+    groups, values = {}, {}
+    for key, value in options.items():
+        if key in ALIASES:
+            groups[ALIASES[key]] = value
+        else:
+            values[key.replace("__", ".")] = value
+    return groups, values
+
+
+def _run_dir(out_dir: str | Path | None, task: str, name: str) -> Path:
+    if out_dir is not None:
+        return Path(out_dir)
+    return Path("outputs") / task / "api" / f"{time.strftime('%Y-%m-%d_%H-%M-%S')}_{name}"
+
+
+@dataclass
+class Result:
+    """An identification: the final estimate with its intervals, PIDynNet's own estimate, the
+    identified equation, the estimate's history over the record, and the run folder."""
+
+    system: str
+    params: dict[str, float]
+    ci95: dict[str, list[float]]
+    std: dict[str, float]
+    truth: dict[str, float | None]
+    error_pct: dict[str, float]
+    pidynnet: dict[str, float]
+    equation: str
+    notes: list[str]
+    metrics: dict[str, Any]
+    run_dir: Path
+    history: pd.DataFrame
+    windows: list[dict] = field(default_factory=list)
+    _objects: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    @classmethod
+    def load(cls, run_dir: str | Path, objects: dict[str, Any] | None = None) -> "Result":
+        """A run folder written by ``identify`` or ``pidyn-train``, read back."""
+        run_dir = Path(run_dir)
+        if not (run_dir / "metrics.json").exists():
+            raise FileNotFoundError(f"{run_dir}: no metrics.json; not a finished identification run folder")
+        m = json.loads((run_dir / "metrics.json").read_text())
+        ident = yaml.safe_load((run_dir / "identified_params.yaml").read_text())
+        state = run_dir / "subperiod_state.json"
+        traj = json.loads(state.read_text()).get("trajectory", []) if state.exists() else []
+        wins = run_dir / "windows.json"
+        return cls(system=m["system"], params=m["params"], ci95=m.get("ci95", {}), std=m.get("std", {}),
+                   truth=m.get("truth", {}), error_pct=m.get("error_pct", {}), pidynnet=m["pidynnet"]["params"],
+                   equation=ident["equation"], notes=list(m.get("notes", [])), metrics=m, run_dir=run_dir,
+                   history=pd.DataFrame(traj),
+                   windows=json.loads(wins.read_text())["windows"] if wins.exists() else [],
+                   _objects=objects or {})
+
+    def to_frame(self) -> pd.DataFrame:
+        """One row per parameter: value, ci95_lo, ci95_hi, std, truth, error_pct, pidynnet."""
+        rows = []
+        for n, v in self.params.items():
+            lo, hi = self.ci95.get(n, (np.nan, np.nan))
+            rows.append({"param": n, "value": v, "ci95_lo": lo, "ci95_hi": hi, "std": self.std.get(n, np.nan),
+                         "truth": self.truth.get(n), "error_pct": self.error_pct.get(n, np.nan),
+                         "pidynnet": self.pidynnet.get(n, np.nan)})
+        return pd.DataFrame(rows).set_index("param")
+
+    def plot(self, path: str | Path | None = None):
+        """PIDynNet's estimate over record time with the window edges, the truth when known and
+        the final estimate with its 95 % interval; returns the figure (or writes ``path``)."""
+        from pidyn.reporting import plot_convergence
+
+        final = {n: {"value": v, "ci95": self.ci95[n]} for n, v in self.params.items() if n in self.ci95}
+        return plot_convergence(None if path is None else Path(path), self.history.to_dict("records"), self.truth,
+                                self.windows, title=f"{self.system}: {self.equation}", final=final or None)
+
+    def save(self, directory: str | Path) -> Path:
+        """Copy the run folder to ``directory`` and add ``params.csv`` and ``history.csv``."""
+        directory = Path(directory)
+        if directory.resolve() != self.run_dir.resolve():
+            shutil.copytree(self.run_dir, directory, dirs_exist_ok=True)
+        self.to_frame().to_csv(directory / "params.csv")
+        self.history.to_csv(directory / "history.csv", index=False)
+        return directory
+
+
+def identify(record: Record | None = None, system: str = "duffing", *, init: dict[str, float] | None = None,
+             out_dir: str | Path | None = None, overrides: Iterable[str] = (), **options: Any) -> Result:
+    """Identify ``system`` (a name from ``conf/system``) from ``record`` (default: the
+    configured simulated record) with PIDynNet and the refinement stage.
+
+    ``init``: starting guesses (``{"k3": 50.0}``). ``options``: config settings by key, ``__``
+    for a dot (``seed=1``, ``refine="none"``, ``baselines="none"``,
+    ``model__schedule__max_windows=4``); ``overrides``: raw Hydra override strings.
+    """
+    from pidyn.tasks.train import identify as run_identification
+
+    groups, values = _split_options(options)
+    values.update({f"system.params.{k}.init": float(v) for k, v in (init or {}).items()})
+    values.setdefault("trainer.enable_progress_bar", False)
+    values.setdefault("raise_errors", True)
+    run_dir = _run_dir(out_dir, "train", system)
+    cfg = compose("train", groups={"system": system, **groups}, values=values, overrides=overrides,
+                  output_dir=run_dir)
+    _, objects = run_identification(cfg, record=record)
+    return Result.load(run_dir, objects)
+
+
+@dataclass
+class ResponsePrediction:
+    """The response to an excitation the identification never saw: PIDynNet's networks
+    fine-tuned on the physics alone, beside the identified model simulated."""
+
+    name: str
+    t: np.ndarray
+    ag: np.ndarray
+    x_pidynnet: np.ndarray
+    x_simulated: np.ndarray
+    seconds: float
+
+    def to_frame(self) -> pd.DataFrame:
+        cols = {"t": self.t, "ag": self.ag}
+        for i in range(self.x_pidynnet.shape[1]):
+            cols[f"x{i + 1}_pidynnet"] = self.x_pidynnet[:, i]
+            cols[f"x{i + 1}_simulated"] = self.x_simulated[:, i]
+        return pd.DataFrame(cols)
+
+
+def predict(result: Result, excitation: str | Path, *, scale: float = 1.0, stretch: float = 1.0,
+            duration: float | None = 20.0, dt: float | None = 0.01, start: float = 0.0,
+            **settings: Any) -> ResponsePrediction:
+    """Predict the response of the identified structure to ``excitation`` (a shipped record's
+    name or an AT2 path), as in the paper's Eq. 14. ``settings``: fields of ``PredictSettings``
+    (``iterations``, ``lbfgs_steps``, ``split_tol``, ``min_window``, ``start_from``)."""
+    from pidyn.excitation.ground_motion import prepare
+    from pidyn.models.predict import PredictSettings, predict_response
+    from pidyn.simulate import simulate
+
+    obj = result._objects
+    if not obj:
+        raise ValueError("predict needs the networks of an identification run in this session: "
+                         "a Result from pidyn.identify(), not one read back with Result.load()")
+    valid = set(PredictSettings.__dataclass_fields__)
+    unknown = set(settings) - valid
+    if unknown:
+        raise ValueError(f"predict: unknown setting(s) {sorted(unknown)}; the settings are {sorted(valid)}")
+    module, system, ident_record = obj["module"], obj["system"], obj["record"]
+    gm = prepare(excitation, scale=scale, stretch=stretch, duration=duration, dt=dt, start=start)
+    values = dict(result.params)
+    sim = simulate(system, {**module.net.params.as_floats(), **values}, gm, gm.t)
+    target = Record(name=gm.name, t=gm.t, f=gm.acc, x=np.zeros((len(gm.t), system.n_dof)))  # the shape only
+    scale_x = float(np.nanstd(ident_record.x)) if ident_record.x is not None else float(np.nanstd(sim.x))
+    scale_v = float(np.nanstd(ident_record.v)) if ident_record.v is not None else None
+    pred = predict_response(module, target, obj["trainer_factory"], PredictSettings(**settings),
+                            x_scale=scale_x, v_scale=scale_v)
+    x_pred = pred.x if pred.x.ndim == 2 else pred.x[:, None]
+    x_sim = sim.x if sim.x.ndim == 2 else sim.x[:, None]
+    return ResponsePrediction(name=gm.name, t=gm.t, ag=gm.acc, x_pidynnet=x_pred, x_simulated=x_sim,
+                              seconds=pred.seconds)
+
+
+@dataclass
+class Diagnosis:
+    """What the nominal model gets wrong: the verdict (``discrepancy``, ``unexplained`` or
+    ``none``), the named causes, the extended equation and its held-out gain."""
+
+    verdict: str
+    causes: list[str]
+    nominal: str
+    extended: str | None
+    gain: dict[str, Any]
+    change: dict | None
+    report: Path
+    details: dict[str, Any]
+
+    def to_frame(self) -> pd.DataFrame:
+        """The screening's ranking of the library's effects, best first."""
+        return pd.DataFrame(self.details.get("ranking", []))
+
+
+def diagnose(record: Record | None = None, nominal: str = "linear", *, mass: float | None = 1.0,
+             out_dir: str | Path | None = None, overrides: Iterable[str] = (), **options: Any) -> Diagnosis:
+    """Diagnose what ``nominal`` (a system name) misses on ``record`` (default: the configured
+    record with a hidden effect). ``mass``: the known mass (None identifies it, force excitation
+    only). ``options`` as for ``identify`` (``diagnosis__fit_share=0.6``)."""
+    from pidyn.tasks.diagnose import diagnose as run_diagnosis
+
+    groups, values = _split_options(options)
+    if record is not None:
+        values["data.mass"] = mass
+    values.setdefault("trainer.enable_progress_bar", False)
+    values.setdefault("raise_errors", True)
+    run_dir = _run_dir(out_dir, "diagnose", nominal)
+    cfg = compose("diagnose", groups={"system": nominal, **groups}, values=values, overrides=overrides,
+                  output_dir=run_dir)
+    d = run_diagnosis(cfg, record=record)
+    return Diagnosis(verdict=d["verdict"], causes=list(d["causes"]), nominal=d["nominal"], extended=d["extended"],
+                     gain=d["gain"], change=d["change"], report=run_dir / "report.md", details=d)
+
+
+def system_names() -> list[str]:
+    """The system names ``identify`` and ``diagnose`` accept."""
+    return group_options("system")

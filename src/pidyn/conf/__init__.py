@@ -1,0 +1,1 @@
+"""Hydra configs of pidyn, shipped inside the package so the commands run from any directory."""

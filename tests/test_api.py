@@ -1,0 +1,86 @@
+"""The Python API: plain values checked against the configs, a Result that a notebook can use,
+and the walk-through example run end to end."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import pidyn
+
+ROOT = Path(__file__).resolve().parents[1]
+SMOKE = {"debug": "smoke", "baselines": "none", "logger": "none"}
+
+
+def test_public_surface_is_listed_and_loads():
+    for name in pidyn.__all__:
+        assert getattr(pidyn, name) is not None, name
+    assert "duffing" in pidyn.system_names() and "shear_building" in pidyn.system_names()
+    with pytest.raises(AttributeError):
+        pidyn.not_a_name  # noqa: B018
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"system": "dufing"}, "did you mean 'duffing'"),
+    ({"model__schedule__max_windowz": 3}, "did you mean 'model.schedule.max_windows'"),
+    ({"refine": "multiple"}, "choose from multiple_shooting, none"),
+    ({"sytem__params__k3__init": 1.0}, "did you mean 'system'"),
+])
+def test_a_misspelled_option_names_the_valid_ones(options, message, tmp_path):
+    record = pidyn.Record.simulate("duffing", duration=5.0)
+    with pytest.raises(ValueError, match=message):
+        pidyn.identify(record, out_dir=tmp_path, **options)
+    assert not (tmp_path / "metrics.json").exists()
+
+
+def test_record_constructors_agree(tmp_path):
+    """simulate, from_at2 (a PEER file) and from_csv (the same samples written out) give one record."""
+    sim = pidyn.Record.simulate("linear_sdof", excitation="el_centro", duration=4.0)
+    at2 = ROOT / "src" / "pidyn" / "excitation" / "records"
+    path = at2 / "ELCENTRO1940_RSN6_IMPVALL.I_I-ELC180.AT2"  # the record the name el_centro stands for
+    from_file = pidyn.Record.from_at2(path, "linear_sdof", duration=4.0)
+    assert np.allclose(sim.f, from_file.f) and np.allclose(sim.x, from_file.x)
+    csv = tmp_path / "rec.csv"
+    pd.DataFrame({"t": sim.t, "ag": sim.f, "x": sim.x[:, 0], "v": sim.v[:, 0]}).to_csv(csv, index=False)
+    back = pidyn.Record.from_csv(csv)
+    assert np.allclose(back.x, sim.x) and back.excitation == "ground"
+    with pytest.raises(FileNotFoundError, match="no such AT2 file"):
+        pidyn.Record.from_at2(tmp_path / "missing.AT2", "duffing")
+
+
+def test_identify_returns_a_result_a_notebook_can_use(tmp_path):
+    record = pidyn.Record.simulate("duffing", duration=12.0)
+    res = pidyn.identify(record, "duffing", init={"k3": 100.0}, out_dir=tmp_path / "run", **SMOKE)
+    frame = res.to_frame()
+    assert list(frame.index) == ["c", "k1", "k3"]
+    assert {"value", "ci95_lo", "ci95_hi", "std", "truth", "error_pct", "pidynnet"} <= set(frame.columns)
+    assert (frame.ci95_lo <= frame.value).all() and (frame.value <= frame.ci95_hi).all()
+    assert frame.loc["k3", "truth"] == 120.0
+    assert "x^3" in res.equation and len(res.history) > 0
+    assert res.plot() is not None
+    saved = res.save(tmp_path / "copy")
+    assert (saved / "params.csv").exists() and (saved / "history.csv").exists() and (saved / "metrics.json").exists()
+    again = pidyn.Result.load(saved)
+    assert again.params == res.params and again.ci95 == res.ci95
+    with pytest.raises(ValueError, match="networks of an identification run"):
+        pidyn.predict(again, "el_centro")
+    with pytest.raises(ValueError, match="unknown setting"):
+        pidyn.predict(res, "el_centro", iteration=10)
+
+
+@pytest.mark.slow
+def test_walkthrough_example_runs(tmp_path):
+    """examples/api_walkthrough.py --quick: identification, prediction and diagnosis through the API."""
+    run = subprocess.run([sys.executable, str(ROOT / "examples" / "api_walkthrough.py"), "--quick", "--out",
+                          str(tmp_path)], cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+    assert "verdict: discrepancy, causes ['quadratic_damping']" in run.stdout, run.stdout[-2000:]
+    assert (tmp_path / "duffing_saved" / "params.csv").exists()
+    assert (tmp_path / "diagnosis" / "report.md").exists()
+    pred = pd.read_csv(tmp_path / "prediction_el_centro.csv")
+    assert np.corrcoef(pred.x1_pidynnet, pred.x1_simulated)[0, 1] > 0.95
