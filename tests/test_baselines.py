@@ -41,7 +41,7 @@ def test_output_error_recovers_duffing(duffing_record):
 
 def test_ukf_converges_on_duffing(duffing_record):
     s, rec = duffing_record
-    res = unscented_kalman_filter(rec, s)
+    res = unscented_kalman_filter(rec, s, q_param=1e-5)
     assert max(errors(res, s.true_values()).values()) < 1.0
     assert len(res.trajectory) > 10 and res.trajectory[0]["k3"] != res.trajectory[-1]["k3"]
 

@@ -72,7 +72,7 @@ def test_early_stopping_eq10_fixed_reference():
 
 
 def test_early_stopping_stops_after_n_successive_quiet_checks():
-    es = ParameterEarlyStopping(check_every=100, eps=1e-4, patience=3)
+    es = ParameterEarlyStopping(check_every=100, eps=1e-4, patience=3, start=0, space="raw", smooth=1)
     theta = torch.tensor([0.5, 15.0, 120.0])
     assert not es.check(theta)
     assert not es.check(theta * (1 + 1e-6))
@@ -81,7 +81,7 @@ def test_early_stopping_stops_after_n_successive_quiet_checks():
 
 
 def test_early_stopping_resets_on_a_jump():
-    es = ParameterEarlyStopping(check_every=100, eps=1e-4, patience=2)
+    es = ParameterEarlyStopping(check_every=100, eps=1e-4, patience=2, start=0, space="raw", smooth=1)
     theta = torch.tensor([1.0])
     es.check(theta)
     es.check(theta)

@@ -10,8 +10,8 @@ Scaled sigma points (van der Merwe): alpha, beta, kappa.
 
 The parameter random walk ``q_param`` decides how fast the filter may move the parameters:
 too small and it freezes before it has converged, too large and it chases the noise. A
-fair baseline tunes it on the data: ``tune`` runs the filter for each value of a grid and
-keeps the one with the largest innovation log-likelihood, sum over steps of
+fair baseline tunes it on the data: with ``q_param=None`` (the default) the filter runs
+for each value of the grid ``tune`` and keeps the one with the largest innovation log-likelihood, sum over steps of
 -1/2 (log det S + nu^T S^-1 nu), which needs no truth (a stated, data-only method).
 """
 
@@ -26,6 +26,9 @@ from pidyn.data.sources import Record
 from pidyn.integrate import rk4
 from pidyn.refine.problem import record_channels
 
+#: the q_param grid searched by default (``baselines.ukf.tune`` in the config mirrors it)
+TUNE_GRID = (1e-11, 1e-10, 1e-9, 1e-8, 1e-7, 1e-6, 1e-5)
+
 
 def unscented_kalman_filter(
     record: Record,
@@ -33,7 +36,7 @@ def unscented_kalman_filter(
     noise_level: float = 0.0,
     init: dict[str, float] | None = None,
     init_param_std: float = 0.7,
-    q_param: float = 1e-5,
+    q_param: float | None = None,
     q_state: float = 1e-10,
     r_floor: float = 1e-3,
     alpha: float = 0.5,
@@ -41,11 +44,13 @@ def unscented_kalman_filter(
     kappa: float = 0.0,
     substeps: int = 2,
     thin: int = 10,
-    tune: list[float] | None = None,
+    tune: tuple[float, ...] | list[float] = TUNE_GRID,
 ) -> BaselineResult:
-    """Joint state-parameter UKF; ``tune``: a grid of ``q_param`` values to choose from by the
-    innovation likelihood (None: use ``q_param`` as given)."""
-    if tune:
+    """Joint state-parameter UKF; ``q_param``: the parameters' random-walk variance per step,
+    or None to choose it from the grid ``tune`` by the innovation likelihood."""
+    if q_param is None:
+        if not len(tune):
+            raise ValueError("ukf: q_param is None and the tuning grid is empty; give one of them")
         kw = dict(noise_level=noise_level, init=init, init_param_std=init_param_std, q_state=q_state,
                   r_floor=r_floor, alpha=alpha, beta=beta, kappa=kappa, substeps=substeps, thin=thin)
         return _tuned(record, system, list(tune), kw)

@@ -28,7 +28,7 @@ from pidyn.params import ParamSpec, clip_to_bounds, from_raw, to_raw
 class ParameterClamp(L.Callback):
     """Clamp physical parameters into the box computed from the previous window."""
 
-    def __init__(self, n_sigma: float = 3.0, min_rel_width: float = 0.0, tail_fraction: float = 1.0) -> None:
+    def __init__(self, n_sigma: float = 3.0, min_rel_width: float = 0.05, tail_fraction: float = 1.0) -> None:
         self.n_sigma, self.min_rel_width, self.tail_fraction = n_sigma, min_rel_width, tail_fraction
         self.bounds: dict[str, tuple[float, float]] = {}
         self.triggered = 0

@@ -26,10 +26,10 @@ class ParameterEarlyStopping(L.Callback):
         check_every: int = 100,
         eps: float = 1e-4,
         patience: int = 3,
-        start: int = 0,
-        space: Literal["raw", "log"] = "raw",
+        start: int = 500,
+        space: Literal["raw", "log"] = "log",
         reference: Literal["fixed", "previous"] = "fixed",
-        smooth: int = 1,
+        smooth: int = 100,
     ) -> None:
         self.check_every, self.eps, self.patience, self.start = check_every, eps, patience, start
         self.space, self.reference, self.smooth = space, reference, max(1, smooth)

@@ -107,7 +107,7 @@ class ShearBuilding(StructuralSystem):
     hysteretic) plus any further force terms, all on its drift.
 
     Args:
-        n_storeys: number of storeys (None: the length of the per-storey lists, else 3).
+        n_storeys: number of storeys (None: the length of the per-storey lists).
         masses, dampings, stiffnesses: per storey (kg, N s/m, N/m); a scalar means every storey.
         stiffness_taper: with a scalar stiffness, the top storey's stiffness as a share of the
             first's, linear in between (1: uniform).
@@ -120,7 +120,7 @@ class ShearBuilding(StructuralSystem):
 
     def __init__(
         self,
-        n_storeys: int | None = None,
+        n_storeys: int | None = 3,
         masses: float | Sequence[float] = 1.0,
         dampings: float | Sequence[float] = 0.5,
         stiffnesses: float | Sequence[float] = 200.0,

@@ -92,6 +92,7 @@ def _build(cfg: DictConfig, record: Record | None) -> _Run:
     _quiet_framework_warnings()
     for name in ("lightning", "lightning.pytorch", "lightning.fabric"):
         logging.getLogger(name).setLevel(logging.WARNING)
+    check_method_names(cfg)
     run_dir = Path(cfg.paths.output_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(int(cfg.get("num_threads", 1)))
@@ -309,17 +310,26 @@ def relative_errors(values: dict[str, float], truths: dict[str, float | None]) -
 
 
 DEFAULT_STARTS = ("output_error", "equation_error", "sindy", "ukf")
+#: the classical methods ``baselines.run`` and ``model.refine.starts`` may name
+BASELINE_METHODS = ("equation_error", "output_error", "sindy", "ukf")
 
 
-def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pidyn_values: dict[str, float],
-                   baselines: list[dict], results: list) -> Any:
-    """The refinement stage after PIDynNet (``model.refine``); None when it is off.
+def check_method_names(cfg: DictConfig) -> None:
+    """Misspelled names and settings fail before PIDynNet runs, not minutes later (or never)."""
+    named = {"baselines.run": list((cfg.get("baselines") or {}).get("run") or [])}
+    plan = refine_plan(cfg)
+    if plan is not None:
+        named["model.refine.starts"] = sorted(plan[0])
+    for key, names in named.items():
+        unknown = sorted(set(names) - set(BASELINE_METHODS))
+        if unknown:
+            raise ValueError(f"{key}: unknown method(s) {unknown}; choose from {', '.join(BASELINE_METHODS)}")
 
-    Starts: PIDynNet's estimate with its networks' states, and the classical estimates named
-    in ``model.refine.starts`` that ran on the same record; the stage refines the one that
-    simulates the record best and says so when that is not PIDynNet's."""
-    from pidyn.models.identify import network_states
-    from pidyn.refine import RefineSettings, refine
+
+def refine_plan(cfg: DictConfig) -> tuple[set[str], list[str], Any] | None:
+    """``model.refine`` read and checked: (classical starts allowed, state sources to compare,
+    RefineSettings), or None when the stage is off."""
+    from pidyn.refine import RefineSettings
 
     node = cfg.model.get("refine") or "none"
     # model.refine=none / =multiple_shooting on the command line sets the method by name (the
@@ -334,6 +344,25 @@ def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pi
     allowed = set(rcfg.pop("starts", DEFAULT_STARTS))
     compare = list(rcfg.pop("compare_states", None) or [])
     settings = RefineSettings(**rcfg)
+    for source in compare:
+        replace(settings, states=source)  # checks the name
+    return allowed, compare, settings
+
+
+def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pidyn_values: dict[str, float],
+                   baselines: list[dict], results: list) -> Any:
+    """The refinement stage after PIDynNet (``model.refine``); None when it is off.
+
+    Starts: PIDynNet's estimate with its networks' states, and the classical estimates named
+    in ``model.refine.starts`` that ran on the same record; the stage refines the one that
+    simulates the record best and says so when that is not PIDynNet's."""
+    from pidyn.models.identify import network_states
+    from pidyn.refine import refine
+
+    plan = refine_plan(cfg)
+    if plan is None:
+        return None
+    allowed, compare, settings = plan
     starts = {"pidynnet": pidyn_values}
     for b in baselines:
         if b["method"] in allowed and b.get("params"):
