@@ -18,6 +18,7 @@ from __future__ import annotations
 import copy
 import logging
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -105,10 +106,108 @@ def _polish(record: Record, system: SDOFSystem, values: dict[str, float], dcfg: 
     return out, f"output error on {seg.t[0]:.4g}-{seg.t[-1]:.4g} s: {res.note}, {res.seconds:.1f} s"
 
 
+@dataclass
+class _Case:
+    """One diagnosis: the record and its split, the nominal system, the settings."""
+
+    cfg: DictConfig
+    record: Record
+    base: SDOFSystem
+    effects: dict
+    thresholds: Thresholds
+    mass_known: bool
+    fit: tuple[float, float]
+    held: tuple[float, float]
+    run_dir: Path
+
+    @property
+    def dcfg(self) -> DictConfig:
+        return self.cfg.diagnosis
+
+    @property
+    def x_raw(self) -> np.ndarray:
+        return self.record.x[:, 0]
+
+    @property
+    def stiff(self) -> str:
+        return _stiffness_name(self.base)
+
+    def mask(self, span: tuple[float, float]) -> np.ndarray:
+        return (self.record.t >= span[0]) & (self.record.t <= span[1])
+
+    def signals(self, period: float, k_nom: float, mass: float) -> tuple[Signals, WeakForm]:
+        """Smoothed x, x' and the weak form, on the time scale of ``period``."""
+        r = self.record
+        v_raw = None if r.v is None else r.v[:, 0]
+        xs, vs = smooth_signals(r.t, self.x_raw, v_raw, period)
+        return (Signals(r.t, xs, vs, mass, k_nom, self.stiff, t_fit_end=self.fit[1],
+                        v_noise=velocity_noise(r.t, self.x_raw, v_raw, period)),
+                WeakForm.for_record(r.t, period))
+
+    def screen(self, system: SDOFSystem, values: dict[str, float], s: Signals, weak: WeakForm,
+               effects: dict | None = None):
+        return screen(system, values, s, self.record.f, self.x_raw, weak, self.fit[1], self.mass_known,
+                      effects=self.effects if effects is None else effects, thresholds=self.thresholds)
+
+    def free_run(self, system: SDOFSystem, values: dict[str, float], v0: float) -> np.ndarray:
+        """The model from the measured initial state over the whole record."""
+        return simulate_identified(system, values, self.record, x0=float(self.x_raw[0]), v0=v0,
+                                   substeps=int(self.dcfg.substeps))[:, 0]
+
+
+@dataclass
+class _Nominal:
+    node: dict
+    system: SDOFSystem
+    values: dict[str, float]
+    metrics: dict
+    polish_note: str | None
+    s: Signals
+    weak: WeakForm
+    period: float
+
+
 def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
     """What the nominal model ``cfg.system`` misses on ``record`` (default: built from
     ``cfg.data``); writes diagnosis.json, report.md and figures to the run folder."""
     t_wall = time.perf_counter()
+    case = _prepare(cfg, record)
+    values0, period = _starting_point(case)
+    nom = _identify_nominal(case, values0, period)
+    # 2-3. what the nominal model cannot explain, and which effect explains it
+    sc = case.screen(nom.system, nom.values, nom.s, nom.weak)
+    pointwise = unexplained_force(nom.system, nom.values, case.record.t, case.x_raw, case.record.f, nom.period)
+    forced = case.dcfg.get("force_effect")
+    log.info("screening: %s", ", ".join(f"{r['effect']} {r['score']:.1f}" for r in sc.ranking[:4]))
+    # 3b. does the nominal model hold on the held-out part? if not, when did the structure change?
+    x_nom = case.free_run(nom.system, nom.values, float(nom.s.v[0]))
+    check, change_row = _check_heldout(case, nom, sc, x_nom, bool(forced))
+    cause = change_row["effect"] if change_row is not None else (forced or sc.cause)
+    # 4. extended model(s): extend, screen again, until nothing more passes the evidence
+    #    thresholds or diagnosis.max_effects is reached
+    if cause is None and bool(case.dcfg.get("learn_unexplained", True)) and not forced \
+            and (sc.verdict == "unexplained" or check.failed):
+        cause = LEARNED  # structured, but nothing in the library explains it: learn the force
+    row = None if cause is None else (_learned_row(sc) if cause == LEARNED else
+                                      change_row or next(r for r in sc.ranking if r["effect"] == cause))
+    ext = _extend_until_explained(cfg, case.record, nom.node, nom.values, cause, row, nom.s, nom.weak, case.x_raw,
+                                  case.fit, case.effects, case.thresholds, case.mass_known, bool(forced))
+    causes = ext["causes"] if case.dcfg.extend else ([] if cause is None else [cause])
+    # 5. held-out gain
+    x_ext = case.free_run(ext["system"], ext["values"], float(nom.s.v[0])) if ext["system"] is not None else None
+    diagnosis = _summary(case, nom, sc, check, change_row, ext, causes, cause, bool(forced), x_nom, x_ext)
+    diagnosis["wall_seconds"] = time.perf_counter() - t_wall
+    write_json(case.run_dir / "diagnosis.json", diagnosis)
+    _write_figures(case, nom, sc, diagnosis, change_row, ext, pointwise, x_nom, x_ext)
+    log.info("verdict: %s%s; held-out NRMSE nominal %.4g%s", diagnosis["verdict"],
+             f" ({diagnosis['cause']})" if diagnosis["cause"] else "", diagnosis["gain"]["nominal"],
+             "" if diagnosis["gain"]["extended"] is None else f", extended {diagnosis['gain']['extended']:.4g}")
+    log.info("run folder %s (%.0f s)", case.run_dir, diagnosis["wall_seconds"])
+    return diagnosis
+
+
+def _prepare(cfg: DictConfig, record: Record | None) -> _Case:
+    """The settings checked, the nominal system, the record and its fit / held-out split."""
     run_dir = Path(cfg.paths.output_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     dcfg = cfg.diagnosis
@@ -118,7 +217,6 @@ def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
         raise ValueError(f"diagnosis.effects: unknown effect(s) {sorted(unknown)}; the library has {sorted(EFFECTS)}")
     effects = {n: EFFECTS[n] for n in wanted}
     thresholds = Thresholds(**OmegaConf.to_container(dcfg.thresholds, resolve=True))  # type: ignore[arg-type]
-
     base: SDOFSystem = hydra.utils.instantiate(cfg.system)
     if not isinstance(base, SDOFSystem):
         raise ValueError(f"diagnosis needs a single-degree-of-freedom nominal system, got '{base.name}'")
@@ -130,113 +228,87 @@ def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
     if record.excitation != base.excitation:
         base = hydra.utils.instantiate(cfg.system, excitation=record.excitation)
     mass = cfg.data.get("mass", 1.0)
-    mass_known = mass is not None
-    if not mass_known and record.excitation == "ground":
+    if mass is None and record.excitation == "ground":
         raise ValueError("data.mass is null, but a ground-excited record cannot reveal the mass "
                          "(m x'' + ... = -m ag is homogeneous in m): give the mass")
     fit, held = split_spans(record, float(dcfg.fit_share))
-    stiff = _stiffness_name(base)
     log.info("diagnosing '%s' with nominal '%s': fit %.4g-%.4g s, held out %.4g-%.4g s",
              record.name, base.name, *fit, *held)
+    return _Case(cfg, record, base, effects, thresholds, mass is not None, fit, held, run_dir)
 
-    # --- signals, time scale and a data-driven starting point for the nominal parameters
-    x_raw = record.x[:, 0]
-    fit_mask = (record.t >= fit[0]) & (record.t <= fit[1])
-    period = dominant_period(record.t[fit_mask], x_raw[fit_mask])
-    values0 = {s.name: s.init for s in base.param_specs()}
-    if mass_known:
-        values0["m"] = float(mass)
 
-    def signals(period_: float, k_nom: float) -> tuple[Signals, WeakForm]:
-        v_raw = None if record.v is None else record.v[:, 0]
-        xs, vs = smooth_signals(record.t, x_raw, v_raw, period_)
-        return (Signals(record.t, xs, vs, values0.get("m", 1.0), k_nom, stiff, t_fit_end=fit[1],
-                        v_noise=velocity_noise(record.t, x_raw, v_raw, period_)),
-                WeakForm.for_record(record.t, period_))
-
-    s, weak = signals(period, values0[stiff])
-    start = screen(base, values0, s, record.f, x_raw, weak, fit[1], mass_known, effects={}, thresholds=thresholds)
-    values0.update(start.nominal_params)
-    if values0.get(stiff, 0) > 0 and values0.get("m", 0) > 0:
-        period = 2 * np.pi * np.sqrt(values0["m"] / values0[stiff])
-        s, weak = signals(period, values0[stiff])
-        start = screen(base, values0, s, record.f, x_raw, weak, fit[1], mass_known, effects={}, thresholds=thresholds)
-        values0.update(start.nominal_params)
+def _starting_point(case: _Case) -> tuple[dict[str, float], float]:
+    """A data-driven start for the nominal parameters (weak-form least squares, no effect) and
+    the natural period, refined once from the start's own stiffness."""
+    period = dominant_period(case.record.t[case.mask(case.fit)], case.x_raw[case.mask(case.fit)])
+    values0 = {s.name: s.init for s in case.base.param_specs()}
+    if case.mass_known:
+        values0["m"] = float(case.cfg.data.get("mass", 1.0))
+    s, weak = case.signals(period, values0[case.stiff], values0.get("m", 1.0))
+    values0.update(case.screen(case.base, values0, s, weak, effects={}).nominal_params)
+    if values0.get(case.stiff, 0) > 0 and values0.get("m", 0) > 0:
+        period = 2 * np.pi * np.sqrt(values0["m"] / values0[case.stiff])
+        s, weak = case.signals(period, values0[case.stiff], values0.get("m", 1.0))
+        values0.update(case.screen(case.base, values0, s, weak, effects={}).nominal_params)
     log.info("weak-form starting point: %s (natural period %.4g s)", _fmt(values0), period)
+    return values0, period
 
-    # --- 1. nominal identification (PIDynNet, then polish)
-    nominal_node = _system_node(cfg.system, {k: v for k, v in values0.items() if v > 0},
-                                values0["m"] if "m" in values0 else 1.0, not mass_known)
+
+def _identify_nominal(case: _Case, values0: dict[str, float], period: float) -> _Nominal:
+    """1. The nominal model on the fitting part: PIDynNet, then the output-error polish."""
+    cfg, record = case.cfg, case.record
+    node = _system_node(cfg.system, {k: v for k, v in values0.items() if v > 0},
+                        values0["m"] if "m" in values0 else 1.0, not case.mass_known)
     if record.excitation != OmegaConf.select(cfg, "system.excitation", default=record.excitation):
-        nominal_node["excitation"] = record.excitation
-    nom_metrics, nom_obj = identify(_sub_cfg(cfg, nominal_node, run_dir / "nominal", fit), record)
-    nominal: SDOFSystem = nom_obj["system"]
-    nominal_values = nom_obj["module"].net.params.as_floats()
+        node["excitation"] = record.excitation
+    metrics, obj = identify(_sub_cfg(cfg, node, case.run_dir / "nominal", case.fit), record)
+    system: SDOFSystem = obj["system"]
+    values = obj["module"].net.params.as_floats()
     polish_note = None
-    if dcfg.polish:
-        nominal_values, polish_note = _polish(record, nominal, nominal_values, dcfg, fit)
-    s, weak = signals(period, nominal_values[stiff])
-    s.mass = nominal_values["m"]
+    if case.dcfg.polish:
+        values, polish_note = _polish(record, system, values, case.dcfg, case.fit)
+    s, weak = case.signals(period, values[case.stiff], values0.get("m", 1.0))
+    s.mass = values["m"]
+    return _Nominal(node, system, values, metrics, polish_note, s, weak, period)
 
-    # --- 2-3. what the nominal model cannot explain, and which effect explains it
-    sc = screen(nominal, nominal_values, s, record.f, x_raw, weak, fit[1], mass_known, effects, thresholds)
-    pointwise = unexplained_force(nominal, nominal_values, record.t, x_raw, record.f, period)
-    forced = dcfg.get("force_effect")
-    cause = forced or sc.cause
-    log.info("screening: %s", ", ".join(f"{r['effect']} {r['score']:.1f}" for r in sc.ranking[:4]))
 
-    # --- 3b. does the nominal model hold on the held-out part? if not, when did the structure change?
-    def free_run(system: SDOFSystem, values: dict[str, float]) -> np.ndarray:
-        """From the measured initial state over the whole record."""
-        return simulate_identified(system, values, record, x0=float(x_raw[0]), v0=float(s.v[0]),
-                                   substeps=int(dcfg.substeps))[:, 0]
-
-    x_nom = free_run(nominal, nominal_values)
-    held_mask = (record.t >= held[0]) & (record.t <= held[1])
-    check = heldout_check(x_raw, x_nom, fit_mask, held_mask, float(np.std(x_raw - s.x)),
-                          threshold=float(dcfg.changes.heldout_ratio))
+def _check_heldout(case: _Case, nom: _Nominal, sc, x_nom: np.ndarray, forced: bool) -> tuple[Any, dict | None]:
+    """The held-out failure check, and where the structure changed when the data say it did
+    (a located change moves ``case.fit`` / ``case.held`` to the change point)."""
+    check = heldout_check(case.x_raw, x_nom, case.mask(case.fit), case.mask(case.held),
+                          float(np.std(case.x_raw - nom.s.x)), threshold=float(case.dcfg.changes.heldout_ratio))
     log.info("%s", check.sentence())
-    change_row = None
-    time_effects = {n: p_ for n, p_ in {"stiffness_loss": stiff, "damping_change": "c"}.items()
-                    if n in effects and p_ in nominal_values}
-    if not forced and time_effects and ((check.failed and sc.cause is None) or sc.cause in time_effects):
-        change, fit, held = _locate_change(nominal, nominal_values, s, record, x_raw, weak, fit, held, mass_known,
-                                           {n: p_ for n, p_ in time_effects.items() if sc.cause in (None, n)},
-                                           thresholds, bool(check.failed and sc.cause is None))
-        if change is not None:
-            cause = change.effect
-            change_row = {"effect": change.effect, "parameters": change.effect_parameters(),
-                          "nominal_refit": {}, "score": -change.delta_bic, "change": change}
-            log.info("%s", change.sentence())
-            fit_mask = (record.t >= fit[0]) & (record.t <= fit[1])
-            held_mask = (record.t >= held[0]) & (record.t <= held[1])
+    time_effects = {n: p_ for n, p_ in {"stiffness_loss": case.stiff, "damping_change": "c"}.items()
+                    if n in case.effects and p_ in nom.values}
+    if forced or not time_effects or not ((check.failed and sc.cause is None) or sc.cause in time_effects):
+        return check, None
+    change, case.fit, case.held = _locate_change(
+        nom.system, nom.values, nom.s, case.record, case.x_raw, nom.weak, case.fit, case.held, case.mass_known,
+        {n: p_ for n, p_ in time_effects.items() if sc.cause in (None, n)}, case.thresholds,
+        bool(check.failed and sc.cause is None))
+    if change is None:
+        return check, None
+    log.info("%s", change.sentence())
+    return check, {"effect": change.effect, "parameters": change.effect_parameters(), "nominal_refit": {},
+                   "score": -change.delta_bic, "change": change}
 
-    # --- 4. extended model(s): extend, screen the extended model again, until nothing more
-    #        passes the evidence thresholds or diagnosis.max_effects is reached
-    learn = bool(dcfg.get("learn_unexplained", True)) and not forced
-    if cause is None and learn and (sc.verdict == "unexplained" or check.failed):
-        cause = LEARNED  # structured, but nothing in the library explains it: learn the force
-    row = None if cause is None else (_learned_row(sc) if cause == LEARNED else
-                                      change_row or next(r for r in sc.ranking if r["effect"] == cause))
-    ext = _extend_until_explained(cfg, record, nominal_node, nominal_values, cause, row, s, weak, x_raw, fit,
-                                  effects, thresholds, mass_known, bool(forced))
-    ext_system, ext_values, ext_metrics = ext["system"], ext["values"], ext["metrics"]
-    causes = ext["causes"] if dcfg.extend else ([] if cause is None else [cause])
-    learned = LEARNED in causes
-    causes = [c for c in causes if c != LEARNED]
 
-    # --- 5. held-out gain
-    x_ext = free_run(ext_system, ext_values) if ext_system is not None else None
-    gain = {"metric": "heldout_nrmse_x", "nominal": nrmse(x_nom[held_mask], x_raw[held_mask]),
-            "extended": None if x_ext is None else nrmse(x_ext[held_mask], x_raw[held_mask])}
+def _summary(case: _Case, nom: _Nominal, sc, check, change_row: dict | None, ext: dict, causes: list[str],
+             cause: str | None, forced: bool, x_nom: np.ndarray, x_ext: np.ndarray | None) -> dict[str, Any]:
+    """The content of diagnosis.json: verdict, causes, evidence, parameters, held-out gain."""
+    record, held_mask = case.record, case.mask(case.held)
+    gain = {"metric": "heldout_nrmse_x", "nominal": nrmse(x_nom[held_mask], case.x_raw[held_mask]),
+            "extended": None if x_ext is None else nrmse(x_ext[held_mask], case.x_raw[held_mask])}
     if record.clean is not None:
         xc = record.clean.x[:, 0]
         gain["nominal_vs_clean"] = nrmse(x_nom[held_mask], xc[held_mask])
         gain["extended_vs_clean"] = None if x_ext is None else nrmse(x_ext[held_mask], xc[held_mask])
-
+    learned = LEARNED in causes
+    causes = [c for c in causes if c != LEARNED]
+    ext_system, ext_values, ext_metrics = ext["system"], ext["values"], ext["metrics"]
     effect_params: dict[str, Any] = {}
     if ext_values is not None and ext_system is not None:
-        nominal_names = {sp.name for sp in nominal.param_specs()}
+        nominal_names = {sp.name for sp in nom.system.param_specs()}
         effect_params = {k: v for k, v in ext_values.items() if k not in nominal_names}
     if change_row is not None:
         ch = change_row["change"]
@@ -244,61 +316,62 @@ def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
         effect_params["t_change_ci95"] = list(ch.ci95)
     verdict = ("discrepancy" if causes or (cause is not None and cause != LEARNED) else
                "unexplained" if learned or check.failed or sc.verdict == "unexplained" else "none")
-    cause = causes[0] if causes else (None if cause == LEARNED else cause)
     truth = dict(record.meta.get("hidden_params") or {}) if "hidden_effect" in record.meta else None
-    diagnosis = {
-        "nominal": nominal.describe(nominal_values),
+    return {
+        "nominal": nom.system.describe(nom.values),
         "verdict": verdict,
-        "cause": cause,
+        "cause": causes[0] if causes else (None if cause == LEARNED else cause),
         "causes": causes,
         "steps": ext["steps"],
         "learned_force": learned,
         "structure": {k: v for k, v in sc.structure.items()},
         "heldout_check": check.__dict__,
         "change": None if change_row is None else change_row["change"].to_dict(),
-        "forced": bool(forced),
+        "forced": forced,
         "ranking": sc.ranking,
         "extended": ext_system.describe(ext_values) if ext_system is not None else None,
         "parameters": effect_params,
-        "nominal_parameters": nominal_values,
+        "nominal_parameters": nom.values,
         "extended_parameters": ext_values,
         "gain": gain,
-        "split": {"fit": list(fit), "heldout": list(held)},
+        "split": {"fit": list(case.fit), "heldout": list(case.held)},
         "record": record.name,
         "noise": (record.meta or {}).get("noise"),
-        "natural_period": period,
-        "thresholds": OmegaConf.to_container(dcfg.thresholds, resolve=True),
-        "polish": {"nominal": polish_note, "extended": ext["note"]},
-        "pidynnet": {"nominal_errors_pct": nom_metrics.get("error_pct"),
+        "natural_period": nom.period,
+        "thresholds": OmegaConf.to_container(case.dcfg.thresholds, resolve=True),
+        "polish": {"nominal": nom.polish_note, "extended": ext["note"]},
+        "pidynnet": {"nominal_errors_pct": nom.metrics.get("error_pct"),
                      "extended_errors_pct": None if ext_metrics is None else ext_metrics.get("error_pct")},
         "hidden": None if truth is None else {"effect": record.meta.get("hidden_effect"), "parameters": truth},
-        "wall_seconds": time.perf_counter() - t_wall,
     }
-    write_json(run_dir / "diagnosis.json", diagnosis)
-    fig = run_dir / "figures"
+
+
+def _write_figures(case: _Case, nom: _Nominal, sc, d: dict, change_row: dict | None, ext: dict, pointwise: dict,
+                   x_nom: np.ndarray, x_ext: np.ndarray | None) -> None:
+    """The figures and report.md of the run folder."""
+    record, fit, held, period, cause = case.record, case.fit, case.held, nom.period, d["cause"]
+    fig = case.run_dir / "figures"
     fig.mkdir(exist_ok=True)
     units = (record.meta or {}).get("units", {})
-    plot_response(fig / "simulation_vs_measured.png", record.t, x_raw, x_nom, x_ext, fit, held, units.get("x", "m"), period)
+    plot_response(fig / "simulation_vs_measured.png", record.t, case.x_raw, x_nom, x_ext, fit, held,
+                  units.get("x", "m"), period)
     explained = None
     if cause is not None:
-        explained = _explained_force(nominal, nominal_values,
-                                     change_row or next(r for r in sc.ranking if r["effect"] == cause), s, pointwise)
+        explained = _explained_force(nom.system, nom.values,
+                                     change_row or next(r for r in sc.ranking if r["effect"] == cause), nom.s,
+                                     pointwise)
     plot_residual(fig / "residual.png", record.t, pointwise["r"], pointwise["x"], pointwise["v"], fit, cause,
                   explained, units, period)
-    plot_ranking(fig / "ranking.png", sc.ranking, thresholds.min_delta_bic)
-    names, A0, y = weak_system(nominal, nominal_values, s, record.f, x_raw, weak, mass_known)
-    running = running_estimate(names, A0, y, weak.centers, max(4 * period, 3 * weak.dt * (2 * weak.half + 1)))
-    plot_running_estimate(fig / "running_estimate.png", running, nominal_values, fit, held,
+    plot_ranking(fig / "ranking.png", sc.ranking, case.thresholds.min_delta_bic)
+    names, A0, y = weak_system(nom.system, nom.values, nom.s, record.f, case.x_raw, nom.weak, case.mass_known)
+    running = running_estimate(names, A0, y, nom.weak.centers,
+                               max(4 * period, 3 * nom.weak.dt * (2 * nom.weak.half + 1)))
+    plot_running_estimate(fig / "running_estimate.png", running, nom.values, fit, held,
                           None if change_row is None else change_row["change"])
-    if learned and ext_system is not None and ext_system.n_latent == 0:
-        _plot_learned(fig / "learned_force.png", record.t, nominal, nominal_values, ext_system, ext_values, pointwise,
-                      units)
-    write_report(run_dir / "report.md", diagnosis, [p.name for p in sorted(fig.glob("*.png"))])
-    log.info("verdict: %s%s; held-out NRMSE nominal %.4g%s", diagnosis["verdict"],
-             f" ({cause})" if cause else "", gain["nominal"],
-             "" if gain["extended"] is None else f", extended {gain['extended']:.4g}")
-    log.info("run folder %s (%.0f s)", run_dir, diagnosis["wall_seconds"])
-    return diagnosis
+    if d["learned_force"] and ext["system"] is not None and ext["system"].n_latent == 0:
+        _plot_learned(fig / "learned_force.png", record.t, nom.system, nom.values, ext["system"], ext["values"],
+                      pointwise, units)
+    write_report(case.run_dir / "report.md", d, [p.name for p in sorted(fig.glob("*.png"))])
 
 
 EXTENSION = "pidyn.discrepancy.extend.extended_system"
