@@ -8,7 +8,11 @@ Measures (one thread, CPU):
     network against nested autograd, in float32 and float64;
   * Lightning's overhead against a plain PyTorch loop driving the same module;
   * end-to-end wall time and parameter errors of `python train.py` (Duffing) and
-    `python train.py system=bouc_wen`.
+    `python train.py system=bouc_wen`;
+  * the cost against the number of storeys of a shear building measured by accelerometers on
+    every floor (3, 5, 10): ms per PIDynNet iteration, ms per refinement linearisation
+    (residuals and exact Jacobian over 20 s of El Centro), and the peak memory of a process
+    doing both (each size in its own process, so the peaks do not mix).
 """
 
 from __future__ import annotations
@@ -75,6 +79,72 @@ def per_iteration_ms(dtype, mode: str, n: int = 200) -> float:
     for _ in range(n):
         step()
     return 1e3 * (time.perf_counter() - t0) / n
+
+
+STOREYS = (3, 5, 10)
+
+
+def storey_cost(n: int, iters: int = 100) -> dict:
+    """One building size: PIDynNet ms / iteration, refinement ms / linearisation, peak RSS."""
+    import resource
+
+    import numpy as np
+
+    from pidyn.data.sources import synthetic
+    from pidyn.data.windows import make_windows
+    from pidyn.models.pidynnet import PIDynNet
+    from pidyn.nets import TaylorMLP
+    from pidyn.refine import RefineSettings
+    from pidyn.refine.stage import build_problem
+    from pidyn.systems import ShearBuilding
+
+    torch.set_default_dtype(torch.float32)
+    torch.manual_seed(0)
+    sb = ShearBuilding(n_storeys=n)
+    rec = synthetic(sb, "el_centro", duration=20.0, channels=("a",))
+    w = make_windows(rec.t, rec.f, None, None, rec.a, 3.0, 1000, accel_signal=rec.f)[2]
+    net = PIDynNet(sb, TaylorMLP(out_features=n))
+    net.enter_window(w)
+    opt = torch.optim.Adam(list(net.parameters()), lr=1e-3)
+    g = torch.Generator().manual_seed(0)
+
+    def step():
+        idx = torch.randperm(1000, generator=g)[:500]
+        L = net.physics_losses(w.t_pool[idx], w.f_pool[idx])
+        L.update(net.data_losses(w))
+        opt.zero_grad()
+        sum(L.values()).backward()
+        opt.step()
+
+    for _ in range(10):
+        step()
+    t0 = time.perf_counter()
+    for _ in range(iters):
+        step()
+    ms_iter = 1e3 * (time.perf_counter() - t0) / iters
+    problem = build_problem(sb, rec, RefineSettings(initial_state="free"))
+    b = problem.bounds[:-1]
+    states = np.hstack([rec.clean.x[b], rec.clean.v[b]])  # the true segment starts (linear: no latent z)
+    u = problem.pack(sb.true_values(), states)
+    problem.linearize(u)
+    t0 = time.perf_counter()
+    reps = 3
+    for _ in range(reps):
+        problem.linearize(u)
+    ms_lin = 1e3 * (time.perf_counter() - t0) / reps
+    return {"storeys": n, "unknowns": int(problem.n_unknowns), "ms_per_iteration": ms_iter,
+            "ms_per_linearisation": ms_lin, "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def storey_scaling() -> list[dict]:
+    out = []
+    for n in STOREYS:
+        code = (f"import sys, json; sys.path.insert(0, {str(ROOT / 'experiments')!r}); import torch; "
+                f"torch.set_num_threads(1); import bench; print(json.dumps(bench.storey_cost({n})))")
+        res = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True, cwd=ROOT)
+        out.append(json.loads(res.stdout.strip().splitlines()[-1]))
+        print(out[-1], flush=True)
+    return out
 
 
 def lightning_overhead(n_iter: int = 1500, repeats: int = 3) -> dict:
@@ -164,6 +234,7 @@ def main() -> None:
         for mode in ("taylor", "autograd") for name, dt in (("float32", torch.float32), ("float64", torch.float64))
     }
     res["lightning_overhead"] = lightning_overhead()
+    res["storeys"] = storey_scaling()
     if not a.quick:
         res["end_to_end"] = [end_to_end([]), end_to_end(["system=bouc_wen"])]
     elif (OUT / "bench.json").exists():  # keep the last full run's end-to-end rows
@@ -182,6 +253,12 @@ def main() -> None:
               f"{lo['iterations']} iterations: plain {lo['plain_s']:.2f} s, Lightning {lo['lightning_s']:.2f} s, "
               f"overhead {lo['overhead_pct']:+.1f} % (medians of {lo.get('repeats', 1)} alternating runs; "
               f"each pair: {lo.get('pairs_pct', [])} %)"]
+    lines += ["", "## Shear buildings: cost against the number of storeys (accelerometers on every floor, "
+              "El Centro 20 s)\n",
+              "| storeys | refinement unknowns (1 s segments) | PIDynNet ms / iteration | refinement ms / "
+              "linearisation (residuals + exact Jacobian) | peak memory MB |", "|---|---|---|---|---|"]
+    lines += [f"| {r['storeys']} | {r['unknowns']} | {r['ms_per_iteration']:.1f} | {r['ms_per_linearisation']:.0f} | "
+              f"{r['peak_rss_mb']:.0f} |" for r in res["storeys"]]
     if "end_to_end" in res:
         lines += ["", "## End to end" + (f" (from the full run of {res['end_to_end_date']})" if res.get("end_to_end_date") else "") + "\n", "| command | wall s | windows | iterations | errors % |", "|---|---|---|---|---|"]
         for e in res["end_to_end"]:
