@@ -178,10 +178,7 @@ def make_windows(
     ref = next(c for c in (x, v, a) if c is not None)
     t_start = t[0] if t_start is None else t_start
     t_end = t[-1] if t_end is None else min(t_end, t[-1])
-    n_win = max(1, int(np.floor((t_end - t_start) / length + 1e-9)))
-    bounds = [(t_start + i * length, t_start + (i + 1) * length) for i in range(n_win)]
-    if cover_tail and t_end - bounds[-1][1] > 2 * (t[1] - t[0]):
-        bounds.append((bounds[-1][1], t_end))  # a shorter last window so that every sample is covered
+    bounds = window_bounds(t, length, t_start, t_end, cover_tail)
     record_peak = float(np.nanmax(np.abs(ref[(t >= t_start) & (t <= t_end)])))
     T = lambda arr: None if arr is None else torch.as_tensor(np.asarray(arr, float), dtype=dtype)  # noqa: E731
     out = []
@@ -189,28 +186,32 @@ def make_windows(
         m = (t >= t0 - 1e-9) & (t <= t1 + 1e-9)
         tp = np.linspace(t0, t1, pool_size)
         peak = float(np.nanmax(np.abs(ref[m])))
-        qd_ = qdd_ = qp_ = qpd_ = None
-        if accel_signal is not None:
-            qd_, qdd_ = double_integral(t, np.asarray(accel_signal, float), t[m], t0)
-            qp_, qpd_ = double_integral(t, np.asarray(accel_signal, float), tp, t0)
-        out.append(
-            Window(
-                index=i,
-                t0=t0,
-                t1=t1,
-                t_data=T(t[m]),
-                f_data=T(np.asarray(f, float)[m]),
-                x=None if x is None else T(x[m]),
-                v=None if v is None else T(v[m]),
-                a=None if a is None else T(a[m]),
-                t_pool=T(tp),
-                f_pool=T(np.interp(tp, t, f)),
-                peak_x=peak,
-                informative=peak >= min_peak_fraction * record_peak,
-                q_data=T(qd_),
-                qd_data=T(qdd_),
-                q_pool=T(qp_),
-                qd_pool=T(qpd_),
-            )
-        )
+        q = _transform(t, accel_signal, m, tp, t0)
+        out.append(Window(index=i, t0=t0, t1=t1, t_data=T(t[m]), f_data=T(np.asarray(f, float)[m]),
+                          x=None if x is None else T(x[m]), v=None if v is None else T(v[m]),
+                          a=None if a is None else T(a[m]), t_pool=T(tp), f_pool=T(np.interp(tp, t, f)),
+                          peak_x=peak, informative=peak >= min_peak_fraction * record_peak,
+                          **{k: T(val) for k, val in q.items()}))
     return out
+
+
+def window_bounds(t: np.ndarray, length: float, t_start: float, t_end: float,
+                  cover_tail: bool = False) -> list[tuple[float, float]]:
+    """Equal windows of ``length`` s over [t_start, t_end]; with ``cover_tail`` a shorter last
+    window so that every sample is covered."""
+    n_win = max(1, int(np.floor((t_end - t_start) / length + 1e-9)))
+    bounds = [(t_start + i * length, t_start + (i + 1) * length) for i in range(n_win)]
+    if cover_tail and t_end - bounds[-1][1] > 2 * (t[1] - t[0]):
+        bounds.append((bounds[-1][1], t_end))
+    return bounds
+
+
+def _transform(t: np.ndarray, accel_signal: np.ndarray | None, m: np.ndarray, tp: np.ndarray,
+               t0: float) -> dict[str, np.ndarray | None]:
+    """The excitation transform's q, q' on the window's samples and collocation pool (None: off)."""
+    if accel_signal is None:
+        return {"q_data": None, "qd_data": None, "q_pool": None, "qd_pool": None}
+    acc = np.asarray(accel_signal, float)
+    q_data, qd_data = double_integral(t, acc, t[m], t0)
+    q_pool, qd_pool = double_integral(t, acc, tp, t0)
+    return {"q_data": q_data, "qd_data": qd_data, "q_pool": q_pool, "qd_pool": qd_pool}

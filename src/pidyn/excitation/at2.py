@@ -45,13 +45,27 @@ def read_at2(path: str | Path, units: str = "g") -> AT2Record:
             handed in by mistake must not be read as acceleration.
     """
     path = Path(path)
+    lines = _read_lines(path)
+    header_idx, npts, dt = _parse_header(path, lines)
+    header = lines[:header_idx]
+    _check_units(path, header, units)
+    acc = _read_samples(path, lines, header_idx, npts)
+    title = " / ".join(h.strip() for h in header if h.strip())
+    return AT2Record(path=path, title=title, dt=dt, acc_g=acc)
+
+
+def _read_lines(path: Path) -> list[str]:
     if not path.is_file():
         raise AT2FormatError(f"{path}: no such file")
     try:
         text = path.read_text(encoding="ascii", errors="strict")
     except UnicodeDecodeError as exc:
         raise AT2FormatError(f"{path}: not a text file ({exc.reason} at byte {exc.start})") from None
-    lines = text.splitlines()
+    return text.splitlines()
+
+
+def _parse_header(path: Path, lines: list[str]) -> tuple[int, int, float]:
+    """The 'NPTS=..., DT=...' line: its index, NPTS and DT, checked."""
     header_idx = next((i for i, line in enumerate(lines[:12]) if _HEADER.search(line)), None)
     if header_idx is None:
         raise AT2FormatError(
@@ -68,7 +82,11 @@ def read_at2(path: str | Path, units: str = "g") -> AT2Record:
         raise AT2FormatError(f"{path}: line {header_idx + 1}: DT={m.group(2)} must be positive")
     if npts <= 1:
         raise AT2FormatError(f"{path}: line {header_idx + 1}: NPTS={npts} is too few samples")
-    header = lines[:header_idx]
+    return header_idx, npts, dt
+
+
+def _check_units(path: Path, header: list[str], units: str) -> None:
+    """An acceleration file in g; a velocity or displacement file handed in by mistake fails."""
     declared = _declared_units(header)
     if declared is not None and declared.lower() != units.lower():
         raise AT2FormatError(
@@ -77,6 +95,10 @@ def read_at2(path: str | Path, units: str = "g") -> AT2Record:
         )
     if any("VELOCITY" in h.upper() or "DISPLACEMENT" in h.upper() for h in header):
         raise AT2FormatError(f"{path}: header describes velocity or displacement, not acceleration")
+
+
+def _read_samples(path: Path, lines: list[str], header_idx: int, npts: int) -> np.ndarray:
+    """The samples after the header: numbers, NPTS of them, finite, plausibly in g."""
     tokens = " ".join(lines[header_idx + 1 :]).split()
     try:
         acc = np.array([float(tok) for tok in tokens], dtype=np.float64)
@@ -99,8 +121,7 @@ def read_at2(path: str | Path, units: str = "g") -> AT2Record:
             f"{path}: peak |acceleration| {np.max(np.abs(acc)):.3g} exceeds 10 g; "
             "the file is probably in cm/s^2 or m/s^2, not g"
         )
-    title = " / ".join(h.strip() for h in header if h.strip())
-    return AT2Record(path=path, title=title, dt=dt, acc_g=acc)
+    return acc
 
 
 def _declared_units(header: list[str]) -> str | None:
