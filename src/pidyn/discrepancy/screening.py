@@ -150,6 +150,48 @@ def screen(
     """
     effects = EFFECTS if effects is None else effects
     th = thresholds or Thresholds()
+    base = _nominal_fit(system, values, s, f, x_raw, weak, fit_end, mass_known)
+    ranking = [_score_effect(eff, s, weak, base, values) for eff in effects.values()]
+    structure = _structure(s, weak, base.A0, base.y, base.fit, base.ho, base.folds, base.rss0, base.rss0_cv,
+                           base.rss0_ho, base.n_eff)
+    ranking.sort(key=lambda r: -np.inf if r["score"] is None else r["score"], reverse=True)
+    for r in ranking:
+        r["passes"] = bool(r["score"] is not None and _passes(r, th))
+    verdict, cause = _verdict(ranking, structure, th)
+    return Screening(
+        nominal_params=dict(zip(base.names, map(float, base.theta0))),
+        ranking=ranking,
+        verdict=verdict,
+        cause=cause,
+        rss_nominal_fit=base.rss0,
+        rss_nominal_heldout=base.rss0_ho,
+        n_independent=float(base.n_eff),
+        residual_rows={"t": weak.centers, "residual": base.y - base.A0 @ base.theta0, "fit": base.fit,
+                       "heldout": base.ho},
+        structure=structure,
+    )
+
+
+@dataclass
+class _NominalFit:
+    """The nominal model's weak-form regression: what every effect is scored against."""
+
+    names: list[str]
+    A0: np.ndarray
+    y: np.ndarray
+    fit: np.ndarray  # rows in the fitting part
+    ho: np.ndarray  # rows wholly held out
+    folds: list
+    theta0: np.ndarray
+    rss0: float
+    rss0_ho: float | None
+    rss0_cv: float
+    ss_total: float
+    n_eff: float  # independent rows
+
+
+def _nominal_fit(system: SDOFSystem, values: dict[str, float], s: Signals, f: np.ndarray, x_raw: np.ndarray,
+                 weak: WeakForm, fit_end: float, mass_known: bool) -> _NominalFit:
     names, A0, y = weak_system(system, values, s, f, x_raw, weak, mass_known)
     starts = weak.starts
     w = 2 * weak.half + 1
@@ -159,62 +201,47 @@ def screen(
     if fit.sum() < 4:
         raise ValueError(f"only {int(fit.sum())} weak-form windows fit in the fitting part (0-{fit_end:g} s); "
                          "use a longer record or a shorter fitting split")
-    n_eff = max(fit.sum() / weak.rows_per_independent, 2.0)
     folds = _folds(fit, 5)
-
     theta0 = lstsq(A0[fit], y[fit])
     r0 = y - A0 @ theta0
-    rss0, rss0_ho = float(np.sum(r0[fit] ** 2)), float(np.sum(r0[ho] ** 2)) if ho.any() else None
-    rss0_cv = _cv_rss(A0, y, folds)
-    ss_total = float(np.sum(y[fit] ** 2))
-    nominal = dict(zip(names, map(float, theta0)))
+    return _NominalFit(names=names, A0=A0, y=y, fit=fit, ho=ho, folds=folds, theta0=theta0,
+                       rss0=float(np.sum(r0[fit] ** 2)),
+                       rss0_ho=float(np.sum(r0[ho] ** 2)) if ho.any() else None,
+                       rss0_cv=_cv_rss(A0, y, folds), ss_total=float(np.sum(y[fit] ** 2)),
+                       n_eff=max(fit.sum() / weak.rows_per_independent, 2.0))
 
-    ranking = []
-    for eff in effects.values():
-        best = None
-        for cand in eff.candidates(s):
-            B = weak.project(cand.columns)
-            row = _fit_candidate(cand, A0, B, y, fit, ho)
-            if row is not None:
-                row["B"] = B
-            if row is not None and (best is None or row["rss_fit"] < best["rss_fit"]):
-                best = row
-        if best is None:
-            ranking.append({"effect": eff.name, "score": None, "note": "no physical fit (wrong sign)"})
-            continue
-        rss_cv = _cv_rss(np.column_stack([A0, best.pop("B")]), y, folds)
-        k = len(best["coef"]) + eff.n_grid
-        rss = max(best["rss_fit"], 1e-300)
-        delta_bic = n_eff * np.log(rss / max(rss0, 1e-300)) + k * np.log(n_eff)
-        nominal_fit = {n: best["theta"][i] for i, n in enumerate(names)}
-        params = eff.parameters(best["coef"], best["fixed"], {**values, **nominal_fit})
-        ranking.append({
-            "effect": eff.name,
-            "score": float(-delta_bic),
-            "delta_bic": float(delta_bic),
-            "explained": float(1 - rss / max(rss0, 1e-300)),
-            "force_share": float((rss0 - rss) / max(ss_total, 1e-300)),
-            "cv_gain": float(1 - rss_cv / max(rss0_cv, 1e-300)),
-            "heldout_gain": None if rss0_ho is None else float(1 - best["rss_ho"] / max(rss0_ho, 1e-300)),
-            "parameters": {k_: float(v) for k_, v in params.items()},
-            "nominal_refit": {k_: float(v) for k_, v in nominal_fit.items()},
-        })
-    structure = _structure(s, weak, A0, y, fit, ho, folds, rss0, rss0_cv, rss0_ho, n_eff)
-    ranking.sort(key=lambda r: -np.inf if r["score"] is None else r["score"], reverse=True)
-    for r in ranking:
-        r["passes"] = bool(r["score"] is not None and _passes(r, th))
-    verdict, cause = _verdict(ranking, structure, th)
-    return Screening(
-        nominal_params=nominal,
-        ranking=ranking,
-        verdict=verdict,
-        cause=cause,
-        rss_nominal_fit=rss0,
-        rss_nominal_heldout=rss0_ho,
-        n_independent=float(n_eff),
-        residual_rows={"t": weak.centers, "residual": r0, "fit": fit, "heldout": ho},
-        structure=structure,
-    )
+
+def _score_effect(eff: Effect, s: Signals, weak: WeakForm, base: _NominalFit, values: dict[str, float]) -> dict:
+    """The effect's best candidate added to the nominal regression: its BIC score, shares of the
+    force it explains (in sample, cross-validated, held out) and its parameters."""
+    best = None
+    for cand in eff.candidates(s):
+        B = weak.project(cand.columns)
+        row = _fit_candidate(cand, base.A0, B, base.y, base.fit, base.ho)
+        if row is not None:
+            row["B"] = B
+        if row is not None and (best is None or row["rss_fit"] < best["rss_fit"]):
+            best = row
+    if best is None:
+        return {"effect": eff.name, "score": None, "note": "no physical fit (wrong sign)"}
+    rss0, rss0_cv, rss0_ho = base.rss0, base.rss0_cv, base.rss0_ho
+    rss_cv = _cv_rss(np.column_stack([base.A0, best.pop("B")]), base.y, base.folds)
+    k = len(best["coef"]) + eff.n_grid
+    rss = max(best["rss_fit"], 1e-300)
+    delta_bic = base.n_eff * np.log(rss / max(rss0, 1e-300)) + k * np.log(base.n_eff)
+    nominal_fit = {n: best["theta"][i] for i, n in enumerate(base.names)}
+    params = eff.parameters(best["coef"], best["fixed"], {**values, **nominal_fit})
+    return {
+        "effect": eff.name,
+        "score": float(-delta_bic),
+        "delta_bic": float(delta_bic),
+        "explained": float(1 - rss / max(rss0, 1e-300)),
+        "force_share": float((rss0 - rss) / max(base.ss_total, 1e-300)),
+        "cv_gain": float(1 - rss_cv / max(rss0_cv, 1e-300)),
+        "heldout_gain": None if rss0_ho is None else float(1 - best["rss_ho"] / max(rss0_ho, 1e-300)),
+        "parameters": {k_: float(v) for k_, v in params.items()},
+        "nominal_refit": {k_: float(v) for k_, v in nominal_fit.items()},
+    }
 
 
 def _verdict(ranking: list[dict], structure: dict, th: Thresholds) -> tuple[str, str | None]:
