@@ -56,36 +56,23 @@ def unscented_kalman_filter(
         return _tuned(record, system, list(tune), kw)
     t0 = time.perf_counter()
     specs, fixed, theta0 = starting_point(system, init)
-    nd, nz, npar = system.n_dof, system.n_latent, len(specs)
-    ns = 2 * nd + nz
-    n = ns + npar
+    nd, ns, npar = system.n_dof, system.n_state, len(specs)
     chans = record_channels(record, nd)
     levels = dict((record.meta or {}).get("noise_levels") or {})
     R = np.diag([max(levels.get(c.kind, noise_level), r_floor) ** 2 * _sensor_rms(record, c) ** 2 for c in chans])
-    xs, vs = record.state_scales()
-    m = np.zeros(n)
-    m[ns:] = theta0
-    P = np.diag([1e-12] * ns + [init_param_std**2] * npar)
-    Q = np.diag(list(q_state * xs**2) + list(q_state * vs**2) + [q_state * float(np.max(xs)) ** 2] * nz
-                + [q_param] * npar)
-    lam, wm, wc = _weights(n, alpha, beta, kappa)
+    m, P, Q = _prior(record, system, theta0, init_param_std, q_state, q_param)
+    lam, wm, wc = _weights(ns + npar, alpha, beta, kappa)
     rows = {"x": lambda Yp, Rp, d: Yp[:, d], "v": lambda Yp, Rp, d: Yp[:, nd + d], "a": lambda Yp, Rp, d: Rp[:, nd + d]}
     traj: list[dict] = []
     loglik = 0.0
     t, f = record.t, record.f
     for i in range(len(t) - 1):
-        # --- predict
         X = _sigma_points(m, P, lam)
         p = from_theta(specs, X[ns:])
         p.update({k: np.full(X.shape[1], v) for k, v in fixed.items()})
         with np.errstate(all="ignore"):
             Ys, Rs = rk4(system, p, t[i : i + 2], f[i : i + 2], X[:ns].T.copy(), substeps=substeps)
-        Xp = X.copy()
-        Xp[:ns] = Ys[1].T
-        Xp = np.nan_to_num(Xp, nan=0.0, posinf=1e6, neginf=-1e6)
-        m = Xp @ wm
-        D = Xp - m[:, None]
-        P = (wc * D) @ D.T + Q
+        m, P, D = _predicted_belief(X, Ys[1], ns, wm, wc, Q)
         # --- update with the measurement at t[i+1]
         Y = np.nan_to_num(np.array([rows[c.kind](Ys[1], Rs[1], c.dof) for c in chans]), nan=0.0, posinf=1e6,
                           neginf=-1e6)
@@ -98,6 +85,34 @@ def unscented_kalman_filter(
     res = BaselineResult("ukf", est, time.perf_counter() - t0, trajectory=traj)
     res.loglik = float(loglik)
     return res
+
+
+def _prior(record: Record, system, theta0: np.ndarray, init_param_std: float, q_state: float,
+           q_param: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean, covariance and process noise of the augmented state [x, x', z, theta]: the
+    structure at rest, the parameters at their start with ``init_param_std``; the states'
+    process noise scaled by the record's displacement and velocity spreads."""
+    nd, nz, npar = system.n_dof, system.n_latent, len(theta0)
+    ns = 2 * nd + nz
+    xs, vs = record.state_scales()
+    m = np.zeros(ns + npar)
+    m[ns:] = theta0
+    P = np.diag([1e-12] * ns + [init_param_std**2] * npar)
+    Q = np.diag(list(q_state * xs**2) + list(q_state * vs**2) + [q_state * float(np.max(xs)) ** 2] * nz
+                + [q_param] * npar)
+    return m, P, Q
+
+
+def _predicted_belief(X: np.ndarray, Y_states: np.ndarray, ns: int, wm: np.ndarray, wc: np.ndarray,
+                      Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean, covariance and sigma deviations after propagating the sigma points ``X`` (their
+    states now ``Y_states``); a diverged point is clipped so one bad draw cannot poison the mean."""
+    Xp = X.copy()
+    Xp[:ns] = Y_states.T
+    Xp = np.nan_to_num(Xp, nan=0.0, posinf=1e6, neginf=-1e6)
+    m = Xp @ wm
+    D = Xp - m[:, None]
+    return m, (wc * D) @ D.T + Q, D
 
 
 def _weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[float, np.ndarray, np.ndarray]:
