@@ -182,7 +182,7 @@ class PIDynNet(nn.Module):
             out[f"physics/{name}"] = ((r / self.scale_v[0]) ** 2).mean()
         return out
 
-    def data_losses(self, w: Window, order: int = 1, fill: bool = False) -> dict[str, torch.Tensor]:
+    def data_losses(self, w: Window, fill: bool = False) -> dict[str, torch.Tensor]:
         """Supervised terms over the measured entries; ``fill`` (pretraining only) also fits the
         floors without a sensor to their neighbours' signals interpolated over the floor number."""
         need = 2 if w.a is not None else (1 if w.v is not None else 0)

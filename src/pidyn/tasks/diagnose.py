@@ -399,8 +399,8 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
         refit = {n: v for n, v in row["nominal_refit"].items() if v > 0} if k == 1 else {}
         if cause == LEARNED:  # start the network at the force the current model cannot explain
             row = {**row, "parameters": {"init_from": str(_save_unexplained(run_dir / f"unexplained_{k}.npz", record,
-                                                                          _current_system(node), values, x_raw, fit,
-                                                                          dcfg))}}
+                                                                          _current_system(node), values, x_raw,
+                                                                          fit))}}
         inner = _node_with_values(node, {**values, **refit})
         if k == 1:
             inner = _system_node(OmegaConf.create(inner), refit, refit.get("m", values["m"]), not mass_known)
@@ -454,7 +454,7 @@ def _current_system(node: dict) -> SDOFSystem:
 
 
 def _save_unexplained(path: Path, record: Record, system: SDOFSystem, values: dict[str, float], x_raw: np.ndarray,
-                      fit: tuple[float, float], dcfg: DictConfig) -> Path:
+                      fit: tuple[float, float]) -> Path:
     """The force ``system`` cannot explain on the fitting part (band-limited, the ringing ends
     left out), with x and x' beside it: what a learned force term starts from."""
     period = 2 * np.pi * np.sqrt(values["m"] / max(values.get("k", values.get("k1", 1.0)), 1e-300))

@@ -98,7 +98,7 @@ def generalize(cfg: DictConfig) -> dict[str, Any]:
                "identification": {k: metrics[k] for k in ("params", "error_pct", "max_error_pct")}}
     write_json(run_dir / "generalization.json", summary)
     _write_markdown(run_dir / "generalization.md", cfg, df, summary)
-    _figures(run_dir / "figures", record, module, df, _examples(pred_dir, df))
+    _figures(run_dir / "figures", record, df, _examples(pred_dir, df))
     tb_figures(obj["logger"], run_dir / "figures", int(module.iteration), {})
     log.info("generalisation: %d cases, share gamma >= 0.95: PIDynNet %.2f, simulation %.2f", len(df), share,
              summary["share_gamma_ge_0.95_simulation"])
@@ -194,7 +194,7 @@ def _examples(pred_dir: Path, df: pd.DataFrame, n: int = 4) -> list:
     return out
 
 
-def _figures(fig_dir: Path, record, module, df: pd.DataFrame, examples: list) -> None:
+def _figures(fig_dir: Path, record, df: pd.DataFrame, examples: list) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
