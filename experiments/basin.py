@@ -125,6 +125,7 @@ def main() -> None:
     ap.add_argument("--methods", nargs="*", default=METHODS)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--shard", default=None, help="k/n: run only starts i with i %% n == k, no summary")
+    ap.add_argument("--machine-note", default="", help="how the starts were run (parallel shards), for the summary")
     a = ap.parse_args()
     shard = tuple(int(v) for v in a.shard.split("/")) if a.shard else (0, 1)
     import logging
@@ -190,7 +191,7 @@ def write_summary(df: pd.DataFrame, stem: Path, a, cell: dict, truth: dict) -> N
     lines = [f"# Basin of attraction: {a.cell} ({cell['system']} under {cell['excitation']} x{cell['eq_scale']:g}, "
              "noise-free)\n",
              f"Command: `python experiments/basin.py --cell {a.cell} --starts {a.starts}`  ",
-             f"Machine: {platform.machine()}, one thread  ",
+             f"Machine: {platform.machine()}, one thread{'; ' + a.machine_note if a.machine_note else ''}  ",
              f"Starts: {a.starts}, each parameter log-uniform in [1/3, 3] x truth (k, k1 in [1/2, 2] x), seed {a.seed}. "
              "Success: every parameter within 1 % of the truth.  ",
              f"PIDynNet's schedule here: {' '.join(SHORT)}; then the multiple-shooting refinement from its "
