@@ -147,7 +147,9 @@ def _refined_columns(js: list[dict], n: str, truth: float | None, crb: float) ->
     errs = np.array([j["error_pct"].get(n, np.nan) for j in ref])
     rms = float(np.sqrt(np.nanmean(errs**2)))
     cis = [j["ci95"][n] for j in ref if j.get("ci95") and n in j["ci95"]]
-    cover = [lo <= truth <= hi for lo, hi in cis] if truth is not None else []
+    # noise-free data: the interval measures the integrator's misfit, not noise; coverage is undefined
+    noisy = any((j.get("noise") or 0) > 0 for j in ref)
+    cover = [lo <= truth <= hi for lo, hi in cis] if truth is not None and noisy else []
     return {
         "refined_mean": vals.mean(), "refined_std": vals.std(ddof=1) if len(vals) > 1 else 0.0,
         "refined_rms_err": rms, "refined_over_crb": rms / crb if crb and crb > 0 else np.nan,
