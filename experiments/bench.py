@@ -224,7 +224,11 @@ def end_to_end(args: list[str]) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="skip end-to-end runs")
+    ap.add_argument("--render", action="store_true", help="only write bench.md again from bench.json")
     a = ap.parse_args()
+    if a.render:
+        write_markdown(json.loads((OUT / "bench.json").read_text()))
+        return
     torch.set_num_threads(1)
     res: dict = {"command": "python experiments/bench.py" + (" --quick" if a.quick else ""),
                  "machine": f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} thread, torch {torch.__version__}",
@@ -244,6 +248,10 @@ def main() -> None:
             res["end_to_end_date"] = prev.get("date", "")
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "bench.json").write_text(json.dumps(res, indent=2))
+    write_markdown(res)
+
+
+def write_markdown(res: dict) -> None:
     lines = [f"# Benchmark\n\nCommand: `{res['command']}`  \nMachine: {res['machine']}  \nDate: {res['date']}\n",
              "## ms per training iteration (500 collocation points, x, x', x'', plus data loss)\n",
              "| derivatives | ms |", "|---|---|"]
@@ -262,7 +270,7 @@ def main() -> None:
     if "end_to_end" in res:
         lines += ["", "## End to end" + (f" (from the full run of {res['end_to_end_date']})" if res.get("end_to_end_date") else "") + "\n", "| command | wall s | windows | iterations | errors % |", "|---|---|---|---|---|"]
         for e in res["end_to_end"]:
-            errs = ", ".join(f"{k} {v:.2f}" for k, v in e["error_pct"].items())
+            errs = ", ".join(f"{k} {v:.2g}" for k, v in e["error_pct"].items())
             lines.append(f"| `{e['command']}` | {e['wall_s']:.0f} | {e['windows']} | {e['iterations']} | {errs} |")
     (OUT / "bench.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
