@@ -235,3 +235,20 @@ def test_a_start_where_single_shooting_fails_and_multiple_shooting_succeeds(tmp_
     assert max(abs(oe.params[k] - truth[k]) / truth[k] for k in start) > 0.1, oe.params
     res = refine(system, r, {"start": start}, RefineSettings(states="measured"))
     assert max(abs(res.params[k] - truth[k]) / truth[k] for k in start) < 1e-4, res.params
+
+
+def test_a_noise_free_record_at_rest_is_held_at_rest_despite_correlated_residuals():
+    """Without noise the residual is the integrator's smooth error, not white noise: the
+    uncorrected likelihood-ratio drop exceeds the chi-square threshold, the drop corrected for
+    the residuals' correlation does not, and a record that starts at rest is held there."""
+    bw = BoucWen()
+    r = synthetic(bw, "el_centro", eq_scale=3.0, duration=20.0)
+    truth = {k: v for k, v in bw.true_values().items() if k != "m"}
+    guess = {k: v * (1.05 if i % 2 else 0.95) for i, (k, v) in enumerate(truth.items())}
+    res = refine(bw, r, {"guess": guess}, RefineSettings(states="measured"))
+    test = res.rest_test
+    assert test["residual_lag1_correlation"] > 0.9
+    assert test["misfit_drop"] * test["inflation"] > test["threshold"]  # what the white-noise test would say
+    assert res.initial_state_mode == "rest" and test["at_rest"], test
+    for n, v in truth.items():
+        assert res.params[n] == pytest.approx(v, rel=1e-4), n
