@@ -115,38 +115,14 @@ def predict_response(
                    excitation=record.excitation)
     dm = SubperiodDataModule(blank, window_length=window_length, pool_size=pool_size, batch_size=batch_size,
                              min_peak_fraction=0.0, data_seed=data_seed, accel_signal=accel, cover_tail=True)
-    dt = net.scale_x.dtype
-    scales = _Scales(x=torch.full_like(net.scale_x, float(x_scale)) if x_scale else net.scale_x.clone(),
-                     v=torch.full_like(net.scale_v, float(v_scale)) if v_scale else net.scale_v.clone(),
-                     f=torch.as_tensor(float(np.std(record.f)), dtype=dt))
-    state = (torch.zeros(net.system.n_dof, dtype=dt), torch.zeros(net.system.n_dof, dtype=dt),
-             torch.zeros(net.system.n_latent, dtype=dt) if net.system.n_latent else None)
+    scales = _prediction_scales(net, record, x_scale, v_scale)
     x_pred = np.zeros((len(record.t), net.system.n_dof))
     saved = _nets_state(net)
     if cfg.start_from == "fresh":
         _reset_networks(net, seed)
-    spans = deque((w.t0, w.t1) for w in dm.windows)
-    done: list[tuple[float, float, float]] = []
     try:
-        while spans:
-            t0, t1 = spans.popleft()
-            wdm = SubperiodDataModule(blank, window_length=t1 - t0, pool_size=pool_size, batch_size=batch_size,
-                                      min_peak_fraction=0.0, t_start=t0, t_end=t1, data_seed=data_seed + len(done),
-                                      accel_signal=accel)
-            w = wdm.windows[0]
-            before = _nets_state(net)
-            loss = _solve_window(module, wdm, w, state, scales, trainer_factory, cfg)
-            if not (loss <= cfg.split_tol) and (t1 - t0) / 2 >= cfg.min_window - 1e-9:
-                log.info("%s: window %.2f-%.2f s ended at physics loss %.3g > %.3g: solving it as two halves",
-                         record.name, t0, t1, loss, cfg.split_tol)
-                _load_nets(net, before)
-                mid = 0.5 * (t0 + t1)
-                spans.extendleft([(mid, t1), (t0, mid)])
-                continue
-            done.append((float(t0), float(t1), float(loss)))
-            state = net.state_at_end(w)
-            log.debug("window %.2f-%.2f s: physics loss %.3g", t0, t1, loss)
-            _write_window(net, w, record.t, x_pred)
+        done = _march(module, blank, deque((w.t0, w.t1) for w in dm.windows), accel, scales, trainer_factory, cfg,
+                      x_pred, pool_size, batch_size, data_seed)
         log.info("predicted %s: %d windows, %.1f s", record.name, len(done), time.perf_counter() - t_start)
     finally:
         net.anchor = None
@@ -154,6 +130,48 @@ def predict_response(
         for p in net.physical_parameters():
             p.requires_grad_(True)
     return Prediction(record.name, record.t, x_pred, time.perf_counter() - t_start, done)
+
+
+def _prediction_scales(net, record: Record, x_scale: float | None, v_scale: float | None) -> _Scales:
+    """The response scales of the identification (the new response is not measured) and the
+    new excitation's own scale."""
+    dt = net.scale_x.dtype
+    return _Scales(x=torch.full_like(net.scale_x, float(x_scale)) if x_scale else net.scale_x.clone(),
+                   v=torch.full_like(net.scale_v, float(v_scale)) if v_scale else net.scale_v.clone(),
+                   f=torch.as_tensor(float(np.std(record.f)), dtype=dt))
+
+
+def _march(module: PIDynNetModule, blank: Record, spans: deque, accel, scales: _Scales,
+           trainer_factory: Callable[..., L.Trainer], cfg: PredictSettings, x_pred: np.ndarray, pool_size: int,
+           batch_size: int, data_seed: int) -> list[tuple[float, float, float]]:
+    """Window after window from rest, each started from the state the last one ended in; a
+    window left above ``split_tol`` is solved again as two halves. Writes ``x_pred``; returns
+    (t0, t1, final physics loss) per solved window."""
+    net = module.net
+    dt = net.scale_x.dtype
+    state = (torch.zeros(net.system.n_dof, dtype=dt), torch.zeros(net.system.n_dof, dtype=dt),
+             torch.zeros(net.system.n_latent, dtype=dt) if net.system.n_latent else None)
+    done: list[tuple[float, float, float]] = []
+    while spans:
+        t0, t1 = spans.popleft()
+        wdm = SubperiodDataModule(blank, window_length=t1 - t0, pool_size=pool_size, batch_size=batch_size,
+                                  min_peak_fraction=0.0, t_start=t0, t_end=t1, data_seed=data_seed + len(done),
+                                  accel_signal=accel)
+        w = wdm.windows[0]
+        before = _nets_state(net)
+        loss = _solve_window(module, wdm, w, state, scales, trainer_factory, cfg)
+        if not (loss <= cfg.split_tol) and (t1 - t0) / 2 >= cfg.min_window - 1e-9:
+            log.info("%s: window %.2f-%.2f s ended at physics loss %.3g > %.3g: solving it as two halves",
+                     blank.name, t0, t1, loss, cfg.split_tol)
+            _load_nets(net, before)
+            mid = 0.5 * (t0 + t1)
+            spans.extendleft([(mid, t1), (t0, mid)])
+            continue
+        done.append((float(t0), float(t1), float(loss)))
+        state = net.state_at_end(w)
+        log.debug("window %.2f-%.2f s: physics loss %.3g", t0, t1, loss)
+        _write_window(net, w, blank.t, x_pred)
+    return done
 
 
 def _reset_networks(net, seed: int) -> None:
