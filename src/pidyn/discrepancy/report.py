@@ -173,7 +173,14 @@ def _num(v) -> str:
 
 
 def write_report(path: Path, d: dict, figures: list[str]) -> None:
-    g = d["gain"]
+    """report.md: the verdict, the steps, the models' held-out errors, the evidence, the ranking."""
+    lines = (_verdict_lines(d) + _steps_lines(d) + _model_lines(d) + _evidence_lines(d) + _ranking_lines(d)
+             + ["## Figures", ""] + [f"![{f}](figures/{f})" for f in figures])
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _verdict_lines(d: dict) -> list[str]:
+    """The title and the verdict in words."""
     lines = [f"# Diagnosis of `{d['record']}`", ""]
     if d["verdict"] == "none":
         lines += ["**Verdict: none.** No candidate effect explains more of the residual than noise and the "
@@ -187,6 +194,12 @@ def write_report(path: Path, d: dict, figures: list[str]) -> None:
         lines += [f"**Verdict: discrepancy. Cause{'s' if len(causes) > 1 else ''}: "
                   + ", ".join(f"`{c}`" for c in causes) + "**"
                   + (" (named by the user, not by the screening)" if d.get("forced") else ""), ""]
+    return lines
+
+
+def _steps_lines(d: dict) -> list[str]:
+    """Each extension step with its evidence (when there was more than one)."""
+    lines: list[str] = []
     if len(d.get("steps") or []) > 1 or any(st.get("next_ranking") for st in d.get("steps") or []):
         lines += ["## Steps: extend, screen the extended model again", "",
                   "| step | effect added | score (-dBIC) | CV gain | model after the step | best next candidate |",
@@ -199,12 +212,24 @@ def write_report(path: Path, d: dict, figures: list[str]) -> None:
             lines.append(f"| {st['step']} | {st['effect']} | {_num(ev.get('score'))} | {_num(ev.get('cv_gain'))} | "
                          f"`{st['equation']}` | {nxt_s} |")
         lines.append("")
-    lines += ["| model | equation | held-out NRMSE of x |", "|---|---|---|",
-              f"| nominal | `{d['nominal']}` | {_num(g['nominal'])} |"]
+    return lines
+
+
+def _model_lines(d: dict) -> list[str]:
+    """Nominal and extended equations with their held-out errors, and the split."""
+    g = d["gain"]
+    lines = ["| model | equation | held-out NRMSE of x |", "|---|---|---|",
+             f"| nominal | `{d['nominal']}` | {_num(g['nominal'])} |"]
     if d.get("extended"):
         lines.append(f"| extended | `{d['extended']}` | {_num(g['extended'])} |")
     lines += ["", f"Fitting part {d['split']['fit'][0]:.4g}-{d['split']['fit'][1]:.4g} s; held-out part "
               f"{d['split']['heldout'][0]:.4g}-{d['split']['heldout'][1]:.4g} s (not used for fitting).", ""]
+    return lines
+
+
+def _evidence_lines(d: dict) -> list[str]:
+    """The learned force, the held-out check, a change in time, the effect parameters, the truth."""
+    lines: list[str] = []
     if d.get("learned_force"):
         st = d.get("structure") or {}
         lines += ["A learned force f(x, x') (a small network in the equation of motion, trained in PIDynNet's physics "
@@ -235,6 +260,12 @@ def write_report(path: Path, d: dict, figures: list[str]) -> None:
                       + ", ".join(f"{k} = {v:.5g}" for k, v in (h["parameters"] or {}).items()), ""]
         else:
             lines += ["Hidden in the data (simulated): nothing; the nominal model is the truth.", ""]
+    return lines
+
+
+def _ranking_lines(d: dict) -> list[str]:
+    """The ranking of the library effects and the thresholds they are held to."""
+    lines: list[str] = []
     lines += ["## Ranking of the candidate effects", "",
               "score = -dBIC (weak-form equation error, fitting part); explained = share of the nominal residual "
               "removed; CV gain = share removed in blocked cross-validation over the fitting part; held-out gain = share "
@@ -247,5 +278,4 @@ def write_report(path: Path, d: dict, figures: list[str]) -> None:
     th = d["thresholds"]
     lines += ["", f"An effect counts when -dBIC >= {th['min_delta_bic']:g}, CV gain >= "
               f"{th['min_cv_gain']:g} and it removes at least {th['min_force_share']:g} of the force variance.", ""]
-    lines += ["## Figures", ""] + [f"![{f}](figures/{f})" for f in figures]
-    path.write_text("\n".join(lines) + "\n")
+    return lines
