@@ -396,17 +396,11 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
         if row.get("score") is not None and not np.isfinite(row["score"]):
             raise ValueError(f"effect '{cause}' has no physical fit to this record ({row.get('note')})")
         k = len(out["causes"]) + 1
-        refit = {n: v for n, v in row["nominal_refit"].items() if v > 0} if k == 1 else {}
         if cause == LEARNED:  # start the network at the force the current model cannot explain
             row = {**row, "parameters": {"init_from": str(_save_unexplained(run_dir / f"unexplained_{k}.npz", record,
                                                                           _current_system(node), values, x_raw,
                                                                           fit))}}
-        inner = _node_with_values(node, {**values, **refit})
-        if k == 1:
-            inner = _system_node(OmegaConf.create(inner), refit, refit.get("m", values["m"]), not mass_known)
-        ext_node = {"_target_": EXTENSION, "nominal": inner, "effect": cause,
-                    "effect_params": {n: (v if isinstance(v, str) else float(v)) for n, v in row["parameters"].items()},
-                    "context": s.context()}
+        ext_node = _extension_node(node, values, cause, row, s, k, mass_known)
         folder = run_dir / ("extended" if k == 1 else f"extended_{k}")
         metrics, obj = identify(_sub_cfg(cfg, ext_node, folder, fit), record)
         system: SDOFSystem = obj["system"]
@@ -447,6 +441,20 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
 
 
 LEARNED = "learned_force"
+
+
+def _extension_node(node: dict, values: dict[str, float], cause: str, row: dict, s: Signals, k: int,
+                    mass_known: bool) -> dict:
+    """The config node of step ``k``'s model: the current model (its values; at the first step
+    the screening's refit of the nominal parameters) extended with ``cause`` started at the
+    screening's estimate."""
+    refit = {n: v for n, v in row["nominal_refit"].items() if v > 0} if k == 1 else {}
+    inner = _node_with_values(node, {**values, **refit})
+    if k == 1:
+        inner = _system_node(OmegaConf.create(inner), refit, refit.get("m", values["m"]), not mass_known)
+    return {"_target_": EXTENSION, "nominal": inner, "effect": cause,
+            "effect_params": {n: (v if isinstance(v, str) else float(v)) for n, v in row["parameters"].items()},
+            "context": s.context()}
 
 
 def _current_system(node: dict) -> SDOFSystem:
