@@ -35,7 +35,6 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from pidyn.cli import CONF_DIR  # noqa: E402
 from pidyn.errors import errors_pct  # noqa: E402
 
 CELLS = {
@@ -51,21 +50,11 @@ STIFF = {"k", "k1"}
 
 
 def compose(overrides: list[str], out: Path):
-    from hydra import compose as hcompose
-    from hydra import initialize_config_dir
-    from hydra.core.global_hydra import GlobalHydra
-    from hydra.core.hydra_config import HydraConfig
-    from omegaconf import open_dict
+    """The train config with ``overrides``, its run folder ``out`` (the package's one composer)."""
+    from pidyn.config import compose as compose_config
 
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(CONF_DIR, version_base="1.3"):
-        cfg = hcompose("train", overrides=overrides, return_hydra_config=True)
-    with open_dict(cfg):
-        cfg.paths.output_dir = str(out)
-        cfg.paths.root_dir = str(ROOT)
-        cfg.trainer.enable_progress_bar = False
-    HydraConfig.instance().set_config(cfg)
-    return cfg
+    return compose_config("train", overrides=overrides, output_dir=out, root_dir=ROOT,
+                          values={"trainer.enable_progress_bar": False})
 
 
 def draw_starts(truth: dict[str, float], n: int, seed: int = 0) -> list[dict[str, float]]:

@@ -50,8 +50,6 @@ def _setup(dtype):
 
 def per_iteration_ms(dtype, mode: str, n: int = 200) -> float:
     net, w = _setup(dtype)
-    opt = torch.optim.Adam(list(net.parameters()), lr=1e-3)
-    g = torch.Generator().manual_seed(0)
 
     def autograd_physics(t, f):
         t = t.clone().requires_grad_(True)
@@ -63,17 +61,23 @@ def per_iteration_ms(dtype, mode: str, n: int = 200) -> float:
         r = net.system.residual(Kinematics(t, x, v, a), f, net.params.values())["motion"]
         return {"physics/motion": ((r / net.scale_f) ** 2).mean()}
 
+    return _ms_per_step(net, w, net.physics_losses if mode == "taylor" else autograd_physics, warmup=20, n=n)
+
+
+def _ms_per_step(net, w, physics, warmup: int, n: int) -> float:
+    """ms per Adam step on 500 of the window's 1000 collocation points plus the data loss."""
+    opt = torch.optim.Adam(list(net.parameters()), lr=1e-3)
+    g = torch.Generator().manual_seed(0)
+
     def step():
         idx = torch.randperm(1000, generator=g)[:500]
-        t, f = w.t_pool[idx], w.f_pool[idx]
-        L = net.physics_losses(t, f) if mode == "taylor" else autograd_physics(t, f)
+        L = physics(w.t_pool[idx], w.f_pool[idx])
         L.update(net.data_losses(w))
-        loss = sum(L.values())
         opt.zero_grad()
-        loss.backward()
+        sum(L.values()).backward()
         opt.step()
 
-    for _ in range(20):
+    for _ in range(warmup):
         step()
     t0 = time.perf_counter()
     for _ in range(n):
@@ -105,23 +109,7 @@ def storey_cost(n: int, iters: int = 100) -> dict:
     w = make_windows(rec.t, rec.f, None, None, rec.a, 3.0, 1000, accel_signal=rec.f)[2]
     net = PIDynNet(sb, TaylorMLP(out_features=n))
     net.enter_window(w)
-    opt = torch.optim.Adam(list(net.parameters()), lr=1e-3)
-    g = torch.Generator().manual_seed(0)
-
-    def step():
-        idx = torch.randperm(1000, generator=g)[:500]
-        L = net.physics_losses(w.t_pool[idx], w.f_pool[idx])
-        L.update(net.data_losses(w))
-        opt.zero_grad()
-        sum(L.values()).backward()
-        opt.step()
-
-    for _ in range(10):
-        step()
-    t0 = time.perf_counter()
-    for _ in range(iters):
-        step()
-    ms_iter = 1e3 * (time.perf_counter() - t0) / iters
+    ms_iter = _ms_per_step(net, w, net.physics_losses, warmup=10, n=iters)
     problem = build_problem(sb, rec, RefineSettings(initial_state="free"))
     b = problem.bounds[:-1]
     states = np.hstack([rec.clean.x[b], rec.clean.v[b]])  # the true segment starts (linear: no latent z)
