@@ -12,7 +12,9 @@ Measures (one thread, CPU):
   * the cost against the number of storeys of a shear building measured by accelerometers on
     every floor (3, 5, 10): ms per PIDynNet iteration, ms per refinement linearisation
     (residuals and exact Jacobian over 20 s of El Centro), and the peak memory of a process
-    doing both (each size in its own process, so the peaks do not mix).
+    doing both (each size in its own process, so the peaks do not mix);
+  * where a GPU is present, the same training steps on it (module and window moved as
+    ``trainer=gpu`` moves them), beside the CPU's.
 """
 
 from __future__ import annotations
@@ -64,13 +66,17 @@ def per_iteration_ms(dtype, mode: str, n: int = 200) -> float:
     return _ms_per_step(net, w, net.physics_losses if mode == "taylor" else autograd_physics, warmup=20, n=n)
 
 
-def _ms_per_step(net, w, physics, warmup: int, n: int) -> float:
-    """ms per Adam step on 500 of the window's 1000 collocation points plus the data loss."""
+def _ms_per_step(net, w, physics, warmup: int, n: int, device: str = "cpu") -> float:
+    """ms per Adam step on 500 of the window's 1000 collocation points plus the data loss,
+    on ``device`` (the module and the window moved there, as ``trainer=gpu`` does)."""
+    net.to(device)
+    w = w.to(device)
     opt = torch.optim.Adam(list(net.parameters()), lr=1e-3)
     g = torch.Generator().manual_seed(0)
+    sync = torch.cuda.synchronize if device.startswith("cuda") else (lambda: None)
 
     def step():
-        idx = torch.randperm(1000, generator=g)[:500]
+        idx = torch.randperm(1000, generator=g)[:500].to(device)
         L = physics(w.t_pool[idx], w.f_pool[idx])
         L.update(net.data_losses(w))
         opt.zero_grad()
@@ -79,13 +85,48 @@ def _ms_per_step(net, w, physics, warmup: int, n: int) -> float:
 
     for _ in range(warmup):
         step()
+    sync()
     t0 = time.perf_counter()
     for _ in range(n):
         step()
+    sync()
     return 1e3 * (time.perf_counter() - t0) / n
 
 
+def gpu_ms(n: int = 200) -> dict:
+    """The same steps on the GPU, when there is one: the Duffing step in float32 / float64 and
+    the shear buildings' step (Taylor-mode derivatives)."""
+    if not torch.cuda.is_available():
+        return {"device": None}
+    out: dict = {"device": torch.cuda.get_device_name(0)}
+    for name, dt in (("float32", torch.float32), ("float64", torch.float64)):
+        net, w = _setup(dt)
+        out[f"taylor/{name}"] = _ms_per_step(net, w, net.physics_losses, warmup=20, n=n, device="cuda")
+    torch.set_default_dtype(torch.float32)
+    for storeys in STOREYS:
+        net, w = _building_window(storeys)
+        out[f"storeys/{storeys}"] = _ms_per_step(net, w, net.physics_losses, warmup=10, n=n // 2, device="cuda")
+    return out
+
+
 STOREYS = (3, 5, 10)
+
+
+def _building_window(n: int, with_record: bool = False):
+    """An n-storey building's PIDynNet on its third 3 s window of El Centro (accelerometers)."""
+    from pidyn.data.sources import synthetic
+    from pidyn.data.windows import make_windows
+    from pidyn.models.pidynnet import PIDynNet
+    from pidyn.nets import TaylorMLP
+    from pidyn.systems import ShearBuilding
+
+    torch.manual_seed(0)
+    sb = ShearBuilding(n_storeys=n)
+    rec = synthetic(sb, "el_centro", duration=20.0, channels=("a",))
+    w = make_windows(rec.t, rec.f, None, None, rec.a, 3.0, 1000, accel_signal=rec.f)[2]
+    net = PIDynNet(sb, TaylorMLP(out_features=n))
+    net.enter_window(w)
+    return (net, w, sb, rec) if with_record else (net, w)
 
 
 def storey_cost(n: int, iters: int = 100) -> dict:
@@ -94,21 +135,11 @@ def storey_cost(n: int, iters: int = 100) -> dict:
 
     import numpy as np
 
-    from pidyn.data.sources import synthetic
-    from pidyn.data.windows import make_windows
-    from pidyn.models.pidynnet import PIDynNet
-    from pidyn.nets import TaylorMLP
     from pidyn.refine import RefineSettings
     from pidyn.refine.stage import build_problem
-    from pidyn.systems import ShearBuilding
 
     torch.set_default_dtype(torch.float32)
-    torch.manual_seed(0)
-    sb = ShearBuilding(n_storeys=n)
-    rec = synthetic(sb, "el_centro", duration=20.0, channels=("a",))
-    w = make_windows(rec.t, rec.f, None, None, rec.a, 3.0, 1000, accel_signal=rec.f)[2]
-    net = PIDynNet(sb, TaylorMLP(out_features=n))
-    net.enter_window(w)
+    net, w, sb, rec = _building_window(n, with_record=True)
     ms_iter = _ms_per_step(net, w, net.physics_losses, warmup=10, n=iters)
     problem = build_problem(sb, rec, RefineSettings(initial_state="free"))
     b = problem.bounds[:-1]
@@ -225,6 +256,7 @@ def main() -> None:
         f"{mode}/{name}": per_iteration_ms(dt, mode)
         for mode in ("taylor", "autograd") for name, dt in (("float32", torch.float32), ("float64", torch.float64))
     }
+    res["gpu_ms_per_iteration"] = gpu_ms()
     res["lightning_overhead"] = lightning_overhead()
     res["storeys"] = storey_scaling()
     if not a.quick:
@@ -244,6 +276,14 @@ def write_markdown(res: dict) -> None:
              "## ms per training iteration (500 collocation points, x, x', x'', plus data loss)\n",
              "| derivatives | ms |", "|---|---|"]
     lines += [f"| {k} | {v:.2f} |" for k, v in res["ms_per_iteration"].items()]
+    gpu = res.get("gpu_ms_per_iteration") or {"device": None}
+    if gpu["device"]:
+        lines += ["", f"## The same steps on the GPU ({gpu['device']}), beside one CPU thread\n",
+                  "| step | GPU ms | CPU ms |", "|---|---|---|"]
+        cpu = {**res["ms_per_iteration"], **{f"storeys/{r['storeys']}": r["ms_per_iteration"] for r in res.get("storeys", [])}}
+        lines += [f"| {k} | {v:.2f} | {cpu.get(k, float('nan')):.2f} |" for k, v in gpu.items() if k != "device"]
+    else:
+        lines += ["", "GPU: none on this machine (`make bench` adds GPU rows where `torch.cuda.is_available()`)."]
     lo = res["lightning_overhead"]
     lines += ["", "## Lightning against a plain loop (same module, same batches)\n",
               f"{lo['iterations']} iterations: plain {lo['plain_s']:.2f} s, Lightning {lo['lightning_s']:.2f} s, "

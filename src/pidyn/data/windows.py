@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 import torch
@@ -33,6 +33,23 @@ class Window:
     qd_data: torch.Tensor | None = None
     q_pool: torch.Tensor | None = None
     qd_pool: torch.Tensor | None = None
+    # per channel: measured at every floor and sample (read on the host once, so that the losses
+    # never ask the device), and the pretraining fill of the floors without a sensor
+    complete: dict[str, bool] = field(default_factory=dict, repr=False)
+    _filled: dict[str, tuple[torch.Tensor, bool]] = field(default_factory=dict, repr=False)
+
+    def __post_init__(self) -> None:
+        for kind in ("x", "v", "a"):
+            arr = getattr(self, kind)
+            if arr is not None and kind not in self.complete:
+                self.complete[kind] = not bool(torch.isnan(arr).any())
+
+    def to(self, device: torch.device | str) -> "Window":
+        """A copy with every tensor on ``device`` (the window itself stays where it is)."""
+        moved = {f.name: getattr(self, f.name).to(device) for f in fields(self)
+                 if isinstance(getattr(self, f.name), torch.Tensor)}
+        return replace(self, **moved, complete=dict(self.complete),
+                       _filled={k: (v.to(device), c) for k, (v, c) in self._filled.items()})
 
     def scales(self) -> dict[str, torch.Tensor]:
         """Per-window scales that make every loss term O(1) (x, v, a per degree of freedom; f
@@ -49,20 +66,25 @@ class Window:
         s["a"] = _fill(_nanstd(self.a), s["v"] * w) if self.a is not None else s["f"] * torch.ones_like(s["x"])
         return s
 
-    def filled(self, kind: str) -> torch.Tensor | None:
+    def filled(self, kind: str) -> tuple[torch.Tensor | None, bool]:
         """Channel ``kind`` with the floors that lack the sensor filled by linear interpolation
         over the floor number from the floors that have it (nearest floor beyond the ends): a
-        starting shape for the networks' pretraining, never a target of the identification."""
+        starting shape for the networks' pretraining, never a target of the identification.
+        Also whether no NaN is left (a dropout inside a floor's record stays NaN). Computed
+        once, on the host."""
         arr = getattr(self, kind)
-        if arr is None:
-            return None
-        seen = ~torch.isnan(arr).all(0)
-        if bool(seen.all()) or not bool(seen.any()):
-            return arr
-        have = torch.nonzero(seen)[:, 0].numpy()
-        a = arr.double().numpy()
-        out = np.stack([np.interp(np.arange(a.shape[1]), have, a[i, have]) for i in range(a.shape[0])])
-        return torch.as_tensor(out, dtype=arr.dtype)
+        if arr is None or self.complete.get(kind, False):
+            return arr, arr is not None
+        if kind not in self._filled:
+            host = arr.detach().cpu()
+            seen = ~torch.isnan(host).all(0)
+            if not bool(seen.any()):
+                return arr, False
+            have = torch.nonzero(seen)[:, 0].numpy()
+            a = host.double().numpy()
+            out = np.stack([np.interp(np.arange(a.shape[1]), have, a[i, have]) for i in range(a.shape[0])])
+            self._filled[kind] = (torch.as_tensor(out, dtype=arr.dtype, device=arr.device), not np.isnan(out).any())
+        return self._filled[kind]
 
     def displacement_scale(self) -> np.ndarray:
         """Spread of the displacement per degree of freedom, measured or estimated."""

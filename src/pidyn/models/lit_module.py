@@ -73,6 +73,12 @@ class PIDynNetModule(L.LightningModule):
         self.window_iteration = 0
         self.trajectory = []
 
+    def on_fit_start(self) -> None:
+        # Lightning has put the module on its device by now (and puts it back on the CPU at the
+        # end of the fit): the window's tensors follow it, the caller's window stays on the host
+        if self.window is not None and self.window.t_pool.device != self.device:
+            self.window = self.window.to(self.device)
+
     def configure_optimizers(self) -> Any:
         if self.phase == "finetune_lbfgs":
             return torch.optim.LBFGS(self.net.net_parameters(), lr=1.0, max_iter=self.lbfgs_max_iter, history_size=50,
@@ -200,7 +206,7 @@ class PIDynNetModule(L.LightningModule):
             return torch.empty(0, len(self.net.params.trainable_names))
         from pidyn.params import from_raw
 
-        raw = torch.stack(self.trajectory)
+        raw = torch.stack(self.trajectory).cpu()
         specs = [self.net.params.spec(n) for n in self.net.params.trainable_names]
         return torch.stack([from_raw(s, raw[:, i]) for i, s in enumerate(specs)], dim=1)
 
