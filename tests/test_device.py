@@ -32,13 +32,17 @@ def test_window_to_moves_every_tensor_and_leaves_the_original(built):
 
 
 @pytest.mark.parametrize("fill", [False, True])
-def test_the_losses_read_no_tensor_left_on_the_host(built, fill):
+@pytest.mark.parametrize("anchored", [False, True])
+def test_the_losses_read_no_tensor_left_on_the_host(built, fill, anchored):
     net = built.module.net
     w = built.ident.dm.windows[0]
     net.enter_window(w)
     if fill:  # pretraining's fill of floors without a sensor is computed on the host once
         for kind in ("x", "v", "a"):
             w.filled(kind)
+    if anchored:  # prediction holds the handed-over state exactly (the anchor moves with the module)
+        nd, nz = net.system.n_dof, net.system.n_latent
+        net.anchor = (torch.tensor(w.t0), torch.zeros(nd), torch.zeros(nd), torch.zeros(nz) if nz else None)
     net.to("meta")
     wm = w.to("meta")
     losses = {**net.data_losses(wm, fill=fill), **net.physics_losses(wm.t_pool, wm.f_pool, wm.q_pool, wm.qd_pool)}

@@ -58,6 +58,13 @@ class PIDynNet(nn.Module):
         # hard initial condition for prediction: (t0, x0, v0, z0) or None
         self.anchor: tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None] | None = None
 
+    def _apply(self, fn, recurse: bool = True):  # type: ignore[override]
+        # .to() / .cpu() / .double() carry the prediction anchor along (plain tensors, not state)
+        super()._apply(fn, recurse)
+        if self.anchor is not None:
+            self.anchor = tuple(None if a is None else fn(a) for a in self.anchor)  # type: ignore[assignment]
+        return self
+
     # ----------------------------------------------------------------- windows
     @torch.no_grad()
     def enter_window(self, w: Window, transfer_lnn: bool = False) -> None:
