@@ -12,12 +12,12 @@ import pytest
 import torch
 
 from conftest import make_cfg
-from pidyn.tasks.train import _build
+from pidyn.tasks.train import build_run
 
 
 @pytest.fixture(params=["duffing", "bouc_wen", "shear_building"])
 def built(request, tmp_path):
-    run = _build(make_cfg([f"system={request.param}", "debug=smoke"], tmp_path), None)
+    run = build_run(make_cfg([f"system={request.param}", "debug=smoke"], tmp_path), None)
     return run
 
 
@@ -50,7 +50,7 @@ def test_the_losses_read_no_tensor_left_on_the_host(built, fill, anchored):
 
 
 def test_a_partly_measured_channel_is_masked_and_a_complete_one_is_not(tmp_path):
-    run = _build(make_cfg(["system=shear_building", "debug=smoke", "data.sensors=[1,3]"], tmp_path), None)
+    run = build_run(make_cfg(["system=shear_building", "debug=smoke", "data.sensors=[1,3]"], tmp_path), None)
     w = run.ident.dm.windows[0]
     assert w.complete == {"a": False}
     filled, complete = w.filled("a")

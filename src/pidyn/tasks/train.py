@@ -56,7 +56,7 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     ``record``: data already built from ``cfg.data.source`` (a caller that identifies
     several models on one record builds it once)."""
     t_wall = time.perf_counter()
-    run = _build(cfg, record)
+    run = build_run(cfg, record)
     # the classical baselines need nothing from PIDynNet: they run beside it on another core
     pending = BaselineJob(cfg, run.system, run.record)
     try:
@@ -77,7 +77,9 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
 
 
 @dataclass
-class _Run:
+class Run:
+    """The objects of one run, built from the config before any training."""
+
     system: StructuralSystem
     record: Record
     module: PIDynNetModule
@@ -87,7 +89,7 @@ class _Run:
     run_dir: Path
 
 
-def _build(cfg: DictConfig, record: Record | None) -> _Run:
+def build_run(cfg: DictConfig, record: Record | None) -> Run:
     """Every object of a run from the config (each ``_target_`` instantiated here)."""
     _quiet_framework_warnings()
     for name in ("lightning", "lightning.pytorch", "lightning.fabric"):
@@ -130,10 +132,10 @@ def _build(cfg: DictConfig, record: Record | None) -> _Run:
         return hydra.utils.instantiate(cfg.trainer, logger=logger if logger is not None else False, **kw)
 
     ident = SubperiodIdentifier(module, dm, trainer_factory, schedule, clamp, stopper, run_dir, extra_callbacks=extras)
-    return _Run(system, record, module, ident, trainer_factory, logger, run_dir)
+    return Run(system, record, module, ident, trainer_factory, logger, run_dir)
 
 
-def _report(cfg: DictConfig, run: _Run, results: list, pidyn_values: dict[str, float], baselines: list[dict],
+def _report(cfg: DictConfig, run: Run, results: list, pidyn_values: dict[str, float], baselines: list[dict],
             refined: Any, t_wall: float) -> dict[str, Any]:
     """identified_params.yaml, metrics.json, refinement.json, windows.json, figures, TensorBoard, log."""
     system, record, run_dir = run.system, run.record, run.run_dir
@@ -219,7 +221,7 @@ def refined_metrics(refined: Any, names: list[str], truths: dict[str, float | No
     return out
 
 
-def _figures(run: _Run, results: list, truths: dict, baselines: list[dict], refined: Any, sim: dict[str, np.ndarray],
+def _figures(run: Run, results: list, truths: dict, baselines: list[dict], refined: Any, sim: dict[str, np.ndarray],
              metrics: dict) -> None:
     system, record = run.system, run.record
     fig_dir = run.run_dir / "figures"
