@@ -61,3 +61,22 @@ def test_a_parameter_no_window_informs_keeps_the_windows_estimate():
     out = g.add(torch.tensor([0.55, 0.7, 0.3]), 1e4 * torch.outer(b, b) + torch.diag(torch.tensor([1e-2, 1e-2, 0.0])))
     assert g.fallback and torch.isfinite(out).all()
     assert float(out[2]) == pytest.approx(0.3, rel=1e-5)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_float32_information_spanning_nine_decades_fuses_finite_and_inside_the_windows(seed):
+    """A 5-storey building's window information (13 parameters) spans eight decades and more,
+    in float32: its inverse had negative and zero diagonals, and the marginal weights gave NaN
+    (n1 = nan, then a crash in the next window's least squares)."""
+    g = torch.Generator().manual_seed(seed)
+    f = InformationFusion()
+    n, thetas = 13, []
+    for w in range(3):
+        V, _ = torch.linalg.qr(torch.randn(n, n, generator=g, dtype=torch.float64))
+        J = ((V * torch.logspace(-1, 8, n, dtype=torch.float64)) @ V.T).float()
+        thetas.append(torch.randn(n, generator=g) * (1 + w))
+        out = f.add(thetas[-1], J)
+    T = torch.stack(thetas)
+    assert out.dtype == torch.float32 and torch.isfinite(out).all()
+    if f.fallback:
+        assert ((out >= T.min(0).values - 1e-5) & (out <= T.max(0).values + 1e-5)).all()

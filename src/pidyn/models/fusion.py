@@ -66,27 +66,40 @@ class InformationFusion:
         self.fallback = False  # the last estimate used marginal weights
 
     def add(self, theta: torch.Tensor, info: torch.Tensor) -> torch.Tensor:
+        # in float64: a window's information spans eight decades and more (a 5-storey building),
+        # where a float32 inverse has negative or zero diagonals; the estimate comes back in theta's dtype
+        dtype = theta.dtype
+        theta, info = theta.detach().double(), info.detach().double()
         info = 0.5 * (info + info.T)
-        self.thetas.append(theta.detach().clone())
-        self.infos.append(info.detach().clone())
+        self.thetas.append(theta.clone())
+        self.infos.append(info.clone())
         if self.info is None:
             self.info, self.weighted = info.clone(), info @ theta
         else:
             assert self.weighted is not None
             self.info = self.info + info
             self.weighted = self.weighted + info @ theta
-        return self.estimate()
+        return self.estimate().to(dtype)
 
-    def _ridge(self, info: torch.Tensor) -> torch.Tensor:
-        n = info.shape[0]
+    def _floored(self, info: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Eigenvalues of ``info`` raised to at least the ridge (``ridge`` x the mean positive
+        eigenvalue; round-off leaves small negative ones), with the eigenvectors and the floor."""
+        w, V = torch.linalg.eigh(info)
         tiny = torch.finfo(info.dtype).tiny
-        return (self.ridge * torch.trace(info) / n).clamp_min(tiny ** 0.5) * torch.eye(n, dtype=info.dtype)
+        floor = (self.ridge * w.clamp_min(0).sum() / w.numel()).clamp_min(tiny ** 0.5)
+        return w.clamp_min(floor), V, floor
 
     def _solve(self, info: torch.Tensor, rhs: torch.Tensor, prior: torch.Tensor) -> torch.Tensor:
-        """(info + R)^-1 (rhs + R prior): the ridge pulls a direction no window informs (a
-        damage time before the damage) to the windows' mean estimate, not to raw zero."""
-        reg = self._ridge(info)
-        return torch.linalg.solve(info + reg, rhs + reg @ prior)
+        """(info + R)^-1 (rhs + R prior), R = the floor: it pulls a direction no window informs
+        (a damage time before the damage) to the windows' mean estimate, not to raw zero."""
+        w, V, floor = self._floored(info)
+        return V @ ((V.T @ (rhs + floor * prior)) / (w + floor))
+
+    def _marginal_precision(self, info: torch.Tensor) -> torch.Tensor:
+        """1 / (J + R)^-1_ii, positive and finite: a window with no information on a parameter
+        has ~0 weight for it (a pseudo-inverse would give it an infinite one)."""
+        w, V, floor = self._floored(info)
+        return 1.0 / ((V**2) / (w + floor)).sum(1)
 
     def estimate(self) -> torch.Tensor:
         assert self.info is not None and self.weighted is not None
@@ -101,14 +114,18 @@ class InformationFusion:
             self.fallback = False
             return joint
         self.fallback = True
-        # marginal precision 1 / (J_w + R_w)^-1_ii: a window with no information on a parameter
-        # has ~0 weight for it (a pseudo-inverse would give it an infinite one)
-        prec = torch.stack([1.0 / torch.diagonal(torch.linalg.inv(J + self._ridge(J))) for J in self.infos])
-        return (prec * T).sum(0) / prec.sum(0)
+        prec = torch.stack([self._marginal_precision(J) for J in self.infos])
+        prec = torch.where(torch.isfinite(prec) & (prec > 0), prec, torch.zeros_like(prec))
+        total = prec.sum(0)
+        fused = (prec * T).sum(0) / total.clamp_min(torch.finfo(T.dtype).tiny)
+        # a parameter no window's information weighs (all weights zero) keeps the latest estimate
+        return torch.where((total > 0) & torch.isfinite(fused), fused, T[-1])
 
     def state_dict(self) -> dict:
         return {"info": self.info, "weighted": self.weighted, "thetas": self.thetas, "infos": self.infos}
 
     def load_state_dict(self, s: dict) -> None:
-        self.info, self.weighted = s.get("info"), s.get("weighted")
-        self.thetas, self.infos = list(s.get("thetas") or []), list(s.get("infos") or [])
+        d = lambda a: None if a is None else a.double()  # noqa: E731  (states saved in float32 before)
+        self.info, self.weighted = d(s.get("info")), d(s.get("weighted"))
+        self.thetas = [t.double() for t in s.get("thetas") or []]
+        self.infos = [J.double() for J in s.get("infos") or []]
