@@ -372,11 +372,12 @@ def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pi
     w = cfg.data.windows
     span = {"t_start": w.get("t_start"), "t_end": w.get("t_end")}
     out = refine(system, record, starts, settings, network_states=network_states(results), **span)
-    # the same refinement from PIDynNet's parameters with its segment states taken elsewhere
-    # (e.g. accelerations integrated twice): what the networks' states buy
+    # the same refinement from the same start (PIDynNet's, or the classical estimate that
+    # simulated better) with the segment states taken elsewhere (e.g. accelerations integrated
+    # twice): what the networks' states buy
     out.compared = {}
     for source in compare:
-        alt = refine(system, record, {"pidynnet": pidyn_values}, replace(settings, states=source), **span)
+        alt = refine(system, record, {out.start: starts[out.start]}, replace(settings, states=source), **span)
         out.compared[source] = {"params": alt.params, "cost": alt.cost, "converged": alt.converged,
                                 "max_defect": alt.max_defect, "seconds": alt.seconds,
                                 "error_pct": relative_errors(alt.params, record.truth or {})}
