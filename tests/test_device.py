@@ -8,6 +8,8 @@ does a step that reads a value back from the device.
 
 from __future__ import annotations
 
+import copy
+
 import pytest
 import torch
 
@@ -15,10 +17,9 @@ from conftest import make_cfg
 from pidyn.tasks.train import build_run
 
 
-@pytest.fixture(params=["duffing", "bouc_wen", "shear_building"])
-def built(request, tmp_path):
-    run = build_run(make_cfg([f"system={request.param}", "debug=smoke"], tmp_path), None)
-    return run
+@pytest.fixture(scope="module", params=["duffing", "bouc_wen", "shear_building"])
+def built(request, tmp_path_factory):
+    return build_run(make_cfg([f"system={request.param}", "debug=smoke"], tmp_path_factory.mktemp("run")), None)
 
 
 def test_window_to_moves_every_tensor_and_leaves_the_original(built):
@@ -34,8 +35,8 @@ def test_window_to_moves_every_tensor_and_leaves_the_original(built):
 @pytest.mark.parametrize("fill", [False, True])
 @pytest.mark.parametrize("anchored", [False, True])
 def test_the_losses_read_no_tensor_left_on_the_host(built, fill, anchored):
-    net = built.module.net
-    w = built.ident.dm.windows[0]
+    net = copy.deepcopy(built.module.net)  # moved to meta below; the fixture's stays on the host
+    w = copy.deepcopy(built.ident.dm.windows[0])
     net.enter_window(w)
     if fill:  # pretraining's fill of floors without a sensor is computed on the host once
         for kind in ("x", "v", "a"):
