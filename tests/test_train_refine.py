@@ -69,3 +69,28 @@ def test_csv_without_truth_gets_intervals(tmp_path):
         lo, hi = row["ci95"]
         assert lo < hi and set(m["pidynnet"]["params"]) == set(truth)
         assert abs(row["value"] - truth[n]) / truth[n] < 0.05, (n, row)
+
+
+def test_compare_states_refines_from_the_start_the_stage_chose(tmp_path, monkeypatch):
+    """compare_states isolates the segment states: the comparison starts from the same
+    parameters as the stage (a classical estimate when PIDynNet's simulated worse)."""
+    from types import SimpleNamespace
+
+    import pidyn.refine
+    from pidyn.tasks.train import run_refinement
+
+    calls = []
+
+    def fake_refine(system, record, starts, settings, network_states=None, **span):
+        calls.append((dict(starts), settings.states))
+        return SimpleNamespace(start="output_error" if "output_error" in starts else "pidynnet", params={},
+                               cost=1.0, converged=True, max_defect=0.0, seconds=0.0)
+
+    monkeypatch.setattr(pidyn.refine, "refine", fake_refine)
+    cfg = make_cfg(SMOKE + ["model.refine.starts=[output_error]", "model.refine.compare_states=[integrated]"], tmp_path)
+    pidyn_values, oe = {"c": 9.0, "k1": 9.0, "k3": 9.0}, {"c": 0.5, "k1": 15.0, "k3": 120.0}
+    record = SimpleNamespace(truth=None)
+    out = run_refinement(cfg, None, record, pidyn_values, [{"method": "output_error", "params": oe}], [])
+    assert calls[0][0] == {"pidynnet": pidyn_values, "output_error": oe}
+    assert calls[1] == ({"output_error": oe}, "integrated")
+    assert "integrated" in out.compared
