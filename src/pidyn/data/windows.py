@@ -57,7 +57,7 @@ class Window:
         acceleration integrated and detrended (a scale only, never a target), a floor without
         any sensor that of the nearest floor with one."""
         s = {"f": self.f_pool.std().clamp_min(1e-12)}
-        if self.x is not None and not torch.isnan(self.x).any():
+        if self.complete.get("x", False):
             s["x"] = self.x.std(0).clamp_min(1e-12)
         else:
             s["x"] = torch.as_tensor(self.displacement_scale(), dtype=self.t_data.dtype).clamp_min(1e-12)

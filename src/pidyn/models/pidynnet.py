@@ -80,10 +80,10 @@ class PIDynNet(nn.Module):
         for net in (self.rpn, self.lnn):
             if net is not None:
                 net.set_window(w.t0, w.t1)
-        self.use_drift = w.x is None or bool(torch.isnan(w.x).any())
+        self.use_drift = not w.complete.get("x", False)
         self.drift.zero_()
         q = w.q_data[:, None] if w.q_data is not None else torch.zeros_like(w.t_data)[:, None]
-        if w.x is not None and not torch.isnan(w.x).any():
+        if w.complete.get("x", False):
             y = w.x + q
             self.rpn.set_output_scale(y.std(0).clamp_min(1e-12), y.mean(0))
         else:  # displacement not measured everywhere: its estimated spread beside the ground's
