@@ -43,6 +43,27 @@ def nrmse(pred: np.ndarray, true: np.ndarray) -> float:
     return float(np.sqrt(np.mean((pred - true) ** 2)) / max(np.std(true), 1e-300))
 
 
+#: beyond this a value is a blown-up simulation, not a response (matplotlib's tick arithmetic
+#: overflows on values near the float64 limit)
+PLOT_LIMIT = 1e100
+
+
+def plottable(a: Any) -> np.ndarray:
+    """``a`` as floats with non-finite and blown-up values blanked (NaN): a plot leaves them out
+    instead of failing, so a run whose identified model diverges still gets its figures."""
+    a = np.array(a, dtype=float)
+    with np.errstate(invalid="ignore"):
+        a[~(np.abs(a) < PLOT_LIMIT)] = np.nan
+    return a
+
+
+def diverged(a: Any) -> bool:
+    """Does a simulated response blow up (non-finite or beyond ``PLOT_LIMIT``) anywhere?"""
+    a = np.asarray(a, dtype=float)
+    with np.errstate(invalid="ignore"):
+        return bool(a.size and not np.all(np.abs(a) < PLOT_LIMIT))
+
+
 def _param_grid(n_params: int):
     """One row per parameter: estimate (left), relative error (right), shared record-time axis."""
     import sys
@@ -85,12 +106,12 @@ def plot_convergence(path: Path | None, trajectory: list[dict], truths: dict[str
     fig, axes = _param_grid(len(names))
     t = np.array([p["t"] for p in trajectory])
     for i, n in enumerate(names):
-        v = np.array([p[n] for p in trajectory])
+        v = plottable([p[n] for p in trajectory])
         ax, axe = axes[i]
         ax.plot(t, v, lw=1, label="PIDynNet")
         if other is not None and other[1] and n in other[1][0]:
             to = np.array([p["t"] for p in other[1]])
-            vo = np.array([p[n] for p in other[1]])
+            vo = plottable([p[n] for p in other[1]])
             ax.plot(to, vo, lw=0.8, color="tab:orange", label=other[0])
             if truths.get(n) is not None:
                 axe.semilogy(to, error_pct(vo, truths[n]) + 1e-6, lw=0.8, color="tab:orange")
@@ -99,10 +120,12 @@ def plot_convergence(path: Path | None, trajectory: list[dict], truths: dict[str
             axe.semilogy(t, error_pct(v, truths[n]) + 1e-6, lw=1, color="tab:blue")
             axe.set_ylabel(f"|err| {n} (%)")
         if final and n in final:
-            lo, hi = final[n]["ci95"]
+            val, lo, hi = plottable([final[n]["value"], *final[n]["ci95"]])
             te = t[-1] if len(t) else 0.0
-            ax.errorbar([te], [final[n]["value"]], yerr=[[final[n]["value"] - lo], [hi - final[n]["value"]]],
-                        fmt="o", color="tab:green", ms=4, capsize=3, label="refined, 95 %")
+            if np.isfinite(val):  # an interval without bounds is drawn as the point alone
+                err = [[val - lo], [hi - val]] if np.isfinite(lo) and np.isfinite(hi) else None
+                ax.errorbar([te], [val], yerr=err, fmt="o", color="tab:green", ms=4, capsize=3,
+                            label="refined, 95 %")
         ax.set_ylabel(n)
         for w in windows:
             ax.axvline(w["t1"], color="0.85", lw=0.6)
@@ -132,7 +155,7 @@ def plot_convergence_seeds(path: Path, runs: dict[str, list[list[dict]]], truths
         for method, trs in runs.items():
             for s_i, tr in enumerate(t for t in trs if t and n in t[0]):
                 t = np.array([p["t"] for p in tr])
-                v = np.array([p[n] for p in tr])
+                v = plottable([p[n] for p in tr])
                 ax.plot(t, v, lw=0.7, alpha=0.6, color=colors[method], label=method if s_i == 0 else None)
                 if truths.get(n):
                     axe.semilogy(t, error_pct(v, truths[n]) + 1e-6, lw=0.7, alpha=0.6,
@@ -173,7 +196,7 @@ def plot_response(path: Path, t: np.ndarray, series: dict[str, np.ndarray], titl
 
     fig, ax = plt.subplots(figsize=(10, 3.2))
     for i, (name, y) in enumerate(series.items()):
-        ax.plot(t, y, lw=0.9 if i == 0 else 0.8, ls="-" if i == 0 else "--", label=name,
+        ax.plot(t, plottable(y), lw=0.9 if i == 0 else 0.8, ls="-" if i == 0 else "--", label=name,
                 color="0.3" if i == 0 else None)
     ax.set_xlabel("t (s)")
     ax.set_ylabel(ylabel)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from pidyn.reporting import plottable
 
 
 def _plt():
@@ -23,6 +24,8 @@ def plot_response(path: Path, t, x, x_nom, x_ext, fit, held, unit: str = "m", pe
     """Measured vs simulated displacement (nominal, extended) and the simulation errors; for a
     record of many periods, a third panel zooms into 30 periods at the start of the held-out part."""
     plt = _plt()
+    x_nom = plottable(x_nom)  # a model that blows up is drawn up to the blow-up
+    x_ext = None if x_ext is None else plottable(x_ext)
     zoom = period is not None and (t[-1] - t[0]) > 200 * period
     fig, axes = plt.subplots(3 if zoom else 2, 1, figsize=(11, 8 if zoom else 5.5))
     a1, a2 = axes[0], axes[1]

@@ -14,7 +14,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from pidyn.integrate import rk4
-from pidyn.reporting import write_json
+from pidyn.reporting import diverged, plottable, write_json
 from pidyn.systems.modal import compare_modes, modal_table
 
 
@@ -40,6 +40,8 @@ def write_building_report(system, record, identified: Mapping[str, float], truth
                           state0: np.ndarray | None, run_dir: Path, logger: Any = None, step: int = 0) -> dict:
     """Modal table, storey equations and loops into ``run_dir``; returns the modal comparison."""
     modes = compare_modes(system, identified, truth if truth and all(v is not None for v in truth.values()) else None)
+    d_id, f_id = storey_response(system, identified, record.t, record.f, state0)
+    modes["diverged"] = diverged(d_id) or diverged(f_id)
     write_json(run_dir / "modal.json", modes)
     eqs = system.storey_equations(identified)
     lines = [f"# {system.name}: {system.n_dof} storeys under {record.name}", "",
@@ -47,10 +49,13 @@ def write_building_report(system, record, identified: Mapping[str, float], truth
              "## Identified storey equations (d_i: drift of storey i)", "", "```", *eqs, "```", ""]
     if "truth" in modes:
         lines.append("Truth: " + "; ".join(s.strip() for s in system.storey_equations(truth)))
+    if modes["diverged"]:
+        lines += ["", "**The identified model diverges when simulated over the record** (its response blows "
+                  "up): the estimate is not a usable model of this building, and the loops show only the part "
+                  "before the blow-up."]
     (run_dir / "building.md").write_text("\n".join(lines) + "\n")
     fig_dir = run_dir / "figures"
     fig_dir.mkdir(exist_ok=True)
-    d_id, f_id = storey_response(system, identified, record.t, record.f, state0)
     true_loops = None
     if record.clean is not None and truth and "truth" in modes:
         clean = record.clean
@@ -84,7 +89,7 @@ def plot_storey_loops(path: Path, drift: np.ndarray, force: np.ndarray,
         ax = axes[i // cols][i % cols]
         if truth is not None:
             ax.plot(truth[0][:, i], truth[1][:, i], color="0.6", lw=2.0, label="true")
-        ax.plot(drift[:, i], force[:, i], color="C3", lw=0.7, label="identified")
+        ax.plot(plottable(drift[:, i]), plottable(force[:, i]), color="C3", lw=0.7, label="identified")
         ax.set_title(f"storey {i + 1}")
         ax.set_xlabel("drift (m)")
         ax.set_ylabel("restoring force (N)")

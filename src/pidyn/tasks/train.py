@@ -26,7 +26,7 @@ from pidyn.errors import errors_pct
 from pidyn.models.identify import Schedule, SubperiodIdentifier
 from pidyn.models.lit_module import PIDynNetModule
 from pidyn.models.pidynnet import PIDynNet
-from pidyn.reporting import nrmse, param_table, plot_convergence, plot_response, write_json, write_yaml
+from pidyn.reporting import diverged, nrmse, param_table, plot_convergence, plot_response, write_json, write_yaml
 from pidyn.systems.base import StructuralSystem
 
 log = logging.getLogger(__name__)
@@ -146,10 +146,15 @@ def _report(cfg: DictConfig, run: Run, results: list, pidyn_values: dict[str, fl
     final = {**params.as_floats(), **values}
     notes = [n for r in results for n in (r.notes or [])] + ([] if refined is None else refined.notes)
     units = {n: params.spec(n).unit for n in names}
-    write_yaml(run_dir / "identified_params.yaml", identified_params(system, final, values, truths, units, refined, notes))
-    errors, pidyn_errors = relative_errors(values, truths), relative_errors(pidyn_values, truths)
     # the identified model simulated over the whole record (the physics-only check)
     sim = simulate_response(system, final, record, state0=None if refined is None else np.array(refined.initial_state))
+    if any(diverged(v) for v in sim.values()):
+        notes.append("the identified model diverges when simulated over the record (its response blows up): "
+                     "the estimate is not a usable model; start from a better guess (system.guess) or a classical "
+                     "estimate (model.refine.starts)")
+        log.warning(notes[-1])
+    write_yaml(run_dir / "identified_params.yaml", identified_params(system, final, values, truths, units, refined, notes))
+    errors, pidyn_errors = relative_errors(values, truths), relative_errors(pidyn_values, truths)
     metrics: dict[str, Any] = {
         "system": system.name,
         "record": record.name,

@@ -1,0 +1,56 @@
+"""The diagnosis benchmark's bookkeeping: the table is rewritten after every case, and a
+later run keeps the committed table's finished cases (same hidden kind, code stamped)."""
+
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "experiments"))
+import discrepancy_bench as bench  # noqa: E402
+
+
+def _fake_case(calls: list[int]):
+    def run_case(i, out, extra, kinds):
+        calls.append(i)
+        kind = kinds[i % len(kinds)]
+        found = "+".join(sorted(kind.expect)) or "none"
+        return {"case": i, "hidden": kind.label, "found": found, "verdict": "discrepancy" if kind.expect else "none",
+                "hit": True, "record": "kobe", "noise": 0.01, "seconds": 10.0 + i, "nrmse_nominal": 1.0,
+                "nrmse_extended": 0.1, "top_score": 0.9}
+    return run_case
+
+
+def test_partial_table_and_resume(tmp_path, monkeypatch):
+    res = tmp_path / "results"
+    calls: list[int] = []
+    monkeypatch.setattr(bench, "run_case", _fake_case(calls))
+    monkeypatch.setattr(sys, "argv", ["bench", "--cases", "5", "--jobs", "1", "--results", str(res),
+                                      "--out", str(tmp_path / "out")])
+    bench.main()
+    assert sorted(calls) == [0, 1, 2, 3, 4]
+    df = pd.read_csv(res / "discrepancy_bench.csv")
+    assert list(df.case) == [0, 1, 2, 3, 4] and df.commit.notna().all()
+    # a corrupted row (another kind than case 3 hides now) and a failed one are run again
+    df.loc[df.case == 3, "hidden"] = "not_a_kind"
+    df["error"] = None
+    df.loc[df.case == 1, "error"] = "Traceback: boom"
+    df.to_csv(res / "discrepancy_bench.csv", index=False)
+    calls.clear()
+    monkeypatch.setattr(sys, "argv", ["bench", "--cases", "7", "--jobs", "1", "--results", str(res),
+                                      "--out", str(tmp_path / "out")])
+    bench.main()
+    assert sorted(calls) == [1, 3, 5, 6]
+    md = (res / "discrepancy_bench.md").read_text()
+    assert "7 seeded cases" in md and "planned" not in md.split("\n")[2]
+    assert sorted(pd.read_csv(res / "discrepancy_bench.csv").case) == list(range(7))
+
+
+def test_interrupted_table_says_how_far(tmp_path):
+    rows = [{"case": 0, "hidden": "none", "found": "none", "verdict": "none", "hit": True, "record": "kobe",
+             "noise": 0.0, "seconds": 5.0, "nrmse_nominal": 0.1, "nrmse_extended": 0.1, "top_score": 0.1,
+             "commit": "abc1234"}]
+    lines = bench.write_results(rows, 90, "short", tmp_path)
+    assert "(1 of the 90 planned cases finished; the rest resume)" in lines[2]
+    assert "abc1234" in "\n".join(lines)
