@@ -16,7 +16,9 @@ Success: every parameter within 1 % of the truth. Each start's result is saved a
 finishes (``outputs/basin/<cell>/<method>_<i>.json``), so an interrupted study resumes; rows of
 the committed ``basin_<cell>.csv`` whose start matches the drawn one are kept, so a study can be
 extended to more starts. ``--shard k/n`` runs only starts i with i % n == k (for parallel
-processes) and writes no summary; a last run without ``--shard`` collects them.
+processes) and writes no summary; a last run without ``--shard`` collects them. ``--collect``
+runs nothing and writes the table from the starts finished so far, saying so: committed, it
+lets a study that does not fit in one sitting resume elsewhere.
 Writes experiments/results/basin_<cell>.{md,csv} and a figure of the starts coloured by outcome.
 """
 
@@ -115,7 +117,12 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--shard", default=None, help="k/n: run only starts i with i %% n == k, no summary")
     ap.add_argument("--machine-note", default="", help="how the starts were run (parallel shards), for the summary")
+    ap.add_argument("--collect", action="store_true",
+                    help="run nothing: write the table from the starts finished so far (an interrupted study, "
+                         "committed, resumes from it)")
     a = ap.parse_args()
+    if a.collect and a.shard:
+        ap.error("--collect gathers every shard's results; give no --shard")
     shard = tuple(int(v) for v in a.shard.split("/")) if a.shard else (0, 1)
     import logging
 
@@ -144,6 +151,8 @@ def main() -> None:
                 continue
             if f.exists():
                 r = json.loads(f.read_text())
+            elif a.collect:
+                continue
             else:
                 try:
                     r = run_one(cell, method, start, work / f"{method}_{i:03d}")
@@ -158,6 +167,9 @@ def main() -> None:
                          **{f"start_{k}": start[k] / truth[k] for k in truth}})
             print(f"start {i:3d} {method:13s} max error {max_err:10.4g} %  {r['seconds']:.0f} s", flush=True)
     if a.shard:
+        return
+    if not rows:
+        print("no finished starts to collect")
         return
     df = pd.DataFrame(rows)
     df.to_csv(stem.with_suffix(".csv"), index=False)
@@ -185,6 +197,7 @@ def write_summary(df: pd.DataFrame, stem: Path, a, cell: dict, truth: dict) -> N
              "Success: every parameter within 1 % of the truth.  ",
              f"PIDynNet's schedule here: {' '.join(SHORT)}; then the multiple-shooting refinement from its "
              "estimate and networks only.\n",
+             *_progress_line(df, a),
              "| method | success rate | median seconds | median max error % |", "|---|---|---|---|"]
     label = {"pidynnet": "PIDynNet + refinement", "output_error": "output error (single shooting)",
              "ms_measured": "multiple shooting, states from measured x, x'", "ukf": "UKF (tuned)"}
@@ -204,6 +217,17 @@ def write_summary(df: pd.DataFrame, stem: Path, a, cell: dict, truth: dict) -> N
     lines.append(f"\nStarts coloured by outcome: [{fig.name}](figures/{fig.name})")
     stem.with_suffix(".md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+
+
+def _progress_line(df: pd.DataFrame, a) -> list[str]:
+    """Says how far an interrupted study got (the table covers the finished starts only)."""
+    done = df.groupby("start").method.nunique()
+    full = int((done == len(set(df.method))).sum())
+    if full >= a.starts and len(done) >= a.starts:
+        return []
+    return [f"**Partial: {len(done)} of the {a.starts} starts have results ({full} with every method).** The study "
+            f"resumes from this table: `python experiments/basin.py --cell {a.cell} --starts {a.starts}` (or in "
+            "shards with `--shard k/n`, then `--collect`).\n"]
 
 
 def plot_starts(df: pd.DataFrame, names: list[str], path: Path) -> None:

@@ -6,9 +6,11 @@ and noise level (uniform in 0-5 %) drawn from seed 1000 + i, and runs the full d
 cubic and a negative k2 (signed effects); a stiffness loss and a damping change after the
 split (changes in time the fitting part does not see); pairs of effects; effects outside the
 library (a trilinear spring, Stribeck friction). Finished cases are skipped on a rerun
-(resumable). Writes ``experiments/results/discrepancy_bench.{md,csv,json}``: per kind the hit
-rate, the false ``discrepancy`` rate on clean data, the held-out gain, parameter errors and
-seconds per diagnosis.
+(resumable), and the committed table's finished cases (stamped with their code commit) are
+kept, so a study grows over several sessions; the table is rewritten after every case.
+Writes ``experiments/results/discrepancy_bench.{md,csv,json}``: per kind the hit rate, the
+false ``discrepancy`` rate on clean data, the held-out gain, parameter errors and seconds per
+diagnosis.
 
     python experiments/discrepancy_bench.py --cases 90 --jobs 2
     python experiments/discrepancy_bench.py --cases 18 --kinds pair:gap_contact+coulomb_friction
@@ -132,6 +134,83 @@ def summarise(df: pd.DataFrame) -> dict:
     }
 
 
+def code_commit() -> str:
+    """The checkout's commit (with ``+dirty`` for uncommitted changes), stamped on every row."""
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT,
+                              check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True,
+                               text=True, cwd=ROOT).stdout.strip()
+        return head + ("+dirty" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def committed_rows(path: Path, kinds: list[Kind]) -> dict[int, dict]:
+    """Finished cases of the committed table that still describe case i (same hidden kind, a
+    code commit stamped, no error): a study grows over several sessions without re-running them."""
+    if not path.exists():
+        return {}
+    df = pd.read_csv(path)
+    if "commit" not in df:
+        return {}
+    out = {}
+    for r in df.to_dict("records"):
+        i = int(r["case"])
+        if isinstance(r.get("error"), str) or r["hidden"] != kinds[i % len(kinds)].label:
+            continue
+        out[i] = {k: v for k, v in r.items() if not (isinstance(v, float) and np.isnan(v))}
+    return out
+
+
+def write_results(rows: list[dict], planned: int, schedule: str, results: Path) -> list[str]:
+    """The table over the cases finished so far (rewritten after every case, so an interrupted
+    study loses nothing and says how far it got)."""
+    df = pd.DataFrame(rows).sort_values("case")
+    summary = summarise(df)
+    summary["cases_planned"] = planned
+    summary["schedule"] = schedule
+    summary["total_case_seconds"] = float(df["seconds"].sum()) if "seconds" in df else None  # 2 cases at a time
+    summary["code_commits"] = " ".join(sorted(set(df["commit"].dropna().astype(str)))) if "commit" in df else ""
+    rows_per = []
+    for name, g in df.groupby("hidden", sort=False):
+        errs = g["param_error_pct"] if "param_error_pct" in g else pd.Series(dtype=float)
+        rows_per.append({"hidden": name, "cases": len(g), "top1": float(g.hit.fillna(False).astype(bool).mean()),
+                         "median_param_error_pct": float(errs.median()) if errs.notna().any() else np.nan,
+                         "median_nrmse_ratio": float((g.nrmse_extended / g.nrmse_nominal).median())
+                         if name != "none" else np.nan,
+                         "max_seconds": float(g.seconds.max()) if "seconds" in g else np.nan})
+    per = pd.DataFrame(rows_per)
+    order = {k.label: n for n, k in enumerate(KINDS)}
+    per = per.sort_values("hidden", key=lambda c: c.map(lambda v: order.get(v, len(order)))).set_index("hidden")
+    results.mkdir(parents=True, exist_ok=True)
+    df.to_csv(results / "discrepancy_bench.csv", index=False)
+    (results / "discrepancy_bench.json").write_text(json.dumps(
+        {"summary": summary, "per_effect": per.reset_index().to_dict("records")}, indent=2, default=float))
+    done = "" if len(df) >= planned else f" ({len(df)} of the {planned} planned cases finished; the rest resume)"
+    lines = ["# Diagnosis benchmark: hidden effects", "",
+             f"{summary['cases']} seeded cases{done} (linear SDOF m=1, c=0.5, k=15; nothing, one library effect "
+             "(either sign where the sign is a finding), a change after the split, a pair, or an effect outside the "
+             "library hidden; shipped records scaled to PGA 3 m/s^2; noise uniform 0-5 %; fit 0-16 s, held out "
+             f"16-25 s). PIDynNet schedule: {summary['schedule']}.", "",
+             "Command: `python experiments/discrepancy_bench.py --cases " f"{planned} --jobs 2` (`make discrepancy-bench`); "
+             f"code {summary['code_commits'] or 'unknown'}.", "",
+             "| metric | value |", "|---|---|"]
+    lines += [f"| {k} | {v:.4g} |" if isinstance(v, float) else f"| {k} | {v} |" for k, v in summary.items()]
+    lines += ["", "Hit: the hidden effect(s) named and nothing else; `none` on clean data; for effects outside the "
+              "library `unexplained` or a physically equivalent name (" + ", ".join(f"{k}: {sorted(v)}" for k, v in EQUIVALENT.items()) + ").", "",
+              "| hidden | cases | hit rate | median parameter error % | median NRMSE ratio ext/nom | max seconds |",
+              "|---|---|---|---|---|---|"]
+    for name, r in per.iterrows():
+        lines.append(f"| {name} | {int(r.cases)} | {r.top1:.2f} | {r.median_param_error_pct:.3g} | "
+                     f"{r.median_nrmse_ratio:.3g} | {r.max_seconds:.0f} |")
+    misses = df[~df.hit.fillna(False).astype(bool)] if "hit" in df else df
+    if len(misses):
+        lines += ["", "Misses: " + "; ".join(f"case {r.case} {r.hidden} -> {r.found}" for r in misses.itertuples())]
+    (results / "discrepancy_bench.md").write_text("\n".join(lines) + "\n")
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", type=int, default=90)
@@ -140,53 +219,36 @@ def main() -> None:
     ap.add_argument("--full", action="store_true", help="PIDynNet's default schedule (default: a shorter one)")
     ap.add_argument("--results", type=Path, default=ROOT / "experiments" / "results")
     ap.add_argument("--kinds", nargs="*", default=None, help=f"a subset of the kinds: {', '.join(BY_LABEL)}")
+    ap.add_argument("--rerun", action="store_true", help="ignore the committed table's finished cases")
     args, extra = ap.parse_known_args()
     unknown = set(args.kinds or []) - set(BY_LABEL)
     if unknown:
         ap.error(f"unknown kind(s) {sorted(unknown)}; choose from {', '.join(BY_LABEL)}")
     kinds = [BY_LABEL[k] for k in args.kinds] if args.kinds else KINDS
+    schedule = "default" if args.full else "short: " + " ".join(FAST)
     extra = ([] if args.full else FAST) + extra
     args.out.mkdir(parents=True, exist_ok=True)
-    rows = []
+    kept = {} if args.rerun or args.kinds else committed_rows(args.results / "discrepancy_bench.csv", kinds)
+    kept = {i: r for i, r in kept.items() if i < args.cases}
+    rows = list(kept.values())
+    todo = [i for i in range(args.cases) if i not in kept]
+    if kept:
+        print(f"{len(kept)} case(s) kept from the committed table; {len(todo)} to run", flush=True)
+    commit = code_commit()
     with ThreadPoolExecutor(max_workers=args.jobs) as pool:
-        futs = {pool.submit(run_case, i, args.out, extra, kinds): i for i in range(args.cases)}
+        futs = {pool.submit(run_case, i, args.out, extra, kinds): i for i in todo}
         for n, fut in enumerate(as_completed(futs), 1):
-            r = fut.result()
+            r = {**fut.result(), "commit": commit}
             rows.append(r)
             status = r.get("error") and "FAILED" or f"found {r['found']} ({r['seconds']:.0f} s)"
-            print(f"[{n}/{args.cases}] case {r['case']} hidden {r['hidden']}: {status}", flush=True)
-    df = pd.DataFrame(rows).sort_values("case")
-    summary = summarise(df)
-    summary["schedule"] = "default" if args.full else "short: " + " ".join(FAST)
-    summary["total_case_seconds"] = float(df["seconds"].sum()) if "seconds" in df else None  # 2 cases at a time
-    rows_per = []
-    for name, g in df.groupby("hidden", sort=False):
-        errs = g["param_error_pct"] if "param_error_pct" in g else pd.Series(dtype=float)
-        rows_per.append({"hidden": name, "cases": len(g), "top1": float(g.hit.fillna(False).astype(bool).mean()),
-                         "median_param_error_pct": float(errs.median()) if errs.notna().any() else np.nan,
-                         "median_nrmse_ratio": float((g.nrmse_extended / g.nrmse_nominal).median())
-                         if name != "none" else np.nan})
-    per = pd.DataFrame(rows_per).set_index("hidden")
-    args.results.mkdir(parents=True, exist_ok=True)
-    df.to_csv(args.results / "discrepancy_bench.csv", index=False)
-    (args.results / "discrepancy_bench.json").write_text(json.dumps({"summary": summary, "per_effect": per.reset_index().to_dict("records")}, indent=2, default=float))
-    lines = ["# Diagnosis benchmark: hidden effects", "",
-             f"{summary['cases']} seeded cases (linear SDOF m=1, c=0.5, k=15; nothing, one library effect (either sign "
-             "where the sign is a finding), a change after the split, a pair, or an effect outside the library hidden; "
-             "shipped records scaled to PGA 3 m/s^2; noise uniform 0-5 %; fit 0-16 s, held out 16-25 s). "
-             f"PIDynNet schedule: {summary['schedule']}.", "",
-             "| metric | value |", "|---|---|"]
-    lines += [f"| {k} | {v:.4g} |" if isinstance(v, float) else f"| {k} | {v} |" for k, v in summary.items()]
-    lines += ["", "Hit: the hidden effect(s) named and nothing else; `none` on clean data; for effects outside the "
-              "library `unexplained` or a physically equivalent name (" + ", ".join(f"{k}: {sorted(v)}" for k, v in EQUIVALENT.items()) + ").", "",
-              "| hidden | cases | hit rate | median parameter error % | median NRMSE ratio ext/nom |",
-              "|---|---|---|---|---|"]
-    for name, r in per.iterrows():
-        lines.append(f"| {name} | {int(r.cases)} | {r.top1:.2f} | {r.median_param_error_pct:.3g} | {r.median_nrmse_ratio:.3g} |")
-    misses = df[~df.hit.fillna(False).astype(bool)] if "hit" in df else df
-    if len(misses):
-        lines += ["", "Misses: " + "; ".join(f"case {r.case} {r.hidden} -> {r.found}" for r in misses.itertuples())]
-    (args.results / "discrepancy_bench.md").write_text("\n".join(lines) + "\n")
+            print(f"[{n}/{len(todo)}] case {r['case']} hidden {r['hidden']}: {status}", flush=True)
+            if not args.kinds:  # a subset run does not overwrite the benchmark's table
+                write_results(rows, args.cases, schedule, args.results)
+    if args.kinds:
+        lines = write_results(rows, args.cases, schedule, args.out / "subset")
+        print(f"subset table: {args.out / 'subset'}")
+    else:
+        lines = write_results(rows, args.cases, schedule, args.results)
     print("\n".join(lines))
 
 
