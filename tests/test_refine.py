@@ -252,3 +252,20 @@ def test_a_noise_free_record_at_rest_is_held_at_rest_despite_correlated_residual
     assert res.initial_state_mode == "rest" and test["at_rest"], test
     for n, v in truth.items():
         assert res.params[n] == pytest.approx(v, rel=1e-4), n
+
+
+def test_a_start_whose_simulation_blows_up_is_said_so():
+    """A start whose free simulation diverges (a stiffness far beyond what the RK4 step can
+    integrate) is no start: the stage says so instead of refining silently, and a start that
+    simulates is preferred to it."""
+    system = LinearSDOF()
+    r = synthetic(system, "el_centro", duration=4.0)
+    quick = RefineSettings(states="measured", segment_length=2.0, max_nfev=3, gn_steps=2, reweight=False,
+                           initial_state="free")
+    blown = {"c": 0.5, "k": 1e9}
+    res = refine(system, r, {"pidynnet": blown}, quick)
+    assert any("blowing up" in n for n in res.notes), res.notes
+    good = {"c": 0.6, "k": 14.0}
+    res = refine(system, r, {"pidynnet": blown, "output_error": good}, quick)
+    assert res.start == "output_error"
+    assert not any("blowing up" in n for n in res.notes), res.notes

@@ -80,6 +80,18 @@ def segment_bounds(t: np.ndarray, length: float | None, t_start: float | None = 
     return np.array(b + [i1])
 
 
+#: a state beyond this is a simulation that blew up, not a response
+BLOWN_UP = 1e100
+#: a residual (noise units) is capped here: a blown-up trial step costs a large finite amount,
+#: which the solvers reject, instead of an overflow
+RESIDUAL_CAP = 1e8
+
+
+def _bounded(r: np.ndarray) -> np.ndarray:
+    return np.clip(np.nan_to_num(r, nan=RESIDUAL_CAP, posinf=RESIDUAL_CAP, neginf=-RESIDUAL_CAP),
+                   -RESIDUAL_CAP, RESIDUAL_CAP)
+
+
 class ShootingProblem:
     """Residuals r(u) of the measured channels and continuity defects c(u), with Jacobians."""
 
@@ -193,8 +205,7 @@ class ShootingProblem:
             sim = self._channel_sim(Y, R, ch)
             v = sim.v if isinstance(sim, Dual) else sim
             out.append((v[self.sel_j, self.sel_s] - ch.data[rows]) / ch.sigma)
-        r = np.concatenate(out)
-        return np.nan_to_num(r, nan=1e8, posinf=1e8, neginf=-1e8)
+        return _bounded(np.concatenate(out))
 
     def _defects(self, u: np.ndarray, Y) -> np.ndarray:
         if self.S == 1:
@@ -202,8 +213,7 @@ class ShootingProblem:
         _, states = self.unpack(u)
         yv = Y.v if isinstance(Y, Dual) else Y
         end = yv[self.ends[:-1], np.arange(self.S - 1)]  # (S-1, ns)
-        c = (states[1:] - end) / self.state_scale
-        return np.nan_to_num(c.ravel(), nan=1e8, posinf=1e8, neginf=-1e8)
+        return _bounded(((states[1:] - end) / self.state_scale).ravel())
 
     def _state_cols(self, s: np.ndarray) -> np.ndarray:
         """Columns of segment s's initial state in u (-1 where it is fixed)."""
@@ -241,7 +251,12 @@ class ShootingProblem:
                 C[np.ix_(rr[k], own[k])] = -end_d[k, :, nt:]
             nxt = self._state_cols(s + 1)
             C[rr.ravel(), nxt.ravel()] = 1.0
-        return np.nan_to_num(r), np.nan_to_num(J), c, np.nan_to_num(C)
+        # a capped (blown-up) residual or defect is flat in u: its row carries no derivative
+        J[np.abs(r) >= RESIDUAL_CAP] = 0.0
+        C[np.abs(c) >= RESIDUAL_CAP] = 0.0
+        J[~(np.abs(J) < BLOWN_UP)] = 0.0
+        C[~(np.abs(C) < BLOWN_UP)] = 0.0
+        return r, J, c, C
 
     def residuals_and_fd_jacobian(self, u: np.ndarray, step: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
         """Residuals and their forward-difference Jacobian from one batched plain simulation.
@@ -281,12 +296,20 @@ class ShootingProblem:
 
     def free_run_cost(self, theta: np.ndarray, y0: np.ndarray) -> float:
         """Sum of squared channel residuals (noise units) of one free simulation over the span."""
+        return self.free_run_fit(theta, y0)[0]
+
+    def free_run_fit(self, theta: np.ndarray, y0: np.ndarray) -> tuple[float, bool]:
+        """``free_run_cost`` and whether the simulation blows up (non-finite states, or beyond
+        any response: a blown-up sample costs 1e16 in noise units)."""
         Y, R = self.free_run(theta, y0)
         i0, i1 = self.bounds[0], self.bounds[-1]
         n = self.system.n_dof
         total = 0.0
         for ch in self.channels:
             sim = {"x": Y[:, ch.dof], "v": Y[:, n + ch.dof], "a": R[:, n + ch.dof]}[ch.kind]
-            e = (sim - ch.data[i0:i1 + 1]) / ch.sigma
-            total += float(np.sum(np.nan_to_num(e, nan=1e8, posinf=1e8, neginf=1e8) ** 2))
-        return total
+            with np.errstate(all="ignore"):
+                e = (sim - ch.data[i0:i1 + 1]) / ch.sigma
+            total += float(np.sum(_bounded(e) ** 2))
+        with np.errstate(invalid="ignore"):
+            blown = not bool(np.all(np.abs(Y) < BLOWN_UP))
+        return total, blown

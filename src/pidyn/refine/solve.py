@@ -151,8 +151,9 @@ def solve_constrained(problem: ShootingProblem, u0: np.ndarray, max_steps: int =
                 history.append({"stage": "constrained", "cost": float(r @ r), "max_defect": _max_abs(c),
                                 "step": 0.0, "lam": lam})
             break
-        rp = r + J @ d
-        decrease = float(r @ r - rp @ rp)  # the model's predicted decrease of the misfit
+        with np.errstate(over="ignore", invalid="ignore"):  # a step from a diverging start may overflow
+            rp = r + J @ d
+            decrease = float(r @ r - rp @ rp)  # the model's predicted decrease of the misfit
         u = u + d
         lam = max(lam / 3.0, 1e-12)
         lin = problem.linearize(u)

@@ -312,9 +312,17 @@ class _Starts:
         self.first = prefer if prefer in self.thetas else next(iter(self.thetas))
         self.states0 = initial_states(problem, self.thetas[self.first], settings.states, network_states)
         problem.state_scale = _state_scale(problem, self.states0)
-        self.costs = {k: problem.free_run_cost(th, self.states0[0]) for k, th in self.thetas.items()}
+        fits = {k: problem.free_run_fit(th, self.states0[0]) for k, th in self.thetas.items()}
+        self.costs = {k: c for k, (c, _) in fits.items()}
         self.order = sorted(self.costs, key=lambda k: self.costs[k])
         self.notes: list[str] = []
+        blown = [k for k, (_, b) in fits.items() if b]
+        if len(blown) == len(fits):
+            self.notes.append(f"no starting estimate ({', '.join(blown)}) simulates the record without blowing up: the "
+                              "refinement starts from a diverging model and may end at a degenerate fit (parameters "
+                              "at their bounds); give a classical start (baselines.run and model.refine.starts) or a "
+                              "better guess (system.guess)")
+            log.warning(self.notes[-1])
         best = self.order[0]
         if prefer in self.costs and best != prefer:
             self.notes.append(f"PIDynNet's estimate simulates the record worse than {best}'s (cost "
