@@ -14,6 +14,8 @@ diagnosis.
 
     python experiments/discrepancy_bench.py --cases 90 --jobs 2
     python experiments/discrepancy_bench.py --cases 18 --kinds pair:gap_contact+coulomb_friction
+    python experiments/discrepancy_bench.py --full --cases 6 --name diagnosis_time_40s \
+        --kinds none hysteresis ... data.source.duration=40 data.source.fit_end=26
 """
 
 from __future__ import annotations
@@ -163,7 +165,8 @@ def committed_rows(path: Path, kinds: list[Kind]) -> dict[int, dict]:
     return out
 
 
-def write_results(rows: list[dict], planned: int, schedule: str, results: Path) -> list[str]:
+def write_results(rows: list[dict], planned: int, schedule: str, results: Path, stem: str = "discrepancy_bench",
+                  command: str | None = None) -> list[str]:
     """The table over the cases finished so far (rewritten after every case, so an interrupted
     study loses nothing and says how far it got)."""
     df = pd.DataFrame(rows).sort_values("case")
@@ -184,8 +187,8 @@ def write_results(rows: list[dict], planned: int, schedule: str, results: Path) 
     order = {k.label: n for n, k in enumerate(KINDS)}
     per = per.sort_values("hidden", key=lambda c: c.map(lambda v: order.get(v, len(order)))).set_index("hidden")
     results.mkdir(parents=True, exist_ok=True)
-    df.to_csv(results / "discrepancy_bench.csv", index=False)
-    (results / "discrepancy_bench.json").write_text(json.dumps(
+    df.to_csv(results / f"{stem}.csv", index=False)
+    (results / f"{stem}.json").write_text(json.dumps(
         {"summary": summary, "per_effect": per.reset_index().to_dict("records")}, indent=2, default=float))
     done = "" if len(df) >= planned else f" ({len(df)} of the {planned} planned cases finished; the rest resume)"
     lines = ["# Diagnosis benchmark: hidden effects", "",
@@ -193,7 +196,8 @@ def write_results(rows: list[dict], planned: int, schedule: str, results: Path) 
              "(either sign where the sign is a finding), a change after the split, a pair, or an effect outside the "
              "library hidden; shipped records scaled to PGA 3 m/s^2; noise uniform 0-5 %; fit 0-16 s, held out "
              f"16-25 s). PIDynNet schedule: {summary['schedule']}.", "",
-             "Command: `python experiments/discrepancy_bench.py --cases " f"{planned} --jobs 2` (`make discrepancy-bench`); "
+             f"Command: `{command or f'python experiments/discrepancy_bench.py --cases {planned} --jobs 2'}`"
+             f"{'' if command else ' (`make discrepancy-bench`)'}; "
              f"code {summary['code_commits'] or 'unknown'}.", "",
              "| metric | value |", "|---|---|"]
     lines += [f"| {k} | {v:.4g} |" if isinstance(v, float) else f"| {k} | {v} |" for k, v in summary.items()]
@@ -207,7 +211,7 @@ def write_results(rows: list[dict], planned: int, schedule: str, results: Path) 
     misses = df[~df.hit.fillna(False).astype(bool)] if "hit" in df else df
     if len(misses):
         lines += ["", "Misses: " + "; ".join(f"case {r.case} {r.hidden} -> {r.found}" for r in misses.itertuples())]
-    (results / "discrepancy_bench.md").write_text("\n".join(lines) + "\n")
+    (results / f"{stem}.md").write_text("\n".join(lines) + "\n")
     return lines
 
 
@@ -220,7 +224,13 @@ def main() -> None:
     ap.add_argument("--results", type=Path, default=ROOT / "experiments" / "results")
     ap.add_argument("--kinds", nargs="*", default=None, help=f"a subset of the kinds: {', '.join(BY_LABEL)}")
     ap.add_argument("--rerun", action="store_true", help="ignore the committed table's finished cases")
+    ap.add_argument("--name", default=None,
+                    help="write the table as experiments/results/NAME.{md,csv,json} (a study of its own, e.g. the "
+                         "default schedule on 40 s records; with --kinds too)")
     args, extra = ap.parse_known_args()
+    if args.kinds:  # key=value after --kinds are config overrides, not kinds
+        extra += [k for k in args.kinds if "=" in k]
+        args.kinds = [k for k in args.kinds if "=" not in k] or None
     unknown = set(args.kinds or []) - set(BY_LABEL)
     if unknown:
         ap.error(f"unknown kind(s) {sorted(unknown)}; choose from {', '.join(BY_LABEL)}")
@@ -228,13 +238,19 @@ def main() -> None:
     schedule = "default" if args.full else "short: " + " ".join(FAST)
     extra = ([] if args.full else FAST) + extra
     args.out.mkdir(parents=True, exist_ok=True)
-    kept = {} if args.rerun or args.kinds else committed_rows(args.results / "discrepancy_bench.csv", kinds)
+    name = args.name or "discrepancy_bench"
+    # a subset run writes the benchmark's own table nowhere; a named study writes its own
+    where = args.results if (args.name or not args.kinds) else args.out / "subset"
+    command = None if name == "discrepancy_bench" and not args.kinds else "python " + " ".join(
+        ["experiments/discrepancy_bench.py", *sys.argv[1:]])
+    kept = {} if args.rerun or (args.kinds and not args.name) else committed_rows(where / f"{name}.csv", kinds)
     kept = {i: r for i, r in kept.items() if i < args.cases}
     rows = list(kept.values())
     todo = [i for i in range(args.cases) if i not in kept]
     if kept:
         print(f"{len(kept)} case(s) kept from the committed table; {len(todo)} to run", flush=True)
     commit = code_commit()
+    lines: list[str] = []
     with ThreadPoolExecutor(max_workers=args.jobs) as pool:
         futs = {pool.submit(run_case, i, args.out, extra, kinds): i for i in todo}
         for n, fut in enumerate(as_completed(futs), 1):
@@ -242,15 +258,11 @@ def main() -> None:
             rows.append(r)
             status = r.get("error") and "FAILED" or f"found {r['found']} ({r['seconds']:.0f} s)"
             print(f"[{n}/{len(todo)}] case {r['case']} hidden {r['hidden']}: {status}", flush=True)
-            if not args.kinds:  # a subset run does not overwrite the benchmark's table
-                write_results(rows, args.cases, schedule, args.results)
-    if args.kinds:
-        lines = write_results(rows, args.cases, schedule, args.out / "subset")
-        print(f"subset table: {args.out / 'subset'}")
-    else:
-        lines = write_results(rows, args.cases, schedule, args.results)
+            lines = write_results(rows, args.cases, schedule, where, name, command)
+    if rows and not lines:
+        lines = write_results(rows, args.cases, schedule, where, name, command)
+    print(f"table: {where / (name + '.md')}")
     print("\n".join(lines))
-
 
 if __name__ == "__main__":
     main()

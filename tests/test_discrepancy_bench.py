@@ -54,3 +54,16 @@ def test_interrupted_table_says_how_far(tmp_path):
     lines = bench.write_results(rows, 90, "short", tmp_path)
     assert "(1 of the 90 planned cases finished; the rest resume)" in lines[2]
     assert "abc1234" in "\n".join(lines)
+
+
+def test_a_named_study_writes_its_own_table(tmp_path, monkeypatch):
+    res = tmp_path / "results"
+    monkeypatch.setattr(bench, "run_case", _fake_case([]))
+    monkeypatch.setattr(sys, "argv", ["bench", "--cases", "2", "--jobs", "1", "--results", str(res), "--out",
+                                      str(tmp_path / "out"), "--name", "timing", "--kinds", "none", "hysteresis",
+                                      "data.source.duration=40"])
+    bench.main()
+    assert sorted(p.name for p in res.iterdir()) == ["timing.csv", "timing.json", "timing.md"]
+    md = (res / "timing.md").read_text()
+    assert "--name timing" in md and "data.source.duration=40" in md
+    assert set(pd.read_csv(res / "timing.csv").hidden) == {"none", "hysteresis"}
