@@ -412,3 +412,32 @@ def test_diagnosis_of_an_effect_outside_the_library(effect, tmp_path):
         assert d["learned_force"] and (tmp_path / "figures" / "learned_force.png").exists()
         assert "f_NN" in d["extended"]
     assert d["gain"]["extended"] < 0.95 * d["gain"]["nominal"]
+
+
+def test_a_stiffness_that_rises_in_time_is_no_stiffness_loss():
+    """Under an earthquake, a softening (or trilinear) spring looks like a stiffness that rises
+    once the strong motion is over. Named `stiffness_loss`, it used to be the wrong name for
+    an effect outside the library; the screening now fits only losses, and a located step
+    that is a rise is not named."""
+    from pidyn.discrepancy.changes import Change
+    from pidyn.discrepancy.screening import _fit_candidate
+    from pidyn.tasks.diagnose import _stiffening
+
+    t = np.linspace(0.0, 20.0, 2001)
+    x = np.sin(2 * np.pi * 0.6 * t) * np.exp(-0.05 * t)
+    s = Signals(t, x, np.gradient(x, t), 1.0, 15.0, "k", t_fit_end=20.0)
+    loss = get_effect("stiffness_loss")
+    fit, ho = t < 16.0, t >= 16.0
+    A0 = np.column_stack([x, s.v])
+    for step, found in ((-3.0, True), (+3.0, False)):  # restoring force k x + step x H(t - 8): a loss, a rise
+        y = 15.0 * x + step * x * (t >= 8.0)
+        fits = [f for f in (_fit_candidate(c, A0, c.columns, y, fit, ho) for c in loss.candidates(s)) if f]
+        assert bool(fits) is found
+        if found:
+            best = min(fits, key=lambda f: f["rss_fit"])
+            p = loss.parameters(best["coef"], best["fixed"], {"k": 15.0})
+            assert p["drop"] == pytest.approx(0.2, rel=0.05) and abs(p["t_d"] - 8.0) < 0.6
+    rise = Change("stiffness_loss", "k", 9.2, (9.0, 10.1), +0.2, -30.0, 0.8)
+    assert _stiffening(rise)
+    assert not _stiffening(Change("stiffness_loss", "k", 9.2, (9.0, 10.1), -0.2, -30.0, 0.8))
+    assert not _stiffening(Change("damping_change", "c", 9.2, (9.0, 10.1), +1.0, -30.0, 0.8))

@@ -110,6 +110,7 @@ class Effect:
     #: the effect's sign is a finding (its coefficient is identified with either sign)
     signed: bool = False
 
+
     #: the parameter the tests check, and its relative tolerance
     key: str = ""
     tolerance: float = 0.25
@@ -260,17 +261,21 @@ class Damage(Effect):
         return float(s.t[0]) + 0.05 * (t_end - s.t[0]), t_end
 
     signal, coef = "x", "dk"  # the force that steps: k x (a damping change steps c x')
+    #: the column is -x H(t - t_d), so the coefficient dk is the stiffness lost (> 0): a stiffness
+    #: that rises in time is no loss but the mark of an amplitude-dependent one
+    column_sign, positive = -1.0, True
 
     def candidates(self, s):
         lo, hi = self._span(s)
         sig = getattr(s, self.signal)
         for t_d in np.linspace(lo, hi, self.n_times + 2)[1:-1]:
-            col = sig * (s.t >= t_d)
-            yield Candidate(self.name, col[:, None], (self.coef,), fixed={"t_d": float(t_d)}, positive=(False,))
+            col = self.column_sign * sig * (s.t >= t_d)
+            yield Candidate(self.name, col[:, None], (self.coef,), fixed={"t_d": float(t_d)},
+                            positive=(self.positive,))
 
     def parameters(self, coef, fixed, nominal):
         k = nominal.get("k", nominal.get("k1", 1.0))
-        return {"drop": -coef["dk"] / k, "t_d": fixed["t_d"]}
+        return {"drop": coef["dk"] / k, "t_d": fixed["t_d"]}
 
     def term(self, p, s):
         drop = min(max(p["drop"], 0.01), 0.9)
@@ -286,6 +291,7 @@ class DampChange(Damage):
 
     name, key, tolerance = "damping_change", "change", 0.35
     signal, coef = "v", "dc"
+    column_sign, positive = 1.0, False  # damping may rise or fall
 
     def parameters(self, coef, fixed, nominal):
         return {"change": coef["dc"] / nominal.get("c", 1.0), "t_d": fixed["t_d"]}

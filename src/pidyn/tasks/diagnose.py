@@ -520,6 +520,8 @@ def _locate_change(nominal: SDOFSystem, values: dict[str, float], s: Signals, re
         return locate_change(names, A0, y, t_first, t_last, rows, s.x, s.v, s.t, weak, n_eff, candidates, values)
 
     change = search(float(record.t[-1]) if whole_record else fit[1])
+    if change is not None and _stiffening(change):
+        return None, fit, held
     if change is None or change.delta_bic > -th.min_delta_bic or change.explained < th.min_cv_gain:
         log.info("no step in %s explains the residual%s", " or ".join(sorted(set(candidates.values()))),
                  "" if change is None else f" (best: {change.sentence()}, dBIC {change.delta_bic:.1f})")
@@ -531,8 +533,22 @@ def _locate_change(nominal: SDOFSystem, values: dict[str, float], s: Signals, re
                      change.t_change, fit[0], cut, cut, held[1])
             fit, held = (fit[0], cut), (cut, held[1])
         again = search(fit[1])
+        if again is not None and _stiffening(again):
+            return None, fit, held
         change = again if again is not None else change
     return change, fit, held
+
+
+def _stiffening(change) -> bool:
+    """A stiffness that rises at some time is not a stiffness loss: under an earthquake it is
+    the mark of a stiffness that depends on the amplitude (softening in the strong motion,
+    stiffer again as the motion dies down), which no change in time explains. Say so, name
+    nothing."""
+    if change.effect != "stiffness_loss" or change.fraction <= 0:
+        return False
+    log.info("the best step in time is a stiffness rise (%s): that is an amplitude-dependent stiffness, not damage; "
+             "no change in time is named", change.sentence())
+    return True
 
 
 def _plot_learned(path: Path, t: np.ndarray, nominal: SDOFSystem, nominal_values: dict[str, float], ext: SDOFSystem,
