@@ -148,11 +148,7 @@ def _report(cfg: DictConfig, run: Run, results: list, pidyn_values: dict[str, fl
     units = {n: params.spec(n).unit for n in names}
     # the identified model simulated over the whole record (the physics-only check)
     sim = simulate_response(system, final, record, state0=None if refined is None else np.array(refined.initial_state))
-    if any(diverged(v) for v in sim.values()):
-        notes.append("the identified model diverges when simulated over the record (its response blows up): "
-                     "the estimate is not a usable model; start from a better guess (system.guess) or a classical "
-                     "estimate (model.refine.starts)")
-        log.warning(notes[-1])
+    notes += _divergence_note(sim)
     write_yaml(run_dir / "identified_params.yaml", identified_params(system, final, values, truths, units, refined, notes))
     errors, pidyn_errors = relative_errors(values, truths), relative_errors(pidyn_values, truths)
     metrics: dict[str, Any] = {
@@ -198,6 +194,17 @@ def _report(cfg: DictConfig, run: Run, results: list, pidyn_values: dict[str, fl
     _figures(run, results, truths, baselines, refined, sim, metrics)
     _log_summary(system.describe(final), errors, pidyn_errors, metrics, run_dir)
     return metrics
+
+
+def _divergence_note(sim: dict[str, np.ndarray]) -> list[str]:
+    """Says so when the identified model's simulation over the record blows up."""
+    if not any(diverged(v) for v in sim.values()):
+        return []
+    note = ("the identified model diverges when simulated over the record (its response blows up): the estimate "
+            "is not a usable model; start from a better guess (system.guess) or a classical estimate "
+            "(model.refine.starts)")
+    log.warning(note)
+    return [note]
 
 
 def identified_params(system: StructuralSystem, final: dict[str, float], values: dict[str, float],
