@@ -110,7 +110,6 @@ class Effect:
     #: the effect's sign is a finding (its coefficient is identified with either sign)
     signed: bool = False
 
-
     #: the parameter the tests check, and its relative tolerance
     key: str = ""
     tolerance: float = 0.25
