@@ -43,9 +43,9 @@ def nrmse(pred: np.ndarray, true: np.ndarray) -> float:
     return float(np.sqrt(np.mean((pred - true) ** 2)) / max(np.std(true), 1e-300))
 
 
-#: beyond this a value is a blown-up simulation, not a response (matplotlib's tick arithmetic
-#: overflows on values near the float64 limit)
-PLOT_LIMIT = 1e100
+#: beyond this a value is a blown-up simulation, not a response (the refinement treats it so,
+#: and matplotlib's tick arithmetic overflows on values near the float64 limit)
+BLOWN_UP = 1e100
 
 
 def plottable(a: Any) -> np.ndarray:
@@ -53,15 +53,15 @@ def plottable(a: Any) -> np.ndarray:
     instead of failing, so a run whose identified model diverges still gets its figures."""
     a = np.array(a, dtype=float)
     with np.errstate(invalid="ignore"):
-        a[~(np.abs(a) < PLOT_LIMIT)] = np.nan
+        a[~(np.abs(a) < BLOWN_UP)] = np.nan
     return a
 
 
 def diverged(a: Any) -> bool:
-    """Does a simulated response blow up (non-finite or beyond ``PLOT_LIMIT``) anywhere?"""
+    """Does a simulated response blow up (non-finite or beyond ``BLOWN_UP``) anywhere?"""
     a = np.asarray(a, dtype=float)
     with np.errstate(invalid="ignore"):
-        return bool(a.size and not np.all(np.abs(a) < PLOT_LIMIT))
+        return bool(a.size and not np.all(np.abs(a) < BLOWN_UP))
 
 
 def _param_grid(n_params: int):

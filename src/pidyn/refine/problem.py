@@ -23,6 +23,7 @@ import numpy as np
 from pidyn.autodiff import Dual
 from pidyn.integrate import rk4
 from pidyn.params import ParamSpec, fixed_values, from_theta, to_theta, trainable_specs
+from pidyn.reporting import BLOWN_UP, diverged
 from pidyn.systems.base import StructuralSystem
 
 CHANNELS = ("x", "v", "a")
@@ -80,8 +81,6 @@ def segment_bounds(t: np.ndarray, length: float | None, t_start: float | None = 
     return np.array(b + [i1])
 
 
-#: a state beyond this is a simulation that blew up, not a response
-BLOWN_UP = 1e100
 #: a residual (noise units) is capped here: a blown-up trial step costs a large finite amount,
 #: which the solvers reject, instead of an overflow
 RESIDUAL_CAP = 1e8
@@ -310,6 +309,4 @@ class ShootingProblem:
             with np.errstate(all="ignore"):
                 e = (sim - ch.data[i0:i1 + 1]) / ch.sigma
             total += float(np.sum(_bounded(e) ** 2))
-        with np.errstate(invalid="ignore"):
-            blown = not bool(np.all(np.abs(Y) < BLOWN_UP))
-        return total, blown
+        return total, diverged(Y)
