@@ -54,6 +54,7 @@ class GroundMotion:
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"ground motion '{self.name}': dt={self.dt} must be positive")
         object.__setattr__(self, "acc", acc)
+        object.__setattr__(self, "_grid", np.arange(acc.size) * self.dt)  # once: an integrator calls per step
 
     @property
     def t(self) -> np.ndarray:
@@ -118,7 +119,7 @@ class GroundMotion:
 
     def __call__(self, t: np.ndarray | float) -> np.ndarray:
         """Linear interpolation, zero outside the record (the ground is at rest)."""
-        return np.interp(t, self.t, self.acc, left=0.0, right=0.0)
+        return np.interp(t, self._grid, self.acc, left=0.0, right=0.0)
 
 
 def _tag(name: str, tag: str) -> str:

@@ -75,6 +75,10 @@ class SDOFSystem(StructuralSystem):
         return [n for n in names if any(s.name == n and s.trainable for s in self._specs)]
 
     def _latent_slices(self) -> list[slice | None]:
+        key = tuple(map(id, self.terms))
+        cached = getattr(self, "_slices", None)
+        if cached is not None and cached[0] == key:  # an integrator asks at every step
+            return cached[1]
         out, i = [], 0
         for t in self.terms:
             if t.n_latent:
@@ -82,6 +86,7 @@ class SDOFSystem(StructuralSystem):
                 i += t.n_latent
             else:
                 out.append(None)
+        self._slices = (key, out)
         return out
 
     def restoring_force(self, t, x, v, z, p):
@@ -113,6 +118,8 @@ class SDOFSystem(StructuralSystem):
             if sl is not None:
                 rate = term.latent_rate(t, x, v, z[..., sl], p)
                 parts += [rate[..., j] for j in range(term.n_latent)]
+        if np.ndim(y) == 1:  # one state (an integrator's step): the cheap way
+            return np.array(parts, dtype=float)
         return np.stack(parts, axis=-1)
 
     def rhs(self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]) -> np.ndarray:
