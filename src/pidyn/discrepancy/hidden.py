@@ -49,6 +49,32 @@ def _outside_term(name: str, p: dict[str, float]):
     return StribeckFriction(p["Fc"], p["Fs"], p["vs"], eps=1e-3 * max(p["vs"], 1e-9) / 0.02)
 
 
+#: passes of the fixed point that sizes several hidden effects against their joint response
+_FIXED_POINT_PASSES = 3
+
+
+def _draw(name: str, n_effects: int, rng: np.random.Generator, s: Signals, sign: float | None,
+          params: dict[str, float] | None, hidden: dict[str, float], terms: list) -> tuple[dict, list]:
+    """One hidden effect's parameters, sized against ``s``, added to ``hidden`` and ``terms``."""
+    hidden, terms = dict(hidden), list(terms)
+    if name in OUTSIDE:  # an effect the library does not hold
+        drawn = OUTSIDE[name](rng, s)
+        hidden.update(drawn)
+        terms.append(_outside_term(name, drawn))
+        return hidden, terms
+    eff = get_effect(name)
+    if sign is not None and not eff.signed and n_effects == 1:
+        raise ValueError(f"hidden effect '{name}': its sign is fixed by physics; sign={sign} applies only to "
+                         "cubic_stiffness and quadratic_stiffness")
+    drawn = eff.sample(rng, s, sign=sign if eff.signed else None)
+    if set(drawn) & set(hidden):
+        raise ValueError(f"hidden effects share parameters {sorted(set(drawn) & set(hidden))}")
+    drawn.update({k_: float(v) for k_, v in (params or {}).items() if k_ in drawn})
+    hidden.update(drawn)
+    terms.append(eff.term(drawn, s.context()))
+    return hidden, terms
+
+
 @dataclass
 class HiddenCase:
     record: Record
@@ -94,22 +120,25 @@ def hidden_case(
     if names:
         base = simulate(nominal, truth_nom, gm, gm.t)
         s = Signals(base.t, base.x[:, 0], base.v[:, 0], mass, k, "k", t_fit_end=fit_end)
+    states = []  # the generator's state before each effect's draw: a redraw repeats its shares
     for name in names:  # "gap_contact+coulomb_friction": several effects at once
-        if name in OUTSIDE:  # an effect the library does not hold
-            drawn = OUTSIDE[name](rng, s)
-            hidden.update(drawn)
-            terms.append(_outside_term(name, drawn))
-            continue
-        eff = get_effect(name)
-        if sign is not None and not eff.signed and len(names) == 1:
-            raise ValueError(f"hidden effect '{name}': its sign is fixed by physics; sign={sign} applies only to "
-                             "cubic_stiffness and quadratic_stiffness")
-        drawn = eff.sample(rng, s, sign=sign if eff.signed else None)
-        if set(drawn) & set(hidden):
-            raise ValueError(f"hidden effects {names} share parameters {sorted(set(drawn) & set(hidden))}")
-        drawn.update({k_: float(v) for k_, v in (params or {}).items() if k_ in drawn})
-        hidden.update(drawn)
-        terms.append(eff.term(drawn, s.context()))
+        states.append(rng.bit_generator.state)
+        hidden, terms = _draw(name, len(names), rng, s, sign, params, hidden, terms)
+    # Alone, an effect is sized against the response of the nominal structure. With several,
+    # each is sized against the response of the structure that holds them all (a fixed point):
+    # friction shrinks the motion that a gap must close or a cubic spring must feel, so shares
+    # of the linear response would hide one effect behind the other.
+    for _ in range(_FIXED_POINT_PASSES if len(names) > 1 else 0):
+        combined = SDOFSystem(terms, mass=mass, name="combined")
+        truth_now = {**truth_nom, **{k_: v for k_, v in combined.true_values().items() if k_ not in truth_nom}}
+        sim = simulate(combined, truth_now, gm, gm.t, rtol=1e-7, atol=1e-10)  # sizes, not data
+        if not np.all(np.isfinite(sim.x)):
+            raise RuntimeError(f"hidden effects {names} (seed {seed}): the structure holding them diverges")
+        s = Signals(sim.t, sim.x[:, 0], sim.v[:, 0], mass, k, "k", t_fit_end=fit_end)
+        hidden, terms = {}, list(nominal.terms)
+        for name, state in zip(names, states):
+            rng.bit_generator.state = state
+            hidden, terms = _draw(name, len(names), rng, s, sign, params, hidden, terms)
     unknown = set(params or {}) - set(hidden)
     if unknown:
         raise ValueError(f"hidden effect '{effect}' has no parameter(s) {sorted(unknown)}; it has {sorted(hidden)}")
