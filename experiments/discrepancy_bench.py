@@ -41,7 +41,8 @@ NAMES = ["none", *sorted(EFFECTS)]
 FAST = ["model.schedule.pretrain_iters=300", "model.schedule.pretrain_iters_window=300",
         "model.schedule.max_iters=500"]
 #: library names accepted for an effect outside the library (physically equivalent)
-EQUIVALENT = {"trilinear_spring": {"gap_contact"}, "stribeck_friction": {"coulomb_friction"}}
+#: (a trilinear spring softens, then hardens: a stop beyond a displacement, a cubic for the softening)
+EQUIVALENT = {"trilinear_spring": {"gap_contact", "cubic_stiffness"}, "stribeck_friction": {"coulomb_friction"}}
 
 
 @dataclass

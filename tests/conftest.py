@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -13,6 +14,9 @@ from pidyn.config import compose
 CONF = str(CONF_PATH)
 
 ROOT = Path(__file__).resolve().parents[1]
+
+if os.environ.get("PYTEST_XDIST_WORKER"):  # one torch thread per worker: the workers fill the cores
+    torch.set_num_threads(1)
 
 
 @pytest.fixture(autouse=True)

@@ -362,7 +362,9 @@ def test_diagnosis_names_two_hidden_effects_and_no_third(pair, tmp_path):
 
 
 #: library names a test accepts for an effect outside the library (physically equivalent)
-EQUIVALENT = {"trilinear_spring": {"gap_contact"},  # its hardening branch is a stop beyond a displacement
+#: a trilinear spring softens beyond x1 and hardens beyond x2: a stop beyond a displacement, with
+#: a (softening) cubic spring for the branch before it
+EQUIVALENT = {"trilinear_spring": {"gap_contact", "cubic_stiffness"},
               "stribeck_friction": {"coulomb_friction"}}  # dry friction, without the drop at low speed
 
 

@@ -17,10 +17,19 @@ missing effect. Evidence per effect:
 ``score = -delta_bic``. The verdict is ``discrepancy`` only when the best effect passes the
 evidence, cross-validation and relevance thresholds; otherwise ``none``: nothing explains
 more than noise and the model's own error would.
+
+Two effects at once can hide behind a third: dry friction plus a stop look, one at a time,
+most like a hardening cubic spring, and friction alone, its force soaked up by the refitted
+viscous damping, may score nothing. Every pair of effects is therefore fitted jointly too.
+When the best pair leaves out the best single effect and beats every pair that holds it, or
+holds it while that effect alone fails and the pair passes by a wide margin, the pair's
+member with the better single score is named first (``structure["pair"]`` says why); the
+next screening, of the model extended with it, must still find the partner on its own.
 """
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,6 +48,11 @@ class Thresholds:
     min_force_share: float = 1e-6
     min_structure_gain: float = 0.3  # a generic f(x, x') removing this share (CV) marks the residual as structured
     min_library_share: float = 0.5  # the named effect must explain this share of what the generic one does
+    pair_margin: float = 2.0  # BIC by which a pair must beat the pairs holding the best single effect ("positive")
+
+
+#: effects never fitted together (one step in time is found at a time)
+EXCLUSIVE = ({"stiffness_loss", "damping_change"},)
 
 
 @dataclass
@@ -157,6 +171,8 @@ def screen(
     ranking.sort(key=lambda r: -np.inf if r["score"] is None else r["score"], reverse=True)
     for r in ranking:
         r["passes"] = bool(r["score"] is not None and _passes(r, th))
+    pairs = _score_pairs(effects, ranking, s, weak, base)
+    structure["pair"] = _pair_lead(ranking, pairs, structure, th)
     verdict, cause = _verdict(ranking, structure, th)
     return Screening(
         nominal_params=dict(zip(base.names, map(float, base.theta0))),
@@ -244,6 +260,83 @@ def _score_effect(eff: Effect, s: Signals, weak: WeakForm, base: _NominalFit, va
     }
 
 
+#: a pair's two grids are searched in full up to this many joint candidates, by alternating
+#: (coordinate) search from each effect's best single candidate beyond it
+PAIR_FULL_GRID = 600
+
+
+def _score_pairs(effects: dict[str, Effect], ranking: list[dict], s: Signals, weak: WeakForm,
+                 base: _NominalFit) -> list[dict]:
+    """Every pair of effects fitted jointly with the nominal parameters, best first."""
+    fitted = {r["effect"] for r in ranking if r.get("score") is not None}
+    cols = {n: [(c, weak.project(c.columns)) for c in e.candidates(s)] for n, e in effects.items() if n in fitted}
+
+    def rss(a: str, b: str, i: int, j: int) -> float:
+        (ca, Ba), (cb, Bb) = cols[a][i], cols[b][j]
+        A = np.column_stack([base.A0, Ba, Bb])
+        theta = lstsq(A[base.fit], base.y[base.fit])
+        coef = theta[base.A0.shape[1]:]
+        pos = list(ca.positive or (False,) * Ba.shape[1]) + list(cb.positive or (False,) * Bb.shape[1])
+        if any(p and c <= 0 for p, c in zip(pos, coef)):
+            return np.inf
+        r = base.y - A @ theta
+        return float(np.sum(r[base.fit] ** 2))
+
+    out = []
+    for a, b in itertools.combinations(sorted(cols), 2):
+        if any({a, b} <= g for g in EXCLUSIVE):
+            continue
+        na, nb = len(cols[a]), len(cols[b])
+        if na * nb <= PAIR_FULL_GRID:
+            best, i, j = min((rss(a, b, i, j), i, j) for i in range(na) for j in range(nb))
+        else:
+            i = j = 0
+            for _ in range(3):
+                i = min(range(na), key=lambda q: rss(a, b, q, j))
+                j = min(range(nb), key=lambda q: rss(a, b, i, q))
+            best = rss(a, b, i, j)
+        if not np.isfinite(best):
+            continue
+        k = sum(len(cols[e][q][0].coef_names) + effects[e].n_grid for e, q in ((a, i), (b, j)))
+        delta_bic = base.n_eff * np.log(max(best, 1e-300) / max(base.rss0, 1e-300)) + k * np.log(base.n_eff)
+        A = np.column_stack([base.A0, cols[a][i][1], cols[b][j][1]])
+        out.append({"effects": [a, b], "score": float(-delta_bic), "delta_bic": float(delta_bic),
+                    "explained": float(1 - best / max(base.rss0, 1e-300)),
+                    "cv_gain": float(1 - _cv_rss(A, base.y, base.folds) / max(base.rss0_cv, 1e-300))})
+    out.sort(key=lambda p: p["score"], reverse=True)
+    return out
+
+
+def _pair_lead(ranking: list[dict], pairs: list[dict], structure: dict, th: Thresholds) -> dict | None:
+    """The effect to name first when a pair explains the residual better than greedy
+    one-at-a-time naming would (see the module's notes); None leaves the single ranking in charge."""
+    if not pairs or not ranking or ranking[0].get("score") is None:
+        return None
+    singles = {r["effect"]: r["score"] if r.get("score") is not None else -np.inf for r in ranking}
+    top, s_top = ranking[0]["effect"], ranking[0]["score"]
+    best = pairs[0]
+    a, b = best["effects"]
+    if best["delta_bic"] > -th.min_delta_bic or best["cv_gain"] < th.min_cv_gain:
+        return None
+    if structure.get("cv_gain") is not None and structure["cv_gain"] >= th.min_structure_gain \
+            and best["cv_gain"] < th.min_library_share * structure["cv_gain"]:
+        return None  # the pair, too, explains only a small part of a clearly structured residual
+    with_top = [p["score"] for p in pairs if top in p["effects"]]
+    if top not in (a, b):
+        rival = max(with_top) if with_top else -np.inf
+        if best["score"] - rival < th.pair_margin or best["score"] - s_top < th.pair_margin:
+            return None
+        why = (f"{a} and {b} together score {best['score']:.1f}, more than {top} with any partner "
+               f"({rival:.1f}) or alone ({s_top:.1f}): {top} stood in for them")
+    elif not ranking[0]["passes"] and best["score"] - s_top >= th.min_delta_bic:
+        other = b if a == top else a
+        why = (f"{top} alone scores {s_top:.1f}, with {other} {best['score']:.1f}: the two are needed together")
+    else:
+        return None
+    lead = max((a, b), key=lambda e: singles[e])
+    return {**best, "lead": lead, "why": why}
+
+
 def _verdict(ranking: list[dict], structure: dict, th: Thresholds) -> tuple[str, str | None]:
     """``discrepancy`` when the top effect passes and explains a fair share of what a generic
     f(x, x') explains; ``unexplained`` when the residual is structured but no effect does;
@@ -251,6 +344,9 @@ def _verdict(ranking: list[dict], structure: dict, th: Thresholds) -> tuple[str,
     top = ranking[0] if ranking else None
     structured = structure["cv_gain"] >= th.min_structure_gain  # blocked CV: flexibility is not rewarded
     structure["structured"] = bool(structured)
+    pair = structure.get("pair")
+    if pair is not None:  # two effects explain it together: name the pair's lead first
+        return "discrepancy", pair["lead"]
     found = top is not None and _passes(top, th)
     if found and structured and top["cv_gain"] < th.min_library_share * structure["cv_gain"]:
         # the best library effect explains only a small part of a clearly structured residual:

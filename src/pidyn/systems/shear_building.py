@@ -268,6 +268,8 @@ class ShearBuilding(StructuralSystem):
                 if sl is not None:
                     rate = term.latent_rate(t, d[i], dv[i], z[..., sl], p)
                     parts += [rate[..., j] for j in range(term.n_latent)]
+        if np.ndim(y) == 1:  # one state (an integrator's step): the cheap way
+            return np.array(parts, dtype=float)
         return np.stack(parts, axis=-1)
 
     def rhs(self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]) -> np.ndarray:

@@ -33,7 +33,7 @@ from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.report import (plot_learned_force, plot_ranking, plot_residual, plot_response,
                                      plot_running_estimate, write_report)
 from pidyn.discrepancy.residual import band_limited, dominant_period, unexplained_force
-from pidyn.discrepancy.screening import Thresholds, screen, weak_system
+from pidyn.discrepancy.screening import EXCLUSIVE, Thresholds, screen, weak_system
 from pidyn.discrepancy.weak_form import WeakForm, smooth_signals, velocity_noise
 from pidyn.reporting import nrmse, write_json
 from pidyn.systems.sdof import SDOFSystem
@@ -376,7 +376,6 @@ def _write_figures(case: _Case, nom: _Nominal, sc, d: dict, change_row: dict | N
 
 EXTENSION = "pidyn.discrepancy.extend.extended_system"
 #: effects that cannot sit in one model together (both step at their own t_d)
-EXCLUSIVE = ({"stiffness_loss", "damping_change"},)
 
 
 def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict, nominal_values: dict[str, float],
