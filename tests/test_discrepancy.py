@@ -361,6 +361,20 @@ def test_diagnosis_names_two_hidden_effects_and_no_third(pair, tmp_path):
     assert "Steps" in (tmp_path / "report.md").read_text()
 
 
+@pytest.mark.parametrize("pair, seed", [("gap_contact+coulomb_friction", 1014),
+                                        ("gap_contact+coulomb_friction", 1050),
+                                        ("cubic_stiffness+coulomb_friction", 1051)])
+def test_screening_names_a_pair_that_a_third_effect_stands_in_for(pair, seed):
+    """Friction plus a stop score, one at a time, most like a cubic spring (seed 1014), or
+    friction alone, soaked up by the refitted damping, scores too little (1050, 1051): the
+    greedy screening named cubic_stiffness or nothing. Fitted jointly, the hidden pair wins."""
+    sc = _screen(hidden_case(pair, seed))
+    greedy = sc.ranking[0]
+    assert not (greedy["passes"] and greedy["effect"] in pair.split("+")), "greedy naming alone would do here"
+    assert sc.verdict == "discrepancy" and sc.cause in pair.split("+"), (sc.ranking[:3], sc.structure.get("pair"))
+    assert sorted(sc.structure["pair"]["effects"]) == sorted(pair.split("+"))
+
+
 #: library names a test accepts for an effect outside the library (physically equivalent)
 #: a trilinear spring softens beyond x1 and hardens beyond x2: a stop beyond a displacement, with
 #: a (softening) cubic spring for the branch before it

@@ -240,6 +240,10 @@ def _evidence_lines(d: dict) -> list[str]:
                   + (f"; a generic f(x, x') removes {st['cv_gain']:.2f} of the residual in cross-validation"
                      if st.get("cv_gain") is not None else "")
                   + ". Compare it with the unexplained force in `figures/learned_force.png` before naming a cause.", ""]
+    pair = (d.get("structure") or {}).get("pair")
+    if pair:
+        lines += [f"Two effects at once: {pair['why']}. {pair['lead']} was named first; the screening of the model "
+                  "extended with it had to find the other on its own.", ""]
     hc = d.get("heldout_check")
     if hc:
         lines += [f"Held-out check: simulation error above the noise {hc['nrmse_heldout']:.3g} of the signal on the "

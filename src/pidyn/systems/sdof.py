@@ -118,7 +118,7 @@ class SDOFSystem(StructuralSystem):
             if sl is not None:
                 rate = term.latent_rate(t, x, v, z[..., sl], p)
                 parts += [rate[..., j] for j in range(term.n_latent)]
-        if np.ndim(y) == 1:  # one state (an integrator's step): the cheap way
+        if all(isinstance(q, (float, np.floating)) for q in parts):  # one plain state (an integrator's step)
             return np.array(parts, dtype=float)
         return np.stack(parts, axis=-1)
 
