@@ -118,7 +118,7 @@ def hidden_case(
     hidden: dict[str, float] = {}
     names = [] if effect is None else [e.strip() for e in effect.split("+")]
     if names:
-        base = simulate(nominal, truth_nom, gm, gm.t)
+        base = simulate(nominal, truth_nom, gm, gm.t, rtol=1e-7, atol=1e-10)  # for sizes only, not the data
         s = Signals(base.t, base.x[:, 0], base.v[:, 0], mass, k, "k", t_fit_end=fit_end)
     states = []  # the generator's state before each effect's draw: a redraw repeats its shares
     for name in names:  # "gap_contact+coulomb_friction": several effects at once

@@ -78,7 +78,9 @@ def nominal_columns(system: SDOFSystem, s: Signals, values: dict[str, float]) ->
         if term.n_latent:  # e.g. a hysteresis found in an earlier step: its z along the measured motion
             remainder = remainder + term.force(s.t, s.x, s.v, latent_path(term, s, values), values)
             continue
-        if len(term.linear) != 1 or not _is_linear_only(term):
+        # a stop's kg is refitted too (its gap held): held at the value fitted without the next
+        # effect, it keeps what it soaked up of that effect (friction, seen by a gap alone)
+        if len(term.linear) != 1 or not (_is_linear_only(term) or term.proportional):
             remainder = remainder + term.force(s.t, s.x, s.v, None, values)
             continue
         name = term.linear[0]

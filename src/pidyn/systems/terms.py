@@ -53,6 +53,9 @@ class ForceTerm:
     name: str = "term"
     n_latent: int = 0
     linear: tuple[str, ...] = ()  # parameters the force is linear in
+    #: the force is proportional to its one linear parameter at fixed other parameters (a
+    #: screening refits that coefficient with the nominal ones, the others held)
+    proportional: bool = False
 
     def specs(self) -> list[ParamSpec]:
         raise NotImplementedError
@@ -302,6 +305,7 @@ class GapContact(ForceTerm):
 
     name = "gap_contact"
     linear = ("kg",)
+    proportional = True
 
     def __init__(self, kg: float = 50.0, gap: float = 0.05) -> None:
         self.kg, self.gap = kg, gap
