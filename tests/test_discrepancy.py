@@ -375,6 +375,23 @@ def test_screening_names_a_pair_that_a_third_effect_stands_in_for(pair, seed):
     assert sorted(sc.structure["pair"]["effects"]) == sorted(pair.split("+"))
 
 
+def test_ridge_fit_survives_a_column_silent_in_the_fitting_rows():
+    """A stop whose polished gap lies beyond the motion of the fitting part gives a zero column;
+    the ridge fit (the generic force's yardstick) used to fail there with a singular matrix."""
+    from pidyn.discrepancy.screening import lstsq
+
+    rng = np.random.default_rng(0)
+    A, y = rng.normal(size=(50, 6)), rng.normal(size=50)
+    ridge = np.r_[0.0, 0.0, np.full(4, 1e-3)]
+    scale = np.sqrt((A**2).sum(0))
+    As = A / scale
+    expected = np.linalg.solve(As.T @ As + np.diag(ridge), As.T @ y) / scale
+    assert np.allclose(lstsq(A, y, ridge), expected, rtol=1e-10, atol=1e-12)
+    A[:, 1] = 0.0
+    theta = lstsq(A, y, ridge)
+    assert np.all(np.isfinite(theta)) and theta[1] == 0.0
+
+
 #: library names a test accepts for an effect outside the library (physically equivalent)
 #: a trilinear spring softens beyond x1 and hardens beyond x2: a stop beyond a displacement, with
 #: a (softening) cubic spring for the branch before it

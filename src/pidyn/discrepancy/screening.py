@@ -142,7 +142,10 @@ def lstsq(A: np.ndarray, y: np.ndarray, ridge: np.ndarray | None = None, scale: 
     if ridge is None:
         sol, *_ = np.linalg.lstsq(As, y, rcond=None)
     else:
-        sol = np.linalg.solve(As.T @ As + np.diag(ridge), As.T @ y)
+        # the ridge as extra rows: the same solution, and a column silent in these rows (a stop
+        # never reached in the fitting part) leaves it rank deficient instead of singular
+        aug = np.vstack([As, np.diag(np.sqrt(ridge))])
+        sol, *_ = np.linalg.lstsq(aug, np.r_[y, np.zeros(len(ridge))], rcond=None)
     return sol / scale
 
 
