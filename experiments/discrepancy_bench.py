@@ -155,7 +155,7 @@ def committed_rows(path: Path, kinds: list[Kind]) -> dict[int, dict]:
     code commit stamped, no error): a study grows over several sessions without re-running them."""
     if not path.exists():
         return {}
-    df = pd.read_csv(path)
+    df = pd.read_csv(path, dtype={"commit": str})  # a short hash like 61e7462 is no number
     if "commit" not in df:
         return {}
     out = {}

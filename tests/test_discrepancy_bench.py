@@ -67,3 +67,12 @@ def test_a_named_study_writes_its_own_table(tmp_path, monkeypatch):
     md = (res / "timing.md").read_text()
     assert "--name timing" in md and "data.source.duration=40" in md
     assert set(pd.read_csv(res / "timing.csv").hidden) == {"none", "hysteresis"}
+
+
+def test_a_hash_that_reads_as_a_number_stays_a_hash(tmp_path):
+    """61e7462 is a float to pandas (infinity): the kept rows must carry the hash as written."""
+    kinds = bench.KINDS
+    path = tmp_path / "t.csv"
+    pd.DataFrame([{"case": 0, "hidden": kinds[0].label, "found": "none", "verdict": "none", "hit": True,
+                   "seconds": 1.0, "commit": "61e7462"}]).to_csv(path, index=False)
+    assert bench.committed_rows(path, kinds)[0]["commit"] == "61e7462"
