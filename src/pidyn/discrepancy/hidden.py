@@ -75,6 +75,30 @@ def _draw(name: str, n_effects: int, rng: np.random.Generator, s: Signals, sign:
     return hidden, terms
 
 
+def _size_jointly(names: list[str], states: list, terms: list, rng: np.random.Generator, nominal: SDOFSystem,
+                  truth_nom: dict[str, float], gm, fit_end: float, sign: float | None,
+                  params: dict[str, float] | None, seed: int) -> tuple[dict[str, float], list]:
+    """Several hidden effects, each sized against the response of the structure that holds
+    them all: a fixed point from ``terms`` (sized against the nominal response), each effect's
+    random shares redrawn identically from its generator state ``states``. Friction shrinks
+    the motion that a gap must close or a cubic spring must feel, so shares of the linear
+    response would hide one effect behind the other."""
+    mass, k = nominal.mass, truth_nom["k"]
+    hidden: dict[str, float] = {}
+    for _ in range(_FIXED_POINT_PASSES):
+        combined = SDOFSystem(terms, mass=mass, name="combined")
+        truth_now = {**truth_nom, **{k_: v for k_, v in combined.true_values().items() if k_ not in truth_nom}}
+        sim = simulate(combined, truth_now, gm, gm.t, rtol=1e-7, atol=1e-10)  # sizes, not data
+        if not np.all(np.isfinite(sim.x)):
+            raise RuntimeError(f"hidden effects {names} (seed {seed}): the structure holding them diverges")
+        s = Signals(sim.t, sim.x[:, 0], sim.v[:, 0], mass, k, "k", t_fit_end=fit_end)
+        hidden, terms = {}, list(nominal.terms)
+        for name, state in zip(names, states):
+            rng.bit_generator.state = state
+            hidden, terms = _draw(name, len(names), rng, s, sign, params, hidden, terms)
+    return hidden, terms
+
+
 @dataclass
 class HiddenCase:
     record: Record
@@ -124,21 +148,8 @@ def hidden_case(
     for name in names:  # "gap_contact+coulomb_friction": several effects at once
         states.append(rng.bit_generator.state)
         hidden, terms = _draw(name, len(names), rng, s, sign, params, hidden, terms)
-    # Alone, an effect is sized against the response of the nominal structure. With several,
-    # each is sized against the response of the structure that holds them all (a fixed point):
-    # friction shrinks the motion that a gap must close or a cubic spring must feel, so shares
-    # of the linear response would hide one effect behind the other.
-    for _ in range(_FIXED_POINT_PASSES if len(names) > 1 else 0):
-        combined = SDOFSystem(terms, mass=mass, name="combined")
-        truth_now = {**truth_nom, **{k_: v for k_, v in combined.true_values().items() if k_ not in truth_nom}}
-        sim = simulate(combined, truth_now, gm, gm.t, rtol=1e-7, atol=1e-10)  # sizes, not data
-        if not np.all(np.isfinite(sim.x)):
-            raise RuntimeError(f"hidden effects {names} (seed {seed}): the structure holding them diverges")
-        s = Signals(sim.t, sim.x[:, 0], sim.v[:, 0], mass, k, "k", t_fit_end=fit_end)
-        hidden, terms = {}, list(nominal.terms)
-        for name, state in zip(names, states):
-            rng.bit_generator.state = state
-            hidden, terms = _draw(name, len(names), rng, s, sign, params, hidden, terms)
+    if len(names) > 1:
+        hidden, terms = _size_jointly(names, states, terms, rng, nominal, truth_nom, gm, fit_end, sign, params, seed)
     unknown = set(params or {}) - set(hidden)
     if unknown:
         raise ValueError(f"hidden effect '{effect}' has no parameter(s) {sorted(unknown)}; it has {sorted(hidden)}")
