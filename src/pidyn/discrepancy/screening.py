@@ -170,13 +170,15 @@ def screen(
     effects = EFFECTS if effects is None else effects
     th = thresholds or Thresholds()
     base = _nominal_fit(system, values, s, f, x_raw, weak, fit_end, mass_known)
-    ranking = [_score_effect(eff, s, weak, base, values) for eff in effects.values()]
+    # every candidate's columns projected once: the single and the pair fits use them all
+    projected = {n: [(c, weak.project(c.columns)) for c in e.candidates(s)] for n, e in effects.items()}
+    ranking = [_score_effect(eff, projected[n], base, values) for n, eff in effects.items()]
     structure = _structure(s, weak, base.A0, base.y, base.fit, base.ho, base.folds, base.rss0, base.rss0_cv,
                            base.rss0_ho, base.n_eff)
     ranking.sort(key=lambda r: -np.inf if r["score"] is None else r["score"], reverse=True)
     for r in ranking:
         r["passes"] = bool(r["score"] is not None and _passes(r, th))
-    pairs = _score_pairs(effects, ranking, s, weak, base)
+    pairs = _score_pairs(effects, projected, ranking, base)
     structure["pair"] = _pair_lead(ranking, pairs, structure, th)
     verdict, cause = _verdict(ranking, structure, th)
     return Screening(
@@ -232,12 +234,12 @@ def _nominal_fit(system: SDOFSystem, values: dict[str, float], s: Signals, f: np
                        n_eff=max(fit.sum() / weak.rows_per_independent, 2.0))
 
 
-def _score_effect(eff: Effect, s: Signals, weak: WeakForm, base: _NominalFit, values: dict[str, float]) -> dict:
+def _score_effect(eff: Effect, projected: list[tuple[Candidate, np.ndarray]], base: _NominalFit,
+                  values: dict[str, float]) -> dict:
     """The effect's best candidate added to the nominal regression: its BIC score, shares of the
     force it explains (in sample, cross-validated, held out) and its parameters."""
     best = None
-    for cand in eff.candidates(s):
-        B = weak.project(cand.columns)
+    for cand, B in projected:
         row = _fit_candidate(cand, base.A0, B, base.y, base.fit, base.ho)
         if row is not None:
             row["B"] = B
@@ -270,11 +272,11 @@ def _score_effect(eff: Effect, s: Signals, weak: WeakForm, base: _NominalFit, va
 PAIR_FULL_GRID = 600
 
 
-def _score_pairs(effects: dict[str, Effect], ranking: list[dict], s: Signals, weak: WeakForm,
-                 base: _NominalFit) -> list[dict]:
+def _score_pairs(effects: dict[str, Effect], projected: dict[str, list[tuple[Candidate, np.ndarray]]],
+                 ranking: list[dict], base: _NominalFit) -> list[dict]:
     """Every pair of effects fitted jointly with the nominal parameters, best first."""
     fitted = {r["effect"] for r in ranking if r.get("score") is not None}
-    cols = {n: [(c, weak.project(c.columns)) for c in e.candidates(s)] for n, e in effects.items() if n in fitted}
+    cols = {n: c for n, c in projected.items() if n in fitted}
 
     def rss(a: str, b: str, i: int, j: int) -> float:
         (ca, Ba), (cb, Bb) = cols[a][i], cols[b][j]
