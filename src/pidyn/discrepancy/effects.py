@@ -88,6 +88,8 @@ class Effect:
 
     name: str = "effect"
     n_grid: int = 0  # parameters found by the grid (they count in the information criterion)
+    #: a step in time: what changed stays changed, so it must not fit the held-out part worse
+    step_in_time: bool = False
 
     def candidates(self, s: Signals) -> Iterator[Candidate]:
         raise NotImplementedError
@@ -95,6 +97,12 @@ class Effect:
     def parameters(self, coef: dict[str, float], fixed: dict[str, float], nominal: dict[str, float]) -> dict[str, float]:
         """The effect's physical parameters from regression coefficients (what is reported)."""
         return {**coef, **fixed}
+
+    def admissible(self, params: dict[str, float], nominal: dict[str, float]) -> bool:
+        """Whether a fit (the effect's ``params``, the ``nominal`` parameters refitted with it)
+        describes a physical structure, beyond the coefficient signs a ``Candidate`` fixes; a
+        fit that does not is no evidence for the effect."""
+        return True
 
     def term(self, params: dict[str, float], ctx: dict) -> ForceTerm:
         """The force term at ``params``; ``ctx`` is ``Signals.context()``."""
@@ -159,9 +167,9 @@ class Coulomb(Effect):
 
     def candidates(self, s):
         # near rest, noise flips the sign of the measured velocity: a column no sharper than
-        # the noise (the expected sign of a noisy velocity is a smooth step of that width)
-        eps = max(s.friction_eps, 2.0 * s.v_noise)
-        yield Candidate(self.name, np.tanh(s.v / eps)[:, None], ("Fc",), positive=(True,))
+        # the noise (the term's own rule, so a screening of the extended model sees the same)
+        col = CoulombFriction(1.0, eps=s.friction_eps).measured_force(s.t, s.x, s.v, None, {"Fc": 1.0}, s.v_noise)
+        yield Candidate(self.name, col[:, None], ("Fc",), positive=(True,))
 
     def term(self, p, s):
         return CoulombFriction(p["Fc"], eps=s["friction_eps"])
@@ -253,6 +261,7 @@ class Damage(Effect):
 
     name, key, tolerance = "stiffness_loss", "drop", 0.25
     n_grid = 1
+    step_in_time = True
     n_times = 40
 
     def _span(self, s):
@@ -294,6 +303,12 @@ class DampChange(Damage):
 
     def parameters(self, coef, fixed, nominal):
         return {"change": coef["dc"] / nominal.get("c", 1.0), "t_d": fixed["t_d"]}
+
+    def admissible(self, params, nominal):
+        # the damping stays positive on both sides of the step: a "change" to no damping or less
+        # is the refitted damping taking up a force the model's columns get wrong on one side
+        # (dry friction near rest, where the velocity is mostly noise), not a change of the structure
+        return nominal.get("c", 1.0) > 0 and params["change"] > -1.0
 
     def term(self, p, s):
         change = min(max(p["change"], -0.9), 9.0)

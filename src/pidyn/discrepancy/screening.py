@@ -8,7 +8,8 @@ missing effect. Evidence per effect:
 * ``explained``: share of the nominal model's residual the effect removes (fitting part);
 * ``force_share``: the same, as a share of the whole weak-form force (a relevance floor);
 * ``delta_bic``: change of the Bayesian information criterion, counting overlapping rows as
-  the number of independent windows they span and grid-searched parameters as parameters;
+  the independent rows their noise is worth (``WeakForm.rows_per_independent``) and
+  grid-searched parameters as parameters;
 * ``cv_gain``: reduction of the residual in blocked cross-validation over the fitting part
   (five contiguous blocks, each predicted from the other four: a check that does not reward
   flexibility, and does not depend on how much the structure moves in one particular tail);
@@ -49,6 +50,8 @@ class Thresholds:
     min_structure_gain: float = 0.3  # a generic f(x, x') removing this share (CV) marks the residual as structured
     min_library_share: float = 0.5  # the named effect must explain this share of what the generic one does
     pair_margin: float = 2.0  # BIC by which a pair must beat the pairs holding the best single effect ("positive")
+    #: a step in time found in the fitting part must persist: its held-out gain may not fall below this
+    min_step_heldout_gain: float = -0.1
 
 
 #: effects never fitted together (one step in time is found at a time)
@@ -75,16 +78,19 @@ def nominal_columns(system: SDOFSystem, s: Signals, values: dict[str, float]) ->
     names, cols = [], []
     remainder = np.zeros_like(s.x)
     for term in system.terms:
+        # along the measured signals: a friction found in an earlier step is no sharper than the
+        # velocity noise, as in its screening (sharper, noise near rest reads as a damping change)
         if term.n_latent:  # e.g. a hysteresis found in an earlier step: its z along the measured motion
-            remainder = remainder + term.force(s.t, s.x, s.v, latent_path(term, s, values), values)
+            remainder = remainder + term.measured_force(s.t, s.x, s.v, latent_path(term, s, values), values,
+                                                        s.v_noise)
             continue
         # a stop's kg is refitted too (its gap held): held at the value fitted without the next
         # effect, it keeps what it soaked up of that effect (friction, seen by a gap alone)
         if len(term.linear) != 1 or not (_is_linear_only(term) or term.proportional):
-            remainder = remainder + term.force(s.t, s.x, s.v, None, values)
+            remainder = remainder + term.measured_force(s.t, s.x, s.v, None, values, s.v_noise)
             continue
         name = term.linear[0]
-        cols.append(term.force(s.t, s.x, s.v, None, {**values, name: 1.0}))
+        cols.append(term.measured_force(s.t, s.x, s.v, None, {**values, name: 1.0}, s.v_noise))
         names.append(name)
     return names, np.stack(cols, axis=1) if cols else np.zeros((len(s.x), 0)), remainder
 
@@ -178,7 +184,7 @@ def screen(
     ranking.sort(key=lambda r: -np.inf if r["score"] is None else r["score"], reverse=True)
     for r in ranking:
         r["passes"] = bool(r["score"] is not None and _passes(r, th))
-    pairs = _score_pairs(effects, projected, ranking, base)
+    pairs = _score_pairs(effects, projected, ranking, base, values)
     structure["pair"] = _pair_lead(ranking, pairs, structure, th)
     verdict, cause = _verdict(ranking, structure, th)
     return Screening(
@@ -241,6 +247,8 @@ def _score_effect(eff: Effect, projected: list[tuple[Candidate, np.ndarray]], ba
     best = None
     for cand, B in projected:
         row = _fit_candidate(cand, base.A0, B, base.y, base.fit, base.ho)
+        if row is not None and not _admissible(eff, cand, list(row["coef"].values()), row["theta"], base, values):
+            row = None
         if row is not None:
             row["B"] = B
         if row is not None and (best is None or row["rss_fit"] < best["rss_fit"]):
@@ -256,6 +264,7 @@ def _score_effect(eff: Effect, projected: list[tuple[Candidate, np.ndarray]], ba
     params = eff.parameters(best["coef"], best["fixed"], {**values, **nominal_fit})
     return {
         "effect": eff.name,
+        "step_in_time": eff.step_in_time,
         "score": float(-delta_bic),
         "delta_bic": float(delta_bic),
         "explained": float(1 - rss / max(rss0, 1e-300)),
@@ -272,8 +281,15 @@ def _score_effect(eff: Effect, projected: list[tuple[Candidate, np.ndarray]], ba
 PAIR_FULL_GRID = 600
 
 
+def _admissible(eff: Effect, cand: Candidate, coef, theta, base: _NominalFit, values: dict[str, float]) -> bool:
+    """The effect's own test of a fit (``Effect.admissible``), on its physical parameters."""
+    nominal = {**values, **{n: float(theta[i]) for i, n in enumerate(base.names)}}
+    params = eff.parameters(dict(zip(cand.coef_names, map(float, coef))), cand.fixed, nominal)
+    return eff.admissible(params, nominal)
+
+
 def _score_pairs(effects: dict[str, Effect], projected: dict[str, list[tuple[Candidate, np.ndarray]]],
-                 ranking: list[dict], base: _NominalFit) -> list[dict]:
+                 ranking: list[dict], base: _NominalFit, values: dict[str, float]) -> list[dict]:
     """Every pair of effects fitted jointly with the nominal parameters, best first."""
     fitted = {r["effect"] for r in ranking if r.get("score") is not None}
     cols = {n: c for n, c in projected.items() if n in fitted}
@@ -285,6 +301,9 @@ def _score_pairs(effects: dict[str, Effect], projected: dict[str, list[tuple[Can
         coef = theta[base.A0.shape[1]:]
         pos = list(ca.positive or (False,) * Ba.shape[1]) + list(cb.positive or (False,) * Bb.shape[1])
         if any(p and c <= 0 for p, c in zip(pos, coef)):
+            return np.inf
+        if not (_admissible(effects[a], ca, coef[:Ba.shape[1]], theta, base, values)
+                and _admissible(effects[b], cb, coef[Ba.shape[1]:], theta, base, values)):
             return np.inf
         r = base.y - A @ theta
         return float(np.sum(r[base.fit] ** 2))
@@ -320,6 +339,10 @@ def _pair_lead(ranking: list[dict], pairs: list[dict], structure: dict, th: Thre
     if not pairs or not ranking or ranking[0].get("score") is None:
         return None
     singles = {r["effect"]: r["score"] if r.get("score") is not None else -np.inf for r in ranking}
+    fleeting = {r["effect"] for r in ranking if r.get("persists") is False}
+    pairs = [p for p in pairs if not fleeting & set(p["effects"])]  # a step that does not last leads nowhere
+    if not pairs:
+        return None
     top, s_top = ranking[0]["effect"], ranking[0]["score"]
     best = pairs[0]
     a, b = best["effects"]
@@ -399,6 +422,13 @@ def _structure(s: Signals, weak: WeakForm, A0, y, fit, ho, folds, rss0, rss0_cv,
 
 def _passes(r: dict, th: Thresholds) -> bool:
     if r.get("score") is None:
+        return False
+    if r.get("step_in_time") and r.get("heldout_gain") is not None and r["heldout_gain"] < th.min_step_heldout_gain:
+        # the "change" does not last: a stiffness lower only in the strong motion is one that
+        # depends on the amplitude (softening), not damage
+        r["persists"] = False
+        r["note"] = (f"a step at t = {r['parameters'].get('t_d', float('nan')):.2f} s that does not persist: "
+                     f"held-out gain {r['heldout_gain']:.2f}")
         return False
     return (r["delta_bic"] <= -th.min_delta_bic and r["force_share"] >= th.min_force_share
             and r["cv_gain"] >= th.min_cv_gain)

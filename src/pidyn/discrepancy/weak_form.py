@@ -79,8 +79,8 @@ class WeakForm:
         the rows varies as if there were N / sum_m rho_m independent ones, and
         sum_m rho_m = (sum psi)^2 / (stride sum psi^2): about 1.1 half / stride for this bump.
         Counting one row per non-overlapping window, (2 half + 1) / stride, undercounts by
-        1.8x; on noise-only records a one-column effect's likelihood ratio then averaged 0.6
-        instead of chi2_1's 1 (``test_information_count_is_calibrated_on_noise``).
+        1.8x: on noise-only records a two-sided one-column effect's likelihood ratio then
+        averaged 0.67 instead of chi2_1's 1 (``test_information_count_is_calibrated_on_noise``).
         """
         psi, _ = bump(self.half, self.dt)
         return float(np.sum(psi) ** 2 / np.sum(psi**2)) / self.stride

@@ -63,6 +63,12 @@ class ForceTerm:
     def force(self, t: Array, x: Array, v: Array, z: Array | None, p: dict) -> Array:
         raise NotImplementedError
 
+    def measured_force(self, t: Array, x: Array, v: Array, z: Array | None, p: dict, v_noise: float = 0.0) -> Array:
+        """The force along a measured velocity that still holds noise of std ``v_noise``: what a
+        regression on measured signals must use. The same as ``force`` unless the force turns
+        sharply with the velocity (dry friction), where noise flips its sign near rest."""
+        return self.force(t, x, v, z, p)
+
     def latent_rate(self, t: Array, x: Array, v: Array, z: Array, p: dict) -> Array:
         raise NotImplementedError
 
@@ -215,6 +221,10 @@ class CoulombFriction(ForceTerm):
 
     def force(self, t, x, v, z, p):
         return p["Fc"] * _tanh(v / self.eps)
+
+    def measured_force(self, t, x, v, z, p, v_noise=0.0):
+        # the expected sign of a noisy velocity is a smooth step about as wide as the noise
+        return p["Fc"] * _tanh(v / max(self.eps, 2.0 * v_noise))
 
     def formula(self, p):
         return f"{p['Fc']:.5g} sign(x')"
