@@ -35,14 +35,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from pidyn.discrepancy.effects import EFFECTS  # noqa: E402
+from pidyn.discrepancy.hidden import EQUIVALENT  # noqa: E402
 from pidyn.errors import error_pct  # noqa: E402
 
 NAMES = ["none", *sorted(EFFECTS)]
 FAST = ["model.schedule.pretrain_iters=300", "model.schedule.pretrain_iters_window=300",
         "model.schedule.max_iters=500"]
-#: library names accepted for an effect outside the library (physically equivalent)
-#: (a trilinear spring softens, then hardens: a stop beyond a displacement, a cubic for the softening)
-EQUIVALENT = {"trilinear_spring": {"gap_contact", "cubic_stiffness"}, "stribeck_friction": {"coulomb_friction"}}
 
 
 @dataclass

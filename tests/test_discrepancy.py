@@ -19,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from conftest import make_cfg  # noqa: E402
 
 from pidyn.discrepancy.effects import EFFECTS, Signals, bouc_wen_z, get_effect  # noqa: E402
-from pidyn.discrepancy.hidden import hidden_case  # noqa: E402
+from pidyn.discrepancy.hidden import EQUIVALENT, hidden_case  # noqa: E402
 from pidyn.discrepancy.screening import screen  # noqa: E402
 from pidyn.discrepancy.weak_form import WeakForm, smooth_signals, velocity_noise  # noqa: E402
 from pidyn.excitation import prepare  # noqa: E402
@@ -428,13 +428,6 @@ def test_ridge_fit_survives_a_column_silent_in_the_fitting_rows():
     A[:, 1] = 0.0
     theta = lstsq(A, y, ridge)
     assert np.all(np.isfinite(theta)) and theta[1] == 0.0
-
-
-#: library names a test accepts for an effect outside the library (physically equivalent)
-#: a trilinear spring softens beyond x1 and hardens beyond x2: a stop beyond a displacement, with
-#: a (softening) cubic spring for the branch before it
-EQUIVALENT = {"trilinear_spring": {"gap_contact", "cubic_stiffness"},
-              "stribeck_friction": {"coulomb_friction"}}  # dry friction, without the drop at low speed
 
 
 @pytest.mark.parametrize("effect", list(EQUIVALENT))

@@ -40,6 +40,12 @@ def _stribeck(rng: np.random.Generator, s: Signals) -> dict[str, float]:
 #: effects outside the library: the diagnosis must not give them a wrong library name
 OUTSIDE = {"trilinear_spring": _trilinear, "stribeck_friction": _stribeck}
 
+#: library names physically equivalent to an effect outside the library (what a test or the
+#: benchmark accepts beside ``unexplained``): a trilinear spring softens beyond x1 and hardens
+#: beyond x2, a stop beyond a displacement with a (softening) cubic spring for the branch
+#: before it; Stribeck friction is dry friction with a drop at low speed
+EQUIVALENT = {"trilinear_spring": {"gap_contact", "cubic_stiffness"}, "stribeck_friction": {"coulomb_friction"}}
+
 
 def _outside_term(name: str, p: dict[str, float]):
     from pidyn.systems.terms import StribeckFriction, TrilinearSpring
