@@ -12,7 +12,7 @@ Writes ``experiments/results/discrepancy_bench.{md,csv,json}``: per kind the hit
 false ``discrepancy`` rate on clean data, the held-out gain, parameter errors and seconds per
 diagnosis.
 
-    python experiments/discrepancy_bench.py --cases 90 --jobs 2
+    python experiments/discrepancy_bench.py --cases 180 --jobs 2
     python experiments/discrepancy_bench.py --cases 18 --kinds pair:gap_contact+coulomb_friction
     python experiments/discrepancy_bench.py --full --cases 6 --name diagnosis_time_40s \
         --kinds none hysteresis ... data.source.duration=40 data.source.fit_end=26
@@ -217,7 +217,7 @@ def write_results(rows: list[dict], planned: int, schedule: str, results: Path, 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--cases", type=int, default=90)
+    ap.add_argument("--cases", type=int, default=180)  # 10 of each of the 18 kinds
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=ROOT / "outputs" / "discrepancy_bench")
     ap.add_argument("--full", action="store_true", help="PIDynNet's default schedule (default: a shorter one)")
