@@ -17,7 +17,9 @@ missing effect. Evidence per effect:
 
 ``score = -delta_bic``. The verdict is ``discrepancy`` only when the best effect passes the
 evidence, cross-validation and relevance thresholds; otherwise ``none``: nothing explains
-more than noise and the model's own error would.
+more than noise and the model's own error would. A fit that does not describe a physical
+structure (``Effect.admissible``: a damping change to no damping or less) is no evidence,
+and a step in time must persist into the held-out part.
 
 Two effects at once can hide behind a third: dry friction plus a stop look, one at a time,
 most like a hardening cubic spring, and friction alone, its force soaked up by the refitted
