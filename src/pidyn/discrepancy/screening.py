@@ -185,6 +185,7 @@ def screen(
                            base.rss0_ho, base.n_eff)
     ranking.sort(key=lambda r: -np.inf if r["score"] is None else r["score"], reverse=True)
     for r in ranking:
+        _mark_fleeting_step(r, th)
         r["passes"] = bool(r["score"] is not None and _passes(r, th))
     pairs = _score_pairs(effects, projected, ranking, base, values)
     structure["pair"] = _pair_lead(ranking, pairs, structure, th)
@@ -422,15 +423,17 @@ def _structure(s: Signals, weak: WeakForm, A0, y, fit, ho, folds, rss0, rss0_cv,
             "columns": int(G.shape[1])}
 
 
-def _passes(r: dict, th: Thresholds) -> bool:
-    if r.get("score") is None:
-        return False
+def _mark_fleeting_step(r: dict, th: Thresholds) -> None:
+    """Mark a step in time that does not last (``persists: False``, with a note): a stiffness
+    lower only in the strong motion is one that depends on the amplitude (softening), not damage."""
     if r.get("step_in_time") and r.get("heldout_gain") is not None and r["heldout_gain"] < th.min_step_heldout_gain:
-        # the "change" does not last: a stiffness lower only in the strong motion is one that
-        # depends on the amplitude (softening), not damage
         r["persists"] = False
         r["note"] = (f"a step at t = {r['parameters'].get('t_d', float('nan')):.2f} s that does not persist: "
                      f"held-out gain {r['heldout_gain']:.2f}")
+
+
+def _passes(r: dict, th: Thresholds) -> bool:
+    if r.get("score") is None or r.get("persists") is False:
         return False
     return (r["delta_bic"] <= -th.min_delta_bic and r["force_share"] >= th.min_force_share
             and r["cv_gain"] >= th.min_cv_gain)
