@@ -323,6 +323,29 @@ def test_a_change_in_time_is_located_before_and_after_the_split(t_d):
     assert ch0 is None or ch0.delta_bic > -10, ch0
 
 
+def test_a_step_found_over_the_whole_record_must_persist():
+    """The held-out failure search over the whole record: on a trilinear spring it finds a
+    stiffness "loss" in the strong motion (dBIC below -10), which fits the rows after the
+    fitting part far worse than no step; that step does not persist and nothing is named, the
+    split unchanged. A real loss at 9 s is located, and its step fits the held-out rows better."""
+    from pidyn.discrepancy.screening import Thresholds
+    from pidyn.tasks.diagnose import _locate_change
+
+    def locate(case):
+        r = case.record
+        s, weak, values, *_ = _change_rows(case, float(r.t[-1]))
+        fit, held = (0.0, case.fit_end), (case.fit_end, float(r.t[-1]))
+        return _locate_change(LinearSDOF(), values, s, r, r.x[:, 0], weak, fit, held, True,
+                              {"stiffness_loss": "k", "damping_change": "c"}, Thresholds(), True), fit, held
+
+    for seed in (1, 8):  # the whole record's best step: a loss with dBIC below -10
+        (change, fit, held), fit0, held0 = locate(hidden_case("trilinear_spring", seed, noise=0.02))
+        assert change is None and (fit, held) == (fit0, held0), (seed, change)
+    (change, fit, held), fit0, _ = locate(hidden_case("stiffness_loss", 1, noise=0.02, params={"t_d": 9.0}))
+    assert change is not None and change.effect == "stiffness_loss" and abs(change.t_change - 9.0) < 0.3
+    assert change.heldout_gain is not None and change.heldout_gain > 0.5 and fit[1] >= fit0[1]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("case", ["softening_cubic", "change_after_split", "change_before_split"])
 def test_diagnosis_of_signed_effects_and_changes_in_time(case, tmp_path):

@@ -72,11 +72,13 @@ class Change:
     delta_bic: float
     explained: float  # share of the residual the step removes
     profile: dict[str, list[float]] = field(default_factory=dict)
+    #: share of the held-out rows' residual the step removes, fitted without them (None: no rows)
+    heldout_gain: float | None = None
 
     def to_dict(self) -> dict:
         return {"effect": self.effect, "parameter": self.parameter, "t_change": self.t_change,
                 "t_change_ci95": list(self.ci95), "fraction": self.fraction, "delta_bic": self.delta_bic,
-                "explained": self.explained}
+                "explained": self.explained, "heldout_gain": self.heldout_gain}
 
     def effect_parameters(self) -> dict[str, float]:
         """The library effect's parameters (what the extension starts from)."""
@@ -93,7 +95,8 @@ class Change:
 
 def locate_change(names: list[str], A0: np.ndarray, y: np.ndarray, t_first: np.ndarray, t_last: np.ndarray,
                   rows: np.ndarray, x: np.ndarray, v: np.ndarray, t: np.ndarray, weak, n_eff: float,
-                  params: dict[str, str], nominal: dict[str, float], n_grid: int = 1500) -> Change | None:
+                  params: dict[str, str], nominal: dict[str, float], n_grid: int = 1500,
+                  heldout: np.ndarray | None = None) -> Change | None:
     """The best single step in a nominal parameter over the rows ``rows``.
 
     ``params`` maps each candidate effect to the nominal parameter it steps (``stiffness_loss``:
@@ -101,9 +104,13 @@ def locate_change(names: list[str], A0: np.ndarray, y: np.ndarray, t_first: np.n
     For every t_c on a grid over the rows' span the nominal parameters and the step are fitted
     together; the residual's profile over t_c gives the estimate and its 95 % interval
     (n_eff log RSS(t_c) / RSS_min <= chi2_1(0.95)). None when nothing improves on no step.
+    ``heldout`` (rows no fit uses): the step's ``heldout_gain`` there, whether it persists.
     """
     A = A0[rows]
-    rss0 = float(np.sum((y[rows] - A @ lstsq(A, y[rows])) ** 2))
+    theta0 = lstsq(A, y[rows])
+    rss0 = float(np.sum((y[rows] - A @ theta0) ** 2))
+    has_ho = heldout is not None and bool(np.any(heldout))
+    rss0_ho = float(np.sum((y[heldout] - A0[heldout] @ theta0) ** 2)) if has_ho else None
     lo, hi = float(t_first[rows].min()), float(t_last[rows].max())
     # the change time on the samples themselves (at most n_grid of them): no finer than the data
     inner = np.flatnonzero((t > lo) & (t < hi))
@@ -115,12 +122,15 @@ def locate_change(names: list[str], A0: np.ndarray, y: np.ndarray, t_first: np.n
             continue
         rss = np.empty(len(grid))
         coefs = np.empty(len(grid))
+        rss_ho = np.full(len(grid), np.nan)
         for i, tc in enumerate(grid):
             B = weak.project(force * (t >= tc))[:, 0]
             M = np.column_stack([A, B[rows]])
             theta = lstsq(M, y[rows])
             rss[i] = float(np.sum((y[rows] - M @ theta) ** 2))
             coefs[i] = theta[-1]
+            if has_ho:
+                rss_ho[i] = float(np.sum((y[heldout] - np.column_stack([A0[heldout], B[heldout]]) @ theta) ** 2))
         j = int(np.argmin(rss))
         prof = n_eff * np.log(np.maximum(rss, 1e-300) / max(rss[j], 1e-300))
         inside = np.flatnonzero(prof <= CHI2_95)
@@ -129,7 +139,8 @@ def locate_change(names: list[str], A0: np.ndarray, y: np.ndarray, t_first: np.n
         delta_bic = n_eff * np.log(max(rss[j], 1e-300) / max(rss0, 1e-300)) + 2 * np.log(n_eff)
         base = nominal.get(pname, 1.0)
         cand = Change(effect, pname, float(grid[j]), ci, float(coefs[j] / base), float(delta_bic),
-                      float(1 - rss[j] / max(rss0, 1e-300)), {"t": grid.tolist(), "profile": prof.tolist()})
+                      float(1 - rss[j] / max(rss0, 1e-300)), {"t": grid.tolist(), "profile": prof.tolist()},
+                      None if rss0_ho is None else float(1 - rss_ho[j] / max(rss0_ho, 1e-300)))
         if best is None or cand.delta_bic < best.delta_bic:
             best = cand
     return best

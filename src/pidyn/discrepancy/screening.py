@@ -299,17 +299,17 @@ def _score_pairs(effects: dict[str, Effect], projected: dict[str, list[tuple[Can
 
     def rss(a: str, b: str, i: int, j: int) -> float:
         (ca, Ba), (cb, Bb) = cols[a][i], cols[b][j]
-        A = np.column_stack([base.A0, Ba, Bb])
-        theta = lstsq(A[base.fit], base.y[base.fit])
-        coef = theta[base.A0.shape[1]:]
-        pos = list(ca.positive or (False,) * Ba.shape[1]) + list(cb.positive or (False,) * Bb.shape[1])
-        if any(p and c <= 0 for p, c in zip(pos, coef)):
+        names = tuple(f"{a}.{n}" for n in ca.coef_names) + tuple(f"{b}.{n}" for n in cb.coef_names)
+        both = Candidate(f"{a}+{b}", np.empty((0, 0)), names,
+                         positive=(ca.positive or (False,) * Ba.shape[1]) + (cb.positive or (False,) * Bb.shape[1]))
+        row = _fit_candidate(both, base.A0, np.column_stack([Ba, Bb]), base.y, base.fit, base.ho)
+        if row is None:  # a coefficient of the wrong sign
             return np.inf
+        coef, theta = list(row["coef"].values()), row["theta"]
         if not (_admissible(effects[a], ca, coef[:Ba.shape[1]], theta, base, values)
                 and _admissible(effects[b], cb, coef[Ba.shape[1]:], theta, base, values)):
             return np.inf
-        r = base.y - A @ theta
-        return float(np.sum(r[base.fit] ** 2))
+        return row["rss_fit"]
 
     out = []
     for a, b in itertools.combinations(sorted(cols), 2):

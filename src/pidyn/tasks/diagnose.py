@@ -508,7 +508,12 @@ def _locate_change(nominal: SDOFSystem, values: dict[str, float], s: Signals, re
     record; a change found late or after the split moves the split to halfway between the
     change and the record's end, the change is then estimated again on the new fitting part
     only, and the gain is measured on the rest, which no fit has used. Otherwise the search
-    runs on the fitting part (the screening already named the time-varying effect)."""
+    runs on the fitting part (the screening already named the time-varying effect).
+
+    A step that fits the rows after its fitting part worse than no step (held-out gain below
+    ``th.min_step_heldout_gain``) does not persist: a stiffness lower only in the strong motion
+    depends on the amplitude (softening), it is no damage. Nothing is named then, the split stays
+    where it was, and the screening's rule for a step in time holds here too."""
     names, A0, y = weak_system(nominal, values, s, record.f, x_raw, weak, mass_known)
     w = 2 * weak.half + 1
     t_first, t_last = weak.t[weak.starts], weak.t[weak.starts + w - 1]
@@ -516,8 +521,10 @@ def _locate_change(nominal: SDOFSystem, values: dict[str, float], s: Signals, re
     def search(end: float):
         rows = t_last <= end + 1e-9
         n_eff = max(rows.sum() / weak.rows_per_independent, 2.0)
-        return locate_change(names, A0, y, t_first, t_last, rows, s.x, s.v, s.t, weak, n_eff, candidates, values)
+        return locate_change(names, A0, y, t_first, t_last, rows, s.x, s.v, s.t, weak, n_eff, candidates, values,
+                             heldout=t_first >= end - 1e-9)
 
+    fit0, held0 = fit, held
     change = search(float(record.t[-1]) if whole_record else fit[1])
     if change is not None and _stiffening(change):
         return None, fit, held
@@ -528,13 +535,19 @@ def _locate_change(nominal: SDOFSystem, values: dict[str, float], s: Signals, re
     if whole_record:
         cut = max(fit[1], change.t_change + 0.5 * (float(record.t[-1]) - change.t_change))
         if cut > fit[1]:
-            log.info("the change lies at %.4g s, beyond the fitting part: fitting now %.4g-%.4g s, held out %.4g-%.4g s",
+            log.info("the change lies at %.4g s, late in or beyond the fitting part: fitting now %.4g-%.4g s, "
+                     "held out %.4g-%.4g s",
                      change.t_change, fit[0], cut, cut, held[1])
             fit, held = (fit[0], cut), (cut, held[1])
         again = search(fit[1])
         if again is not None and _stiffening(again):
-            return None, fit, held
+            return None, fit0, held0
         change = again if again is not None else change
+    if change.heldout_gain is not None and change.heldout_gain < th.min_step_heldout_gain:
+        log.info("%s, but the step does not persist: fitted up to %.4g s it fits the rest worse than no step "
+                 "(held-out gain %.2f); a change in time lasts, a stiffness or damping that differs only in the "
+                 "strong motion depends on the amplitude; none is named", change.sentence(), fit[1], change.heldout_gain)
+        return None, fit0, held0
     return change, fit, held
 
 
