@@ -65,6 +65,8 @@ efficiency: $(STAMP)
 	$(PY) experiments/efficiency.py --cell duffing --noise 0.025 $(ARGS)
 	$(PY) experiments/efficiency.py --cell bouc_wen_x1 --noise 0.025 $(ARGS)
 	$(PY) experiments/efficiency.py --cell bouc_wen_x3 --noise 0.025 $(ARGS)
+	$(PY) experiments/efficiency.py --cell bouc_wen_x1_t1.5 --noise 0.025 $(ARGS)
+	$(PY) experiments/efficiency.py --cell bouc_wen_x3_t1.5 --noise 0.025 $(ARGS)
 
 benchmarks: $(STAMP)
 	$(PY) diagnose.py data=bouc_wen_benchmark system=linear hydra.run.dir=outputs/bouc_wen_benchmark

@@ -36,6 +36,8 @@ CELLS = {
     "duffing": {"system": "duffing", "record": "kobe", "eq_scale": 1.0},
     "bouc_wen_x1": {"system": "bouc_wen", "record": "el_centro", "eq_scale": 1.0},
     "bouc_wen_x3": {"system": "bouc_wen", "record": "el_centro", "eq_scale": 3.0},
+    "bouc_wen_x1_t1.5": {"system": "bouc_wen", "record": "el_centro", "eq_scale": 1.0, "stretch": 1.5},
+    "bouc_wen_x3_t1.5": {"system": "bouc_wen", "record": "el_centro", "eq_scale": 3.0, "stretch": 1.5},
 }
 
 
@@ -53,8 +55,8 @@ def draw(cell: dict, noise: float, seed: int, duration: float, dt: float) -> dic
     from pidyn.refine import RefineSettings, refine
 
     system = _system(cell["system"])
-    record = synthetic(system, cell["record"], eq_scale=cell["eq_scale"], duration=duration, dt=dt, noise=noise,
-                       data_seed=seed)
+    record = synthetic(system, cell["record"], eq_scale=cell["eq_scale"], stretch=cell.get("stretch", 1.0),
+                       duration=duration, dt=dt, noise=noise, data_seed=seed)
     guess = {s.name: float(s.init) for s in system.param_specs() if s.trainable}
     t0 = time.perf_counter()
     res = refine(system, record, {"guess": guess}, RefineSettings(states="measured"))
@@ -117,10 +119,11 @@ def main() -> None:
     df.to_csv(a.out / f"efficiency_{tag}.csv", index=False)
     at_rest = sum(r["mode"] == "rest" for r in rows)
     secs = np.median([r["seconds"] for r in rows])
+    stretched = f" stretched {cell['stretch']:g}" if cell.get("stretch", 1.0) != 1.0 else ""
     lines = [f"# Efficiency of the final estimator: {a.cell}, noise {100 * a.noise:g} %, {a.draws} noise draws "
              f"({platform.machine()}, one thread)", "",
              f"Command: `python experiments/efficiency.py --cell {a.cell} --noise {a.noise:g} --draws {a.draws}`", "",
-             f"Record: {cell['record']} x{cell['eq_scale']:g}, first {a.duration:g} s at dt {a.dt:g} s, x and x' "
+             f"Record: {cell['record']} x{cell['eq_scale']:g}{stretched}, first {a.duration:g} s at dt {a.dt:g} s, x and x' "
              f"measured. Refinement from the config's initial guesses, segment states from the measurements; "
              f"initial state held at rest in {at_rest} of {a.draws} draws (likelihood-ratio test); "
              f"median {secs:.0f} s a draw.", "",
