@@ -166,7 +166,7 @@ def committed_rows(path: Path, kinds: list[Kind]) -> dict[int, dict]:
 
 
 def write_results(rows: list[dict], planned: int, schedule: str, results: Path, stem: str = "discrepancy_bench",
-                  command: str | None = None) -> list[str]:
+                  command: str | None = None, split: tuple[float, float] = (16.0, 25.0)) -> list[str]:
     """The table over the cases finished so far (rewritten after every case, so an interrupted
     study loses nothing and says how far it got)."""
     df = pd.DataFrame(rows).sort_values("case")
@@ -194,8 +194,8 @@ def write_results(rows: list[dict], planned: int, schedule: str, results: Path, 
     lines = ["# Diagnosis benchmark: hidden effects", "",
              f"{summary['cases']} seeded cases{done} (linear SDOF m=1, c=0.5, k=15; nothing, one library effect "
              "(either sign where the sign is a finding), a change after the split, a pair, or an effect outside the "
-             "library hidden; shipped records scaled to PGA 3 m/s^2; noise uniform 0-5 %; fit 0-16 s, held out "
-             f"16-25 s). PIDynNet schedule: {summary['schedule']}.", "",
+             "library hidden; shipped records scaled to PGA 3 m/s^2; noise uniform 0-5 %; "
+             f"fit 0-{split[0]:g} s, held out {split[0]:g}-{split[1]:g} s). PIDynNet schedule: {summary['schedule']}.", "",
              f"Command: `{command or f'python experiments/discrepancy_bench.py --cases {planned} --jobs 2'}`"
              f"{'' if command else ' (`make discrepancy-bench`)'}; "
              f"code {summary['code_commits'] or 'unknown'}.", "",
@@ -236,6 +236,8 @@ def main() -> None:
         ap.error(f"unknown kind(s) {sorted(unknown)}; choose from {', '.join(BY_LABEL)}")
     kinds = [BY_LABEL[k] for k in args.kinds] if args.kinds else KINDS
     schedule = "default" if args.full else "short: " + " ".join(FAST)
+    given = dict(e.split("=", 1) for e in extra if "=" in e)  # the record's split, as the table states it
+    split = (float(given.get("data.source.fit_end", 16.0)), float(given.get("data.source.duration", 25.0)))
     extra = ([] if args.full else FAST) + extra
     args.out.mkdir(parents=True, exist_ok=True)
     name = args.name or "discrepancy_bench"
@@ -258,9 +260,9 @@ def main() -> None:
             rows.append(r)
             status = r.get("error") and "FAILED" or f"found {r['found']} ({r['seconds']:.0f} s)"
             print(f"[{n}/{len(todo)}] case {r['case']} hidden {r['hidden']}: {status}", flush=True)
-            lines = write_results(rows, args.cases, schedule, where, name, command)
+            lines = write_results(rows, args.cases, schedule, where, name, command, split)
     if rows and not lines:
-        lines = write_results(rows, args.cases, schedule, where, name, command)
+        lines = write_results(rows, args.cases, schedule, where, name, command, split)
     print(f"table: {where / (name + '.md')}")
     print("\n".join(lines))
 
