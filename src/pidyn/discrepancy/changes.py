@@ -122,16 +122,19 @@ def locate_change(names: list[str], A0: np.ndarray, y: np.ndarray, t_first: np.n
             continue
         rss = np.empty(len(grid))
         coefs = np.empty(len(grid))
-        rss_ho = np.full(len(grid), np.nan)
         for i, tc in enumerate(grid):
             B = weak.project(force * (t >= tc))[:, 0]
             M = np.column_stack([A, B[rows]])
             theta = lstsq(M, y[rows])
             rss[i] = float(np.sum((y[rows] - M @ theta) ** 2))
             coefs[i] = theta[-1]
-            if has_ho:
-                rss_ho[i] = float(np.sum((y[heldout] - np.column_stack([A0[heldout], B[heldout]]) @ theta) ** 2))
         j = int(np.argmin(rss))
+        gain_ho = None
+        if has_ho:  # the best step, fitted on ``rows``, predicting the rows no fit used
+            B = weak.project(force * (t >= grid[j]))[:, 0]
+            theta = lstsq(np.column_stack([A, B[rows]]), y[rows])
+            rss_ho = float(np.sum((y[heldout] - np.column_stack([A0[heldout], B[heldout]]) @ theta) ** 2))
+            gain_ho = float(1 - rss_ho / max(rss0_ho, 1e-300))
         prof = n_eff * np.log(np.maximum(rss, 1e-300) / max(rss[j], 1e-300))
         inside = np.flatnonzero(prof <= CHI2_95)
         # the interval reaches to the neighbouring grid points: it is never narrower than the grid
@@ -140,7 +143,7 @@ def locate_change(names: list[str], A0: np.ndarray, y: np.ndarray, t_first: np.n
         base = nominal.get(pname, 1.0)
         cand = Change(effect, pname, float(grid[j]), ci, float(coefs[j] / base), float(delta_bic),
                       float(1 - rss[j] / max(rss0, 1e-300)), {"t": grid.tolist(), "profile": prof.tolist()},
-                      None if rss0_ho is None else float(1 - rss_ho[j] / max(rss0_ho, 1e-300)))
+                      gain_ho)
         if best is None or cand.delta_bic < best.delta_bic:
             best = cand
     return best
