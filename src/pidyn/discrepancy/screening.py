@@ -55,6 +55,10 @@ class Thresholds:
     #: a step in time found in the fitting part must persist: its held-out gain may not fall below this
     min_step_heldout_gain: float = -0.1
 
+    def step_persists(self, heldout_gain: float | None) -> bool:
+        """A step in time lasts into the rows no fit used (no rows: nothing to refute it)."""
+        return heldout_gain is None or heldout_gain >= self.min_step_heldout_gain
+
 
 #: effects never fitted together (one step in time is found at a time)
 EXCLUSIVE = ({"stiffness_loss", "damping_change"},)
@@ -426,7 +430,7 @@ def _structure(s: Signals, weak: WeakForm, A0, y, fit, ho, folds, rss0, rss0_cv,
 def _mark_fleeting_step(r: dict, th: Thresholds) -> None:
     """Mark a step in time that does not last (``persists: False``, with a note): a stiffness
     lower only in the strong motion is one that depends on the amplitude (softening), not damage."""
-    if r.get("step_in_time") and r.get("heldout_gain") is not None and r["heldout_gain"] < th.min_step_heldout_gain:
+    if r.get("step_in_time") and not th.step_persists(r.get("heldout_gain")):
         r["persists"] = False
         r["note"] = (f"a step at t = {r['parameters'].get('t_d', float('nan')):.2f} s that does not persist: "
                      f"held-out gain {r['heldout_gain']:.2f}")

@@ -543,7 +543,7 @@ def _locate_change(nominal: SDOFSystem, values: dict[str, float], s: Signals, re
         if again is not None and _stiffening(again):
             return None, fit0, held0
         change = again if again is not None else change
-    if change.heldout_gain is not None and change.heldout_gain < th.min_step_heldout_gain:
+    if not th.step_persists(change.heldout_gain):
         log.info("%s, but the step does not persist: fitted up to %.4g s it fits the rest worse than no step "
                  "(held-out gain %.2f); a change in time lasts, a stiffness or damping that differs only in the "
                  "strong motion depends on the amplitude; none is named", change.sentence(), fit[1], change.heldout_gain)
