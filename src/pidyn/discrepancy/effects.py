@@ -289,9 +289,21 @@ class Damage(Effect):
         drop = min(max(p["drop"], 0.01), 0.9)
         return StiffnessLoss(drop, p["t_d"], t_min=s["t_min"], t_max=s["t_max"], stiffness=s["stiffness"])
 
-    def sample(self, rng, s, sign=None):
+    def _time_of_share(self, s, share: float) -> float:
+        """The time by which the stepping force's signal has done ``share`` of its work
+        (cumulative energy over the search span): a change drawn there has motion on both
+        sides. Damage happens in the shaking; a change before the record's motion starts (the
+        structure at rest) leaves no trace in the data, and no method could name it."""
         lo, hi = self._span(s)
-        return {"drop": float(rng.uniform(0.15, 0.4)), "t_d": float(rng.uniform(lo + 0.2 * (hi - lo), lo + 0.7 * (hi - lo)))}
+        inside = (s.t >= lo) & (s.t <= hi)
+        t, e = s.t[inside], getattr(s, self.signal)[inside] ** 2
+        cum = np.cumsum(e)
+        if len(t) < 2 or cum[-1] <= 0:
+            return float(lo + share * (hi - lo))
+        return float(np.interp(share * cum[-1], cum, t))
+
+    def sample(self, rng, s, sign=None):
+        return {"drop": float(rng.uniform(0.15, 0.4)), "t_d": self._time_of_share(s, float(rng.uniform(0.2, 0.7)))}
 
 
 class DampChange(Damage):
@@ -315,9 +327,8 @@ class DampChange(Damage):
         return DampingChange(change, p["t_d"], t_min=s["t_min"], t_max=s["t_max"], damping=s.get("damping", "c"))
 
     def sample(self, rng, s, sign=None):
-        lo, hi = self._span(s)
         # damage raises the dissipation: the damping doubles to triples
-        return {"change": float(rng.uniform(1.0, 2.0)), "t_d": float(rng.uniform(lo + 0.2 * (hi - lo), lo + 0.6 * (hi - lo)))}
+        return {"change": float(rng.uniform(1.0, 2.0)), "t_d": self._time_of_share(s, float(rng.uniform(0.2, 0.6)))}
 
 
 class Gap(Effect):

@@ -205,11 +205,14 @@ def _steps_lines(d: dict) -> list[str]:
     lines: list[str] = []
     if len(d.get("steps") or []) > 1 or any(st.get("next_ranking") for st in d.get("steps") or []):
         lines += ["## Steps: extend, screen the extended model again", "",
-                  "| step | effect added | score (-dBIC) | CV gain | model after the step | best next candidate |",
+                  "| step | effect added | score (-dBIC) | CV gain | model after the step | next candidate |",
                   "|---|---|---|---|---|---|"]
-        for st in d["steps"]:
+        steps = d["steps"]
+        for i, st in enumerate(steps):
             ev = st["evidence"]
-            nxt = (st.get("next_ranking") or [{}])[0]
+            ranking = st.get("next_ranking") or [{}]
+            named = steps[i + 1]["effect"] if i + 1 < len(steps) else None  # a tie-break may name the second
+            nxt = next((r for r in ranking if r.get("effect") == named), ranking[0])
             nxt_s = "-" if not nxt else (f"{nxt.get('effect')} {_num(nxt.get('score'))} "
                                          f"({'passes' if nxt.get('passes') else 'below the thresholds: stop'})")
             lines.append(f"| {st['step']} | {st['effect']} | {_num(ev.get('score'))} | {_num(ev.get('cv_gain'))} | "

@@ -54,6 +54,13 @@ class Thresholds:
     pair_margin: float = 2.0  # BIC by which a pair must beat the pairs holding the best single effect ("positive")
     #: a step in time found in the fitting part must persist: its held-out gain may not fall below this
     min_step_heldout_gain: float = -0.1
+    #: an effect that makes the held-out prediction worse than this, where a generic f(x, x')
+    #: improves it by min_structure_gain, is refused (the held-out part has structure it misses)
+    min_heldout_gain: float = 0.0
+    #: between passing effects this close in BIC (below "strong", 6, on Kass & Raftery's
+    #: scale) the one with the clearly better blocked cross-validation gain is named
+    tie_delta_bic: float = 6.0
+    tie_cv_margin: float = 0.1
 
     def step_persists(self, heldout_gain: float | None) -> bool:
         """A step in time lasts into the rows no fit used (no rows: nothing to refute it)."""
@@ -190,6 +197,7 @@ def screen(
     ranking.sort(key=lambda r: -np.inf if r["score"] is None else r["score"], reverse=True)
     for r in ranking:
         _mark_fleeting_step(r, th)
+        _mark_heldout_miss(r, structure, th)
         r["passes"] = bool(r["score"] is not None and _passes(r, th))
     pairs = _score_pairs(effects, projected, ranking, base, values)
     structure["pair"] = _pair_lead(ranking, pairs, structure, th)
@@ -263,7 +271,7 @@ def _score_effect(eff: Effect, projected: list[tuple[Candidate, np.ndarray]], ba
     if best is None:
         return {"effect": eff.name, "score": None, "note": "no physical fit (wrong sign)"}
     rss0, rss0_cv, rss0_ho = base.rss0, base.rss0_cv, base.rss0_ho
-    rss_cv = _cv_rss(np.column_stack([base.A0, best.pop("B")]), base.y, base.folds)
+    rss_cv = _cv_rss(np.column_stack([base.A0, best.pop("B")]), base.y, base.folds, n_fixed=base.A0.shape[1])
     k = len(best["coef"]) + eff.n_grid
     rss = max(best["rss_fit"], 1e-300)
     delta_bic = base.n_eff * np.log(rss / max(rss0, 1e-300)) + k * np.log(base.n_eff)
@@ -335,7 +343,8 @@ def _score_pairs(effects: dict[str, Effect], projected: dict[str, list[tuple[Can
         A = np.column_stack([base.A0, cols[a][i][1], cols[b][j][1]])
         out.append({"effects": [a, b], "score": float(-delta_bic), "delta_bic": float(delta_bic),
                     "explained": float(1 - best / max(base.rss0, 1e-300)),
-                    "cv_gain": float(1 - _cv_rss(A, base.y, base.folds) / max(base.rss0_cv, 1e-300))})
+                    "cv_gain": float(1 - _cv_rss(A, base.y, base.folds, n_fixed=base.A0.shape[1])
+                                                  / max(base.rss0_cv, 1e-300))})
     out.sort(key=lambda p: p["score"], reverse=True)
     return out
 
@@ -392,6 +401,13 @@ def _verdict(ranking: list[dict], structure: dict, th: Thresholds) -> tuple[str,
                              f"cross-validation against {structure['cv_gain']:.2f} for a generic f(x, x')")
         found = False
     if found:
+        rival = _tie_break(ranking, th)
+        if rival is not None:
+            structure["tie_break"] = (f"{rival['effect']} (score {rival['score']:.1f}, cross-validation gain "
+                                      f"{rival['cv_gain']:.2f}) named before {top['effect']} ({top['score']:.1f}, "
+                                      f"{top['cv_gain']:.2f}): BIC does not decide between them, "
+                                      "cross-validation does")
+            return "discrepancy", rival["effect"]
         return "discrepancy", top["effect"]
     return ("unexplained" if structured else "none"), None
 
@@ -436,8 +452,34 @@ def _mark_fleeting_step(r: dict, th: Thresholds) -> None:
                      f"held-out gain {r['heldout_gain']:.2f}")
 
 
+def _mark_heldout_miss(r: dict, structure: dict, th: Thresholds) -> None:
+    """Mark an effect (not a step in time: ``_mark_fleeting_step`` rules those) that predicts the
+    held-out part worse than the nominal model does, where a generic f(x, x') predicts it
+    clearly better: the effect fits the fitting part's force by a shape the structure does not
+    have (an even spring standing in for a trilinear one under a one-sided pulse)."""
+    ho, generic = r.get("heldout_gain"), structure.get("heldout_gain")
+    if r.get("step_in_time") or r.get("score") is None or ho is None or generic is None:
+        return
+    if ho < th.min_heldout_gain and generic >= th.min_structure_gain:
+        r["heldout_miss"] = True
+        r["note"] = (f"held-out gain {ho:.2f} against {generic:.2f} for a generic f(x, x'): "
+                     "it does not predict the rows no fit used")
+
+
+def _tie_break(ranking: list[dict], th: Thresholds) -> dict | None:
+    """The passing effect to name instead of the top one, when BIC does not decide between them
+    (within ``tie_delta_bic``) and blocked cross-validation clearly does; None: the top one."""
+    passing = [r for r in ranking if r.get("passes")]
+    if len(passing) < 2 or passing[0] is not ranking[0]:
+        return None
+    top = passing[0]
+    rivals = [r for r in passing[1:] if top["score"] - r["score"] < th.tie_delta_bic
+              and r["cv_gain"] - top["cv_gain"] >= th.tie_cv_margin]
+    return max(rivals, key=lambda r: r["cv_gain"]) if rivals else None
+
+
 def _passes(r: dict, th: Thresholds) -> bool:
-    if r.get("score") is None or r.get("persists") is False:
+    if r.get("score") is None or r.get("persists") is False or r.get("heldout_miss"):
         return False
     return (r["delta_bic"] <= -th.min_delta_bic and r["force_share"] >= th.min_force_share
             and r["cv_gain"] >= th.min_cv_gain)
@@ -454,15 +496,34 @@ def _folds(fit: np.ndarray, k: int) -> list[np.ndarray]:
     return out
 
 
-def _cv_rss(A: np.ndarray, y: np.ndarray, folds: list[np.ndarray], ridge: np.ndarray | None = None) -> float:
-    """Residual sum of squares of each block predicted from the others."""
+#: in cross-validation, a column with less than this share of its energy (over the fitting rows)
+#: in a fold's training rows is one those rows cannot estimate: it is left out of that fold
+CV_MIN_TRAIN_SHARE = 1e-3
+
+
+def _cv_rss(A: np.ndarray, y: np.ndarray, folds: list[np.ndarray], ridge: np.ndarray | None = None,
+            n_fixed: int | None = None) -> float:
+    """Residual sum of squares of each block predicted from the others.
+
+    Without a ridge, a column beyond the first ``n_fixed`` (the nominal ones; default all
+    but none) that is nearly silent in a fold's training rows (a stop reached almost only in
+    the test block, a step in time just before its end) is left out of that fold: its
+    coefficient, estimated from a handful of rows, would blow the prediction up by orders of
+    magnitude; left out, the fold predicts what the nominal model does, i.e. no gain.
+    ``n_fixed``: the leading (nominal) columns, always kept; None keeps every column."""
     total = 0.0
     everything = np.logical_or.reduce(folds)
-    scale = None if ridge is None else np.sqrt((A[everything] ** 2).sum(0))
+    energy = (A[everything] ** 2).sum(0)
+    scale = None if ridge is None else np.sqrt(energy)
     for test in folds:
         train = everything & ~test
-        theta = lstsq(A[train], y[train], ridge, scale)
-        total += float(np.sum((y[test] - A[test] @ theta) ** 2))
+        cols = np.arange(A.shape[1])
+        if ridge is None and n_fixed is not None:
+            share = (A[train] ** 2).sum(0) / np.where(energy > 0, energy, 1.0)
+            cols = cols[(cols < n_fixed) | (share >= CV_MIN_TRAIN_SHARE)]
+        theta = lstsq(A[train][:, cols], y[train], None if ridge is None else ridge[cols],
+                      None if scale is None else scale[cols])
+        total += float(np.sum((y[test] - A[test][:, cols] @ theta) ** 2))
     return total
 
 

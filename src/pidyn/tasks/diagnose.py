@@ -425,8 +425,9 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
         if not remaining:
             break
         sc = screen(system, ext_values, s, record.f, x_raw, weak, fit[1], mass_known, remaining, thresholds)
-        out["steps"][-1]["next_ranking"] = [{k_: r.get(k_) for k_ in ("effect", "score", "cv_gain", "passes")}
-                                            for r in sc.ranking[:4]]
+        out["steps"][-1]["next_ranking"] = [{k_: r.get(k_) for k_ in _STEP_EVIDENCE if k_ in r} for r in sc.ranking]
+        out["steps"][-1]["next_structure"] = dict(sc.structure)
+        out["steps"][-1]["next_verdict"] = sc.verdict
         log.info("screening the extended model: %s", ", ".join(f"{r['effect']} {r['score']:.1f}"
                                                                for r in sc.ranking[:4] if r.get("score") is not None))
         cause = sc.cause
@@ -440,6 +441,9 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
 
 
 LEARNED = "learned_force"
+#: what each step keeps of the next screening's rows: the evidence behind the next name
+_STEP_EVIDENCE = ("effect", "score", "delta_bic", "explained", "cv_gain", "heldout_gain", "force_share", "passes",
+                  "persists", "heldout_miss", "note", "parameters")
 
 
 def _extension_node(node: dict, values: dict[str, float], cause: str, row: dict, s: Signals, k: int,

@@ -1,0 +1,102 @@
+"""The screening's decision rules on hand-made evidence: each rule alone, where it acts and
+where it must not (the benchmark measures them together on simulated records)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pidyn.discrepancy.effects import EFFECTS, Signals
+from pidyn.discrepancy.screening import (Thresholds, _cv_rss, _folds, _mark_heldout_miss, _passes, _tie_break,
+                                         _verdict)
+
+
+def _row(effect: str, score: float, cv: float, ho: float | None = 0.5, step: bool = False) -> dict:
+    return {"effect": effect, "score": score, "delta_bic": -score, "cv_gain": cv, "heldout_gain": ho,
+            "force_share": 0.01, "step_in_time": step, "parameters": {"t_d": 5.0}}
+
+
+def _rank(rows: list[dict], structure: dict, th: Thresholds) -> list[dict]:
+    for r in rows:
+        _mark_heldout_miss(r, structure, th)
+        r["passes"] = _passes(r, th)
+    return rows
+
+
+def test_a_column_silent_in_the_training_blocks_does_not_blow_up_cross_validation():
+    """A stop reached almost only in one block: its coefficient, estimated from the other blocks'
+    handful of touching rows, used to predict that block orders of magnitude wrong."""
+    rng = np.random.default_rng(3)
+    n = 500
+    A0 = rng.normal(size=(n, 3))
+    y = A0 @ np.array([1.0, -2.0, 0.5]) + 0.1 * rng.normal(size=n)
+    fit = np.ones(n, dtype=bool)
+    folds = _folds(fit, 5)
+    spike = np.zeros(n)
+    spike[420:440] = 5.0  # the stop, reached in the last block only
+    spike[10] = 1e-3  # ... and grazed once elsewhere, where noise is all that scales it
+    A = np.column_stack([A0, spike])
+    y = y + 0.8 * spike
+    nominal = _cv_rss(A0, y, folds)
+    unguarded = _cv_rss(A, y, folds)
+    guarded = _cv_rss(A, y, folds, n_fixed=3)
+    assert unguarded > 100 * nominal  # the defect the guard is for
+    assert guarded <= nominal * 1.001  # the fold without the stop predicts what the nominal model does
+    # a column with its energy spread over the blocks is kept: the guard changes nothing there
+    spread = rng.normal(size=n)
+    B = np.column_stack([A0, spread])
+    assert _cv_rss(B, y, folds, n_fixed=3) == _cv_rss(B, y, folds)
+
+
+def test_an_effect_that_predicts_the_held_out_part_worse_is_refused_where_a_generic_force_does_better():
+    th = Thresholds()
+    structured = {"cv_gain": 0.6, "heldout_gain": 0.98}
+    rows = _rank([_row("quadratic_stiffness", 13.6, 0.35, ho=-0.09)], structured, th)
+    assert rows[0]["heldout_miss"] and not rows[0]["passes"]
+    assert _verdict(rows, dict(structured), th) == ("unexplained", None)
+    # the held-out part without structure (a generic force gains nothing there): no evidence against it
+    quiet = {"cv_gain": 0.6, "heldout_gain": 0.1}
+    rows = _rank([_row("quadratic_stiffness", 13.6, 0.35, ho=-0.09)], quiet, th)
+    assert rows[0]["passes"] and "heldout_miss" not in rows[0]
+    # a step in time has its own rule (it must persist), not this one
+    rows = _rank([_row("stiffness_loss", 30.0, 0.5, ho=-0.05, step=True)], structured, th)
+    assert "heldout_miss" not in rows[0]
+
+
+def test_cross_validation_decides_between_effects_that_bic_does_not():
+    th = Thresholds()
+    structure = {"cv_gain": 0.7, "heldout_gain": 0.6}
+    rows = _rank([_row("cubic_stiffness", 38.8, 0.36), _row("gap_contact", 36.0, 0.63),
+                  _row("quadratic_stiffness", 24.8, 0.06)], structure, th)
+    st = dict(structure)
+    assert _verdict(rows, st, th) == ("discrepancy", "gap_contact")
+    assert "cross-validation" in st["tie_break"]
+    # BIC strongly prefers the top one (a gap of 6 or more): it stays
+    rows = _rank([_row("cubic_stiffness", 44.0, 0.36), _row("gap_contact", 36.0, 0.63)], structure, th)
+    assert _tie_break(rows, th) is None
+    # a cross-validation edge below the margin is no reason to pass over the top one
+    rows = _rank([_row("cubic_stiffness", 38.8, 0.55), _row("gap_contact", 36.0, 0.63)], structure, th)
+    assert _verdict(rows, dict(structure), th) == ("discrepancy", "cubic_stiffness")
+    # a rival that fails the thresholds is never named
+    rows = _rank([_row("cubic_stiffness", 38.8, 0.36), _row("gap_contact", 8.0, 0.63)], structure, th)
+    assert _tie_break(rows, th) is None
+
+
+def test_a_hidden_change_in_time_is_drawn_where_the_structure_moves():
+    """A change while the structure is still at rest leaves no trace in the data: the benchmark
+    draws the time of a hidden change by the share of the motion's energy before it."""
+    t = np.linspace(0.0, 25.0, 2501)
+    quiet = t < 8.0  # at rest until the strong motion arrives
+    x = np.where(quiet, 1e-5, 0.05) * np.sin(2 * np.pi * t)
+    v = np.gradient(x, t)
+    s = Signals(t, x, v, 1.0, 15.0, "k", t_fit_end=16.0)
+    for name in ("stiffness_loss", "damping_change"):
+        eff = EFFECTS[name]
+        sig = getattr(s, eff.signal) ** 2
+        inside = (t >= eff._span(s)[0]) & (t <= 16.0)
+        for share in (0.2, 0.5, 0.7):
+            t_d = eff._time_of_share(s, share)
+            before = sig[inside & (t < t_d)].sum() / sig[inside].sum()
+            assert abs(before - share) < 0.01, (name, share, before)
+            assert t_d > 8.0
+        drawn = eff.sample(np.random.default_rng(0), s)
+        assert 8.0 < drawn["t_d"] < 16.0
