@@ -194,7 +194,9 @@ def write_results(rows: list[dict], planned: int, schedule: str, results: Path, 
     lines = ["# Diagnosis benchmark: hidden effects", "",
              f"{summary['cases']} seeded cases{done} (linear SDOF m=1, c=0.5, k=15; nothing, one library effect "
              "(either sign where the sign is a finding), a change after the split, a pair, or an effect outside the "
-             "library hidden; shipped records scaled to PGA 3 m/s^2; noise uniform 0-5 %; "
+             "library hidden; a change before the split drawn where the structure moves, after 20-70 % (stiffness) or "
+             "20-60 % (damping) of the stepping signal's energy in the fitting part; "
+             "shipped records scaled to PGA 3 m/s^2; noise uniform 0-5 %; "
              f"fit 0-{split[0]:g} s, held out {split[0]:g}-{split[1]:g} s). PIDynNet schedule: {summary['schedule']}.", "",
              f"Command: `{command or f'python experiments/discrepancy_bench.py --cases {planned} --jobs 2'}`"
              f"{'' if command else ' (`make discrepancy-bench`)'}; "

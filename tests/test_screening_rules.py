@@ -4,6 +4,7 @@ where it must not (the benchmark measures them together on simulated records).""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.screening import (Thresholds, _cv_rss, _folds, _mark_heldout_miss, _passes, _tie_break,
@@ -100,3 +101,26 @@ def test_a_hidden_change_in_time_is_drawn_where_the_structure_moves():
             assert t_d > 8.0
         drawn = eff.sample(np.random.default_rng(0), s)
         assert 8.0 < drawn["t_d"] < 16.0
+
+
+def test_the_held_out_check_holds_on_a_quiet_held_out_part_with_nothing_hidden():
+    """San Fernando's held-out part is ten times quieter than its fitting part, so 3 % noise
+    is a quarter of the signal there. The raw-minus-smoothed noise estimate, low by the share
+    the smoother keeps, left a quarter of that noise to read as model error: the check failed
+    (ratio 3.8) with the true model, and a record with nothing hidden got a learned force."""
+    from pidyn.discrepancy.changes import heldout_check
+    from pidyn.discrepancy.hidden import hidden_case
+    from pidyn.discrepancy.weak_form import measurement_noise, smooth_signals
+
+    period = 2 * np.pi / np.sqrt(15.0)
+    case = hidden_case(None, 1198)
+    r = case.record
+    x, t = r.x[:, 0], r.t
+    noise = x - r.clean.x[:, 0]
+    sigma = measurement_noise(t, x, period)
+    assert sigma == pytest.approx(float(np.std(noise)), rel=0.03)
+    fit, held = t <= case.fit_end, t >= case.fit_end
+    assert np.sqrt(np.mean(x[held] ** 2)) < 0.15 * np.sqrt(np.mean(x[fit] ** 2))  # the quiet held-out part
+    assert not heldout_check(x, r.clean.x[:, 0], fit, held, sigma).failed
+    xs, _ = smooth_signals(t, x, None, period)
+    assert heldout_check(x, r.clean.x[:, 0], fit, held, float(np.std(x - xs))).failed  # the old estimate

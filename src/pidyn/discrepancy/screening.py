@@ -19,7 +19,10 @@ missing effect. Evidence per effect:
 evidence, cross-validation and relevance thresholds; otherwise ``none``: nothing explains
 more than noise and the model's own error would. A fit that does not describe a physical
 structure (``Effect.admissible``: a damping change to no damping or less) is no evidence,
-and a step in time must persist into the held-out part.
+a step in time must persist into the held-out part, and any other effect must not predict
+the held-out part worse than the nominal model where a generic force predicts it better.
+Between passing effects that BIC does not separate (less than ``tie_delta_bic``) the one
+with the clearly better cross-validation gain is named.
 
 Two effects at once can hide behind a third: dry friction plus a stop look, one at a time,
 most like a hardening cubic spring, and friction alone, its force soaked up by the refitted

@@ -124,8 +124,20 @@ def velocity_noise(t: np.ndarray, x: np.ndarray, v: np.ndarray | None, period: f
     win = _sg_window(t, period)
     dt = float(t[1] - t[0])
     raw = v if v is not None else x
-    # the share of white noise the smoother removes is 1 - ||h||^2 (h: its coefficients)
-    h0 = savgol_coeffs(win, 3)
-    sigma = float(np.std(raw - savgol_filter(raw, win, 3))) / np.sqrt(max(1 - np.sum(h0**2), 1e-12))
-    h = h0 if v is not None else savgol_coeffs(win, 3, deriv=1, delta=dt)
+    sigma = measurement_noise(t, raw, period)
+    h = savgol_coeffs(win, 3) if v is not None else savgol_coeffs(win, 3, deriv=1, delta=dt)
     return sigma * float(np.sqrt(np.sum(h**2)))
+
+
+def measurement_noise(t: np.ndarray, raw: np.ndarray, period: float) -> float:
+    """Standard deviation of the white measurement noise in ``raw``.
+
+    The raw-minus-smoothed signal holds the noise less the share the smoother keeps, ||h||^2
+    of its variance (h: the filter's coefficients; a least-squares smoother is a projection);
+    uncorrected, the estimate is low by that share, and in a quiet part of a record, where the
+    noise is a large share of the signal, the shortfall reads as model error."""
+    from scipy.signal import savgol_coeffs
+
+    win = _sg_window(t, period)
+    h0 = savgol_coeffs(win, 3)
+    return float(np.std(raw - savgol_filter(raw, win, 3))) / np.sqrt(max(1 - np.sum(h0**2), 1e-12))

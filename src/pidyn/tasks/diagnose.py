@@ -34,7 +34,7 @@ from pidyn.discrepancy.report import (plot_learned_force, plot_ranking, plot_res
                                      plot_running_estimate, write_report)
 from pidyn.discrepancy.residual import band_limited, dominant_period, unexplained_force
 from pidyn.discrepancy.screening import EXCLUSIVE, Thresholds, screen, weak_system
-from pidyn.discrepancy.weak_form import WeakForm, smooth_signals, velocity_noise
+from pidyn.discrepancy.weak_form import WeakForm, measurement_noise, smooth_signals, velocity_noise
 from pidyn.reporting import nrmse, write_json
 from pidyn.systems.sdof import SDOFSystem
 from pidyn.tasks.train import build_record, identify, simulate_identified
@@ -276,7 +276,8 @@ def _check_heldout(case: _Case, nom: _Nominal, sc, x_nom: np.ndarray, forced: bo
     """The held-out failure check, and where the structure changed when the data say it did
     (a located change moves ``case.fit`` / ``case.held`` to the change point)."""
     check = heldout_check(case.x_raw, x_nom, case.mask(case.fit), case.mask(case.held),
-                          float(np.std(case.x_raw - nom.s.x)), threshold=float(case.dcfg.changes.heldout_ratio))
+                          measurement_noise(case.record.t, case.x_raw, nom.period),
+                          threshold=float(case.dcfg.changes.heldout_ratio))
     log.info("%s", check.sentence())
     time_effects = {n: p_ for n, p_ in {"stiffness_loss": case.stiff, "damping_change": "c"}.items()
                     if n in case.effects and p_ in nom.values}
