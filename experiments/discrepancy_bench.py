@@ -220,6 +220,8 @@ def write_results(rows: list[dict], planned: int, schedule: str, results: Path, 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", type=int, default=180)  # 10 of each of the 18 kinds
+    ap.add_argument("--first", type=int, default=0,
+                    help="first case (with --name: a study of cases FIRST..CASES-1, seeds the benchmark does not use)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=ROOT / "outputs" / "discrepancy_bench")
     ap.add_argument("--full", action="store_true", help="PIDynNet's default schedule (default: a shorter one)")
@@ -236,6 +238,10 @@ def main() -> None:
     unknown = set(args.kinds or []) - set(BY_LABEL)
     if unknown:
         ap.error(f"unknown kind(s) {sorted(unknown)}; choose from {', '.join(BY_LABEL)}")
+    if args.first and not args.name:
+        ap.error("--first needs --name: cases from FIRST on are a study of their own, not the benchmark's table")
+    if not 0 <= args.first < args.cases:
+        ap.error(f"--first {args.first} must lie in 0..{args.cases - 1} (--cases {args.cases})")
     kinds = [BY_LABEL[k] for k in args.kinds] if args.kinds else KINDS
     schedule = "default" if args.full else "short: " + " ".join(FAST)
     given = dict(e.split("=", 1) for e in extra if "=" in e)  # the record's split, as the table states it
@@ -248,9 +254,9 @@ def main() -> None:
     command = None if name == "discrepancy_bench" and not args.kinds else "python " + " ".join(
         ["experiments/discrepancy_bench.py", *sys.argv[1:]])
     kept = {} if args.rerun or (args.kinds and not args.name) else committed_rows(where / f"{name}.csv", kinds)
-    kept = {i: r for i, r in kept.items() if i < args.cases}
+    kept = {i: r for i, r in kept.items() if args.first <= i < args.cases}
     rows = list(kept.values())
-    todo = [i for i in range(args.cases) if i not in kept]
+    todo = [i for i in range(args.first, args.cases) if i not in kept]
     if kept:
         print(f"{len(kept)} case(s) kept from the committed table; {len(todo)} to run", flush=True)
     commit = code_commit()
@@ -262,9 +268,9 @@ def main() -> None:
             rows.append(r)
             status = r.get("error") and "FAILED" or f"found {r['found']} ({r['seconds']:.0f} s)"
             print(f"[{n}/{len(todo)}] case {r['case']} hidden {r['hidden']}: {status}", flush=True)
-            lines = write_results(rows, args.cases, schedule, where, name, command, split)
+            lines = write_results(rows, args.cases - args.first, schedule, where, name, command, split)
     if rows and not lines:
-        lines = write_results(rows, args.cases, schedule, where, name, command, split)
+        lines = write_results(rows, args.cases - args.first, schedule, where, name, command, split)
     print(f"table: {where / (name + '.md')}")
     print("\n".join(lines))
 

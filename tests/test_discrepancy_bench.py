@@ -76,3 +76,18 @@ def test_a_hash_that_reads_as_a_number_stays_a_hash(tmp_path):
     pd.DataFrame([{"case": 0, "hidden": kinds[0].label, "found": "none", "verdict": "none", "hit": True,
                    "seconds": 1.0, "commit": "61e7462"}]).to_csv(path, index=False)
     assert bench.committed_rows(path, kinds)[0]["commit"] == "61e7462"
+
+
+def test_a_study_of_later_seeds_runs_only_those(tmp_path, monkeypatch):
+    """``--first 180 --cases 183 --name ...``: the cases (seeds) the benchmark's table does not use."""
+    res = tmp_path / "results"
+    calls: list[int] = []
+    monkeypatch.setattr(bench, "run_case", _fake_case(calls))
+    monkeypatch.setattr(sys, "argv", ["bench", "--first", "180", "--cases", "183", "--jobs", "1", "--results",
+                                      str(res), "--out", str(tmp_path / "out"), "--name", "later"])
+    bench.main()
+    assert sorted(calls) == [180, 181, 182]
+    df = pd.read_csv(res / "later.csv")
+    assert list(df.case) == [180, 181, 182]
+    assert "3 seeded cases" in (res / "later.md").read_text()
+    assert not (res / "discrepancy_bench.csv").exists()

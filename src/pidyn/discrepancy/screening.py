@@ -508,12 +508,11 @@ def _cv_rss(A: np.ndarray, y: np.ndarray, folds: list[np.ndarray], ridge: np.nda
             n_fixed: int | None = None) -> float:
     """Residual sum of squares of each block predicted from the others.
 
-    Without a ridge, a column beyond the first ``n_fixed`` (the nominal ones; default all
-    but none) that is nearly silent in a fold's training rows (a stop reached almost only in
-    the test block, a step in time just before its end) is left out of that fold: its
-    coefficient, estimated from a handful of rows, would blow the prediction up by orders of
-    magnitude; left out, the fold predicts what the nominal model does, i.e. no gain.
-    ``n_fixed``: the leading (nominal) columns, always kept; None keeps every column."""
+    Without a ridge, a column after the first ``n_fixed`` (the nominal ones, always kept;
+    None keeps every column) that is nearly silent in a fold's training rows (a stop reached
+    almost only in the test block, a step in time just before its end) is left out of that
+    fold: its coefficient, estimated from a handful of rows, would blow the prediction up by
+    orders of magnitude; left out, the fold predicts what the nominal model does: no gain."""
     total = 0.0
     everything = np.logical_or.reduce(folds)
     energy = (A[everything] ** 2).sum(0)
