@@ -29,6 +29,7 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 from pidyn.baselines.least_squares import output_error
 from pidyn.data.sources import Record
 from pidyn.discrepancy.changes import heldout_check, locate_change, running_estimate
+from pidyn.discrepancy.confirm import Confirmation, confirm, undecided
 from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.report import (plot_learned_force, plot_ranking, plot_residual, plot_response,
                                      plot_running_estimate, write_report)
@@ -183,19 +184,28 @@ def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
     x_nom = case.free_run(nom.system, nom.values, float(nom.s.v[0]))
     check, change_row = _check_heldout(case, nom, sc, x_nom, bool(forced))
     cause = change_row["effect"] if change_row is not None else (forced or sc.cause)
+    confirmation = None
+    if cause is None and not forced and sc.verdict == "none" and not check.failed:
+        # 3c. an effect the weak form leans towards without deciding: the simulated response decides
+        confirmation = _confirm(case.cfg, case.record, nom.system, nom.values, nom.node, sc, nom.s, 1,
+                                case.mass_known, case.fit, case.held, case.thresholds)
+        if confirmation.row is not None:
+            cause = confirmation.row["effect"]
     # 4. extended model(s): extend, screen again, until nothing more passes the evidence
     #    thresholds or diagnosis.max_effects is reached
     if cause is None and bool(case.dcfg.get("learn_unexplained", True)) and not forced \
             and (sc.verdict == "unexplained" or check.failed):
         cause = LEARNED  # structured, but nothing in the library explains it: learn the force
     row = None if cause is None else (_learned_row(sc) if cause == LEARNED else
-                                      change_row or next(r for r in sc.ranking if r["effect"] == cause))
+                                      change_row or (confirmation.row if confirmation and confirmation.row else
+                                                     next(r for r in sc.ranking if r["effect"] == cause)))
     ext = _extend_until_explained(cfg, case.record, nom.node, nom.values, cause, row, nom.s, nom.weak, case.x_raw,
-                                  case.fit, case.effects, case.thresholds, case.mass_known, bool(forced))
+                                  case.fit, case.held, case.effects, case.thresholds, case.mass_known, bool(forced))
     causes = ext["causes"] if case.dcfg.extend else ([] if cause is None else [cause])
     # 5. held-out gain
     x_ext = case.free_run(ext["system"], ext["values"], float(nom.s.v[0])) if ext["system"] is not None else None
     diagnosis = _summary(case, nom, sc, check, change_row, ext, causes, cause, bool(forced), x_nom, x_ext)
+    diagnosis["confirmation"] = None if confirmation is None else confirmation.tested
     diagnosis["wall_seconds"] = time.perf_counter() - t_wall
     write_json(case.run_dir / "diagnosis.json", diagnosis)
     _write_figures(case, nom, sc, diagnosis, change_row, ext, pointwise, x_nom, x_ext)
@@ -381,8 +391,8 @@ EXTENSION = "pidyn.discrepancy.extend.extended_system"
 
 def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict, nominal_values: dict[str, float],
                             cause: str | None, row: dict | None, s: Signals, weak: WeakForm, x_raw: np.ndarray,
-                            fit: tuple[float, float], effects: dict, thresholds: Thresholds, mass_known: bool,
-                            forced: bool) -> dict[str, Any]:
+                            fit: tuple[float, float], held: tuple[float, float], effects: dict,
+                            thresholds: Thresholds, mass_known: bool, forced: bool) -> dict[str, Any]:
     """Extend the model with ``cause``, identify it (PIDynNet, polish), screen the extended
     model against the effects not yet in it, and repeat while one passes the thresholds, up to
     ``diagnosis.max_effects``. Each step's evidence is kept; the last model carries every
@@ -410,7 +420,8 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
         out["causes"].append(cause)
         out["steps"].append({"step": k, "effect": cause, "folder": folder.name, "equation": system.describe(ext_values),
                              "evidence": {key: row.get(key) for key in ("score", "delta_bic", "explained", "cv_gain",
-                                                                        "heldout_gain", "force_share")}})
+                                                                        "heldout_gain", "force_share",
+                                                                        "source")}})
         out.update(system=system, values=ext_values, metrics=metrics)
         log.info("step %d: extended with %s: %s", k, cause, system.describe(ext_values))
         node, values = ext_node, ext_values
@@ -432,19 +443,42 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
         log.info("screening the extended model: %s", ", ".join(f"{r['effect']} {r['score']:.1f}"
                                                                for r in sc.ranking[:4] if r.get("score") is not None))
         cause = sc.cause
+        confirmation = None
+        if cause is None and sc.verdict == "none":  # the simulated response decides what the weak form leans to
+            confirmation = _confirm(cfg, record, system, ext_values, node, sc, s, k + 1, mass_known, fit, held,
+                                    thresholds)
+            out["steps"][-1]["next_confirmation"] = confirmation.tested
+            if confirmation.row is not None:
+                cause = confirmation.row["effect"]
         if cause is None and sc.verdict == "unexplained" and LEARNED not in out["causes"] and dcfg.get("learn_unexplained", True):
             cause = LEARNED  # what remains is structured but no library effect: learn it
         row = None if cause is None else (_learned_row(sc) if cause == LEARNED else
+                                          confirmation.row if confirmation is not None and confirmation.row else
                                           next(r for r in sc.ranking if r["effect"] == cause))
         if cause == LEARNED and LEARNED in out["causes"]:
             break
     return out
 
 
+def _confirm(cfg: DictConfig, record: Record, system: SDOFSystem, values: dict[str, float], node: dict, sc,
+             s: Signals, k: int, mass_known: bool, fit: tuple[float, float], held: tuple[float, float],
+             thresholds: Thresholds) -> Confirmation:
+    """The output-error check of the effects screening ``sc`` leaves undecided
+    (``pidyn.discrepancy.confirm``); ``diagnosis.confirm.max_candidates`` = 0 turns it off."""
+    dcfg = cfg.diagnosis
+    ccfg = dcfg.get("confirm") or {}
+    candidates = undecided(sc.ranking, thresholds, int(ccfg.get("max_candidates", 3)))
+    if not candidates:
+        return Confirmation()
+    build = lambda row: _current_system(_extension_node(node, values, row["effect"], row, s, k, mass_known))  # noqa: E731
+    return confirm(record, system, values, candidates, build, fit, held, thresholds, substeps=int(dcfg.substeps),
+                   max_nfev=int(dcfg.polish_max_nfev), polish_seconds=dcfg.polish_seconds)
+
+
 LEARNED = "learned_force"
 #: what each step keeps of the next screening's rows: the evidence behind the next name
 _STEP_EVIDENCE = ("effect", "score", "delta_bic", "explained", "cv_gain", "heldout_gain", "force_share", "passes",
-                  "persists", "heldout_miss", "note", "parameters")
+                  "persists", "heldout_miss", "note", "parameters", "source")
 
 
 def _extension_node(node: dict, values: dict[str, float], cause: str, row: dict, s: Signals, k: int,
@@ -456,9 +490,12 @@ def _extension_node(node: dict, values: dict[str, float], cause: str, row: dict,
     inner = _node_with_values(node, {**values, **refit})
     if k == 1:
         inner = _system_node(OmegaConf.create(inner), refit, refit.get("m", values["m"]), not mass_known)
-    return {"_target_": EXTENSION, "nominal": inner, "effect": cause,
+    node = {"_target_": EXTENSION, "nominal": inner, "effect": cause,
             "effect_params": {n: (v if isinstance(v, str) else float(v)) for n, v in row["parameters"].items()},
             "context": s.context()}
+    if row.get("change") is not None:  # located over the record, with an interval: held (see extended_system)
+        node["held"] = ["t_d"]
+    return node
 
 
 def _current_system(node: dict) -> SDOFSystem:
