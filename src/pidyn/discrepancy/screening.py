@@ -358,8 +358,10 @@ def _pair_lead(ranking: list[dict], pairs: list[dict], structure: dict, th: Thre
     if not pairs or not ranking or ranking[0].get("score") is None:
         return None
     singles = {r["effect"]: r["score"] if r.get("score") is not None else -np.inf for r in ranking}
-    fleeting = {r["effect"] for r in ranking if r.get("persists") is False}
-    pairs = [p for p in pairs if not fleeting & set(p["effects"])]  # a step that does not last leads nowhere
+    # a step that does not last, or an effect that misses the held-out part where a generic force
+    # does not, leads nowhere: the rules that refuse it alone refuse it in a pair too
+    refused = {r["effect"] for r in ranking if r.get("persists") is False or r.get("heldout_miss")}
+    pairs = [p for p in pairs if not refused & set(p["effects"])]
     if not pairs:
         return None
     top, s_top = ranking[0]["effect"], ranking[0]["score"]
