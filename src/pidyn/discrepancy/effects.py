@@ -306,6 +306,10 @@ class Damage(Effect):
         return {"drop": float(rng.uniform(0.15, 0.4)), "t_d": self._time_of_share(s, float(rng.uniform(0.2, 0.7)))}
 
 
+#: the largest relative damping change the library names (the damping ten times its value)
+MAX_DAMPING_CHANGE = 9.0
+
+
 class DampChange(Damage):
     """The damping changes by a fraction at an unknown time (grid over the time)."""
 
@@ -320,10 +324,12 @@ class DampChange(Damage):
         # the damping stays positive on both sides of the step: a "change" to no damping or less
         # is the refitted damping taking up a force the model's columns get wrong on one side
         # (dry friction near rest, where the velocity is mostly noise), not a change of the structure
-        return nominal.get("c", 1.0) > 0 and params["change"] > -1.0
+        # ... and no more than the term can represent (a tenfold damping): beyond it the located
+        # step is a force of another shape (dry friction in a quiet tail reads as a huge damping)
+        return nominal.get("c", 1.0) > 0 and -1.0 < params["change"] <= MAX_DAMPING_CHANGE
 
     def term(self, p, s):
-        change = min(max(p["change"], -0.9), 9.0)
+        change = min(max(p["change"], -0.9), MAX_DAMPING_CHANGE)
         return DampingChange(change, p["t_d"], t_min=s["t_min"], t_max=s["t_max"], damping=s.get("damping", "c"))
 
     def sample(self, rng, s, sign=None):

@@ -185,7 +185,7 @@ def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
     check, change_row = _check_heldout(case, nom, sc, x_nom, bool(forced))
     cause = change_row["effect"] if change_row is not None else (forced or sc.cause)
     confirmation = None
-    if cause is None and not forced and sc.verdict == "none" and not check.failed:
+    if cause is None and not forced and sc.verdict == "none":
         # 3c. an effect the weak form leans towards without deciding: the simulated response decides
         confirmation = _confirm(case.cfg, case.record, nom.system, nom.values, nom.node, sc, nom.s, 1,
                                 case.mass_known, case.fit, case.held, case.thresholds)
@@ -568,6 +568,9 @@ def _locate_change(nominal: SDOFSystem, values: dict[str, float], s: Signals, re
 
     fit0, held0 = fit, held
     change = search(float(record.t[-1]) if whole_record else fit[1])
+    if change is not None and not EFFECTS[change.effect].admissible(change.effect_parameters(), values):
+        log.info("the best step in time, %s, is not one the library can name (outside its range)", change.sentence())
+        return None, fit, held
     if change is not None and _stiffening(change):
         return None, fit, held
     if change is None or change.delta_bic > -th.min_delta_bic or change.explained < th.min_cv_gain:
@@ -585,6 +588,10 @@ def _locate_change(nominal: SDOFSystem, values: dict[str, float], s: Signals, re
         if again is not None and _stiffening(again):
             return None, fit0, held0
         change = again if again is not None else change
+        if not EFFECTS[change.effect].admissible(change.effect_parameters(), values):
+            log.info("re-estimated on the new fitting part, %s is outside the library's range; none is named",
+                     change.sentence())
+            return None, fit0, held0
     if not th.step_persists(change.heldout_gain):
         log.info("%s, but the step does not persist: fitted up to %.4g s it fits the rest worse than no step "
                  "(held-out gain %.2f); a change in time lasts, a stiffness or damping that differs only in the "

@@ -1,0 +1,95 @@
+"""The output-error check that decides what the weak-form screening leaves undecided, and the
+extension that holds a located change time."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pidyn.baselines.least_squares import output_error
+from pidyn.discrepancy.confirm import confirm, independent_samples, undecided
+from pidyn.discrepancy.effects import Signals
+from pidyn.discrepancy.extend import extended_system
+from pidyn.discrepancy.hidden import hidden_case
+from pidyn.discrepancy.screening import Thresholds, _pair_lead
+from pidyn.systems import LinearSDOF
+
+
+def test_white_noise_counts_every_sample_and_a_coloured_one_fewer():
+    rng = np.random.default_rng(0)
+    n = 4000
+    white = rng.normal(size=n)
+    assert 0.85 * n < independent_samples(white) < 1.15 * n
+    phi = 0.8  # AR(1): n (1 - phi) / (1 + phi) independent samples
+    ar = np.zeros(n)
+    for i in range(1, n):
+        ar[i] = phi * ar[i - 1] + rng.normal()
+    expected = n * (1 - phi) / (1 + phi)
+    assert 0.6 * expected < independent_samples(ar) < 1.6 * expected
+
+
+def test_only_leaning_unrefused_effects_are_checked():
+    th = Thresholds()
+    rows = [{"effect": "gap_contact", "score": 25.0}, {"effect": "cubic_stiffness", "score": 4.0},
+            {"effect": "stiffness_loss", "score": 6.0, "step_in_time": True},
+            {"effect": "quadratic_stiffness", "score": 3.0, "heldout_miss": True},
+            {"effect": "quadratic_damping", "score": -2.0}, {"effect": "hysteresis", "score": None}]
+    assert [r["effect"] for r in undecided(rows, th, 3)] == ["cubic_stiffness"]
+
+
+def _check(effect: str | None, seed: int, noise: float, sign: float | None = None):
+    case = hidden_case(effect, seed, noise=noise, sign=sign)
+    rec = case.record
+    nominal = LinearSDOF(c=case.nominal["c"], k=case.nominal["k"])
+    s = Signals(rec.t, rec.x[:, 0], rec.v[:, 0], 1.0, case.nominal["k"], "k", t_fit_end=case.fit_end)
+    # the current model as the diagnosis holds it: the best linear fit by output error (the
+    # polish), which has already bent c and k towards the missing force
+    fitted = output_error(rec.segment(0.0, case.fit_end), nominal, substeps=4, max_nfev=30).params
+    values = {"m": 1.0, **fitted}
+    start = -30.0 if (sign or 1.0) < 0 else 30.0
+    row = {"effect": "cubic_stiffness", "score": 4.0, "parameters": {"k3": start}}
+    out = confirm(rec, nominal, values, [row], lambda r: extended_system(nominal, r["effect"], r["parameters"],
+                                                                        s.context()),
+                  (0.0, case.fit_end), (case.fit_end, float(rec.t[-1])), Thresholds())
+    return case, out
+
+
+def test_the_simulated_response_names_a_softening_cubic_the_weak_form_leaves_undecided():
+    """A softening cubic (its force 6-15 % of the linear one at the peak, as the benchmark draws
+    it) under 3 % noise, against the best linear model."""
+    case, out = _check("cubic_stiffness", 11, 0.03, sign=-1.0)
+    (tested,) = out.tested
+    assert out.row is not None and out.row["effect"] == "cubic_stiffness", tested
+    assert tested["delta_bic"] < -10 and tested["heldout_gain"] > 0
+    assert tested["parameters"]["k3"] == pytest.approx(case.truth["k3"], rel=0.15)
+
+
+def test_the_simulated_response_names_nothing_when_nothing_is_missing():
+    _, out = _check(None, 12, 0.03)
+    (tested,) = out.tested
+    assert out.row is None and not tested["passes"], tested
+    assert tested["delta_bic"] > -10
+
+
+def test_a_located_change_time_is_held_in_the_extension():
+    nominal = LinearSDOF()
+    ctx = {"t_min": 0.0, "t_max": 25.0, "stiffness": "k"}
+    ext = extended_system(nominal, "stiffness_loss", {"drop": 0.2, "t_d": 7.5}, ctx, held=["t_d"])
+    specs = {s.name: s for s in ext.param_specs()}
+    assert not specs["t_d"].trainable and specs["t_d"].init == 7.5 and specs["drop"].trainable
+    with pytest.raises(ValueError, match="cannot hold"):
+        extended_system(nominal, "stiffness_loss", {"drop": 0.2, "t_d": 7.5}, ctx, held=["t_change"])
+
+
+def test_a_pair_holding_an_effect_the_held_out_rule_refuses_leads_nowhere():
+    th = Thresholds()
+    ranking = [{"effect": "quadratic_stiffness", "score": 14.0, "passes": False, "heldout_miss": True},
+               {"effect": "cubic_stiffness", "score": 12.0, "passes": True},
+               {"effect": "gap_contact", "score": 11.0, "passes": True}]
+    pairs = [{"effects": ["gap_contact", "quadratic_stiffness"], "score": 40.0, "delta_bic": -40.0, "cv_gain": 0.9},
+             {"effects": ["cubic_stiffness", "gap_contact"], "score": 15.0, "delta_bic": -15.0, "cv_gain": 0.8}]
+    structure = {"cv_gain": 0.9}
+    assert _pair_lead(ranking, pairs, structure, th) is None  # the best pair holds the refused spring
+    ranking[0].pop("heldout_miss")
+    lead = _pair_lead(ranking, pairs, structure, th)
+    assert lead is not None and lead["lead"] == "quadratic_stiffness"
