@@ -177,7 +177,8 @@ def _num(v) -> str:
 
 def write_report(path: Path, d: dict, figures: list[str]) -> None:
     """report.md: the verdict, the steps, the models' held-out errors, the evidence, the ranking."""
-    lines = (_verdict_lines(d) + _steps_lines(d) + _model_lines(d) + _evidence_lines(d) + _ranking_lines(d)
+    lines = (_verdict_lines(d) + _steps_lines(d) + _model_lines(d) + _evidence_lines(d) + _confirmation_lines(d)
+             + _ranking_lines(d)
              + ["## Figures", ""] + [f"![{f}](figures/{f})" for f in figures])
     path.write_text("\n".join(lines) + "\n")
 
@@ -213,8 +214,9 @@ def _steps_lines(d: dict) -> list[str]:
             ranking = st.get("next_ranking") or [{}]
             named = steps[i + 1]["effect"] if i + 1 < len(steps) else None  # a tie-break may name the second
             nxt = next((r for r in ranking if r.get("effect") == named), ranking[0])
+            by_oe = i + 1 < len(steps) and (steps[i + 1].get("evidence") or {}).get("source") == "output_error"
             nxt_s = "-" if not nxt else (f"{nxt.get('effect')} {_num(nxt.get('score'))} "
-                                         f"({'passes' if nxt.get('passes') else 'below the thresholds: stop'})")
+                                         f"({'named by the output-error check' if by_oe else 'passes' if nxt.get('passes') else 'below the thresholds: stop'})")
             lines.append(f"| {st['step']} | {st['effect']} | {_num(ev.get('score'))} | {_num(ev.get('cv_gain'))} | "
                          f"`{st['equation']}` | {nxt_s} |")
         lines.append("")
@@ -271,6 +273,28 @@ def _evidence_lines(d: dict) -> list[str]:
         else:
             lines += ["Hidden in the data (simulated): nothing; the nominal model is the truth.", ""]
     return lines
+
+
+def _confirmation_lines(d: dict) -> list[str]:
+    """The output-error check of the effects a screening leaned to without deciding."""
+    checks = [("nominal model", d.get("confirmation"))]
+    checks += [(f"after step {st['step']} ({st['effect']})", st.get("next_confirmation")) for st in d.get("steps") or []]
+    checks = [(where, rows) for where, rows in checks if rows]
+    if not checks:
+        return []
+    lines = ["## Output-error check", "",
+             "Effects the weak-form screening leaned to (0 < score < threshold) without deciding, fitted by output error "
+             "with the model and compared on the simulated response: -dBIC over the residual's independent samples, "
+             "held-out gain = share of the held-out simulation error removed.", "",
+             "| model | effect | weak-form score | -dBIC (output error) | independent samples | held-out gain | named | estimate |",
+             "|---|---|---|---|---|---|---|---|"]
+    for where, rows in checks:
+        for r in rows:
+            est = ", ".join(f"{k}={v:.4g}" for k, v in (r.get("parameters") or {}).items())
+            lines.append(f"| {where} | {r['effect']} | {_num(r.get('weak_form_score'))} | {_num(r.get('score'))} | "
+                         f"{_num(r.get('independent_samples'))} | {_num(r.get('heldout_gain'))} | "
+                         f"{'yes' if r.get('passes') else 'no'} | {est or r.get('error', '')} |")
+    return lines + [""]
 
 
 def _ranking_lines(d: dict) -> list[str]:

@@ -4,7 +4,8 @@
    polish);
 2. compute the force it cannot explain (figures: over time, against x and x', spectrum);
 3. screen the effect library against it (``pidyn.discrepancy.screening``) and name the cause,
-   or ``none``;
+   or ``none``; an effect the weak-form screening leans to without deciding is fitted by output
+   error and named when the simulated response decides for it (``pidyn.discrepancy.confirm``);
 4. extend the model with the named effect and identify it again with PIDynNet (its parameters
    trainable in the physics loss; hysteresis brings a latent state through the LNN);
 5. simulate nominal and extended models over the held-out part and compare.
@@ -415,8 +416,8 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
         metrics, obj = identify(_sub_cfg(cfg, ext_node, folder, fit), record)
         system: SDOFSystem = obj["system"]
         ext_values = obj["module"].net.params.as_floats()
-        if dcfg.polish:
-            ext_values, out["note"] = _polish(record, system, ext_values, dcfg, fit)
+        if dcfg.polish:  # a held change time is refined here, from where the search put it
+            ext_values, out["note"] = _polish(record, _current_system(_release_held(ext_node)), ext_values, dcfg, fit)
         out["causes"].append(cause)
         out["steps"].append({"step": k, "effect": cause, "folder": folder.name, "equation": system.describe(ext_values),
                              "evidence": {key: row.get(key) for key in ("score", "delta_bic", "explained", "cv_gain",
@@ -470,8 +471,10 @@ def _confirm(cfg: DictConfig, record: Record, system: SDOFSystem, values: dict[s
     candidates = undecided(sc.ranking, thresholds, int(ccfg.get("max_candidates", 3)))
     if not candidates:
         return Confirmation()
+    node = _release_held(node)  # as in the polish: a located change time is refined with the rest
     build = lambda row: _current_system(_extension_node(node, values, row["effect"], row, s, k, mass_known))  # noqa: E731
-    return confirm(record, system, values, candidates, build, fit, held, thresholds, substeps=int(dcfg.substeps),
+    return confirm(record, _current_system(node), values, candidates, build, fit, held, thresholds,
+                   substeps=int(dcfg.substeps),
                    max_nfev=int(dcfg.polish_max_nfev), polish_seconds=dcfg.polish_seconds)
 
 
@@ -495,6 +498,16 @@ def _extension_node(node: dict, values: dict[str, float], cause: str, row: dict,
             "context": s.context()}
     if row.get("change") is not None:  # located over the record, with an interval: held (see extended_system)
         node["held"] = ["t_d"]
+    return node
+
+
+def _release_held(node: dict) -> dict:
+    """A copy of a system node with every held effect parameter free again (the polish and the
+    output-error check refine a located change time from its located value)."""
+    node = copy.deepcopy(OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else node)
+    if node.get("_target_") == EXTENSION:
+        node.pop("held", None)
+        node["nominal"] = _release_held(node["nominal"])
     return node
 
 
