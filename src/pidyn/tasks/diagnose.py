@@ -387,7 +387,6 @@ def _write_figures(case: _Case, nom: _Nominal, sc, d: dict, change_row: dict | N
 
 
 EXTENSION = "pidyn.discrepancy.extend.extended_system"
-#: effects that cannot sit in one model together (both step at their own t_d)
 
 
 def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict, nominal_values: dict[str, float],
@@ -437,28 +436,38 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
         remaining = {n: e for n, e in effects.items() if n not in present | blocked}
         if not remaining:
             break
-        sc = screen(system, ext_values, s, record.f, x_raw, weak, fit[1], mass_known, remaining, thresholds)
-        out["steps"][-1]["next_ranking"] = [{k_: r.get(k_) for k_ in _STEP_EVIDENCE if k_ in r} for r in sc.ranking]
-        out["steps"][-1]["next_structure"] = dict(sc.structure)
-        out["steps"][-1]["next_verdict"] = sc.verdict
-        log.info("screening the extended model: %s", ", ".join(f"{r['effect']} {r['score']:.1f}"
-                                                               for r in sc.ranking[:4] if r.get("score") is not None))
-        cause = sc.cause
-        confirmation = None
-        if cause is None and sc.verdict == "none":  # the simulated response decides what the weak form leans to
-            confirmation = _confirm(cfg, record, system, ext_values, node, sc, s, k + 1, mass_known, fit, held,
-                                    thresholds)
-            out["steps"][-1]["next_confirmation"] = confirmation.tested
-            if confirmation.row is not None:
-                cause = confirmation.row["effect"]
-        if cause is None and sc.verdict == "unexplained" and LEARNED not in out["causes"] and dcfg.get("learn_unexplained", True):
-            cause = LEARNED  # what remains is structured but no library effect: learn it
-        row = None if cause is None else (_learned_row(sc) if cause == LEARNED else
-                                          confirmation.row if confirmation is not None and confirmation.row else
-                                          next(r for r in sc.ranking if r["effect"] == cause))
+        cause, row = _next_cause(cfg, record, system, ext_values, node, remaining, out, s, weak, x_raw, fit, held,
+                                 thresholds, mass_known)
         if cause == LEARNED and LEARNED in out["causes"]:
             break
     return out
+
+
+def _next_cause(cfg: DictConfig, record: Record, system: SDOFSystem, values: dict[str, float], node: dict,
+                remaining: dict, out: dict[str, Any], s: Signals, weak: WeakForm, x_raw: np.ndarray,
+                fit: tuple[float, float], held: tuple[float, float], thresholds: Thresholds,
+                mass_known: bool) -> tuple[str | None, dict | None]:
+    """Screen the model just extended against the effects not yet in it; what the weak form
+    leaves undecided goes to the output-error check, and a structured remainder no library
+    effect explains to the learned force. The evidence lands on the last step of ``out``."""
+    k = len(out["causes"])
+    sc = screen(system, values, s, record.f, x_raw, weak, fit[1], mass_known, remaining, thresholds)
+    step = out["steps"][-1]
+    step["next_ranking"] = [{k_: r.get(k_) for k_ in _STEP_EVIDENCE if k_ in r} for r in sc.ranking]
+    step["next_structure"] = dict(sc.structure)
+    step["next_verdict"] = sc.verdict
+    log.info("screening the extended model: %s", ", ".join(f"{r['effect']} {r['score']:.1f}"
+                                                           for r in sc.ranking[:4] if r.get("score") is not None))
+    if sc.cause is not None:
+        return sc.cause, next(r for r in sc.ranking if r["effect"] == sc.cause)
+    if sc.verdict == "none":  # the simulated response decides what the weak form leans to
+        confirmation = _confirm(cfg, record, system, values, node, sc, s, k + 1, mass_known, fit, held, thresholds)
+        step["next_confirmation"] = confirmation.tested
+        if confirmation.row is not None:
+            return confirmation.row["effect"], confirmation.row
+    if sc.verdict == "unexplained" and LEARNED not in out["causes"] and cfg.diagnosis.get("learn_unexplained", True):
+        return LEARNED, _learned_row(sc)  # what remains is structured but no library effect: learn it
+    return None, None
 
 
 def _confirm(cfg: DictConfig, record: Record, system: SDOFSystem, values: dict[str, float], node: dict, sc,
