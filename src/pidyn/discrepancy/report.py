@@ -285,8 +285,8 @@ def _confirmation_lines(d: dict) -> list[str]:
     lines = ["## Output-error check", "",
              "Effects the weak-form screening leaned to (0 < score < threshold) without deciding, fitted by output error "
              "with the model and compared on the simulated response: -dBIC over the residual's independent samples, "
-             "held-out gain = share of the held-out simulation error removed.", "",
-             "| model | effect | weak-form score | -dBIC (output error) | independent samples | held-out gain | named | estimate |",
+             "held-out gain = share of the held-out simulation error removed; of those that pass, the best is named.", "",
+             "| model | effect | weak-form score | -dBIC (output error) | independent samples | held-out gain | passes | estimate |",
              "|---|---|---|---|---|---|---|---|"]
     for where, rows in checks:
         for r in rows:
