@@ -93,3 +93,34 @@ def test_a_pair_holding_an_effect_the_held_out_rule_refuses_leads_nowhere():
     ranking[0].pop("heldout_miss")
     lead = _pair_lead(ranking, pairs, structure, th)
     assert lead is not None and lead["lead"] == "quadratic_stiffness"
+    ranking[0]["heldout_small"] = True  # a small held-out share refuses an effect alone, not in a pair
+    assert _pair_lead(ranking, pairs, structure, th) is not None
+
+
+def test_a_learned_force_is_kept_only_when_it_predicts_the_held_out_part_better():
+    """The guard on a learned force: a network started at the force the linear model misses
+    (here the hidden cubic spring itself) predicts the held-out part better and is kept; one
+    started at a force the structure does not have (a softening cubic twice as strong, an extra
+    linear spring) predicts it worse and is not."""
+    from pidyn.systems.terms import LearnedForce
+    from pidyn.tasks.diagnose import _learned_predicts
+
+    case = hidden_case("cubic_stiffness", 5, noise=0.0, sign=1.0)
+    rec = case.record
+    x, v = rec.x[:, 0], rec.v[:, 0]
+    nominal = LinearSDOF(c=case.nominal["c"], k=case.nominal["k"])
+    values = {"m": 1.0, **case.nominal}
+    held = (case.fit_end, float(rec.t[-1]))
+    k3 = case.truth["k3"]
+    scales = (float(np.abs(x).max()), float(np.abs(v).max()), float(k3 * np.abs(x).max() ** 3))
+    fit = rec.t <= case.fit_end
+    kept = {}
+    for name, force in (("truth", k3 * x ** 3), ("softening", -2 * k3 * x ** 3), ("spring", 5 * x)):
+        term = LearnedForce(*scales, seed=0)
+        term.fit_to(x[fit], v[fit], force[fit], iters=200)
+        kept[name], errors = _learned_predicts(rec, nominal, values, nominal.with_term(term), values, x,
+                                               float(v[0]), held, 4)
+        assert errors["without"] > 0.3, errors  # the linear model misses the cubic spring
+        if name == "truth":
+            assert errors["with"] < 0.1 * errors["without"], errors
+    assert kept == {"truth": True, "softening": False, "spring": False}

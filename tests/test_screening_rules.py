@@ -63,6 +63,23 @@ def test_an_effect_that_predicts_the_held_out_part_worse_is_refused_where_a_gene
     assert "heldout_miss" not in rows[0]
 
 
+def test_an_effect_that_predicts_almost_none_of_the_held_out_structure_is_not_named():
+    """A quadratic spring fitted to a symmetric trilinear one: it passes on the fitting part
+    and gains 0.01 on the held-out part, where a generic f(x, x') gains 0.77."""
+    th = Thresholds()
+    structured = {"cv_gain": 0.79, "heldout_gain": 0.77}
+    rows = _rank([_row("quadratic_stiffness", 16.0, 0.63, ho=0.01)], structured, th)
+    assert rows[0]["heldout_small"] and not rows[0]["passes"] and "heldout_miss" not in rows[0]
+    assert _verdict(rows, dict(structured), th) == ("unexplained", None)
+    # a third of what the generic force predicts there (the first of a pair, alone) is named
+    rows = _rank([_row("gap_contact", 16.0, 0.63, ho=0.25)], structured, th)
+    assert rows[0]["passes"] and "heldout_small" not in rows[0]
+    assert _verdict(rows, dict(structured), th) == ("discrepancy", "gap_contact")
+    # no structure in the held-out part: nothing to share
+    rows = _rank([_row("quadratic_stiffness", 16.0, 0.63, ho=0.01)], {"cv_gain": 0.79, "heldout_gain": 0.2}, th)
+    assert rows[0]["passes"]
+
+
 def test_cross_validation_decides_between_effects_that_bic_does_not():
     th = Thresholds()
     structure = {"cv_gain": 0.7, "heldout_gain": 0.6}

@@ -245,6 +245,11 @@ def _evidence_lines(d: dict) -> list[str]:
                   + (f"; a generic f(x, x') removes {st['cv_gain']:.2f} of the residual in cross-validation"
                      if st.get("cv_gain") is not None else "")
                   + ". Compare it with the unexplained force in `figures/learned_force.png` before naming a cause.", ""]
+    refused = d.get("learned_force_refused")
+    if refused:
+        lines += [f"A learned force f(x, x') was tried ({refused['folder']}/) and not kept: {refused['note']}. What "
+                  "the model misses is structured, but neither the library nor a network of x and x' trained on the "
+                  "fitting part predicts it; the model below is the one it would have extended.", ""]
     pair = (d.get("structure") or {}).get("pair")
     if pair:
         lines += [f"Two effects at once: {pair['why']}. {pair['lead']} was named first; the screening of the model "

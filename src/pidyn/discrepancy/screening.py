@@ -60,6 +60,10 @@ class Thresholds:
     #: an effect that makes the held-out prediction worse than this, where a generic f(x, x')
     #: improves it by min_structure_gain, is refused (the held-out part has structure it misses)
     min_heldout_gain: float = 0.0
+    #: ... and an effect that predicts less than this share of what that generic f(x, x') predicts
+    #: there explains none of the held-out structure: it is not named (pairs are not refused by it:
+    #: the second effect of a pair may predict little alone)
+    min_heldout_share: float = 0.1
     #: between passing effects this close in BIC (below "strong", 6, on Kass & Raftery's
     #: scale) the one with the clearly better blocked cross-validation gain is named
     tie_delta_bic: float = 6.0
@@ -461,14 +465,23 @@ def _mark_heldout_miss(r: dict, structure: dict, th: Thresholds) -> None:
     """Mark an effect (not a step in time: ``_mark_fleeting_step`` rules those) that predicts the
     held-out part worse than the nominal model does, where a generic f(x, x') predicts it
     clearly better: the effect fits the fitting part's force by a shape the structure does not
-    have (an even spring standing in for a trilinear one under a one-sided pulse)."""
+    have (an even spring standing in for a trilinear one under a one-sided pulse). Mark it as
+    ``heldout_small`` when it predicts less than ``min_heldout_share`` of what the generic force
+    predicts there: a quadratic spring fitted to a symmetric trilinear one gains 0.01 where the
+    generic force gains 0.77."""
     ho, generic = r.get("heldout_gain"), structure.get("heldout_gain")
     if r.get("step_in_time") or r.get("score") is None or ho is None or generic is None:
         return
-    if ho < th.min_heldout_gain and generic >= th.min_structure_gain:
+    if generic < th.min_structure_gain:
+        return
+    if ho < th.min_heldout_gain:
         r["heldout_miss"] = True
         r["note"] = (f"held-out gain {ho:.2f} against {generic:.2f} for a generic f(x, x'): "
                      "it does not predict the rows no fit used")
+    elif ho < th.min_heldout_share * generic:
+        r["heldout_small"] = True
+        r["note"] = (f"held-out gain {ho:.2f} against {generic:.2f} for a generic f(x, x'): "
+                     "it explains almost none of the structure in the rows no fit used")
 
 
 def _tie_break(ranking: list[dict], th: Thresholds) -> dict | None:
@@ -484,7 +497,7 @@ def _tie_break(ranking: list[dict], th: Thresholds) -> dict | None:
 
 
 def _passes(r: dict, th: Thresholds) -> bool:
-    if r.get("score") is None or r.get("persists") is False or r.get("heldout_miss"):
+    if r.get("score") is None or r.get("persists") is False or r.get("heldout_miss") or r.get("heldout_small"):
         return False
     return (r["delta_bic"] <= -th.min_delta_bic and r["force_share"] >= th.min_force_share
             and r["cv_gain"] >= th.min_cv_gain)

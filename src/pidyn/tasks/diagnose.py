@@ -207,6 +207,7 @@ def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
     x_ext = case.free_run(ext["system"], ext["values"], float(nom.s.v[0])) if ext["system"] is not None else None
     diagnosis = _summary(case, nom, sc, check, change_row, ext, causes, cause, bool(forced), x_nom, x_ext)
     diagnosis["confirmation"] = None if confirmation is None else confirmation.tested
+    diagnosis["learned_force_refused"] = ext.get("refused")
     diagnosis["wall_seconds"] = time.perf_counter() - t_wall
     write_json(case.run_dir / "diagnosis.json", diagnosis)
     _write_figures(case, nom, sc, diagnosis, change_row, ext, pointwise, x_nom, x_ext)
@@ -399,7 +400,8 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
     named effect. Step k's run is in ``extended/`` (k = 1) or ``extended_<k>/``."""
     dcfg = cfg.diagnosis
     run_dir = Path(cfg.paths.output_dir)
-    out: dict[str, Any] = {"system": None, "values": None, "metrics": None, "causes": [], "steps": [], "note": None}
+    out: dict[str, Any] = {"system": None, "values": None, "metrics": None, "causes": [], "steps": [], "note": None,
+                           "refused": None}
     node, values = nominal_node, nominal_values
     limit = 1 if forced else int(dcfg.get("max_effects", 3))
     while cause is not None and row is not None and dcfg.extend:
@@ -417,11 +419,24 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
         ext_values = obj["module"].net.params.as_floats()
         if dcfg.polish:  # a held change time is refined here, from where the search put it
             ext_values, out["note"] = _polish(record, _current_system(_release_held(ext_node)), ext_values, dcfg, fit)
+        if cause == LEARNED:
+            kept, errors = _learned_predicts(record, _current_system(node), values, system, ext_values, x_raw,
+                                             float(s.v[0]), held, int(dcfg.substeps))
+            if not kept:  # a network that fits the fitting part but predicts worse is not a model
+                out["refused"] = {"effect": LEARNED, "folder": folder.name, "heldout_nrmse": errors,
+                                  "note": (f"the learned force predicts the held-out part worse "
+                                           f"(NRMSE {errors['with']:.3g}) than the model it extends "
+                                           f"({errors['without']:.3g}): not kept")}
+                log.info("step %d: %s", k, out["refused"]["note"])
+                break
+            row = {**row, "heldout_nrmse": errors}
         out["causes"].append(cause)
         out["steps"].append({"step": k, "effect": cause, "folder": folder.name, "equation": system.describe(ext_values),
                              "evidence": {key: row.get(key) for key in ("score", "delta_bic", "explained", "cv_gain",
                                                                         "heldout_gain", "force_share",
                                                                         "source")}})
+        if cause == LEARNED:
+            out["steps"][-1]["evidence"]["heldout_nrmse"] = row["heldout_nrmse"]
         out.update(system=system, values=ext_values, metrics=metrics)
         log.info("step %d: extended with %s: %s", k, cause, system.describe(ext_values))
         node, values = ext_node, ext_values
@@ -490,7 +505,7 @@ def _confirm(cfg: DictConfig, record: Record, system: SDOFSystem, values: dict[s
 LEARNED = "learned_force"
 #: what each step keeps of the next screening's rows: the evidence behind the next name
 _STEP_EVIDENCE = ("effect", "score", "delta_bic", "explained", "cv_gain", "heldout_gain", "force_share", "passes",
-                  "persists", "heldout_miss", "note", "parameters", "source")
+                  "persists", "heldout_miss", "heldout_small", "note", "parameters", "source")
 
 
 def _extension_node(node: dict, values: dict[str, float], cause: str, row: dict, s: Signals, k: int,
@@ -522,6 +537,21 @@ def _release_held(node: dict) -> dict:
 
 def _current_system(node: dict) -> SDOFSystem:
     return hydra.utils.instantiate(OmegaConf.create(node))
+
+
+def _learned_predicts(record: Record, before: SDOFSystem, before_values: dict[str, float], after: SDOFSystem,
+                      after_values: dict[str, float], x_raw: np.ndarray, v0: float, held: tuple[float, float],
+                      substeps: int) -> tuple[bool, dict[str, float]]:
+    """Does the model with a learned force predict the held-out part better than the model it
+    extends? A network trained on the fitting part can fit it and still extrapolate wrongly
+    (a trilinear spring reached further in the held-out part): kept only if it predicts better.
+    The held-out part decides here, as it does for the screening's held-out rules."""
+    mask = (record.t >= held[0]) & (record.t <= held[1])
+    errors = {}
+    for key, system, vals in (("without", before, before_values), ("with", after, after_values)):
+        x = simulate_identified(system, vals, record, x0=float(x_raw[0]), v0=v0, substeps=substeps)[:, 0]
+        errors[key] = nrmse(x[mask], x_raw[mask]) if np.all(np.isfinite(x)) else float("inf")
+    return bool(mask.any() and errors["with"] < errors["without"]), errors
 
 
 def _save_unexplained(path: Path, record: Record, system: SDOFSystem, values: dict[str, float], x_raw: np.ndarray,
