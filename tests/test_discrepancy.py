@@ -146,17 +146,15 @@ FAST = ["model.schedule.pretrain_iters=150", "model.schedule.pretrain_iters_wind
         "model.schedule.max_iters=200", "logger=none"]
 
 
-def _draw_effects(n: int, seed: int) -> list[str]:
-    rng = np.random.default_rng(seed)
-    return [str(e) for e in rng.choice(sorted(EFFECTS), size=n, replace=False)]
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize("effect", _draw_effects(3, seed=2026) + ["none"])
+@pytest.mark.parametrize("effect", ["coulomb_friction", "none"])
 def test_diagnosis_finds_estimates_and_gains(effect, tmp_path):
     """End to end (PIDynNet, polish, screening, extension, held-out simulation) on a seeded
     hidden effect with 2 % noise: the diagnosis names it, estimates its key parameter within
-    the effect's stated tolerance and lowers the held-out error; with nothing hidden: none."""
+    the effect's stated tolerance and lowers the held-out error; with nothing hidden: none.
+    Other effects end to end: a softening cubic and stiffness losses below, quadratic damping
+    in the user's CSV file and in the API walkthrough (test_api), every kind in
+    ``make discrepancy-bench``."""
     from pidyn.tasks.diagnose import diagnose
 
     cfg = make_cfg([f"data.source.effect={effect}", "noise=0.02", "data_seed=5", *FAST], tmp_path,
@@ -191,7 +189,8 @@ def test_diagnosis_of_a_users_csv_file(tmp_path):
                    config_name="diagnose")
     d = diagnose(cfg)
     assert d["cause"] == "quadratic_damping"
-    assert d["gain"]["extended"] < d["gain"]["nominal"]
+    assert d["parameters"]["c2"] == pytest.approx(case.truth["c2"], rel=get_effect("quadratic_damping").tolerance)
+    assert d["gain"]["extended"] < 0.7 * d["gain"]["nominal"]
     assert d["split"]["fit"][1] == pytest.approx(0.65 * r.t[-1], rel=1e-6)
 
 

@@ -74,7 +74,10 @@ def test_lbfgs_finish_solves_a_strongly_nonlinear_window_that_adam_alone_does_no
 def test_generalize_task_writes_figures_and_table(tmp_path):
     from pidyn.tasks.generalize import generalize
 
-    gcfg = make_cfg(["excitation.duration=12", "model.schedule.max_windows=1", "generalization.max_cases=1",
+    # the files and the resume are tested here, not the identification: a short schedule
+    gcfg = make_cfg(["excitation.duration=12", "model.schedule.max_windows=1", "model.schedule.pretrain_iters=150",
+                     "model.schedule.pretrain_iters_window=150", "model.schedule.max_iters=200",
+                     "generalization.max_cases=1",
                      "generalization.duration=4", "generalization.iterations=50", "generalization.split_tol=1e9",
                      "logger=none"], tmp_path,
                     config_name="generalize")
