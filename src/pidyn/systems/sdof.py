@@ -111,15 +111,18 @@ class SDOFSystem(StructuralSystem):
         return out
 
     def state_rate(self, t, y, p, f):
-        x, v, z = y[..., 0], y[..., 1], y[..., 2:]
+        if isinstance(y, np.ndarray) and y.ndim == 1:  # one plain state (an integrator's step): scalars, not
+            x, v, z = y[0], y[1], y[2:]               # 0-d arrays, so the rate is built without np.stack
+        else:
+            x, v, z = y[..., 0], y[..., 1], y[..., 2:]
         a = (self.forcing(f, p) - self.restoring_force(t, x, v, z, p)) / p["m"]
         parts = [v, a]
         for term, sl in zip(self.terms, self._latent_slices()):
             if sl is not None:
                 rate = term.latent_rate(t, x, v, z[..., sl], p)
                 parts += [rate[..., j] for j in range(term.n_latent)]
-        if all(isinstance(q, (float, np.floating)) for q in parts):  # one plain state (an integrator's step)
-            return np.array(parts, dtype=float)
+        if all(np.ndim(q) == 0 for q in parts):
+            return np.array([float(q) for q in parts])
         return np.stack(parts, axis=-1)
 
     def rhs(self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]) -> np.ndarray:
