@@ -111,9 +111,10 @@ class SDOFSystem(StructuralSystem):
         return out
 
     def state_rate(self, t, y, p, f):
-        if isinstance(y, np.ndarray) and y.ndim == 1:  # one plain state (an integrator's step): scalars, not
-            x, v, z = y[0], y[1], y[2:]               # 0-d arrays, so the rate is built without np.stack
-        else:
+        plain = isinstance(y, np.ndarray) and y.ndim == 1
+        if plain:  # one plain state (an integrator's step): scalars, not 0-d arrays, so the rate is built
+            x, v, z = y[0], y[1], y[2:]  # without np.stack
+        else:  # a batch, or dual numbers (sensitivities): np.stack dispatches to them
             x, v, z = y[..., 0], y[..., 1], y[..., 2:]
         a = (self.forcing(f, p) - self.restoring_force(t, x, v, z, p)) / p["m"]
         parts = [v, a]
@@ -121,7 +122,8 @@ class SDOFSystem(StructuralSystem):
             if sl is not None:
                 rate = term.latent_rate(t, x, v, z[..., sl], p)
                 parts += [rate[..., j] for j in range(term.n_latent)]
-        if all(np.ndim(q) == 0 for q in parts):
+        if plain and all(isinstance(q, (float, np.floating)) or (isinstance(q, np.ndarray) and q.ndim == 0)
+                         for q in parts):
             return np.array([float(q) for q in parts])
         return np.stack(parts, axis=-1)
 
