@@ -420,23 +420,17 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
         if dcfg.polish:  # a held change time is refined here, from where the search put it
             ext_values, out["note"] = _polish(record, _current_system(_release_held(ext_node)), ext_values, dcfg, fit)
         if cause == LEARNED:
-            kept, errors = _learned_predicts(record, _current_system(node), values, system, ext_values, x_raw,
-                                             float(s.v[0]), held, int(dcfg.substeps))
-            if not kept:  # a network that fits the fitting part but predicts worse is not a model
-                out["refused"] = {"effect": LEARNED, "folder": folder.name, "heldout_nrmse": errors,
-                                  "note": (f"the learned force predicts the held-out part worse "
-                                           f"(NRMSE {errors['with']:.3g}) than the model it extends "
-                                           f"({errors['without']:.3g}): not kept")}
-                log.info("step %d: %s", k, out["refused"]["note"])
+            out["refused"], errors = _refuse_learned(record, _current_system(node), values, system, ext_values,
+                                                     x_raw, float(s.v[0]), held, int(dcfg.substeps), folder)
+            if out["refused"] is not None:  # a network that fits the fitting part but predicts worse
                 break
             row = {**row, "heldout_nrmse": errors}
         out["causes"].append(cause)
         out["steps"].append({"step": k, "effect": cause, "folder": folder.name, "equation": system.describe(ext_values),
                              "evidence": {key: row.get(key) for key in ("score", "delta_bic", "explained", "cv_gain",
-                                                                        "heldout_gain", "force_share",
-                                                                        "source")}})
-        if cause == LEARNED:
-            out["steps"][-1]["evidence"]["heldout_nrmse"] = row["heldout_nrmse"]
+                                                                        "heldout_gain", "force_share", "source",
+                                                                        "heldout_nrmse") if key in row or
+                                          key != "heldout_nrmse"}})
         out.update(system=system, values=ext_values, metrics=metrics)
         log.info("step %d: extended with %s: %s", k, cause, system.describe(ext_values))
         node, values = ext_node, ext_values
@@ -552,6 +546,20 @@ def _learned_predicts(record: Record, before: SDOFSystem, before_values: dict[st
         x = simulate_identified(system, vals, record, x0=float(x_raw[0]), v0=v0, substeps=substeps)[:, 0]
         errors[key] = nrmse(x[mask], x_raw[mask]) if np.all(np.isfinite(x)) else float("inf")
     return bool(mask.any() and errors["with"] < errors["without"]), errors
+
+
+def _refuse_learned(record: Record, before: SDOFSystem, before_values: dict[str, float], after: SDOFSystem,
+                    after_values: dict[str, float], x_raw: np.ndarray, v0: float, held: tuple[float, float],
+                    substeps: int, folder: Path) -> tuple[dict | None, dict[str, float]]:
+    """Why the learned force of the run in ``folder`` is not kept (None: it is), and both
+    held-out errors."""
+    kept, errors = _learned_predicts(record, before, before_values, after, after_values, x_raw, v0, held, substeps)
+    if kept:
+        return None, errors
+    note = (f"the learned force predicts the held-out part worse (NRMSE {errors['with']:.3g}) than the model "
+            f"it extends ({errors['without']:.3g}): not kept")
+    log.info("%s: %s", folder.name, note)
+    return {"effect": LEARNED, "folder": folder.name, "heldout_nrmse": errors, "note": note}, errors
 
 
 def _save_unexplained(path: Path, record: Record, system: SDOFSystem, values: dict[str, float], x_raw: np.ndarray,
