@@ -424,13 +424,10 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
                                                      x_raw, float(s.v[0]), held, int(dcfg.substeps), folder)
             if out["refused"] is not None:  # a network that fits the fitting part but predicts worse
                 break
-            row = {**row, "heldout_nrmse": errors}
         out["causes"].append(cause)
         out["steps"].append({"step": k, "effect": cause, "folder": folder.name, "equation": system.describe(ext_values),
-                             "evidence": {key: row.get(key) for key in ("score", "delta_bic", "explained", "cv_gain",
-                                                                        "heldout_gain", "force_share", "source",
-                                                                        "heldout_nrmse") if key in row or
-                                          key != "heldout_nrmse"}})
+                             "evidence": {**{key: row.get(key) for key in _ROW_EVIDENCE},
+                                          **({"heldout_nrmse": errors} if cause == LEARNED else {})}})
         out.update(system=system, values=ext_values, metrics=metrics)
         log.info("step %d: extended with %s: %s", k, cause, system.describe(ext_values))
         node, values = ext_node, ext_values
@@ -497,6 +494,8 @@ def _confirm(cfg: DictConfig, record: Record, system: SDOFSystem, values: dict[s
 
 
 LEARNED = "learned_force"
+#: what each step keeps of the row that named its effect
+_ROW_EVIDENCE = ("score", "delta_bic", "explained", "cv_gain", "heldout_gain", "force_share", "source")
 #: what each step keeps of the next screening's rows: the evidence behind the next name
 _STEP_EVIDENCE = ("effect", "score", "delta_bic", "explained", "cv_gain", "heldout_gain", "force_share", "passes",
                   "persists", "heldout_miss", "heldout_small", "note", "parameters", "source")
