@@ -78,7 +78,8 @@ def test_generalize_task_writes_figures_and_table(tmp_path):
     gcfg = make_cfg(["excitation.duration=12", "model.schedule.max_windows=1", "model.schedule.pretrain_iters=150",
                      "model.schedule.pretrain_iters_window=150", "model.schedule.max_iters=200",
                      "generalization.max_cases=1",
-                     "generalization.duration=4", "generalization.iterations=50", "generalization.split_tol=1e9",
+                     "generalization.duration=4", "generalization.iterations=50", "generalization.lbfgs_steps=3",
+                     "generalization.split_tol=1e9",
                      "logger=none"], tmp_path,
                     config_name="generalize")
     summary = generalize(gcfg)

@@ -140,15 +140,15 @@ def test_interval_coverage_over_seeds():
     most draws, and their width follows the Cramer-Rao bound."""
     s = Duffing()
     truth = {k: v for k, v in s.true_values().items() if k != "m"}  # the mass is known
-    covered, ratios, errs = 0, [], []
+    covered, ratios, crb = 0, [], None
     for seed in range(8):
         r = synthetic(s, "kobe", duration=20.0, noise=0.05, data_seed=100 + seed)
         res = refine(s, r, {"guess": {"c": 0.55, "k1": 14.0, "k3": 105.0}}, RefineSettings(states="measured"))
         for n in truth:
             lo, hi = res.intervals[n]["ci95"]
             covered += lo <= truth[n] <= hi
-            errs.append((res.params[n] - truth[n]) / truth[n])
-        crb = cramer_rao(s, s.true_values(), r.t, r.f, 0.05)["std_pct"]
+        if crb is None:  # the bound depends on the excitation and the noise level, not on the draw
+            crb = cramer_rao(s, s.true_values(), r.t, r.f, 0.05)["std_pct"]
         ratios += [res.intervals[n]["rel_std_pct"] / crb[n] for n in truth]
     assert covered >= 20, covered  # of 24 (95 % expects 22.8)
     assert 0.7 < np.median(ratios) < 1.4, ratios
@@ -231,7 +231,7 @@ def test_a_start_where_single_shooting_fails_and_multiple_shooting_succeeds(tmp_
     system = hydra.utils.instantiate(cfg.system)
     r = build_record(cfg, system)
     truth = system.true_values()
-    oe = output_error(r, system, init=start, max_nfev=60)
+    oe = output_error(r, system, init=start, max_nfev=20)  # in its basin's end by then (60 give the same 3 digits)
     assert max(abs(oe.params[k] - truth[k]) / truth[k] for k in start) > 0.1, oe.params
     res = refine(system, r, {"start": start}, RefineSettings(states="measured"))
     assert max(abs(res.params[k] - truth[k]) / truth[k] for k in start) < 1e-4, res.params

@@ -48,9 +48,12 @@ class Dual:
         return f"Dual(v={self.v!r}, d.shape={self.d.shape})"
 
     def __getitem__(self, idx: Any) -> "Dual":
-        idx_t = idx if isinstance(idx, tuple) else (idx,)
-        didx = idx_t + (slice(None),) if any(i is Ellipsis for i in idx_t) else idx_t
-        return Dual(self.v[idx], self.d[didx])
+        # an integrator indexes at every step: a loop, not any() over a generator
+        idx_t = idx if type(idx) is tuple else (idx,)
+        for i in idx_t:
+            if i is Ellipsis:  # the derivative axis stays last
+                return Dual(self.v[idx], self.d[idx_t + (slice(None),)])
+        return Dual(self.v[idx], self.d[idx_t])
 
     def __setitem__(self, idx: Any, value: Any) -> None:
         idx_t = idx if isinstance(idx, tuple) else (idx,)
@@ -78,6 +81,10 @@ class Dual:
         if isinstance(o, Dual):
             return Dual(self.v + o.v, self.d + o.d)
         v = self.v + o
+        if np.shape(v) == self.v.shape:  # a read-only view, as broadcast_to gives, at a tenth of its cost
+            d = self.d.view()
+            d.flags.writeable = False
+            return Dual(v, d)
         return Dual(v, np.broadcast_to(self.d, v.shape + self.d.shape[-1:]))
 
     __radd__ = __add__

