@@ -166,6 +166,50 @@ def storey_scaling() -> list[dict]:
     return out
 
 
+def simulation_ms(reps: int = 3) -> list[dict]:
+    """What simulation costs, the work behind data, refinement, output error and diagnosis:
+    ground truth (LSODA, rtol 1e-10) of 25 s at dt 0.01 s, and over the same record one
+    output-error step (residuals and finite-difference Jacobian, one RK4 batch) and one
+    refinement linearisation (residuals and exact Jacobian by dual numbers, 1 s segments)."""
+    import numpy as np
+
+    from pidyn.excitation import prepare
+    from pidyn.refine import RefineSettings
+    from pidyn.refine.problem import ShootingProblem
+    from pidyn.refine.stage import build_problem
+    from pidyn.data.sources import synthetic_from_motion
+    from pidyn.refine import record_channels, segment_bounds
+    from pidyn.simulate import simulate
+    from pidyn.systems import BoucWen, Duffing, ShearBuilding
+
+    def best(fn) -> float:
+        times = []
+        for _ in range(reps):
+            t0 = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t0)
+        return 1e3 * min(times)
+
+    gm = prepare("el_centro", dt=0.01, duration=25.0)
+    out = []
+    for system in (Duffing(), BoucWen(), ShearBuilding()):
+        truth = system.true_values()
+        row = {"system": system.name, "truth_ms": best(lambda: simulate(system, truth, gm, gm.t))}
+        rec = synthetic_from_motion(system, gm, noise=0.0, data_seed=0, params=truth)
+        oe = ShootingProblem(system, rec.t, rec.f, record_channels(rec, system.n_dof), segment_bounds(rec.t, None), 4,
+                             fixed_state0=np.zeros(system.n_state))
+        th = oe.pack(truth, np.zeros((1, system.n_state)))[:oe.n_theta]
+        row["output_error_step_ms"] = best(lambda: oe.residuals_and_fd_jacobian(th))
+        problem = build_problem(system, rec, RefineSettings(initial_state="free"))
+        b = problem.bounds[:-1]
+        states = np.hstack([rec.clean.x[b], rec.clean.v[b]] + ([rec.clean.z[b]] if system.n_latent else []))
+        u = problem.pack(truth, states)
+        row["linearisation_ms"] = best(lambda: problem.linearize(u))
+        out.append(row)
+        print(row, flush=True)
+    return out
+
+
 def lightning_overhead(n_iter: int = 1500, repeats: int = 3) -> dict:
     """Median over ``repeats`` alternating pairs, so that a load on the other core shifts both."""
     runs = [_overhead_once(n_iter) for _ in range(repeats)]
@@ -259,6 +303,7 @@ def main() -> None:
     res["gpu_ms_per_iteration"] = gpu_ms()
     res["lightning_overhead"] = lightning_overhead()
     res["storeys"] = storey_scaling()
+    res["simulation"] = simulation_ms()
     if not a.quick:
         res["end_to_end"] = [end_to_end([]), end_to_end(["system=bouc_wen"])]
     elif (OUT / "bench.json").exists():  # keep the last full run's end-to-end rows
@@ -295,6 +340,12 @@ def write_markdown(res: dict) -> None:
               "linearisation (residuals + exact Jacobian) | peak memory MB |", "|---|---|---|---|---|"]
     lines += [f"| {r['storeys']} | {r['unknowns']} | {r['ms_per_iteration']:.1f} | {r['ms_per_linearisation']:.0f} | "
               f"{r['peak_rss_mb']:.0f} |" for r in res["storeys"]]
+    if "simulation" in res:
+        lines += ["", "## Simulation (El Centro 25 s at dt 0.01 s, RK4 with 4 substeps; best of 3)\n",
+                  "| system | ground truth (LSODA) ms | output-error step (residuals + FD Jacobian) ms | "
+                  "refinement linearisation (residuals + exact Jacobian, 1 s segments) ms |", "|---|---|---|---|"]
+        lines += [f"| {r['system']} | {r['truth_ms']:.0f} | {r['output_error_step_ms']:.0f} | {r['linearisation_ms']:.0f} |"
+                  for r in res["simulation"]]
     if "end_to_end" in res:
         lines += ["", "## End to end" + (f" (from the full run of {res['end_to_end_date']})" if res.get("end_to_end_date") else "") + "\n", "| command | wall s | windows | iterations | errors % |", "|---|---|---|---|---|"]
         for e in res["end_to_end"]:

@@ -436,12 +436,23 @@ class LearnedForce(ForceTerm):
             u = torch.stack([x / self.x_scale, v / self.v_scale], dim=-1)
             return self.net(u)[..., 0] * self.f_scale
         u = np.stack([np.asarray(x, float) / self.x_scale, np.asarray(v, float) / self.v_scale], axis=-1)
-        for layer in self.net:  # the same weights, evaluated in NumPy for simulations
-            if isinstance(layer, torch.nn.Linear):
-                u = u @ layer.weight.detach().cpu().double().numpy().T + layer.bias.detach().cpu().double().numpy()
-            else:
+        layers = self._numpy_layers()  # the same weights, evaluated in NumPy for simulations
+        for i, (w, b) in enumerate(layers):
+            u = u @ w + b
+            if i < len(layers) - 1:  # Linear, Tanh, ..., Linear
                 u = np.tanh(u)
         return u[..., 0] * self.f_scale
+
+    def _numpy_layers(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The linear layers' (W^T, b) in float64, converted again only when training has changed
+        them (an integrator asks at every step)."""
+        linear = [m for m in self.net if isinstance(m, torch.nn.Linear)]
+        key = tuple((id(q), q._version) for m in linear for q in (m.weight, m.bias))
+        cached = getattr(self, "_numpy_cache", None)
+        if cached is None or cached[0] != key:
+            self._numpy_cache = (key, [(m.weight.detach().cpu().double().numpy().copy().T,
+                                        m.bias.detach().cpu().double().numpy().copy()) for m in linear])
+        return self._numpy_cache[1]
 
     def formula(self, p):
         return "f_NN(x, x')"
