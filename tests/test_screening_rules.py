@@ -141,3 +141,25 @@ def test_the_held_out_check_holds_on_a_quiet_held_out_part_with_nothing_hidden()
     assert not heldout_check(x, r.clean.x[:, 0], fit, held, sigma).failed
     xs, _ = smooth_signals(t, x, None, period)
     assert heldout_check(x, r.clean.x[:, 0], fit, held, float(np.std(x - xs))).failed  # the old estimate
+
+
+def test_the_held_out_check_says_so_when_the_held_out_part_holds_no_motion():
+    """A record whose motion dies out before the held-out part (a short strong-motion record
+    at 40 s): the held-out share of almost no signal read 5e146 and the check failed. Now the
+    check says it cannot judge; the same record with motion there is judged as before."""
+    from pidyn.discrepancy.changes import heldout_check
+
+    t = np.arange(0.0, 40.0, 0.01)
+    fit, held = t < 26.0, t >= 26.0
+    sigma = 0.05
+    noise = sigma * np.random.default_rng(0).standard_normal(t.size)
+    dying = np.sin(2 * t) * np.exp(-0.5 * np.maximum(t - 20.0, 0.0))
+    check = heldout_check(dying + noise, 1.02 * dying, fit, held, sigma)
+    assert check.ratio is None and check.nrmse_heldout is None and not check.failed
+    assert check.nrmse_fit is not None and check.nrmse_fit < 0.05
+    assert "no motion above the noise" in check.sentence()
+    lasting = np.sin(2 * t)
+    judged = heldout_check(lasting + noise, 1.02 * lasting, fit, held, sigma)
+    assert judged.ratio is not None and not judged.failed
+    assert heldout_check(lasting + noise, np.sin(2.2 * t), fit, held, sigma).failed is False  # wrong everywhere
+    assert heldout_check(lasting + noise, np.where(fit, lasting, 0.3 * lasting), fit, held, sigma).failed

@@ -30,13 +30,17 @@ CHI2_95 = 3.841
 
 @dataclass
 class HeldoutCheck:
-    nrmse_fit: float  # simulation error above the noise, as a share of the part's RMS
-    nrmse_heldout: float
-    ratio: float
+    nrmse_fit: float | None  # simulation error above the noise, as a share of the part's RMS
+    nrmse_heldout: float | None  # None: the part holds no motion above the noise
+    ratio: float | None
     threshold: float
     failed: bool
 
     def sentence(self) -> str:
+        if self.ratio is None:
+            part = "held-out" if self.nrmse_heldout is None else "fitting"
+            return (f"the held-out check cannot judge the nominal model: the {part} part holds no motion above "
+                    "the noise")
         verb = "fails" if self.failed else "holds"
         fmt = lambda e: f"{e:.3g} of the signal" if e > 0 else "within the noise"  # noqa: E731
         return (f"the nominal model {verb} on the held-out part: simulation error above the noise "
@@ -48,14 +52,21 @@ def heldout_check(x_meas: np.ndarray, x_sim: np.ndarray, fit: np.ndarray, held: 
                   threshold: float = 3.0, floor: float = 0.02) -> HeldoutCheck:
     """Ratio of the held-out to the fitting part's simulation error, each with the noise
     variance removed and divided by the part's RMS; ``floor`` keeps a near-perfect fit from
-    turning a tiny held-out error into a large ratio."""
+    turning a tiny held-out error into a large ratio. A part whose motion is not above the
+    noise (signal power, noise removed, at most the noise power: a record whose strong motion
+    ended before the held-out part) gives no share to compare, and the check says so instead
+    of failing on a division by almost nothing."""
 
-    def excess(mask: np.ndarray) -> float:
+    def excess(mask: np.ndarray) -> float | None:
         e2 = float(np.mean((x_sim[mask] - x_meas[mask]) ** 2))
-        s2 = max(float(np.mean(x_meas[mask] ** 2)) - noise_std**2, 1e-300)
+        s2 = float(np.mean(x_meas[mask] ** 2)) - noise_std**2
+        if not s2 > max(noise_std**2, 1e-300):
+            return None
         return float(np.sqrt(max(e2 - noise_std**2, 0.0) / s2)) if np.isfinite(e2) else float("inf")
 
     n_fit, n_ho = excess(fit), excess(held)
+    if n_fit is None or n_ho is None:
+        return HeldoutCheck(n_fit, n_ho, None, float(threshold), False)
     ratio = n_ho / max(n_fit, floor)
     return HeldoutCheck(n_fit, n_ho, float(ratio), float(threshold), bool(ratio > threshold))
 

@@ -255,7 +255,10 @@ def _evidence_lines(d: dict) -> list[str]:
         lines += [f"Two effects at once: {pair['why']}. {pair['lead']} was named first; the screening of the model "
                   "extended with it had to find the other on its own.", ""]
     hc = d.get("heldout_check")
-    if hc:
+    if hc and hc.get("ratio") is None:
+        part = "held-out" if hc.get("nrmse_heldout") is None else "fitting"
+        lines += [f"Held-out check: none; the {part} part holds no motion above the noise.", ""]
+    elif hc:
         lines += [f"Held-out check: simulation error above the noise {hc['nrmse_heldout']:.3g} of the signal on the "
                   f"held-out part against {hc['nrmse_fit']:.3g} on the fitting part (ratio {hc['ratio']:.3g}; "
                   f"{'beyond' if hc['failed'] else 'within'} the threshold {hc['threshold']:g}).", ""]
