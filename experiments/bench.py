@@ -302,6 +302,8 @@ def main() -> None:
         res = json.loads((OUT / "bench.json").read_text())
         res["simulation"] = simulation_ms()
         res["simulation_date"] = time.strftime("%Y-%m-%d")
+        # the machine may not be the one of the other rows: its taylor/float32 iteration, to compare
+        res["simulation_reference_ms"] = per_iteration_ms(torch.float32, "taylor")
         (OUT / "bench.json").write_text(json.dumps(res, indent=2))
         write_markdown(res)
         return
@@ -355,6 +357,9 @@ def write_markdown(res: dict) -> None:
     if "simulation" in res:
         when = f", measured {res['simulation_date']} by `python experiments/bench.py --simulation`" \
             if res.get("simulation_date") else ""
+        if res.get("simulation_reference_ms"):
+            when += (f" on a machine where the taylor/float32 iteration above took "
+                     f"{res['simulation_reference_ms']:.2f} ms")
         lines += ["", f"## Simulation (El Centro 25 s at dt 0.01 s, RK4 with 4 substeps; best of 3{when})\n",
                   "| system | ground truth (LSODA) ms | output-error step (residuals + FD Jacobian) ms | "
                   "refinement linearisation (residuals + exact Jacobian, 1 s segments) ms |", "|---|---|---|---|"]
