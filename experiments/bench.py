@@ -176,12 +176,10 @@ def simulation_ms(reps: int = 3) -> list[dict]:
     refinement linearisation (residuals and exact Jacobian by dual numbers, 1 s segments)."""
     import numpy as np
 
-    from pidyn.excitation import prepare
-    from pidyn.refine import RefineSettings
-    from pidyn.refine.problem import ShootingProblem
-    from pidyn.refine.stage import build_problem
     from pidyn.data.sources import synthetic_from_motion
-    from pidyn.refine import record_channels, segment_bounds
+    from pidyn.excitation import prepare
+    from pidyn.refine import RefineSettings, ShootingProblem, record_channels, segment_bounds
+    from pidyn.refine.stage import build_problem
     from pidyn.simulate import simulate
     from pidyn.systems import BoucWen, Duffing, ShearBuilding
 
