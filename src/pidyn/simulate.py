@@ -43,7 +43,7 @@ def simulate(
 
     LSODA runs through ``odeint``: the same Fortran solver as ``solve_ivp(method="LSODA")``, but
     its steps stay in Fortran instead of returning to Python after each one (tens of thousands
-    per record at this tolerance, the kinks of the excitation keep them short), 1.3-1.9x faster
+    per record at this tolerance, the kinks of the excitation keep them short), 1.3-2.4x faster
     for the same accuracy. Other methods go through ``solve_ivp``.
     """
     n, nz = system.n_dof, system.n_latent
