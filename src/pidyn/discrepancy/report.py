@@ -255,9 +255,11 @@ def _evidence_lines(d: dict) -> list[str]:
         lines += [f"Two effects at once: {pair['why']}. {pair['lead']} was named first; the screening of the model "
                   "extended with it had to find the other on its own.", ""]
     hc = d.get("heldout_check")
-    if hc and hc.get("ratio") is None:
-        part = "held-out" if hc.get("nrmse_heldout") is None else "fitting"
-        lines += [f"Held-out check: none; the {part} part holds no motion above the noise.", ""]
+    if hc and hc.get("ratio") is None:  # not judged: the check's own sentence says why
+        from pidyn.discrepancy.changes import HeldoutCheck
+
+        why = HeldoutCheck(**hc).sentence()
+        lines += [f"{why[0].upper()}{why[1:]}.", ""]
     elif hc:
         lines += [f"Held-out check: simulation error above the noise {hc['nrmse_heldout']:.3g} of the signal on the "
                   f"held-out part against {hc['nrmse_fit']:.3g} on the fitting part (ratio {hc['ratio']:.3g}; "
