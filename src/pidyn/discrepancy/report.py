@@ -245,6 +245,10 @@ def _evidence_lines(d: dict) -> list[str]:
                   + (f"; a generic f(x, x') removes {st['cv_gain']:.2f} of the residual in cross-validation"
                      if st.get("cv_gain") is not None else "")
                   + ". Compare it with the unexplained force in `figures/learned_force.png` before naming a cause.", ""]
+        if d.get("learned_fit"):
+            lines += [f"After PIDynNet, the {d['learned_fit']['note']} (the network and the physical parameters "
+                      "trained on the simulated response of the fitting part, which is what the held-out check "
+                      "then judges).", ""]
     refused = d.get("learned_force_refused")
     if refused:
         lines += [f"A learned force f(x, x') was tried ({refused['folder']}/) and not kept: {refused['note']}. What "

@@ -25,6 +25,7 @@ from typing import Any
 
 import hydra
 import numpy as np
+import torch
 from omegaconf import DictConfig, OmegaConf, open_dict
 
 from pidyn.baselines.least_squares import output_error
@@ -32,6 +33,7 @@ from pidyn.data.sources import Record
 from pidyn.discrepancy.changes import heldout_check, locate_change, running_estimate
 from pidyn.discrepancy.confirm import Confirmation, confirm, undecided
 from pidyn.discrepancy.effects import EFFECTS, Signals
+from pidyn.discrepancy.learned_fit import fit_learned_force
 from pidyn.discrepancy.report import (plot_learned_force, plot_ranking, plot_residual, plot_response,
                                      plot_running_estimate, write_report)
 from pidyn.discrepancy.residual import band_limited, dominant_period, unexplained_force
@@ -39,6 +41,7 @@ from pidyn.discrepancy.screening import EXCLUSIVE, Thresholds, screen, weak_syst
 from pidyn.discrepancy.weak_form import WeakForm, measurement_noise, smooth_signals, velocity_noise
 from pidyn.reporting import nrmse, write_json
 from pidyn.systems.sdof import SDOFSystem
+from pidyn.systems.terms import LearnedForce
 from pidyn.tasks.train import build_record, identify, simulate_identified
 
 log = logging.getLogger(__name__)
@@ -353,6 +356,7 @@ def _summary(case: _Case, nom: _Nominal, sc, check, change_row: dict | None, ext
         "natural_period": nom.period,
         "thresholds": OmegaConf.to_container(case.dcfg.thresholds, resolve=True),
         "polish": {"nominal": nom.polish_note, "extended": ext["note"]},
+        "learned_fit": ext.get("learned_fit"),
         "pidynnet": {"nominal_errors_pct": nom.metrics.get("error_pct"),
                      "extended_errors_pct": None if ext_metrics is None else ext_metrics.get("error_pct")},
         "hidden": None if truth is None else {"effect": record.meta.get("hidden_effect"), "parameters": truth},
@@ -401,7 +405,7 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
     dcfg = cfg.diagnosis
     run_dir = Path(cfg.paths.output_dir)
     out: dict[str, Any] = {"system": None, "values": None, "metrics": None, "causes": [], "steps": [], "note": None,
-                           "refused": None}
+                           "refused": None, "learned_fit": None}
     node, values = nominal_node, nominal_values
     limit = 1 if forced else int(dcfg.get("max_effects", 3))
     while cause is not None and row is not None and dcfg.extend:
@@ -419,6 +423,8 @@ def _extend_until_explained(cfg: DictConfig, record: Record, nominal_node: dict,
         ext_values = obj["module"].net.params.as_floats()
         if dcfg.polish:  # a held change time is refined here, from where the search put it
             ext_values, out["note"] = _polish(record, _current_system(_release_held(ext_node)), ext_values, dcfg, fit)
+        if cause == LEARNED and (dcfg.get("learned") or {}).get("output_error", True):
+            ext_values, out["learned_fit"] = _train_learned(record, system, ext_values, s, fit, dcfg, folder)
         if cause == LEARNED:
             out["refused"], errors = _refuse_learned(record, _current_system(node), values, system, ext_values,
                                                      x_raw, float(s.v[0]), held, int(dcfg.substeps), folder)
@@ -545,6 +551,27 @@ def _learned_predicts(record: Record, before: SDOFSystem, before_values: dict[st
         x = simulate_identified(system, vals, record, x0=float(x_raw[0]), v0=v0, substeps=substeps)[:, 0]
         errors[key] = nrmse(x[mask], x_raw[mask]) if np.all(np.isfinite(x)) else float("inf")
     return bool(mask.any() and errors["with"] < errors["without"]), errors
+
+
+def _train_learned(record: Record, system: SDOFSystem, values: dict[str, float], s: Signals,
+                   fit: tuple[float, float], dcfg: DictConfig, folder: Path) -> tuple[dict[str, float], dict | None]:
+    """The learned force (weights set in place) and the physical parameters trained further on
+    the simulated response of the fitting part (``pidyn.discrepancy.learned_fit``); the weights
+    are written to ``folder/learned_force.pt`` (the PIDynNet checkpoint there holds the ones
+    before this training)."""
+    lcfg = dcfg.get("learned") or {}
+    period = 2 * np.pi * np.sqrt(values["m"] / max(values.get(s.stiffness, s.k_nominal), 1e-300))
+    res = fit_learned_force(system, values, record, fit, period, smoothed=(s.x, s.v),
+                            periods_per_segment=float(lcfg.get("periods_per_segment", 3.0)),
+                            max_evaluations=int(lcfg.get("max_evaluations", 60)))
+    if res is None:
+        return values, None
+    nets = [t.net.state_dict() for t in system.terms if isinstance(t, LearnedForce)]
+    torch.save({"values": res.values, "networks": nets}, folder / "learned_force.pt")
+    return res.values, {"note": res.note, "loss_before": res.loss_before, "loss_after": res.loss_after,
+                        "evaluations": res.evaluations, "segments": res.segments,
+                        "segment_seconds": res.segment_seconds, "seconds": res.seconds,
+                        "file": f"{folder.name}/learned_force.pt"}
 
 
 def _refuse_learned(record: Record, before: SDOFSystem, before_values: dict[str, float], after: SDOFSystem,
