@@ -39,6 +39,7 @@ from pidyn.discrepancy.hidden import EQUIVALENT  # noqa: E402
 from pidyn.errors import error_pct  # noqa: E402
 
 NAMES = ["none", *sorted(EFFECTS)]
+#: the benchmark's PIDynNet schedule, stated in every row's table; diagnose's default since db7a6c1
 FAST = ["model.schedule.pretrain_iters=300", "model.schedule.pretrain_iters_window=300",
         "model.schedule.max_iters=500"]
 
@@ -224,7 +225,7 @@ def main() -> None:
                     help="first case (with --name: a study of cases FIRST..CASES-1, seeds the benchmark does not use)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=ROOT / "outputs" / "discrepancy_bench")
-    ap.add_argument("--full", action="store_true", help="PIDynNet's default schedule (default: a shorter one)")
+    ap.add_argument("--full", action="store_true", help="no schedule overrides: diagnose's default (the same as FAST since db7a6c1)")
     ap.add_argument("--results", type=Path, default=ROOT / "experiments" / "results")
     ap.add_argument("--kinds", nargs="*", default=None, help=f"a subset of the kinds: {', '.join(BY_LABEL)}")
     ap.add_argument("--rerun", action="store_true", help="ignore the committed table's finished cases")

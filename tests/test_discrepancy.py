@@ -499,6 +499,9 @@ def test_diagnosis_of_an_effect_outside_the_library(effect, tmp_path):
     if d["verdict"] == "unexplained":
         assert d["learned_force"] and (tmp_path / "figures" / "learned_force.png").exists()
         assert "f_NN" in d["extended"]
+        lf = d["learned_fit"]  # trained on the simulated response after PIDynNet, its weights written
+        assert lf["loss_after"] < lf["loss_before"] and (tmp_path / lf["file"]).exists(), lf
+        assert "simulated response" in (tmp_path / "report.md").read_text()
     assert d["gain"]["extended"] < 0.95 * d["gain"]["nominal"]
 
 

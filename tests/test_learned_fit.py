@@ -29,15 +29,16 @@ def _with_network(case) -> tuple:
 
 def test_the_training_integrates_what_the_simulation_integrates():
     """A zero network on clean linear data, the segments started at the true states: the segment
-    loss is the integrators' difference only (RK4 over two samples against four steps per sample,
-    on a rough accelerogram), not a model error."""
+    loss is the integrators' difference only (one RK4 step over four samples, 40 per period,
+    against four steps per sample, on a rough accelerogram), not a model error: below 1e-6 of
+    the signal's variance (it was 2e-3 with the samples at the step's ends and middle)."""
     case = hidden_case(None, seed=2, noise=0.0, duration=14.0, fit_end=11.0)
     system, _ = _with_network(case)
     truth = (case.record.clean.x[:, 0], case.record.clean.v[:, 0])
     res = fit_learned_force(system, dict(NOMINAL), case.record, (0.0, 11.0), PERIOD, smoothed=truth,
                             max_evaluations=1)
     assert res is not None and res.segments >= 2
-    assert res.loss_before < 1e-8, res.note
+    assert res.loss_before < 1e-6, res.note
 
 
 @pytest.mark.parametrize("channels", [("x",), ("a",)])

@@ -7,12 +7,13 @@ the phase walks away (trilinear springs in the diagnosis benchmark: the extended
 simulated even the fitting part worse than the nominal one). Here the network's weights and
 the model's physical parameters are trained further on the simulated response itself, in
 segments with free starting states (multiple shooting without continuity constraints: each
-segment's state is fitted with it), by L-BFGS through a torch RK4. The scheme and the
-excitation interpolation are those of :func:`pidyn.integrate.rk4`, so the NumPy simulation
-that judges the model integrates the force it was trained for.
+segment's state is fitted with it), by L-BFGS through a torch RK4 on the system's own
+``state_rate``. Its excitation quadrature is that of :func:`pidyn.integrate.rk4` (exact for an
+excitation linear between samples), so the NumPy simulation that judges the model integrates
+the force it was trained for.
 
-Every measured channel (x, v, a, each floor) enters the loss, each scaled by its own
-variance over the fitting part, so an accelerometer record is fitted as well as a
+Every measured channel (x, v, a, each floor of a building) enters the loss, each scaled by its
+own variance over the fitting part, so an accelerometer record is fitted as well as a
 displacement one.
 """
 
@@ -30,7 +31,7 @@ from scipy.signal import savgol_filter
 
 from pidyn.data.sources import Record
 from pidyn.params import ParamSpec, from_raw, to_raw
-from pidyn.systems.sdof import SDOFSystem
+from pidyn.systems.base import StructuralSystem
 from pidyn.systems.terms import LearnedForce
 
 log = logging.getLogger(__name__)
@@ -67,12 +68,44 @@ def _free_spec(spec: ParamSpec, value: float) -> ParamSpec:
     return dataclasses.replace(spec, init=value, scale=abs(value) or spec.scale)
 
 
-def _starts(record: Record, system: SDOFSystem, values: dict[str, float], idx: np.ndarray, period: float,
+def _step_forcing(f: np.ndarray, rows: np.ndarray, stride: int, dt: float) -> tuple[np.ndarray, ...]:
+    """The forcing values one RK4 step over ``stride`` samples uses at its start, midpoint and
+    end, so that the step integrates the excitation (linear between its samples) exactly: for
+    y'' = f(t), RK4 advances y' by h/6 (F_a + 4 F_m + F_b) and y by h^2/6 (F_a + 2 F_m), and
+    F_a, F_m are chosen to make those the exact integral and first moment. The samples at the
+    ends and middle would make it Simpson's rule, wrong by the second difference, which is as
+    large as a rough accelerogram itself. For one sample per step it gives F_a = f_a and F_m
+    the linear midpoint, as :func:`pidyn.integrate.rk4` does."""
+    h = stride * dt
+    start = rows[:-1]
+    m0 = np.zeros(start.shape)
+    m1 = np.zeros(start.shape)
+    for j in range(stride):  # sample interval j of the step: f = f_j + (f_j+1 - f_j) u / dt
+        fj, fk = f[start + j], f[start + j + 1]
+        H = h - j * dt
+        m0 += dt * (fj + fk) / 2
+        m1 += H * fj * dt + H * (fk - fj) * dt / 2 - fj * dt**2 / 2 - (fk - fj) * dt**2 / 3
+    f_b = f[rows[1:]]
+    f_m = (6 * m0 / h - f_b - 6 * m1 / h**2) / 2
+    f_a = 6 * m1 / h**2 - 2 * f_m
+    return f_a, f_m, f_b
+
+
+def _learned_terms(system: StructuralSystem) -> list[LearnedForce]:
+    """Every learned force of a model: its own terms, or its storeys' (unwrapped)."""
+    terms = list(getattr(system, "terms", []))
+    for storey in getattr(system, "storeys", []):
+        terms += [getattr(t, "term", t) for t in storey]
+    return [t for t in terms if isinstance(t, LearnedForce)]
+
+
+def _starts(record: Record, system: StructuralSystem, values: dict[str, float], idx: np.ndarray, period: float,
             smoothed: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
     """Initial states (B, n_state) of the segments starting at samples ``idx``: x and x' from
-    ``smoothed`` (the diagnosis's smoothed motion), else from the measured displacement smoothed
-    over a tenth of the period, else from the model's simulation; latent states from the model's
-    simulation. They are trained with the rest; this is only where they start."""
+    ``smoothed`` ((N,) or (N, n_dof), the caller's smoothed motion), else from the measured
+    displacement smoothed over a tenth of the period, else from the model's simulation; latent
+    states from the model's simulation. They are trained with the rest; this is only where
+    they start."""
     from pidyn.integrate import rk4
 
     n = system.n_dof
@@ -84,45 +117,31 @@ def _starts(record: Record, system: SDOFSystem, values: dict[str, float], idx: n
             Y, _ = rk4(system, dict(values), record.t, record.f, np.zeros((1, system.n_state)), substeps=2)
         y0 = np.array(Y[idx, 0, :])
     if smoothed is not None:
-        y0[:, 0], y0[:, 1] = smoothed[0][idx], smoothed[1][idx]
+        y0[:, :n] = np.reshape(smoothed[0], (len(record.t), -1))[idx]
+        y0[:, n:2 * n] = np.reshape(smoothed[1], (len(record.t), -1))[idx]
     elif measured:
         y0[:, :n] = savgol_filter(record.x, width, 3, axis=0)[idx]
         y0[:, n:2 * n] = savgol_filter(record.x, width, 3, deriv=1, delta=record.dt, axis=0)[idx]
     return np.where(np.isfinite(y0), y0, 0.0)
 
 
-def _torch_rate(system: SDOFSystem):
-    slices = system._latent_slices()
-
-    def rate(t, y, p, f):
-        x, v, z = y[..., 0], y[..., 1], y[..., 2:]
-        a = (system.forcing(f, p) - system._restoring(t, x, v, z, p, slices)) / p["m"]
-        parts = [v, a]
-        for term, sl in zip(system.terms, slices):
-            if sl is not None:
-                r = term.latent_rate(t, x, v, z[..., sl], p)
-                parts += [r[..., j] for j in range(term.n_latent)]
-        return torch.stack(parts, -1)
-
-    return rate
-
-
-def fit_learned_force(system: SDOFSystem, values: dict[str, float], record: Record, span: tuple[float, float],
+def fit_learned_force(system: StructuralSystem, values: dict[str, float], record: Record, span: tuple[float, float],
                       period: float, smoothed: tuple[np.ndarray, np.ndarray] | None = None, substeps: int = 2,
                       periods_per_segment: float = 3.0, max_evaluations: int = 60) -> LearnedFit | None:
     """Train ``system``'s learned force(s) and its trainable physical parameters on the
     simulated response over ``span`` (s). The weights are set in place only when the segment
     loss goes down; returns None when the system holds no learned force or the span is too
     short for one segment."""
-    terms = [t for t in system.terms if isinstance(t, LearnedForce)]
-    if not terms or system.n_dof != 1:
+    terms = _learned_terms(system)
+    if not terms:
         return None
+    n = system.n_dof
     t_all = record.t
     i0, i1 = int(np.searchsorted(t_all, span[0])), int(np.searchsorted(t_all, span[1], side="right")) - 1
     # one RK4 step over 2 m samples where the period allows 50 steps of that length (its midpoint is
     # a sample: the excitation is exact there), else ``substeps`` steps per sample, the excitation
     # linear between samples as in pidyn.integrate.rk4
-    half = max(0, int(period / (100.0 * record.dt)))
+    half = max(0, int(period / (80.0 * record.dt)))
     stride = 2 * half if half else 1
     L = stride * max(8 // stride + 1, int(round(periods_per_segment * period / (record.dt * stride))))
     if i1 - i0 < L:
@@ -147,18 +166,14 @@ def fit_learned_force(system: SDOFSystem, values: dict[str, float], record: Reco
         arr = getattr(record, kind)
         if arr is None:
             continue
-        seg = arr[rows, 0]
-        var = float(np.nanvar(arr[i0:i1 + 1, 0])) or 1.0
+        seg = arr[rows]  # (L / stride + 1, B, n_dof), NaN where a floor has no such sensor
+        var = np.nanvar(arr[i0:i1 + 1], axis=0)  # each floor's channel scaled by its own variance
+        var = np.where(np.isfinite(var) & (var > 0), var, 1.0)
         targets.append((kind, torch.tensor(np.nan_to_num(seg), dtype=dtype),
-                        torch.tensor(np.isfinite(seg), dtype=dtype), var))
+                        torch.tensor(np.isfinite(seg), dtype=dtype), torch.tensor(var, dtype=dtype)))
     if stride > 1:
         q, h = 1, stride * record.dt
-        f_a, f_b = record.f[rows[:-1]], record.f[rows[1:]]
-        # the midpoint value whose RK4 weight gives the exact integral of the excitation (linear
-        # between samples) over the step; the sample there would make it Simpson's rule, wrong
-        # by the second difference, which is as large as a rough accelerogram itself
-        inner = sum(record.f[rows[:-1] + j] for j in range(1, stride))
-        f_m = (3.0 * (f_a + f_b) / stride + 6.0 * inner / stride - f_a - f_b) / 4.0
+        f_a, f_m, f_b = _step_forcing(record.f, rows, stride, record.dt)
         t_a = t_all[rows[:-1]]
     else:
         q, h = substeps, record.dt / substeps
@@ -176,7 +191,7 @@ def fit_learned_force(system: SDOFSystem, values: dict[str, float], record: Reco
 
     originals = [t.net for t in terms]
     copies = [copy.deepcopy(t.net).to(dtype) for t in terms]
-    rate = _torch_rate(system)
+    rate = system.state_rate  # torch states in, torch rates out
     fixed = {n: float(v) for n, v in values.items() if n not in free}
 
     def loss_fn() -> torch.Tensor:
@@ -193,12 +208,12 @@ def fit_learned_force(system: SDOFSystem, values: dict[str, float], record: Reco
             if (j + 1) % q == 0:
                 states.append(y)
         Y = torch.stack(states)  # (L / stride + 1, B, n_state)
-        sim = {"x": Y[..., 0], "v": Y[..., 1]}
+        sim = {"x": Y[..., :n], "v": Y[..., n:2 * n]}
         if want_a:
-            sim["a"] = rate(t_rows, Y, p, f_rows)[..., 1]
+            sim["a"] = rate(t_rows, Y, p, f_rows)[..., n:2 * n]
         total = torch.zeros((), dtype=dtype)
         for kind, target, mask, var in targets:
-            total = total + (((sim[kind] - target) ** 2) * mask).sum() / mask.sum().clamp_min(1.0) / var
+            total = total + (((sim[kind] - target) ** 2) * mask / var).sum() / mask.sum().clamp_min(1.0)
         return total
 
     params = [raw, y_raw] + [q for c in copies for q in c.parameters()]

@@ -136,6 +136,8 @@ class SDOFSystem(StructuralSystem):
             for j, q in enumerate(parts):
                 out[..., j] = q
             return out
+        if isinstance(parts[0], torch.Tensor):  # torch states (a learned force trained by output error)
+            return torch.stack(parts, dim=-1)
         return np.stack(parts, axis=-1)
 
     def rhs(self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]) -> np.ndarray:

@@ -277,6 +277,8 @@ class ShearBuilding(StructuralSystem):
                         parts += [rate[..., j] for j in range(term.n_latent)]
         if all(isinstance(q, (float, np.floating)) for q in parts):  # one plain state (an integrator's step)
             return np.array(parts, dtype=float)
+        if isinstance(parts[0], torch.Tensor):  # torch states (a learned force trained by output error)
+            return torch.stack(parts, dim=-1)
         return np.stack(parts, axis=-1)
 
     def rhs(self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]) -> np.ndarray:
