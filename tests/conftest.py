@@ -19,6 +19,12 @@ if os.environ.get("PYTEST_XDIST_WORKER"):  # one torch thread per worker: the wo
     torch.set_num_threads(1)
 
 
+def pytest_collection_modifyitems(config, items):
+    """The slow tests first (a stable sort, otherwise in file order): a minute-long test that
+    starts last keeps one worker busy while the others idle."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 @pytest.fixture(autouse=True)
 def _clean_state():
     GlobalHydra.instance().clear()

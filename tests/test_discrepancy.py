@@ -491,8 +491,8 @@ def test_diagnosis_of_an_effect_outside_the_library(effect, tmp_path):
     another; either way the extended model gains on the held-out data."""
     from pidyn.tasks.diagnose import diagnose
 
-    cfg = make_cfg([f"data.source.effect={effect}", "noise=0.02", "data_seed=5", *FAST], tmp_path,
-                   config_name="diagnose")
+    cfg = make_cfg([f"data.source.effect={effect}", "noise=0.02", "data_seed=5", "diagnosis.learned.max_evaluations=30",
+                    *FAST], tmp_path, config_name="diagnose")
     d = diagnose(cfg)
     assert d["verdict"] in ("unexplained", "discrepancy")
     assert set(d["causes"]) <= EQUIVALENT[effect], d["causes"]
@@ -501,7 +501,7 @@ def test_diagnosis_of_an_effect_outside_the_library(effect, tmp_path):
         assert "f_NN" in d["extended"]
         lf = d["learned_fit"]  # trained on the simulated response after PIDynNet, its weights written
         assert lf["loss_after"] < lf["loss_before"] and (tmp_path / lf["file"]).exists(), lf
-        assert "simulated response" in (tmp_path / "report.md").read_text()
+        assert "trained further on the simulated response" in (tmp_path / "report.md").read_text()
     assert d["gain"]["extended"] < 0.95 * d["gain"]["nominal"]
 
 

@@ -41,12 +41,13 @@ def test_the_training_integrates_what_the_simulation_integrates():
     assert res.loss_before < 1e-6, res.note
 
 
-@pytest.mark.parametrize("channels", [("x",), ("a",)])
+@pytest.mark.slow
+@pytest.mark.parametrize("channels", [("a",)])  # displacements: the diagnosis's own test (test_discrepancy)
 def test_a_learned_force_trained_on_the_response_predicts_a_trilinear_spring(channels):
     """A trilinear spring, outside the library. The network started, as the diagnosis starts it,
-    at the force the nominal model leaves unexplained pointwise predicts the held-out part no
-    better than the nominal model; trained on the fitting part's response it predicts it far
-    better, from displacements or from accelerometers alone."""
+    at the force the nominal model leaves unexplained pointwise predicts the held-out motion
+    with NRMSE 0.23 (the nominal model 0.35); trained on the response of the fitting part,
+    measured here by an accelerometer alone, 0.067."""
     case = hidden_case("trilinear_spring", seed=5, noise=0.05, duration=14.0, fit_end=9.0)
     r = case.record
     system, term = _with_network(case)

@@ -245,10 +245,13 @@ def _evidence_lines(d: dict) -> list[str]:
                   + (f"; a generic f(x, x') removes {st['cv_gain']:.2f} of the residual in cross-validation"
                      if st.get("cv_gain") is not None else "")
                   + ". Compare it with the unexplained force in `figures/learned_force.png` before naming a cause.", ""]
-        if d.get("learned_fit"):
-            lines += [f"After PIDynNet, the {d['learned_fit']['note']} (the network and the physical parameters "
-                      "trained on the simulated response of the fitting part, which is what the held-out check "
-                      "then judges).", ""]
+        lf = d.get("learned_fit")
+        if lf:
+            lines += ["After PIDynNet, the network and the physical parameters were trained further on the simulated "
+                      "response of the fitting part (a free simulation is what the held-out comparison measures): "
+                      f"{lf['segments']} segments of {lf['segment_seconds']:.3g} s, {lf['evaluations']} evaluations, "
+                      f"{lf['seconds']:.1f} s; segment loss {lf['loss_before']:.3g} -> {lf['loss_after']:.3g} "
+                      "(mean squared error over the response's variance).", ""]
     refused = d.get("learned_force_refused")
     if refused:
         lines += [f"A learned force f(x, x') was tried ({refused['folder']}/) and not kept: {refused['note']}. What "
