@@ -135,12 +135,12 @@ def fit_learned_force(system: StructuralSystem, values: dict[str, float], record
     terms = _learned_terms(system)
     if not terms:
         return None
-    n = system.n_dof
+    nd = system.n_dof
     t_all = record.t
     i0, i1 = int(np.searchsorted(t_all, span[0])), int(np.searchsorted(t_all, span[1], side="right")) - 1
-    # one RK4 step over 2 m samples where the period allows 50 steps of that length (its midpoint is
-    # a sample: the excitation is exact there), else ``substeps`` steps per sample, the excitation
-    # linear between samples as in pidyn.integrate.rk4
+    # one RK4 step over 2 m samples where the period allows 40 steps of that length (the forcing
+    # moment-matched, see _step_forcing), else ``substeps`` steps per sample, the excitation linear
+    # between samples as in pidyn.integrate.rk4
     half = max(0, int(period / (80.0 * record.dt)))
     stride = 2 * half if half else 1
     L = stride * max(8 // stride + 1, int(round(periods_per_segment * period / (record.dt * stride))))
@@ -172,12 +172,12 @@ def fit_learned_force(system: StructuralSystem, values: dict[str, float], record
         targets.append((kind, torch.tensor(np.nan_to_num(seg), dtype=dtype),
                         torch.tensor(np.isfinite(seg), dtype=dtype), torch.tensor(var, dtype=dtype)))
     if stride > 1:
-        q, h = 1, stride * record.dt
+        per_sample, h = 1, stride * record.dt
         f_a, f_m, f_b = _step_forcing(record.f, rows, stride, record.dt)
         t_a = t_all[rows[:-1]]
     else:
-        q, h = substeps, record.dt / substeps
-        frac = np.arange(substeps)[:, None, None] / substeps  # (q, 1, 1)
+        per_sample, h = substeps, record.dt / substeps
+        frac = np.arange(substeps)[:, None, None] / substeps  # (substeps, 1, 1)
         f0, f1 = record.f[rows[:-1]][None], record.f[rows[1:]][None]
         df = (f1 - f0) / substeps
         f_a = (f0 + frac * (f1 - f0)).transpose(1, 0, 2).reshape(-1, len(idx))
@@ -205,18 +205,18 @@ def fit_learned_force(system: StructuralSystem, values: dict[str, float], record
             k3 = rate(ta + 0.5 * h, y + (0.5 * h) * k2, p, f_m[j])
             k4 = rate(ta + h, y + h * k3, p, f_b[j])
             y = y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-            if (j + 1) % q == 0:
+            if (j + 1) % per_sample == 0:
                 states.append(y)
         Y = torch.stack(states)  # (L / stride + 1, B, n_state)
-        sim = {"x": Y[..., :n], "v": Y[..., n:2 * n]}
+        sim = {"x": Y[..., :nd], "v": Y[..., nd:2 * nd]}
         if want_a:
-            sim["a"] = rate(t_rows, Y, p, f_rows)[..., n:2 * n]
+            sim["a"] = rate(t_rows, Y, p, f_rows)[..., nd:2 * nd]
         total = torch.zeros((), dtype=dtype)
         for kind, target, mask, var in targets:
             total = total + (((sim[kind] - target) ** 2) * mask / var).sum() / mask.sum().clamp_min(1.0)
         return total
 
-    params = [raw, y_raw] + [q for c in copies for q in c.parameters()]
+    params = [raw, y_raw] + [w for c in copies for w in c.parameters()]
     opt = torch.optim.LBFGS(params, lr=1.0, max_iter=max_evaluations, max_eval=max_evaluations,
                             line_search_fn="strong_wolfe", tolerance_grad=1e-10, tolerance_change=1e-12,
                             history_size=20)
@@ -250,11 +250,11 @@ def fit_learned_force(system: StructuralSystem, values: dict[str, float], record
     out_values = dict(values)
     if after < before:
         with torch.no_grad():
-            for i, n in enumerate(free):
-                out_values[n] = float(from_raw(fspecs[n], best["raw"][i]))
+            for i, name in enumerate(free):
+                out_values[name] = float(from_raw(fspecs[name], best["raw"][i]))
             for o, state in zip(originals, best["nets"]):
-                for q, (_, w) in zip(o.parameters(), state.items()):
-                    q.copy_(w.to(q.dtype))
+                for w, (_, trained) in zip(o.parameters(), state.items()):
+                    w.copy_(trained.to(w.dtype))
     result = LearnedFit(out_values, before, min(after, before), evaluations, len(idx), L * record.dt,
                         time.perf_counter() - start)
     log.info("%s", result.note)
