@@ -125,6 +125,117 @@ def _starts(record: Record, system: StructuralSystem, values: dict[str, float], 
     return np.where(np.isfinite(y0), y0, 0.0)
 
 
+@dataclass
+class _Grid:
+    """The segments and the RK4 steps through them: sample ``rows`` (K, B) fitted per segment
+    (every ``stride``-th sample from each start), and per step (S, B) its start time and the
+    forcing at its start, middle and end; ``per_sample`` steps between fitted samples."""
+
+    idx: np.ndarray
+    rows: np.ndarray
+    length: int
+    h: float
+    per_sample: int
+    t_a: torch.Tensor
+    f_a: torch.Tensor
+    f_m: torch.Tensor
+    f_b: torch.Tensor
+
+
+def _grid(record: Record, span: tuple[int, int], period: float, periods_per_segment: float,
+          substeps: int) -> _Grid | None:
+    """Segments of ``periods_per_segment`` natural periods covering the samples ``span`` (they
+    overlap where the length does not divide it). One RK4 step over 2 m samples where the period
+    allows 40 steps of that length (the forcing moment-matched, see _step_forcing), else
+    ``substeps`` steps per sample, the excitation linear between samples as in pidyn.integrate.rk4."""
+    i0, i1 = span
+    half = max(0, int(period / (80.0 * record.dt)))
+    stride = 2 * half if half else 1
+    length = stride * max(8 // stride + 1, int(round(periods_per_segment * period / (record.dt * stride))))
+    if i1 - i0 < length:
+        return None
+    idx = np.unique(np.round(np.linspace(i0, i1 - length, max(1, -(-(i1 - i0) // length)))).astype(int))
+    rows = idx[None, :] + np.arange(0, length + 1, stride)[:, None]
+    t = record.t
+    if stride > 1:
+        per_sample, h = 1, stride * record.dt
+        f_a, f_m, f_b = _step_forcing(record.f, rows, stride, record.dt)
+        t_a = t[rows[:-1]]
+    else:
+        per_sample, h = substeps, record.dt / substeps
+        frac = np.arange(substeps)[:, None, None] / substeps  # (substeps, 1, 1)
+        f0, f1 = record.f[rows[:-1]][None], record.f[rows[1:]][None]
+        df = (f1 - f0) / substeps
+
+        def steps(v: np.ndarray) -> np.ndarray:  # (substeps, K-1, B) -> (S, B), in time order
+            return v.transpose(1, 0, 2).reshape(-1, len(idx))
+
+        f_a, f_m, f_b = steps(f0 + frac * (f1 - f0)), steps(f0 + frac * (f1 - f0) + 0.5 * df), \
+            steps(f0 + frac * (f1 - f0) + df)
+        t_a = steps(t[rows[:-1]][None] + frac * record.dt)
+    as_t = lambda v: torch.tensor(v, dtype=torch.float64)  # noqa: E731
+    return _Grid(idx, rows, length, h, per_sample, as_t(t_a), as_t(f_a), as_t(f_m), as_t(f_b))
+
+
+def _targets(record: Record, rows: np.ndarray, span: tuple[int, int]) -> list[tuple]:
+    """(kind, values, mask, variance) of every measured channel at ``rows``: (K, B, n_dof), NaN
+    (mask 0) where a floor has no such sensor, each floor scaled by its variance over ``span``."""
+    out = []
+    for kind in _CHANNELS:
+        arr = getattr(record, kind)
+        if arr is None:
+            continue
+        seg = arr[rows]
+        var = np.nanvar(arr[span[0]:span[1] + 1], axis=0)
+        var = np.where(np.isfinite(var) & (var > 0), var, 1.0)
+        out.append((kind, torch.tensor(np.nan_to_num(seg), dtype=torch.float64),
+                    torch.tensor(np.isfinite(seg), dtype=torch.float64), torch.tensor(var, dtype=torch.float64)))
+    return out
+
+
+def _simulate(rate, y: torch.Tensor, p: dict, g: _Grid) -> torch.Tensor:
+    """The states (K, B, n_state) at the fitted samples, by RK4 from ``y`` (B, n_state)."""
+    h = g.h
+    states = [y]
+    for j in range(g.f_a.shape[0]):
+        ta = g.t_a[j]
+        k1 = rate(ta, y, p, g.f_a[j])
+        k2 = rate(ta + 0.5 * h, y + (0.5 * h) * k1, p, g.f_m[j])
+        k3 = rate(ta + 0.5 * h, y + (0.5 * h) * k2, p, g.f_m[j])
+        k4 = rate(ta + h, y + h * k3, p, g.f_b[j])
+        y = y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        if (j + 1) % g.per_sample == 0:
+            states.append(y)
+    return torch.stack(states)
+
+
+def _lbfgs_best(loss_fn, params: list[torch.Tensor], keep, max_evaluations: int) -> tuple[float, int, dict]:
+    """L-BFGS on ``loss_fn``; the loss at the start, the evaluations made, and ``keep()`` at the
+    lowest loss seen (with ``loss``; empty if none was finite)."""
+    opt = torch.optim.LBFGS(params, lr=1.0, max_iter=max_evaluations, max_eval=max_evaluations,
+                            line_search_fn="strong_wolfe", tolerance_grad=1e-10, tolerance_change=1e-12,
+                            history_size=20)
+    evaluations, best = 0, {}
+
+    def closure() -> torch.Tensor:
+        nonlocal evaluations
+        opt.zero_grad()
+        loss = loss_fn()
+        evaluations += 1
+        if not torch.isfinite(loss):  # a step into a blow-up: a large loss, no slope; the line search backs off
+            return torch.tensor(1e30, dtype=torch.float64)
+        loss.backward()
+        value = float(loss.detach())
+        if not best or value < best["loss"]:
+            best.update(keep(), loss=value)
+        return loss
+
+    with torch.no_grad():
+        before = float(loss_fn())
+    opt.step(closure)
+    return before, evaluations, best
+
+
 def fit_learned_force(system: StructuralSystem, values: dict[str, float], record: Record, span: tuple[float, float],
                       period: float, smoothed: tuple[np.ndarray, np.ndarray] | None = None, substeps: int = 2,
                       periods_per_segment: float = 3.0, max_evaluations: int = 60) -> LearnedFit | None:
@@ -133,116 +244,42 @@ def fit_learned_force(system: StructuralSystem, values: dict[str, float], record
     loss goes down; returns None when the system holds no learned force or the span is too
     short for one segment."""
     terms = _learned_terms(system)
-    if not terms:
+    samples = (int(np.searchsorted(record.t, span[0])), int(np.searchsorted(record.t, span[1], side="right")) - 1)
+    g = None if not terms else _grid(record, samples, period, periods_per_segment, substeps)
+    if g is None:
         return None
-    nd = system.n_dof
-    t_all = record.t
-    i0, i1 = int(np.searchsorted(t_all, span[0])), int(np.searchsorted(t_all, span[1], side="right")) - 1
-    # one RK4 step over 2 m samples where the period allows 40 steps of that length (the forcing
-    # moment-matched, see _step_forcing), else ``substeps`` steps per sample, the excitation linear
-    # between samples as in pidyn.integrate.rk4
-    half = max(0, int(period / (80.0 * record.dt)))
-    stride = 2 * half if half else 1
-    L = stride * max(8 // stride + 1, int(round(periods_per_segment * period / (record.dt * stride))))
-    if i1 - i0 < L:
-        return None
-    n_seg = max(1, -(-(i1 - i0) // L))  # cover the span, the segments overlapping where L does not divide it
-    idx = np.unique(np.round(np.linspace(i0, i1 - L, n_seg)).astype(int))
-    start = time.perf_counter()
-    dtype = torch.float64
+    start, dtype, nd = time.perf_counter(), torch.float64, system.n_dof
     specs = {s.name: s for s in system.param_specs()}
-    free = [n for n, s in specs.items() if s.trainable and n in values]
-    fspecs = {n: _free_spec(specs[n], float(values[n])) for n in free}
-    raw = torch.tensor([to_raw(fspecs[n], float(values[n])) for n in free], dtype=dtype, requires_grad=True)
-
-    y0_np = _starts(record, system, values, idx, period, smoothed)
-    y_scale = np.maximum(np.abs(y0_np).max(0), 1e-12)
-    y_raw = torch.tensor(y0_np / y_scale, dtype=dtype, requires_grad=True)
-    y_scale_t = torch.tensor(y_scale, dtype=dtype)
-
-    rows = idx[None, :] + np.arange(0, L + 1, stride)[:, None]  # (L / stride + 1, B) fitted samples per segment
-    targets = []
-    for kind in _CHANNELS:
-        arr = getattr(record, kind)
-        if arr is None:
-            continue
-        seg = arr[rows]  # (L / stride + 1, B, n_dof), NaN where a floor has no such sensor
-        var = np.nanvar(arr[i0:i1 + 1], axis=0)  # each floor's channel scaled by its own variance
-        var = np.where(np.isfinite(var) & (var > 0), var, 1.0)
-        targets.append((kind, torch.tensor(np.nan_to_num(seg), dtype=dtype),
-                        torch.tensor(np.isfinite(seg), dtype=dtype), torch.tensor(var, dtype=dtype)))
-    if stride > 1:
-        per_sample, h = 1, stride * record.dt
-        f_a, f_m, f_b = _step_forcing(record.f, rows, stride, record.dt)
-        t_a = t_all[rows[:-1]]
-    else:
-        per_sample, h = substeps, record.dt / substeps
-        frac = np.arange(substeps)[:, None, None] / substeps  # (substeps, 1, 1)
-        f0, f1 = record.f[rows[:-1]][None], record.f[rows[1:]][None]
-        df = (f1 - f0) / substeps
-        f_a = (f0 + frac * (f1 - f0)).transpose(1, 0, 2).reshape(-1, len(idx))
-        f_m = (f0 + frac * (f1 - f0) + 0.5 * df).transpose(1, 0, 2).reshape(-1, len(idx))
-        f_b = (f0 + frac * (f1 - f0) + df).transpose(1, 0, 2).reshape(-1, len(idx))
-        t_a = (t_all[rows[:-1]][None] + frac * record.dt).transpose(1, 0, 2).reshape(-1, len(idx))
-    f_a, f_m, f_b, t_a = (torch.tensor(v, dtype=dtype) for v in (f_a, f_m, f_b, t_a))
-    f_rows = torch.tensor(record.f[rows], dtype=dtype)
-    t_rows = torch.tensor(t_all[rows], dtype=dtype)
-    want_a = any(k == "a" for k, *_ in targets)
-
-    originals = [t.net for t in terms]
-    copies = [copy.deepcopy(t.net).to(dtype) for t in terms]
-    rate = system.state_rate  # torch states in, torch rates out
-    fixed = {n: float(v) for n, v in values.items() if n not in free}
+    free = [name for name, s in specs.items() if s.trainable and name in values]
+    fspecs = {name: _free_spec(specs[name], float(values[name])) for name in free}
+    raw = torch.tensor([to_raw(fspecs[name], float(values[name])) for name in free], dtype=dtype, requires_grad=True)
+    y0 = _starts(record, system, values, g.idx, period, smoothed)
+    y_scale = torch.tensor(np.maximum(np.abs(y0).max(0), 1e-12), dtype=dtype)
+    y_raw = torch.tensor(y0, dtype=dtype).div(y_scale).requires_grad_(True)
+    targets = _targets(record, g.rows, samples)
+    f_rows, t_rows = (torch.tensor(v[g.rows], dtype=dtype) for v in (record.f, record.t))
+    fixed = {name: float(v) for name, v in values.items() if name not in free}
+    originals, copies = [t.net for t in terms], [copy.deepcopy(t.net).to(dtype) for t in terms]
 
     def loss_fn() -> torch.Tensor:
-        p = {**fixed, **{n: from_raw(fspecs[n], raw[i]) for i, n in enumerate(free)}}
-        y = y_raw * y_scale_t
-        states = [y]
-        for j in range(f_a.shape[0]):
-            ta = t_a[j]
-            k1 = rate(ta, y, p, f_a[j])
-            k2 = rate(ta + 0.5 * h, y + (0.5 * h) * k1, p, f_m[j])
-            k3 = rate(ta + 0.5 * h, y + (0.5 * h) * k2, p, f_m[j])
-            k4 = rate(ta + h, y + h * k3, p, f_b[j])
-            y = y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-            if (j + 1) % per_sample == 0:
-                states.append(y)
-        Y = torch.stack(states)  # (L / stride + 1, B, n_state)
+        p = {**fixed, **{name: from_raw(fspecs[name], raw[i]) for i, name in enumerate(free)}}
+        Y = _simulate(system.state_rate, y_raw * y_scale, p, g)  # torch states in, torch rates out
         sim = {"x": Y[..., :nd], "v": Y[..., nd:2 * nd]}
-        if want_a:
-            sim["a"] = rate(t_rows, Y, p, f_rows)[..., nd:2 * nd]
+        if any(kind == "a" for kind, *_ in targets):
+            sim["a"] = system.state_rate(t_rows, Y, p, f_rows)[..., nd:2 * nd]
         total = torch.zeros((), dtype=dtype)
         for kind, target, mask, var in targets:
             total = total + (((sim[kind] - target) ** 2) * mask / var).sum() / mask.sum().clamp_min(1.0)
         return total
 
-    params = [raw, y_raw] + [w for c in copies for w in c.parameters()]
-    opt = torch.optim.LBFGS(params, lr=1.0, max_iter=max_evaluations, max_eval=max_evaluations,
-                            line_search_fn="strong_wolfe", tolerance_grad=1e-10, tolerance_change=1e-12,
-                            history_size=20)
-    evaluations = 0
-    best: dict = {}
-
-    def closure() -> torch.Tensor:
-        nonlocal evaluations
-        opt.zero_grad()
-        loss = loss_fn()
-        evaluations += 1
-        if not torch.isfinite(loss):  # a step into a blow-up: a large loss, no slope; the line search backs off
-            return torch.tensor(1e30, dtype=dtype)
-        loss.backward()
-        value = float(loss.detach())
-        if not best or value < best["loss"]:
-            best.update(loss=value, raw=raw.detach().clone(),
-                        nets=[copy.deepcopy(c.state_dict()) for c in copies])
-        return loss
+    def keep() -> dict:
+        return {"raw": raw.detach().clone(), "nets": [copy.deepcopy(c.state_dict()) for c in copies]}
 
     try:
         for t, c in zip(terms, copies):
             t.net = c
-        with torch.no_grad():
-            before = float(loss_fn())
-        opt.step(closure)
+        params = [raw, y_raw] + [w for c in copies for w in c.parameters()]
+        before, evaluations, best = _lbfgs_best(loss_fn, params, keep, max_evaluations)
     finally:
         for t, o in zip(terms, originals):
             t.net = o
@@ -255,7 +292,7 @@ def fit_learned_force(system: StructuralSystem, values: dict[str, float], record
             for o, state in zip(originals, best["nets"]):
                 for w, (_, trained) in zip(o.parameters(), state.items()):
                     w.copy_(trained.to(w.dtype))
-    result = LearnedFit(out_values, before, min(after, before), evaluations, len(idx), L * record.dt,
+    result = LearnedFit(out_values, before, min(after, before), evaluations, len(g.idx), g.length * record.dt,
                         time.perf_counter() - start)
     log.info("%s", result.note)
     return result
