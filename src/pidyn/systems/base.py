@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Callable, Literal
+from typing import Any, Callable, Literal
 
 import numpy as np
 import torch
@@ -133,3 +133,9 @@ def merge_specs(defaults: list[ParamSpec], overrides: dict | None) -> list[Param
             o["scale"] = abs(float(o["init"])) or s.scale  # never scale by the (unknown) truth
         out.append(replace(s, **o))
     return out
+
+
+def stack_last(parts: list, like) -> Any:
+    """``parts`` stacked on a new last axis: torch when ``like`` is a tensor (the physics loss, a
+    learned force trained by output error), NumPy otherwise (plain or dual arrays)."""
+    return torch.stack(parts, dim=-1) if isinstance(like, torch.Tensor) else np.stack(parts, axis=-1)

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from pidyn.params import ParamSpec
-from pidyn.systems.base import ExcitationKind, Kinematics, StructuralSystem, merge_specs
+from pidyn.systems.base import ExcitationKind, Kinematics, StructuralSystem, merge_specs, stack_last
 from pidyn.systems.terms import (
     BoucWenHysteresis,
     CubicStiffness,
@@ -136,9 +136,7 @@ class SDOFSystem(StructuralSystem):
             for j, q in enumerate(parts):
                 out[..., j] = q
             return out
-        if isinstance(parts[0], torch.Tensor):  # torch states (a learned force trained by output error)
-            return torch.stack(parts, dim=-1)
-        return np.stack(parts, axis=-1)
+        return stack_last(parts, parts[0])
 
     def rhs(self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]) -> np.ndarray:
         return self.state_rate(t, np.asarray(y, dtype=float), p, f(t))

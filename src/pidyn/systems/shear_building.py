@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from pidyn.params import ParamSpec
-from pidyn.systems.base import ExcitationKind, Kinematics, StructuralSystem, merge_specs
+from pidyn.systems.base import ExcitationKind, Kinematics, StructuralSystem, merge_specs, stack_last
 from pidyn.systems.terms import TERMS, BoucWenHysteresis, ForceTerm, LinearStiffness, ViscousDamping
 
 
@@ -81,10 +81,6 @@ def _per_storey(value: float | Sequence[float], n: int, what: str) -> list[float
     if len(vals) != n:
         raise ValueError(f"shear_building: {what} has {len(vals)} values for {n} storeys; give {n} or one scalar")
     return vals
-
-
-def _stack(parts: list, like) -> Any:
-    return torch.stack(parts, dim=-1) if isinstance(like, torch.Tensor) else np.stack(parts, axis=-1)
 
 
 def _storey_term(spec: Mapping[str, Any], k: float) -> ForceTerm:
@@ -253,7 +249,7 @@ class ShearBuilding(StructuralSystem):
             raise ValueError(f"{self.name}: latent states {self.latent_names} are required")
         rhs = self._floor_forces(k.t, k.x, k.v, k.z, p, f)
         motion = [p[f"m{i + 1}"] * k.a[..., i] - rhs[i] for i in range(self.n_dof)]
-        out = {"motion": _stack(motion, k.x)}
+        out = {"motion": stack_last(motion, k.x)}
         d, dv = self._drifts(k.x, k.v)
         for i, (storey, slices) in enumerate(zip(self.storeys, self._latent_slices())):
             for term, sl in zip(storey, slices):
@@ -277,9 +273,7 @@ class ShearBuilding(StructuralSystem):
                         parts += [rate[..., j] for j in range(term.n_latent)]
         if all(isinstance(q, (float, np.floating)) for q in parts):  # one plain state (an integrator's step)
             return np.array(parts, dtype=float)
-        if isinstance(parts[0], torch.Tensor):  # torch states (a learned force trained by output error)
-            return torch.stack(parts, dim=-1)
-        return np.stack(parts, axis=-1)
+        return stack_last(parts, parts[0])
 
     def rhs(self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]) -> np.ndarray:
         return self.state_rate(t, np.asarray(y, dtype=float), p, f(t))
