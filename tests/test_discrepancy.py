@@ -298,7 +298,7 @@ def test_a_change_in_time_is_located_before_and_after_the_split(t_d):
     part, wrong after it); the whole-record search finds the time inside its interval and the
     size of the drop; the same search on a record with nothing hidden finds nothing."""
     from pidyn.discrepancy.changes import heldout_check, locate_change
-    from pidyn.tasks.train import simulate_identified
+    from pidyn.simulate import simulate_identified
 
     case = hidden_case("stiffness_loss", 21, noise=0.02, params={"t_d": t_d})
     r = case.record
@@ -328,13 +328,13 @@ def test_a_step_found_over_the_whole_record_must_persist():
     fitting part far worse than no step; that step does not persist and nothing is named, the
     split unchanged. A real loss at 9 s is located, and its step fits the held-out rows better."""
     from pidyn.discrepancy.screening import Thresholds
-    from pidyn.tasks.diagnose import _locate_change
+    from pidyn.discrepancy.changes import locate_step
 
     def locate(case):
         r = case.record
         s, weak, values, *_ = _change_rows(case, float(r.t[-1]))
         fit, held = (0.0, case.fit_end), (case.fit_end, float(r.t[-1]))
-        return _locate_change(LinearSDOF(), values, s, r, r.x[:, 0], weak, fit, held, True,
+        return locate_step(LinearSDOF(), values, s, r.f, r.x[:, 0], weak, fit, held, True,
                               {"stiffness_loss": "k", "damping_change": "c"}, Thresholds(), True), fit, held
 
     for seed in (1, 8):  # the whole record's best step: a loss with dBIC below -10
@@ -512,7 +512,7 @@ def test_a_stiffness_that_rises_in_time_is_no_stiffness_loss():
     that is a rise is not named."""
     from pidyn.discrepancy.changes import Change
     from pidyn.discrepancy.screening import _fit_candidate
-    from pidyn.tasks.diagnose import _stiffening
+    from pidyn.discrepancy.changes import is_stiffening
 
     t = np.linspace(0.0, 20.0, 2001)
     x = np.sin(2 * np.pi * 0.6 * t) * np.exp(-0.05 * t)
@@ -529,6 +529,6 @@ def test_a_stiffness_that_rises_in_time_is_no_stiffness_loss():
             p = loss.parameters(best["coef"], best["fixed"], {"k": 15.0})
             assert p["drop"] == pytest.approx(0.2, rel=0.05) and abs(p["t_d"] - 8.0) < 0.6
     rise = Change("stiffness_loss", "k", 9.2, (9.0, 10.1), +0.2, -30.0, 0.8)
-    assert _stiffening(rise)
-    assert not _stiffening(Change("stiffness_loss", "k", 9.2, (9.0, 10.1), -0.2, -30.0, 0.8))
-    assert not _stiffening(Change("damping_change", "c", 9.2, (9.0, 10.1), +1.0, -30.0, 0.8))
+    assert is_stiffening(rise)
+    assert not is_stiffening(Change("stiffness_loss", "k", 9.2, (9.0, 10.1), -0.2, -30.0, 0.8))
+    assert not is_stiffening(Change("damping_change", "c", 9.2, (9.0, 10.1), +1.0, -30.0, 0.8))

@@ -14,7 +14,7 @@ from pidyn.discrepancy.residual import unexplained_force
 from pidyn.reporting import nrmse
 from pidyn.systems.sdof import LinearSDOF
 from pidyn.systems.terms import LearnedForce
-from pidyn.tasks.train import simulate_response
+from pidyn.simulate import simulate_response
 
 NOMINAL = {"m": 1.0, "c": 0.5, "k": 15.0}
 PERIOD = 2 * np.pi / np.sqrt(15.0)

@@ -103,7 +103,7 @@ def test_a_learned_force_is_kept_only_when_it_predicts_the_held_out_part_better(
     started at a force the structure does not have (a softening cubic twice as strong, an extra
     linear spring) predicts it worse and is not."""
     from pidyn.systems.terms import LearnedForce
-    from pidyn.tasks.diagnose import _learned_predicts
+    from pidyn.discrepancy.learned_fit import learned_predicts
 
     case = hidden_case("cubic_stiffness", 5, noise=0.0, sign=1.0)
     rec = case.record
@@ -118,7 +118,7 @@ def test_a_learned_force_is_kept_only_when_it_predicts_the_held_out_part_better(
     for name, force in (("truth", k3 * x ** 3), ("softening", -2 * k3 * x ** 3), ("spring", 5 * x)):
         term = LearnedForce(*scales, seed=0)
         term.fit_to(x[fit], v[fit], force[fit], iters=200)
-        kept[name], errors = _learned_predicts(rec, nominal, values, nominal.with_term(term), values, x,
+        kept[name], errors = learned_predicts(rec, nominal, values, nominal.with_term(term), values, x,
                                                float(v[0]), held, 4)
         assert errors["without"] > 0.3, errors  # the linear model misses the cubic spring
         if name == "truth":

@@ -18,11 +18,14 @@ the figure a user reads the change from.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from pidyn.discrepancy.screening import lstsq
+
+log = logging.getLogger(__name__)
 
 #: chi-square(1) 95 % quantile: the profile-likelihood interval of the change time
 CHI2_95 = 3.841
@@ -175,3 +178,77 @@ def running_estimate(names: list[str], A0: np.ndarray, y: np.ndarray, centers: n
             for j, n in enumerate(names):
                 out[n][i] = theta[j]
     return out
+
+
+def locate_step(nominal, values: dict[str, float], s, f: np.ndarray, x_raw: np.ndarray, weak, fit: tuple[float, float],
+                held: tuple[float, float], mass_known: bool, candidates: dict[str, str], th,
+                whole_record: bool) -> tuple[Change | None, tuple[float, float], tuple[float, float]]:
+    """A step in stiffness or damping: its time, interval and size, and the split to measure it on.
+
+    ``whole_record`` (the nominal model failed on the held-out part): search every row of the
+    record; a change found late or after the split moves the split to halfway between the
+    change and the record's end, the change is then estimated again on the new fitting part
+    only, and the gain is measured on the rest, which no fit has used. Otherwise the search
+    runs on the fitting part (the screening already named the time-varying effect).
+
+    A step that fits the rows after its fitting part worse than no step (held-out gain below
+    ``th.min_step_heldout_gain``) does not persist: a stiffness lower only in the strong motion
+    depends on the amplitude (softening), it is no damage. Nothing is named then, the split stays
+    where it was, and the screening's rule for a step in time holds here too."""
+    from pidyn.discrepancy.effects import EFFECTS
+    from pidyn.discrepancy.screening import weak_system
+
+    names, A0, y = weak_system(nominal, values, s, f, x_raw, weak, mass_known)
+    w = 2 * weak.half + 1
+    t_first, t_last = weak.t[weak.starts], weak.t[weak.starts + w - 1]
+    t_end = float(s.t[-1])
+
+    def search(end: float):
+        rows = t_last <= end + 1e-9
+        n_eff = max(rows.sum() / weak.rows_per_independent, 2.0)
+        return locate_change(names, A0, y, t_first, t_last, rows, s.x, s.v, s.t, weak, n_eff, candidates, values,
+                             heldout=t_first >= end - 1e-9)
+
+    fit0, held0 = fit, held
+    change = search(t_end if whole_record else fit[1])
+    if change is not None and not EFFECTS[change.effect].admissible(change.effect_parameters(), values):
+        log.info("the best step in time, %s, is not one the library can name (outside its range)", change.sentence())
+        return None, fit, held
+    if change is not None and is_stiffening(change):
+        return None, fit, held
+    if change is None or change.delta_bic > -th.min_delta_bic or change.explained < th.min_cv_gain:
+        log.info("no step in %s explains the residual%s", " or ".join(sorted(set(candidates.values()))),
+                 "" if change is None else f" (best: {change.sentence()}, dBIC {change.delta_bic:.1f})")
+        return None, fit, held
+    if whole_record:
+        cut = max(fit[1], change.t_change + 0.5 * (t_end - change.t_change))
+        if cut > fit[1]:
+            log.info("the change lies at %.4g s, late in or beyond the fitting part: fitting now %.4g-%.4g s, "
+                     "held out %.4g-%.4g s", change.t_change, fit[0], cut, cut, held[1])
+            fit, held = (fit[0], cut), (cut, held[1])
+        again = search(fit[1])
+        if again is not None and is_stiffening(again):
+            return None, fit0, held0
+        change = again if again is not None else change
+        if not EFFECTS[change.effect].admissible(change.effect_parameters(), values):
+            log.info("re-estimated on the new fitting part, %s is outside the library's range; none is named",
+                     change.sentence())
+            return None, fit0, held0
+    if not th.step_persists(change.heldout_gain):
+        log.info("%s, but the step does not persist: fitted up to %.4g s it fits the rest worse than no step "
+                 "(held-out gain %.2f); a change in time lasts, a stiffness or damping that differs only in the "
+                 "strong motion depends on the amplitude; none is named", change.sentence(), fit[1], change.heldout_gain)
+        return None, fit0, held0
+    return change, fit, held
+
+
+def is_stiffening(change: Change) -> bool:
+    """A stiffness that rises at some time is not a stiffness loss: under an earthquake it is
+    the mark of a stiffness that depends on the amplitude (softening in the strong motion,
+    stiffer again as the motion dies down), which no change in time explains. Say so, name
+    nothing."""
+    if change.effect != "stiffness_loss" or change.fraction <= 0:
+        return False
+    log.info("the best step in time is a stiffness rise (%s): that is an amplitude-dependent stiffness, not damage; "
+             "no change in time is named", change.sentence())
+    return True

@@ -6,6 +6,8 @@ nominal system as a nested node) rebuilds the extended model exactly.
 
 from __future__ import annotations
 
+from typing import Any
+
 from pidyn.discrepancy.effects import get_effect
 from pidyn.systems.sdof import SDOFSystem
 
@@ -40,3 +42,87 @@ def extended_system(nominal: SDOFSystem, effect: str, effect_params: dict, conte
     if unknown:
         raise ValueError(f"effect '{effect}': cannot hold {sorted(unknown)}; its parameters are {sorted(names)}")
     return nominal.with_term(term, params={n: {"trainable": False} for n in held} or None)
+
+
+# ---------------------------------------------------------------------- config nodes
+# A model of the diagnosis is a plain config node (``_target_`` + arguments) so that every
+# run folder rebuilds it exactly; these helpers build and edit such nodes.
+
+#: the ``_target_`` of an extended model's node
+EXTENSION = "pidyn.discrepancy.extend.extended_system"
+
+
+def system_node(node: Any, inits: dict[str, float], mass: float, identify_mass: bool) -> dict:
+    """A nominal system's config node with data-driven initial values and the mass setting."""
+    out = _plain(node)
+    out["mass"] = float(mass)
+    out["identify_mass"] = bool(identify_mass)
+    params = dict(out.get("params") or {})
+    for n, v in inits.items():
+        if n == "m":
+            continue
+        params[n] = {**dict(params.get(n) or {}), "init": float(v)}
+    out["params"] = params
+    return out
+
+
+def extension_node(node: dict, values: dict[str, float], cause: str, row: dict, context: dict, k: int,
+                   mass_known: bool) -> dict:
+    """The node of step ``k``'s model: the current model (its values; at the first step the
+    screening's refit of the nominal parameters) extended with ``cause`` started at the
+    screening's estimate (``row``); ``context`` is ``Signals.context()``."""
+    refit = {n: v for n, v in row["nominal_refit"].items() if v > 0} if k == 1 else {}
+    inner = node_with_values(node, {**values, **refit})
+    if k == 1:
+        inner = system_node(inner, refit, refit.get("m", values["m"]), not mass_known)
+    out = {"_target_": EXTENSION, "nominal": inner, "effect": cause,
+           "effect_params": {n: (v if isinstance(v, str) else float(v)) for n, v in row["parameters"].items()},
+           "context": context}
+    if row.get("change") is not None:  # located over the record, with an interval: held (see extended_system)
+        out["held"] = ["t_d"]
+    return out
+
+
+def release_held(node: Any) -> dict:
+    """A copy of a system node with every held effect parameter free again (the polish and the
+    output-error check refine a located change time from its located value)."""
+    node = _plain(node)
+    if node.get("_target_") == EXTENSION:
+        node.pop("held", None)
+        node["nominal"] = release_held(node["nominal"])
+    return node
+
+
+def build_system(node: Any) -> SDOFSystem:
+    """The system a node describes."""
+    import hydra
+    from omegaconf import OmegaConf
+
+    return hydra.utils.instantiate(OmegaConf.create(_plain(node)))
+
+
+def node_with_values(node: Any, values: dict[str, float]) -> dict:
+    """A copy of a (possibly nested) system node started from ``values``: the nominal
+    parameters as ``params.<name>.init``, each effect's as its ``effect_params``."""
+    node = _plain(node)
+    if node.get("_target_") == EXTENSION:
+        node["nominal"] = node_with_values(node["nominal"], values)
+        node["effect_params"] = {n: float(values.get(n, v)) for n, v in node["effect_params"].items()}
+        return node
+    params = dict(node.get("params") or {})
+    for n in list(params):
+        if n in values and n != "m":
+            params[n] = {**dict(params[n] or {}), "init": float(values[n])}
+    node["params"] = params
+    return node
+
+
+def _plain(node: Any) -> dict:
+    """A deep plain-dict copy of a node (a DictConfig resolved)."""
+    import copy
+
+    from omegaconf import DictConfig, OmegaConf
+
+    out = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else copy.deepcopy(node)
+    assert isinstance(out, dict)
+    return out

@@ -1,0 +1,397 @@
+"""The diagnosis loop: what does the nominal model get wrong, why, and what does fixing it gain?
+
+1. a data-driven start, then the nominal model on the fitting part (``identify``: PIDynNet,
+   then optionally an output-error polish);
+2. the force it cannot explain, screened against the effect library
+   (``pidyn.discrepancy.screening``): a cause, or ``none``; an effect the weak-form screening
+   leans to without deciding is fitted by output error and named when the simulated response
+   decides for it (``pidyn.discrepancy.confirm``);
+3. the held-out check, and where the structure changed when the model fails there
+   (``pidyn.discrepancy.changes``);
+4. the model extended with the named effect and identified again, screened again, until
+   nothing more passes the evidence (a structured remainder no library effect explains gets a
+   learned force, ``pidyn.discrepancy.learned_fit``);
+5. nominal and extended models simulated over the held-out part and compared.
+
+``identify(node, folder, fit) -> (metrics, system, values)`` identifies the model a config
+node describes on the fitting span ``fit`` and writes its run to ``folder``: the task passes
+it in, so this package never imports the task layer.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from pidyn.baselines.least_squares import output_error
+from pidyn.data.sources import Record
+from pidyn.discrepancy.changes import HeldoutCheck, heldout_check, locate_step
+from pidyn.discrepancy.confirm import Confirmation, confirm, undecided
+from pidyn.discrepancy.effects import EFFECTS, Signals
+from pidyn.discrepancy.extend import (EXTENSION, build_system, extension_node, release_held,  # noqa: F401
+                                      system_node)
+from pidyn.discrepancy.learned_fit import LEARNED, learned_row, refuse_learned, save_unexplained, train_learned_force
+from pidyn.discrepancy.residual import dominant_period
+from pidyn.discrepancy.screening import EXCLUSIVE, Screening, screen
+from pidyn.discrepancy.settings import DiagnosisSettings
+from pidyn.discrepancy.weak_form import WeakForm, measurement_noise, smooth_signals, velocity_noise
+from pidyn.simulate import simulate_identified
+from pidyn.systems.sdof import SDOFSystem
+
+log = logging.getLogger(__name__)
+
+IdentifyFn = Callable[[dict, Path, tuple[float, float]], tuple[dict, SDOFSystem, dict[str, float]]]
+
+#: what each step keeps of the row that named its effect
+ROW_EVIDENCE = ("score", "delta_bic", "explained", "cv_gain", "heldout_gain", "force_share", "source")
+#: what each step keeps of the next screening's rows: the evidence behind the next name
+STEP_EVIDENCE = ("effect", "score", "delta_bic", "explained", "cv_gain", "heldout_gain", "force_share", "passes",
+                 "persists", "heldout_miss", "heldout_small", "note", "parameters", "source")
+
+
+def split_spans(record: Record, fit_share: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Fitting and held-out time spans: the record's own split if it has one, else a share."""
+    sp = (record.meta or {}).get("split")
+    if sp:
+        return (float(sp["fit"][0]), float(sp["fit"][1])), (float(sp["heldout"][0]), float(sp["heldout"][1]))
+    if not 0.1 <= fit_share <= 0.95:
+        raise ValueError(f"diagnosis.fit_share must lie in [0.1, 0.95], got {fit_share}")
+    t0, t1 = float(record.t[0]), float(record.t[-1])
+    cut = t0 + fit_share * (t1 - t0)
+    return (t0, cut), (cut, t1)
+
+
+def stiffness_name(system: SDOFSystem) -> str:
+    names = [s.name for s in system.param_specs()]
+    for n in ("k", "k1"):
+        if n in names:
+            return n
+    raise ValueError(f"nominal system '{system.name}' has no linear stiffness 'k' or 'k1' to extend")
+
+
+@dataclass
+class Case:
+    """One diagnosis: the record and its split, the nominal system and its config node, the
+    settings, and how a model is identified."""
+
+    record: Record
+    base: SDOFSystem
+    base_node: dict
+    effects: dict
+    settings: DiagnosisSettings
+    mass: float | None
+    fit: tuple[float, float]
+    held: tuple[float, float]
+    run_dir: Path
+    identify: IdentifyFn
+
+    @property
+    def mass_known(self) -> bool:
+        return self.mass is not None
+
+    @property
+    def thresholds(self):
+        return self.settings.thresholds
+
+    @property
+    def x_raw(self) -> np.ndarray:
+        return self.record.x[:, 0]
+
+    @property
+    def stiff(self) -> str:
+        return stiffness_name(self.base)
+
+    def mask(self, span: tuple[float, float]) -> np.ndarray:
+        return (self.record.t >= span[0]) & (self.record.t <= span[1])
+
+    def signals(self, period: float, k_nom: float, mass: float) -> tuple[Signals, WeakForm]:
+        """Smoothed x, x' and the weak form, on the time scale of ``period``."""
+        r = self.record
+        v_raw = None if r.v is None else r.v[:, 0]
+        xs, vs = smooth_signals(r.t, self.x_raw, v_raw, period)
+        return (Signals(r.t, xs, vs, mass, k_nom, self.stiff, t_fit_end=self.fit[1],
+                        v_noise=velocity_noise(r.t, self.x_raw, v_raw, period)),
+                WeakForm.for_record(r.t, period))
+
+    def screen(self, system: SDOFSystem, values: dict[str, float], s: Signals, weak: WeakForm,
+               effects: dict | None = None) -> Screening:
+        return screen(system, values, s, self.record.f, self.x_raw, weak, self.fit[1], self.mass_known,
+                      effects=self.effects if effects is None else effects, thresholds=self.thresholds)
+
+    def free_run(self, system: SDOFSystem, values: dict[str, float], v0: float) -> np.ndarray:
+        """The model from the measured initial state over the whole record."""
+        return simulate_identified(system, values, self.record, x0=float(self.x_raw[0]), v0=v0,
+                                   substeps=int(self.settings.substeps))[:, 0]
+
+
+def prepare(record: Record, base: SDOFSystem, base_node: dict, settings: DiagnosisSettings, mass: float | None,
+            run_dir: Path, identify: IdentifyFn) -> Case:
+    """The settings checked against the library and the nominal system, the fit / held-out split."""
+    wanted = list(settings.effects) if settings.effects else list(EFFECTS)
+    unknown = set(wanted) - set(EFFECTS)
+    if unknown:
+        raise ValueError(f"diagnosis.effects: unknown effect(s) {sorted(unknown)}; the library has {sorted(EFFECTS)}")
+    effects = {n: EFFECTS[n] for n in wanted}
+    if not isinstance(base, SDOFSystem):
+        raise ValueError(f"diagnosis needs a single-degree-of-freedom nominal system, got '{base.name}'")
+    already = {t.name for t in base.terms} & set(effects)
+    if already:  # an effect the nominal model already has cannot be what it misses
+        log.info("not screening %s: already in the nominal model", sorted(already))
+        effects = {n: e for n, e in effects.items() if n not in already}
+    if mass is None and record.excitation == "ground":
+        raise ValueError("data.mass is null, but a ground-excited record cannot reveal the mass "
+                         "(m x'' + ... = -m ag is homogeneous in m): give the mass")
+    fit, held = split_spans(record, float(settings.fit_share))
+    log.info("diagnosing '%s' with nominal '%s': fit %.4g-%.4g s, held out %.4g-%.4g s",
+             record.name, base.name, *fit, *held)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    return Case(record, base, base_node, effects, settings, mass, fit, held, run_dir, identify)
+
+
+@dataclass
+class Nominal:
+    node: dict
+    system: SDOFSystem
+    values: dict[str, float]
+    metrics: dict
+    polish_note: str | None
+    s: Signals
+    weak: WeakForm
+    period: float
+
+
+@dataclass
+class Outcome:
+    """Everything the summary and the figures are made of."""
+
+    nominal: Nominal
+    screening: Screening
+    check: HeldoutCheck
+    change_row: dict | None
+    extension: dict
+    causes: list[str]
+    cause: str | None
+    forced: bool
+    confirmation: Confirmation | None
+    pointwise: dict
+    x_nom: np.ndarray
+    x_ext: np.ndarray | None
+
+
+def run(case: Case) -> Outcome:
+    """Steps 1-5 on a prepared case."""
+    values0, period = starting_point(case)
+    nom = identify_nominal(case, values0, period)
+    from pidyn.discrepancy.residual import unexplained_force
+
+    sc = case.screen(nom.system, nom.values, nom.s, nom.weak)
+    pointwise = unexplained_force(nom.system, nom.values, case.record.t, case.x_raw, case.record.f, nom.period)
+    forced = case.settings.force_effect
+    log.info("screening: %s", ", ".join(f"{r['effect']} {r['score']:.1f}" for r in sc.ranking[:4]))
+    # does the nominal model hold on the held-out part? if not, when did the structure change?
+    x_nom = case.free_run(nom.system, nom.values, float(nom.s.v[0]))
+    check, change_row = check_heldout(case, nom, sc, x_nom, bool(forced))
+    cause = change_row["effect"] if change_row is not None else (forced or sc.cause)
+    confirmation = None
+    if cause is None and not forced and sc.verdict == "none":
+        # an effect the weak form leans towards without deciding: the simulated response decides
+        confirmation = confirm_undecided(case, nom.system, nom.values, nom.node, sc, nom.s, 1)
+        if confirmation.row is not None:
+            cause = confirmation.row["effect"]
+    if cause is None and case.settings.learn_unexplained and not forced \
+            and (sc.verdict == "unexplained" or check.failed):
+        cause = LEARNED  # structured, but nothing in the library explains it: learn the force
+    row = None if cause is None else (learned_row(sc.structure) if cause == LEARNED else
+                                      change_row or (confirmation.row if confirmation and confirmation.row else
+                                                     next(r for r in sc.ranking if r["effect"] == cause)))
+    ext = extend_until_explained(case, nom, cause, row, bool(forced))
+    causes = ext["causes"] if case.settings.extend else ([] if cause is None else [cause])
+    x_ext = case.free_run(ext["system"], ext["values"], float(nom.s.v[0])) if ext["system"] is not None else None
+    return Outcome(nom, sc, check, change_row, ext, causes, cause, bool(forced), confirmation, pointwise, x_nom, x_ext)
+
+
+def starting_point(case: Case) -> tuple[dict[str, float], float]:
+    """A data-driven start for the nominal parameters (weak-form least squares, no effect) and
+    the natural period, refined once from the start's own stiffness."""
+    period = dominant_period(case.record.t[case.mask(case.fit)], case.x_raw[case.mask(case.fit)])
+    values0 = {s.name: s.init for s in case.base.param_specs()}
+    if case.mass_known:
+        values0["m"] = float(case.mass)
+    s, weak = case.signals(period, values0[case.stiff], values0.get("m", 1.0))
+    values0.update(case.screen(case.base, values0, s, weak, effects={}).nominal_params)
+    if values0.get(case.stiff, 0) > 0 and values0.get("m", 0) > 0:
+        period = 2 * np.pi * np.sqrt(values0["m"] / values0[case.stiff])
+        s, weak = case.signals(period, values0[case.stiff], values0.get("m", 1.0))
+        values0.update(case.screen(case.base, values0, s, weak, effects={}).nominal_params)
+    log.info("weak-form starting point: %s (natural period %.4g s)", _fmt(values0), period)
+    return values0, period
+
+
+def polish(case: Case, system: SDOFSystem, values: dict[str, float]) -> tuple[dict[str, float], str]:
+    """Output-error least squares on (part of) the fitting span, from ``values``."""
+    st, fit = case.settings, case.fit
+    seg_end = fit[1] if st.polish_seconds is None else min(fit[1], fit[0] + float(st.polish_seconds))
+    seg = case.record.segment(fit[0], seg_end)
+    trainable = {s.name for s in system.param_specs() if s.trainable}
+    res = output_error(seg, system, init={k: v for k, v in values.items() if k in trainable},
+                       substeps=int(st.substeps), max_nfev=int(st.polish_max_nfev))
+    out = dict(values)
+    out.update(res.params)
+    return out, f"output error on {seg.t[0]:.4g}-{seg.t[-1]:.4g} s: {res.note}, {res.seconds:.1f} s"
+
+
+def identify_nominal(case: Case, values0: dict[str, float], period: float) -> Nominal:
+    """The nominal model on the fitting part: PIDynNet, then the output-error polish."""
+    record = case.record
+    node = system_node(case.base_node, {k: v for k, v in values0.items() if v > 0},
+                       values0["m"] if "m" in values0 else 1.0, not case.mass_known)
+    if record.excitation != case.base_node.get("excitation", record.excitation):
+        node["excitation"] = record.excitation
+    metrics, system, values = case.identify(node, case.run_dir / "nominal", case.fit)
+    polish_note = None
+    if case.settings.polish:
+        values, polish_note = polish(case, system, values)
+    s, weak = case.signals(period, values[case.stiff], values0.get("m", 1.0))
+    s.mass = values["m"]
+    return Nominal(node, system, values, metrics, polish_note, s, weak, period)
+
+
+def check_heldout(case: Case, nom: Nominal, sc: Screening, x_nom: np.ndarray,
+                  forced: bool) -> tuple[HeldoutCheck, dict | None]:
+    """The held-out failure check, and where the structure changed when the data say it did
+    (a located change moves ``case.fit`` / ``case.held`` to the change point)."""
+    check = heldout_check(case.x_raw, x_nom, case.mask(case.fit), case.mask(case.held),
+                          measurement_noise(case.record.t, case.x_raw, nom.period),
+                          threshold=float(case.settings.changes.heldout_ratio))
+    log.info("%s", check.sentence())
+    time_effects = {n: p_ for n, p_ in {"stiffness_loss": case.stiff, "damping_change": "c"}.items()
+                    if n in case.effects and p_ in nom.values}
+    if forced or not time_effects or not ((check.failed and sc.cause is None) or sc.cause in time_effects):
+        return check, None
+    change, case.fit, case.held = locate_step(
+        nom.system, nom.values, nom.s, case.record.f, case.x_raw, nom.weak, case.fit, case.held, case.mass_known,
+        {n: p_ for n, p_ in time_effects.items() if sc.cause in (None, n)}, case.thresholds,
+        bool(check.failed and sc.cause is None))
+    if change is None:
+        return check, None
+    log.info("%s", change.sentence())
+    return check, {"effect": change.effect, "parameters": change.effect_parameters(), "nominal_refit": {},
+                   "score": -change.delta_bic, "change": change}
+
+
+def extend_until_explained(case: Case, nom: Nominal, cause: str | None, row: dict | None,
+                           forced: bool) -> dict[str, Any]:
+    """Extend the model with ``cause``, identify it (PIDynNet, polish), screen the extended
+    model against the effects not yet in it, and repeat while one passes the thresholds, up to
+    ``diagnosis.max_effects``. Each step's evidence is kept; the last model carries every
+    named effect. Step k's run is in ``extended/`` (k = 1) or ``extended_<k>/``."""
+    st = case.settings
+    out: dict[str, Any] = {"system": None, "values": None, "metrics": None, "causes": [], "steps": [], "note": None,
+                           "refused": None, "learned_fit": None}
+    node, values = nom.node, nom.values
+    limit = 1 if forced else int(st.max_effects)
+    while cause is not None and row is not None and st.extend:
+        step = _extension_step(case, nom, node, values, cause, row, out)
+        if step is None:  # a learned force that predicts the held-out part worse: not kept
+            break
+        node, values, system = step
+        k = len(out["causes"])
+        if k >= limit:
+            if not forced:
+                log.info("stopping at diagnosis.max_effects=%d effects", limit)
+            break
+        if cause == LEARNED:
+            break  # the learned force takes whatever is left: nothing to screen after it
+        present = set(out["causes"]) | {t.name for t in system.terms}
+        blocked = set().union(*[g for g in EXCLUSIVE if g & present])
+        remaining = {n: e for n, e in case.effects.items() if n not in present | blocked}
+        if not remaining:
+            break
+        cause, row = next_cause(case, system, values, node, remaining, out, nom.s, nom.weak)
+        if cause == LEARNED and LEARNED in out["causes"]:
+            break
+    return out
+
+
+def _extension_step(case: Case, nom: Nominal, node: dict, values: dict[str, float], cause: str, row: dict,
+                    out: dict[str, Any]) -> tuple[dict, dict[str, float], SDOFSystem] | None:
+    """Step k: the current model extended with ``cause``, identified, polished (and a learned
+    force trained on the response); recorded in ``out``. None when a learned force is refused."""
+    st, record, s = case.settings, case.record, nom.s
+    if row.get("score") is not None and not np.isfinite(row["score"]):
+        raise ValueError(f"effect '{cause}' has no physical fit to this record ({row.get('note')})")
+    k = len(out["causes"]) + 1
+    if cause == LEARNED:  # start the network at the force the current model cannot explain
+        path = save_unexplained(case.run_dir / f"unexplained_{k}.npz", record, build_system(node), values,
+                                case.x_raw, case.fit)
+        row = {**row, "parameters": {"init_from": str(path)}}
+    ext_node = extension_node(node, values, cause, row, s.context(), k, case.mass_known)
+    folder = case.run_dir / ("extended" if k == 1 else f"extended_{k}")
+    metrics, system, ext_values = case.identify(ext_node, folder, case.fit)
+    if st.polish:  # a held change time is refined here, from where the search put it
+        ext_values, out["note"] = polish(case, build_system(release_held(ext_node)), ext_values)
+    if cause == LEARNED and st.learned.output_error:
+        ext_values, out["learned_fit"] = train_learned_force(record, system, ext_values, s, case.fit, st.learned,
+                                                             folder)
+    errors = None
+    if cause == LEARNED:
+        out["refused"], errors = refuse_learned(record, build_system(node), values, system, ext_values, case.x_raw,
+                                                float(s.v[0]), case.held, int(st.substeps), folder)
+        if out["refused"] is not None:  # a network that fits the fitting part but predicts worse
+            return None
+    out["causes"].append(cause)
+    out["steps"].append({"step": k, "effect": cause, "folder": folder.name, "equation": system.describe(ext_values),
+                         "evidence": {**{key: row.get(key) for key in ROW_EVIDENCE},
+                                      **({"heldout_nrmse": errors} if cause == LEARNED else {})}})
+    out.update(system=system, values=ext_values, metrics=metrics)
+    log.info("step %d: extended with %s: %s", k, cause, system.describe(ext_values))
+    return ext_node, ext_values, system
+
+
+def next_cause(case: Case, system: SDOFSystem, values: dict[str, float], node: dict, remaining: dict,
+               out: dict[str, Any], s: Signals, weak: WeakForm) -> tuple[str | None, dict | None]:
+    """Screen the model just extended against the effects not yet in it; what the weak form
+    leaves undecided goes to the output-error check, and a structured remainder no library
+    effect explains to the learned force. The evidence lands on the last step of ``out``."""
+    k = len(out["causes"])
+    sc = screen(system, values, s, case.record.f, case.x_raw, weak, case.fit[1], case.mass_known, remaining,
+                case.thresholds)
+    step = out["steps"][-1]
+    step["next_ranking"] = [{k_: r.get(k_) for k_ in STEP_EVIDENCE if k_ in r} for r in sc.ranking]
+    step["next_structure"] = dict(sc.structure)
+    step["next_verdict"] = sc.verdict
+    log.info("screening the extended model: %s", ", ".join(f"{r['effect']} {r['score']:.1f}"
+                                                           for r in sc.ranking[:4] if r.get("score") is not None))
+    if sc.cause is not None:
+        return sc.cause, next(r for r in sc.ranking if r["effect"] == sc.cause)
+    if sc.verdict == "none":  # the simulated response decides what the weak form leans to
+        confirmation = confirm_undecided(case, system, values, node, sc, s, k + 1)
+        step["next_confirmation"] = confirmation.tested
+        if confirmation.row is not None:
+            return confirmation.row["effect"], confirmation.row
+    if sc.verdict == "unexplained" and LEARNED not in out["causes"] and case.settings.learn_unexplained:
+        return LEARNED, learned_row(sc.structure)  # what remains is structured but no library effect: learn it
+    return None, None
+
+
+def confirm_undecided(case: Case, system: SDOFSystem, values: dict[str, float], node: dict, sc: Screening,
+                      s: Signals, k: int) -> Confirmation:
+    """The output-error check of the effects screening ``sc`` leaves undecided
+    (``pidyn.discrepancy.confirm``); ``diagnosis.confirm.max_candidates`` = 0 turns it off."""
+    st = case.settings
+    candidates = undecided(sc.ranking, case.thresholds, int(st.confirm.max_candidates))
+    if not candidates:
+        return Confirmation()
+    node = release_held(node)  # as in the polish: a located change time is refined with the rest
+    ctx = s.context()
+    build = lambda row: build_system(extension_node(node, values, row["effect"], row, ctx, k, case.mass_known))  # noqa: E731
+    return confirm(case.record, build_system(node), values, candidates, build, case.fit, case.held, case.thresholds,
+                   substeps=int(st.substeps), max_nfev=int(st.polish_max_nfev), polish_seconds=st.polish_seconds)
+
+
+def _fmt(values: dict[str, float]) -> str:
+    return ", ".join(f"{k}={v:.5g}" for k, v in values.items())

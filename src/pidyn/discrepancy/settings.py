@@ -1,0 +1,84 @@
+"""The diagnosis's settings as typed dataclasses (``conf/diagnose.yaml``'s ``diagnosis`` node
+mirrors them; ``tests/test_settings_source.py`` checks that the two agree)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from pidyn.discrepancy.screening import Thresholds
+
+
+@dataclass
+class LearnedSettings:
+    """A learned force f(x, x'): trained further on the simulated response of the fitting part."""
+
+    output_error: bool = True
+    periods_per_segment: float = 3.0
+    max_evaluations: int = 60
+
+
+@dataclass
+class ConfirmSettings:
+    """The output-error check of effects the weak form leans to without deciding (0: off)."""
+
+    max_candidates: int = 3
+
+
+@dataclass
+class ChangeSettings:
+    """The held-out failure check that starts the search for a change in time."""
+
+    heldout_ratio: float = 3.0
+
+
+@dataclass
+class DiagnosisSettings:
+    """What the diagnosis does and when it names an effect."""
+
+    fit_share: float = 0.65
+    effects: list[str] | None = None
+    force_effect: str | None = None
+    extend: bool = True
+    learn_unexplained: bool = True
+    max_effects: int = 3
+    ls_init: str | None = "none"
+    polish: bool = True
+    polish_seconds: float | None = None
+    polish_max_nfev: int = 30
+    substeps: int = 4
+    learned: LearnedSettings = field(default_factory=LearnedSettings)
+    confirm: ConfirmSettings = field(default_factory=ConfirmSettings)
+    changes: ChangeSettings = field(default_factory=ChangeSettings)
+    thresholds: Thresholds = field(default_factory=Thresholds)
+
+    def __post_init__(self) -> None:
+        if not 0.1 <= float(self.fit_share) <= 0.95:
+            raise ValueError(f"diagnosis.fit_share must lie in [0.1, 0.95], got {self.fit_share}")
+        if int(self.max_effects) < 1:
+            raise ValueError(f"diagnosis.max_effects must be >= 1, got {self.max_effects}")
+
+    @classmethod
+    def from_mapping(cls, node: Mapping[str, Any] | None) -> "DiagnosisSettings":
+        """From the config's ``diagnosis`` node (a plain mapping); an unknown key fails, naming the known ones."""
+        node = dict(node or {})
+        nested = {"learned": LearnedSettings, "confirm": ConfirmSettings, "changes": ChangeSettings,
+                  "thresholds": Thresholds}
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(node) - known
+        if unknown:
+            raise ValueError(f"diagnosis: unknown setting(s) {sorted(unknown)}; known: {sorted(known)}")
+        for key, sub in nested.items():
+            value = node.get(key)
+            if value is None:
+                node.pop(key, None)
+                continue
+            sub_known = {f.name for f in dataclasses.fields(sub)}
+            bad = set(value) - sub_known
+            if bad:
+                raise ValueError(f"diagnosis.{key}: unknown setting(s) {sorted(bad)}; known: {sorted(sub_known)}")
+            node[key] = sub(**dict(value))
+        if node.get("effects") is not None:
+            node["effects"] = list(node["effects"])
+        return cls(**node)

@@ -1,0 +1,138 @@
+"""What a diagnosis writes: ``diagnosis.json``'s content, the figures and ``report.md``."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pidyn.discrepancy.changes import running_estimate
+from pidyn.discrepancy.effects import EFFECTS, Signals
+from pidyn.discrepancy.learned_fit import LEARNED
+from pidyn.discrepancy.pipeline import Case, Outcome
+from pidyn.discrepancy.report import (plot_learned_force, plot_ranking, plot_residual, plot_response,
+                                      plot_running_estimate, write_report)
+from pidyn.discrepancy.residual import band_limited
+from pidyn.discrepancy.screening import weak_system
+from pidyn.reporting import nrmse
+from pidyn.systems.sdof import SDOFSystem
+
+
+def summarize(case: Case, o: Outcome) -> dict[str, Any]:
+    """The content of diagnosis.json: verdict, causes, evidence, parameters, held-out gain."""
+    record, held_mask, nom, ext = case.record, case.mask(case.held), o.nominal, o.extension
+    gain = {"metric": "heldout_nrmse_x", "nominal": nrmse(o.x_nom[held_mask], case.x_raw[held_mask]),
+            "extended": None if o.x_ext is None else nrmse(o.x_ext[held_mask], case.x_raw[held_mask])}
+    if record.clean is not None:
+        xc = record.clean.x[:, 0]
+        gain["nominal_vs_clean"] = nrmse(o.x_nom[held_mask], xc[held_mask])
+        gain["extended_vs_clean"] = None if o.x_ext is None else nrmse(o.x_ext[held_mask], xc[held_mask])
+    learned = LEARNED in o.causes
+    causes = [c for c in o.causes if c != LEARNED]
+    ext_system, ext_values, ext_metrics = ext["system"], ext["values"], ext["metrics"]
+    effect_params: dict[str, Any] = {}
+    if ext_values is not None and ext_system is not None:
+        nominal_names = {sp.name for sp in nom.system.param_specs()}
+        effect_params = {k: v for k, v in ext_values.items() if k not in nominal_names}
+    if o.change_row is not None:
+        ch = o.change_row["change"]
+        effect_params["t_change"] = effect_params.get("t_d", ch.t_change)
+        effect_params["t_change_ci95"] = list(ch.ci95)
+    sc, check = o.screening, o.check
+    verdict = ("discrepancy" if causes or (o.cause is not None and o.cause != LEARNED) else
+               "unexplained" if learned or check.failed or sc.verdict == "unexplained" else "none")
+    truth = dict(record.meta.get("hidden_params") or {}) if "hidden_effect" in record.meta else None
+    return {
+        "nominal": nom.system.describe(nom.values),
+        "verdict": verdict,
+        "cause": causes[0] if causes else (None if o.cause == LEARNED else o.cause),
+        "causes": causes,
+        "steps": ext["steps"],
+        "learned_force": learned,
+        "structure": {k: v for k, v in sc.structure.items()},
+        "heldout_check": check.__dict__,
+        "change": None if o.change_row is None else o.change_row["change"].to_dict(),
+        "forced": o.forced,
+        "ranking": sc.ranking,
+        "extended": ext_system.describe(ext_values) if ext_system is not None else None,
+        "parameters": effect_params,
+        "nominal_parameters": nom.values,
+        "extended_parameters": ext_values,
+        "gain": gain,
+        "split": {"fit": list(case.fit), "heldout": list(case.held)},
+        "record": record.name,
+        "noise": (record.meta or {}).get("noise"),
+        "natural_period": nom.period,
+        "thresholds": dataclasses.asdict(case.thresholds),
+        "polish": {"nominal": nom.polish_note, "extended": ext["note"]},
+        "learned_fit": ext.get("learned_fit"),
+        "pidynnet": {"nominal_errors_pct": nom.metrics.get("error_pct"),
+                     "extended_errors_pct": None if ext_metrics is None else ext_metrics.get("error_pct")},
+        "hidden": None if truth is None else {"effect": record.meta.get("hidden_effect"), "parameters": truth},
+        "confirmation": None if o.confirmation is None else o.confirmation.tested,
+        "learned_force_refused": ext.get("refused"),
+    }
+
+
+def write_figures(case: Case, o: Outcome, d: dict) -> None:
+    """The figures and report.md of the run folder."""
+    record, fit, held, nom = case.record, case.fit, case.held, o.nominal
+    period, cause, sc = nom.period, d["cause"], o.screening
+    fig = case.run_dir / "figures"
+    fig.mkdir(exist_ok=True)
+    units = (record.meta or {}).get("units", {})
+    plot_response(fig / "simulation_vs_measured.png", record.t, case.x_raw, o.x_nom, o.x_ext, fit, held,
+                  units.get("x", "m"), period)
+    explained = None
+    if cause is not None:
+        explained = explained_force(nom.system, nom.values,
+                                    o.change_row or next(r for r in sc.ranking if r["effect"] == cause), nom.s,
+                                    o.pointwise)
+    pw = o.pointwise
+    plot_residual(fig / "residual.png", record.t, pw["r"], pw["x"], pw["v"], fit, cause, explained, units, period)
+    plot_ranking(fig / "ranking.png", sc.ranking, case.thresholds.min_delta_bic)
+    names, A0, y = weak_system(nom.system, nom.values, nom.s, record.f, case.x_raw, nom.weak, case.mass_known)
+    running = running_estimate(names, A0, y, nom.weak.centers,
+                               max(4 * period, 3 * nom.weak.dt * (2 * nom.weak.half + 1)))
+    plot_running_estimate(fig / "running_estimate.png", running, nom.values, fit, held,
+                          None if o.change_row is None else o.change_row["change"])
+    ext = o.extension
+    if d["learned_force"] and ext["system"] is not None and ext["system"].n_latent == 0:
+        plot_learned(fig / "learned_force.png", record.t, nom.system, nom.values, ext["system"], ext["values"],
+                     pw, units)
+    write_report(case.run_dir / "report.md", d, [p.name for p in sorted(fig.glob("*.png"))])
+
+
+def plot_learned(path: Path, t: np.ndarray, nominal: SDOFSystem, nominal_values: dict[str, float], ext: SDOFSystem,
+                 ext_values: dict[str, float], pw: dict[str, np.ndarray], units: dict) -> None:
+    """The extended model's restoring force minus the nominal one (the learned force plus the
+    shift of the nominal parameters that came with it) on the residual's band-limited signals."""
+    x, v = pw["x"], pw["v"]  # on the record's samples: a time-dependent term (a change) evaluates right
+    dev = ext.restoring_force(t, x, v, None, ext_values) - nominal.restoring_force(t, x, v, None, nominal_values)
+    gx = np.linspace(x.min(), x.max(), 60)
+    gv = np.linspace(v.min(), v.max(), 60)
+    X, V = np.meshgrid(gx, gv)
+    t_end = float(t[-1])  # the surface: the model as it stands at the end of the record
+    F = (ext.restoring_force(t_end, X, V, None, ext_values) - nominal.restoring_force(t_end, X, V, None, nominal_values))
+    edge = max(1, len(x) // 50)
+    inner = slice(edge, len(x) - edge)  # the band-limited ends ring
+    plot_learned_force(path, x[inner], v[inner], pw["r"][inner], dev[inner], {"x": X, "v": V, "f": F}, units)
+
+
+def explained_force(nominal: SDOFSystem, values: dict[str, float], row: dict, s: Signals,
+                    pw: dict[str, np.ndarray]) -> np.ndarray:
+    """What the screening's fit says the residual is: the effect's force plus the change it
+    brings to the nominal parameters (which had absorbed part of the effect), on the same
+    band-limited signals as the residual."""
+    from pidyn.discrepancy.effects import bouc_wen_z
+
+    p = {**values, **row["nominal_refit"], **row["parameters"]}
+    term = EFFECTS[row["effect"]].term(row["parameters"], s.context())
+    x, v = pw["x"], pw["v"]
+    z = bouc_wen_z(x, p["beta"], p["gamma"], p["n"]) if term.n_latent else None
+    change = nominal.restoring_force(s.t, x, v, None, values) - nominal.restoring_force(s.t, x, v, None, p)
+    inertia = (p["m"] - values["m"]) * pw["a"]  # nonzero only when the mass is identified
+    total = term.force(s.t, x, v, z, p) - change + inertia
+    return band_limited(total, float(s.t[1] - s.t[0]), float(pw["f_cut"]))[0]  # the residual's band
