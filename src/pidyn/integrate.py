@@ -39,7 +39,8 @@ def rk4(
 
     Args:
         p: parameter values, scalars or (B,) arrays (plain or dual).
-        f: excitation samples, (N,) shared or (N, B) per trajectory.
+        f: excitation samples, (N,) shared or (N, B) per trajectory; a system with several
+            inputs takes (N, n_inputs) shared or (N, B, n_inputs).
         y0: initial states (B, n_state), plain or dual.
         t0: absolute start time of each trajectory (time-dependent terms see t0 + t - t[0]).
     Returns:
@@ -54,6 +55,10 @@ def rk4(
     tt = np.asarray(t0, float) + (np.asarray(t, float) - float(t[0]))[:, None] if np.ndim(t0) else \
         float(t0) + np.asarray(t, float) - float(t[0])
     ff = np.asarray(f, float)
+    multi = system.n_inputs > 1
+    if ff.ndim not in ((2, 3) if multi else (1, 2)) or (multi and ff.shape[-1] != system.n_inputs):
+        raise ValueError(f"{system.name}: excitation of shape {ff.shape} for {system.n_inputs} input(s)")
+    per_trajectory = ff.ndim == (3 if multi else 2)
 
     def store(i: int, yi: Any) -> None:
         if D:
@@ -78,6 +83,6 @@ def rk4(
         store(i + 1, y)
     Y: Any = Dual(Yv, Yd) if D else Yv
     T = tt if np.ndim(tt) == 2 else np.broadcast_to(np.asarray(tt)[:, None], (N, shape[0]))
-    F = ff if ff.ndim == 2 else np.broadcast_to(ff[:, None], (N, shape[0]))
+    F = ff if per_trajectory else np.broadcast_to(ff[:, None], (N, shape[0]) + ff.shape[1:])
     R = rate(T, Y, p, F)
     return Y, R

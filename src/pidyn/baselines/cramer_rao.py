@@ -45,17 +45,18 @@ def cramer_rao(
     probe = ShootingProblem(system, t, f, [Channel("x", 0, np.zeros(len(t)), 1.0)], segment_bounds(t, None),
                             substeps, fixed_state0=np.zeros(system.n_state), fixed=params)
     u = probe.pack({s.name: params[s.name] for s in probe.specs}, np.zeros((1, system.n_state)))
-    Y, R = probe.simulate(u)
-    clean = {"x": Y[:, 0, :n], "v": Y[:, 0, n:2 * n], "a": R[:, 0, n:2 * n]}
+    Y, R, A = probe.simulate(u)
+    clean = {"x": Y[:, 0, :n], "v": Y[:, 0, n:2 * n], "a": A[:, 0]}
     chans = [Channel(c, fl - 1, clean[c][:, fl - 1], 1.0) for c, floors in layout.items() for fl in floors]
     names = probe.names
     if max(levels.values(), default=0.0) <= 0:
         return {"names": names, "std_pct": {k: 0.0 for k in names},
                 "std_pct_unknown_start": {k: 0.0 for k in names}, "correlation": np.eye(len(names)).tolist(),
                 "noise_level": noise_level, "channels": layout}
-    ground = np.asarray(f, float) if system.excitation == "ground" else 0.0
+    # an accelerometer measures x'' + ag (several inputs: the model's reading is absolute already)
+    ground = np.asarray(f, float) if system.excitation == "ground" and system.n_inputs == 1 else 0.0
     for ch in chans:
-        sensed = ch.data + (ground if ch.kind == "a" else 0.0)  # an accelerometer measures x'' + ag
+        sensed = ch.data + (ground if ch.kind == "a" else 0.0)
         ch.sigma = max(levels.get(ch.kind, 0.0), 1e-12) * float(np.sqrt(np.mean(sensed**2)))
     # the initial state as unknowns too (columns after the parameters), at rest
     prob = ShootingProblem(system, t, f, chans, segment_bounds(t, None), substeps, fixed=params)

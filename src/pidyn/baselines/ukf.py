@@ -62,7 +62,7 @@ def unscented_kalman_filter(
     R = np.diag([max(levels.get(c.kind, noise_level), r_floor) ** 2 * _sensor_rms(record, c) ** 2 for c in chans])
     m, P, Q = _prior(record, system, theta0, init_param_std, q_state, q_param)
     lam, wm, wc = _weights(ns + npar, alpha, beta, kappa)
-    rows = {"x": lambda Yp, Rp, d: Yp[:, d], "v": lambda Yp, Rp, d: Yp[:, nd + d], "a": lambda Yp, Rp, d: Rp[:, nd + d]}
+    rows = {"x": lambda Yp, Ap, d: Yp[:, d], "v": lambda Yp, Ap, d: Yp[:, nd + d], "a": lambda Yp, Ap, d: Ap[:, d]}
     traj: list[dict] = []
     loglik = 0.0
     t, f = record.t, record.f
@@ -72,9 +72,10 @@ def unscented_kalman_filter(
         p.update({k: np.full(X.shape[1], v) for k, v in fixed.items()})
         with np.errstate(all="ignore"):
             Ys, Rs = rk4(system, p, t[i : i + 2], f[i : i + 2], X[:ns].T.copy(), substeps=substeps)
+            A = system.acceleration_output(Rs[1][:, nd:2 * nd], f[i + 1], p)  # as the accelerometers read
         m, P, D = _predicted_belief(X, Ys[1], ns, wm, wc, Q)
         # --- update with the measurement at t[i+1]
-        Y = np.nan_to_num(np.array([rows[c.kind](Ys[1], Rs[1], c.dof) for c in chans]), nan=0.0, posinf=1e6,
+        Y = np.nan_to_num(np.array([rows[c.kind](Ys[1], A, c.dof) for c in chans]), nan=0.0, posinf=1e6,
                           neginf=-1e6)
         m, P, ll = _update(m, P, D, Y, np.array([c.data[i + 1] for c in chans]), R, wm, wc)
         loglik += ll
@@ -143,6 +144,8 @@ def _update(m: np.ndarray, P: np.ndarray, D: np.ndarray, Y: np.ndarray, y: np.nd
     y_mean = Y @ wm
     DY = Y - y_mean[:, None]
     Syy = (wc * DY) @ DY.T + R
+    if not (np.all(np.isfinite(Syy)) and np.all(np.isfinite(P))):  # the filter diverged: no update, no likelihood
+        return m, P, -np.inf
     Sinv = np.linalg.inv(Syy)
     K = ((wc * D) @ DY.T) @ Sinv
     nu = y - y_mean
@@ -155,7 +158,8 @@ def _update(m: np.ndarray, P: np.ndarray, D: np.ndarray, Y: np.ndarray, y: np.nd
 def _sensor_rms(record: Record, ch) -> float:
     """RMS of what the sensor measured: an accelerometer under ground excitation measures
     x'' + ag, the noise level is a fraction of that."""
-    y = ch.data + (record.f if ch.kind == "a" and record.excitation == "ground" else 0.0)
+    one_ground = record.excitation == "ground" and record.n_inputs == 1  # several: the record's a is absolute
+    y = ch.data + (record.f if ch.kind == "a" and one_ground else 0.0)
     return float(np.sqrt(np.mean(y**2)))
 
 
@@ -164,7 +168,11 @@ def _tuned(record: Record, system, grid: list[float], kw: dict) -> BaselineResul
     log-likelihood wins (the data choose, no truth involved)."""
     t0 = time.perf_counter()
     runs = [unscented_kalman_filter(record, system, q_param=float(q), **kw) for q in grid]
-    best = max(range(len(runs)), key=lambda i: runs[i].loglik if np.isfinite(runs[i].loglik) else -np.inf)
+    finite = [i for i in range(len(runs)) if np.isfinite(runs[i].loglik)]
+    if not finite:
+        raise RuntimeError(f"the filter diverged for every q_param of the grid {grid} (no finite innovation "
+                           "log-likelihood): start it nearer (system.params.<name>.init) or widen the grid")
+    best = max(finite, key=lambda i: runs[i].loglik)
     out = runs[best]
     out.seconds = time.perf_counter() - t0
     out.note = (f"q_param={grid[best]:.3g} chosen from {len(grid)} values by the innovation log-likelihood "

@@ -57,6 +57,13 @@ class Record:
         measured = {k: getattr(self, k) for k in CHANNEL_KINDS if getattr(self, k) is not None}
         if not measured:
             raise DataError(f"record '{self.name}': no response channel (x, v or a)")
+        if self.f.ndim not in (1, 2):
+            raise DataError(f"record '{self.name}': excitation of shape {self.f.shape}; one column per input")
+        if self.f.ndim == 2 and self.f.shape[1] == 1:
+            self.f = self.f[:, 0]
+        names = (self.meta or {}).get("inputs")
+        if self.f.ndim == 2 and names is not None and len(names) != self.f.shape[1]:
+            raise DataError(f"record '{self.name}': {self.f.shape[1]} input columns but {len(names)} input names")
         for kind, arr in measured.items():
             if len(arr) != len(self.t) or len(self.f) != len(self.t):
                 raise DataError(f"record '{self.name}': {len(self.t)} times, {len(arr)} samples of '{kind}', "
@@ -69,6 +76,16 @@ class Record:
     @property
     def dt(self) -> float:
         return float(self.t[1] - self.t[0])
+
+    @property
+    def n_inputs(self) -> int:
+        """Excitation channels: one (``f`` is (N,)) or several supports (``f`` is (N, n_inputs), ``a`` absolute)."""
+        return 1 if self.f.ndim == 1 else int(self.f.shape[1])
+
+    @property
+    def inputs(self) -> list[str]:
+        """The names of several inputs (``meta["inputs"]``); empty for one."""
+        return list((self.meta or {}).get("inputs") or []) if self.n_inputs > 1 else []
 
     @property
     def n_dof(self) -> int:
@@ -192,12 +209,18 @@ def synthetic_from_motion(
     levels = _noise_levels(noise, channels)
     truth = params or system.true_values()
     clean = simulate(system, truth, gm, gm.t)
-    ground = clean.f[:, None] if system.excitation == "ground" else 0.0
+    several = system.n_inputs > 1
+    if system.excitation != "ground":
+        ground = 0.0
+    else:  # the ground acceleration each floor feels (several supports: weighted by their influence)
+        ground = system.ground_motion(clean.f, truth) if several else clean.f[:, None]
+    if several:
+        ground = ground[:, [s - 1 for s in floors]]
     sensed = {c: getattr(clean, c)[:, [s - 1 for s in floors]] for c in channels}
     if "a" in sensed:
         sensed["a"] = sensed["a"] + ground  # an accelerometer measures the absolute acceleration
     meas = add_noise(sensed, levels, data_seed)
-    if "a" in meas:
+    if "a" in meas and not several:  # one ground: kept relative; several: no single ground, kept absolute
         meas["a"] = meas["a"] - ground
     full = {}
     for c in channels:
@@ -215,7 +238,8 @@ def synthetic_from_motion(
         truth=dict(truth),
         clean=clean,
         meta={"record": gm.name, "pga": gm.pga, "dt": gm.dt, "noise": max(levels.values()), "noise_levels": levels,
-              "data_seed": data_seed, "sensors": floors, "channels": list(channels)},
+              "data_seed": data_seed, "sensors": floors, "channels": list(channels),
+              **({"inputs": list(system.inputs)} if several else {})},
     )
 
 

@@ -211,10 +211,18 @@ def make_windows(
         q = _transform(t, accel_signal, m, tp, t0)
         out.append(Window(index=i, t0=t0, t1=t1, t_data=T(t[m]), f_data=T(np.asarray(f, float)[m]),
                           x=None if x is None else T(x[m]), v=None if v is None else T(v[m]),
-                          a=None if a is None else T(a[m]), t_pool=T(tp), f_pool=T(np.interp(tp, t, f)),
+                          a=None if a is None else T(a[m]), t_pool=T(tp), f_pool=T(_interp(tp, t, f)),
                           peak_x=peak, informative=peak >= min_peak_fraction * record_peak,
                           **{k: T(val) for k, val in q.items()}))
     return out
+
+
+def _interp(tq: np.ndarray, t: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """The excitation between samples, linear; one column per input when there are several."""
+    f = np.asarray(f, float)
+    if f.ndim == 1:
+        return np.interp(tq, t, f)
+    return np.stack([np.interp(tq, t, f[:, j]) for j in range(f.shape[1])], axis=-1)
 
 
 def window_bounds(t: np.ndarray, length: float, t_start: float, t_end: float,

@@ -179,3 +179,52 @@ def prepare(
     if scale != 1.0:
         gm = gm.scaled(scale)
     return gm
+
+
+@dataclass(frozen=True)
+class SupportMotions:
+    """Several ground accelerations on one time grid, ``acc`` (N, n_inputs) in m/s^2: a
+    structure on supports that move differently (a bridge's abutments and bent)."""
+
+    name: str
+    dt: float
+    acc: np.ndarray
+    inputs: tuple[str, ...]
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        acc = np.asarray(self.acc, dtype=np.float64)
+        if acc.ndim != 2 or acc.shape[0] < 2 or acc.shape[1] != len(self.inputs):
+            raise ValueError(f"support motions '{self.name}': need (N, {len(self.inputs)}) samples, got {acc.shape}")
+        if not np.all(np.isfinite(acc)):
+            raise ValueError(f"support motions '{self.name}': non-finite samples")
+        if not (np.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"support motions '{self.name}': dt={self.dt} must be positive")
+        object.__setattr__(self, "acc", acc)
+        object.__setattr__(self, "_grid", np.arange(acc.shape[0]) * self.dt)
+
+    @classmethod
+    def from_motions(cls, motions: dict[str, GroundMotion], name: str = "supports") -> "SupportMotions":
+        """One motion per support (same step; cut to the shortest)."""
+        dts = {m.dt for m in motions.values()}
+        if len(dts) != 1:
+            raise ValueError(f"support motions '{name}': different steps {sorted(dts)}; resample first")
+        n = min(m.acc.size for m in motions.values())
+        return cls(name, dts.pop(), np.stack([m.acc[:n] for m in motions.values()], axis=1), tuple(motions))
+
+    @property
+    def t(self) -> np.ndarray:
+        return np.arange(self.acc.shape[0]) * self.dt
+
+    @property
+    def duration(self) -> float:
+        return (self.acc.shape[0] - 1) * self.dt
+
+    @property
+    def pga(self) -> float:
+        return float(np.max(np.abs(self.acc)))
+
+    def __call__(self, t: np.ndarray | float) -> np.ndarray:
+        """Linear interpolation of every input, zero outside the record: (n_inputs,) or (N, n_inputs)."""
+        cols = [np.interp(t, self._grid, self.acc[:, j], left=0.0, right=0.0) for j in range(self.acc.shape[1])]
+        return np.stack(cols, axis=-1)

@@ -194,9 +194,12 @@ class PIDynNet(nn.Module):
         floors without a sensor to their neighbours' signals interpolated over the floor number."""
         need = 2 if w.a is not None else (1 if w.v is not None else 0)
         k = self.kinematics(w.t_data, w.f_data, w.q_data, w.qd_data, order=need, latent=False)
+        a = k.a
+        if a is not None and self.system.n_inputs > 1:  # several supports: the record's a is absolute
+            a = self.system.acceleration_output(a, w.f_data, self.params.values())
         out = {}
         for name, pred, meas, scale in (("x", k.x, w.x, self.scale_x), ("v", k.v, w.v, self.scale_v),
-                                        ("a", k.a, w.a, self.scale_a)):
+                                        ("a", a, w.a, self.scale_a)):
             complete = w.complete.get(name, False)
             if fill and meas is not None:
                 meas, complete = w.filled(name)

@@ -130,7 +130,7 @@ class ShootingProblem:
         self.ends = lengths
         self.t_local = self.t[: self.L + 1] - self.t[0]
         self.t0 = self.t[self.bounds[:-1]]
-        self.F = self.f[self.idx].T  # (L+1, S)
+        self.F = np.swapaxes(self.f[self.idx], 0, 1)  # (L+1, S), or (L+1, S, n_inputs)
 
     # ------------------------------------------------------------------ unknowns
     @property
@@ -170,7 +170,8 @@ class ShootingProblem:
         return p
 
     def simulate(self, u: np.ndarray, dual: bool = False):
-        """States (L+1, S, n_state) and rates of every segment (dual arrays when ``dual``)."""
+        """States (L+1, S, n_state), rates and the accelerometers' readings (L+1, S, n_dof;
+        ``StructuralSystem.acceleration_output``) of every segment (dual arrays when ``dual``)."""
         theta, states = self.unpack(u)
         y0 = states
         if dual:
@@ -180,28 +181,36 @@ class ShootingProblem:
             if not self.free_state0:
                 d[0] = 0.0
             y0 = Dual(states, d)
+        p = self._params(theta, dual)
         with np.errstate(all="ignore"):
-            return rk4(self.system, self._params(theta, dual), self.t_local, self.F, y0, self.substeps, t0=self.t0)
+            Y, R = rk4(self.system, p, self.t_local, self.F, y0, self.substeps, t0=self.t0)
+            return Y, R, self._accelerations(R, p, self.F)
 
-    def _channel_sim(self, Y, R, ch: Channel):
+    def _accelerations(self, R, p: dict, F: np.ndarray):
+        """The accelerometers' readings from the rates: the relative x'' for one input, absolute
+        (the influence-weighted ground added) for several."""
+        n = self.system.n_dof
+        return self.system.acceleration_output(R[..., n:2 * n], F, p)
+
+    def _channel_sim(self, Y, A, ch: Channel):
         n = self.system.n_dof
         if ch.kind == "x":
             return Y[..., ch.dof]
         if ch.kind == "v":
             return Y[..., n + ch.dof]
-        return R[..., n + ch.dof]
+        return A[..., ch.dof]
 
     # ------------------------------------------------------------------ residuals
     def residuals(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(measured-channel residuals in noise units, continuity defects in state scales)."""
-        Y, R = self.simulate(u)
-        return self._data_res(Y, R), self._defects(u, Y)
+        Y, _, A = self.simulate(u)
+        return self._data_res(Y, A), self._defects(u, Y)
 
-    def _data_res(self, Y, R) -> np.ndarray:
+    def _data_res(self, Y, A) -> np.ndarray:
         out = []
         rows = self.idx[self.sel_s, self.sel_j]
         for ch in self.channels:
-            sim = self._channel_sim(Y, R, ch)
+            sim = self._channel_sim(Y, A, ch)
             v = sim.v if isinstance(sim, Dual) else sim
             out.append((v[self.sel_j, self.sel_s] - ch.data[rows]) / ch.sigma)
         return _bounded(np.concatenate(out))
@@ -222,12 +231,12 @@ class ShootingProblem:
 
     def linearize(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """r, J = dr/du, c, C = dc/du, all exact."""
-        Y, R = self.simulate(u, dual=True)
-        r = self._data_res(Y, R)
+        Y, _, A = self.simulate(u, dual=True)
+        r = self._data_res(Y, A)
         nt, ns, n_u = self.n_theta, self.ns, self.n_unknowns
         blocks = []
         for ch in self.channels:
-            sim = self._channel_sim(Y, R, ch)
+            sim = self._channel_sim(Y, A, ch)
             blocks.append(sim.d[self.sel_j, self.sel_s] / ch.sigma)  # (M_c, D)
         G = np.concatenate(blocks)
         J = np.zeros((len(r), n_u))
@@ -273,7 +282,8 @@ class ShootingProblem:
         y0 = np.repeat(self.fixed_state0[None, :], nt + 1, axis=0)
         with np.errstate(all="ignore"):
             Y, R = rk4(self.system, p, self.t_local, self.F[:, 0], y0, self.substeps, t0=float(self.t0[0]))
-        res = [self._data_res(Y[:, j:j + 1], R[:, j:j + 1]) for j in range(nt + 1)]
+            A = self._accelerations(R, p, np.broadcast_to(self.F[:, :1], (self.F.shape[0], nt + 1) + self.F.shape[2:]))
+        res = [self._data_res(Y[:, j:j + 1], A[:, j:j + 1]) for j in range(nt + 1)]
         return res[0], np.stack([(res[j + 1] - res[0]) / step for j in range(nt)], axis=1)
 
     # ------------------------------------------------------------------ helpers
@@ -303,9 +313,11 @@ class ShootingProblem:
         Y, R = self.free_run(theta, y0)
         i0, i1 = self.bounds[0], self.bounds[-1]
         n = self.system.n_dof
+        with np.errstate(all="ignore"):
+            A = self._accelerations(R, self._params(np.asarray(theta, float), False), self.f[i0:i1 + 1])
         total = 0.0
         for ch in self.channels:
-            sim = {"x": Y[:, ch.dof], "v": Y[:, n + ch.dof], "a": R[:, n + ch.dof]}[ch.kind]
+            sim = {"x": Y[:, ch.dof], "v": Y[:, n + ch.dof], "a": A[:, ch.dof]}[ch.kind]
             with np.errstate(all="ignore"):
                 e = (sim - ch.data[i0:i1 + 1]) / ch.sigma
             total += float(np.sum(_bounded(e) ** 2))

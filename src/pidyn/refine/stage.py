@@ -88,6 +88,8 @@ class RefineResult:
     rest_test: dict = field(default_factory=dict)  # auto: the likelihood-ratio test of a start at rest
     history: list[dict] = field(default_factory=list)
     compared: dict = field(default_factory=dict)  # the same refinement from other segment states (by source)
+    #: covariance of the parameters' unconstrained coordinates (log / logit / scaled), in ``names`` order
+    covariance: list[list[float]] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -209,7 +211,7 @@ def refine(system, record, start: dict[str, dict[str, float]], settings: RefineS
         problem, u, converged, test = _test_rest(problem, u, converged, settings, rep.history)
     r, J, c, C = problem.linearize(u)
     theta, states = problem.unpack(u)
-    ints, corr, cond = _uncertainty(problem, r, J, C, theta)
+    ints, corr, cond, cov = _uncertainty(problem, r, J, C, theta)
     notes = bound_notes(problem.specs, theta) + identifiability_notes(problem.names, ints, corr, cond)
     for n_ in notes:
         log.warning("identifiability: %s", n_)
@@ -220,6 +222,7 @@ def refine(system, record, start: dict[str, dict[str, float]], settings: RefineS
         max_defect=float(np.max(np.abs(c))) if c.size else 0.0, segments=problem.S, condition_number=cond,
         converged=bool(converged), seconds=time.perf_counter() - t_wall, state_source=settings.states,
         initial_state_mode="free" if problem.free_state0 else "rest", rest_test=test, history=rep.history,
+        covariance=cov.tolist(),
     )
 
 
@@ -293,7 +296,7 @@ def _uncertainty(problem: ShootingProblem, r: np.ndarray, J: np.ndarray, C: np.n
     the residuals' own variance (the weights' noise unit may still be off by a factor)."""
     cov, cond = covariance(problem, J, C)
     cov = cov * float(r @ r) / max(len(r) - (problem.n_theta + (problem.ns if problem.free_state0 else 0)), 1)
-    return intervals(problem.specs, theta, cov), correlation(cov), cond
+    return intervals(problem.specs, theta, cov), correlation(cov), cond, cov
 
 
 class _Starts:

@@ -3,6 +3,14 @@
 A system knows its parameters (``ParamSpec``), its named physics residuals for the loss
 (torch) and its right-hand side for simulation (NumPy/SciPy). The excitation is either a
 ground acceleration (``-M 1 ag``) or a force applied to the structure (``u``).
+
+Several ground inputs (a bridge on three supports that move differently): the excitation
+``f`` then has a last axis of length ``n_inputs``, each degree of freedom feels the ground
+acceleration ``sum_j r_j ag_j`` with influence coefficients ``r_j`` (identified, or given),
+and an accelerometer's absolute reading is x'' + sum_j r_j ag_j. With one input the record
+keeps accelerations relative to the ground (the measured ag is subtracted); with several
+there is no single ground to subtract, so the record keeps them absolute and
+``acceleration_output`` gives the model's reading in the same convention.
 """
 
 from __future__ import annotations
@@ -41,6 +49,12 @@ class StructuralSystem(ABC):
     n_dof: int = 1
     n_latent: int = 0
     latent_names: tuple[str, ...] = ()
+    #: names of several ground inputs (supports); empty: one input (``ag`` or ``u``)
+    inputs: tuple[str, ...] = ()
+
+    @property
+    def n_inputs(self) -> int:
+        return max(1, len(self.inputs))
 
     def __init__(self, excitation: ExcitationKind = "ground") -> None:
         if excitation not in ("ground", "force"):
@@ -84,13 +98,32 @@ class StructuralSystem(ABC):
         spec = next((s for s in self.param_specs() if s.name in ("m", "m1")), None)
         return float(spec.init) if spec is not None else 1.0
 
+    def ground_motion(self, f, p):
+        """The ground acceleration every degree of freedom feels, shaped like ``f[..., 0]`` per
+        degree of freedom on a last axis (..., n_dof): ``f`` itself for one input, the inputs
+        weighted by their influence coefficients for several."""
+        raise NotImplementedError(f"{self.name}: several ground inputs are not supported")
+
+    def acceleration_output(self, a_rel, f, p):
+        """What an accelerometer on each degree of freedom reads, in the record's convention:
+        ``a_rel`` itself (relative to the one ground) for one input, a_rel + sum_j r_j ag_j
+        (absolute) for several. Works on NumPy, dual and torch arrays (..., n_dof)."""
+        if self.n_inputs == 1:
+            return a_rel
+        return a_rel + self.ground_motion(f, p)
+
     def excitation_as_acceleration(self, f):
         """The excitation as an acceleration q'' for the excitation transform, or None.
 
-        Ground excitation: ag itself. A force on a single mass: -u/m (nominal m). A force
-        on one storey of a multi-storey model has no common acceleration: None (no transform).
+        Ground excitation: ag itself (several inputs: weighted by the influence coefficients'
+        starting values, a fixed signal, so the change of variable stays exact). A force on a
+        single mass: -u/m (nominal m). A force on one storey of a multi-storey model has no
+        common acceleration: None (no transform).
         """
         if self.excitation == "ground":
+            if self.n_inputs > 1:
+                start = {s.name: s.init for s in self.param_specs()}
+                return self.ground_motion(f, start)[..., 0]
             return f
         if self.n_dof > 1:
             return None

@@ -3,6 +3,10 @@
     m x'' + sum_i f_i(t, x, x', z) = -m ag(t)   (ground excitation)
                                    =  u(t)      (applied force)
 
+Several ground inputs (a deck on supports that move differently): the right-hand side is
+``-m sum_j r_j ag_j`` with one influence coefficient ``r_<input>`` per input, identified with
+the other parameters (they sum to about 1 when the supports move together) or given.
+
 The Bouc-Wen case of the paper (Eq. 16) prints ``-ag`` on the right-hand side without m.
 That is the same equation only when m = 1; with a known m != 1 no parameter set would zero
 the residual. We write ``-m ag`` (Newton's law for a base-excited mass), which reduces to
@@ -38,12 +42,20 @@ class SDOFSystem(StructuralSystem):
         excitation: ExcitationKind = "ground",
         params: dict | None = None,
         name: str = "sdof",
+        inputs: Sequence[str] | None = None,
     ) -> None:
         super().__init__(excitation)
         self.name = name
         self.terms = list(terms)
         self.mass = mass
         self.identify_mass = identify_mass
+        self.inputs = tuple(str(i) for i in (inputs or ()))
+        if len(self.inputs) == 1:
+            self.inputs = ()  # one input is the plain ag (no influence coefficient to identify)
+        if self.inputs and excitation != "ground":
+            raise ValueError(f"{name}: several inputs are ground motions (supports); got excitation '{excitation}'")
+        if len(set(self.inputs)) != len(self.inputs):
+            raise ValueError(f"{name}: input names repeat: {list(self.inputs)}")
         if identify_mass and excitation == "ground":
             raise ValueError(
                 f"{name}: the mass cannot be identified under ground excitation "
@@ -52,6 +64,9 @@ class SDOFSystem(StructuralSystem):
         defaults = [ParamSpec("m", init=mass, scale=mass, true=mass, trainable=identify_mass, unit="kg")]
         for term in self.terms:
             defaults += term.specs()
+        share = 1.0 / max(len(self.inputs), 1)
+        defaults += [ParamSpec(influence_name(i), init=share, scale=share, transform="identity", unit="-")
+                     for i in self.inputs]
         self._specs = merge_specs(defaults, params)
         self.n_latent = sum(t.n_latent for t in self.terms)
         self.latent_names = tuple(t.name for t in self.terms if t.n_latent)
@@ -63,12 +78,14 @@ class SDOFSystem(StructuralSystem):
         """This model plus one more force term (a discovered effect); the existing parameter
         specs (their initial values included) are kept, ``params`` overrides any of them."""
         new = SDOFSystem(self.terms + [term], mass=self.mass, excitation=self.excitation,
-                         name=name or f"{self.name}+{term.name}")
+                         name=name or f"{self.name}+{term.name}", inputs=self.inputs)
         new.identify_mass = self.identify_mass
         new._specs = merge_specs(list(self._specs) + merge_specs(term.specs(), None), params)
         return new
 
     def linear_params(self) -> list[str]:
+        # the influence coefficients are linear in the residual too, but a start from a network that
+        # fits absolute accelerations pins them poorly: the data start and the refinement estimate them
         names = [n for t in self.terms for n in t.linear]
         if self.identify_mass:
             names.insert(0, "m")
@@ -101,7 +118,20 @@ class SDOFSystem(StructuralSystem):
 
     def forcing(self, f, p):
         """Right-hand-side force from the excitation signal."""
-        return -p["m"] * f if self.excitation == "ground" else f
+        return -p["m"] * self.ground_input(f, p) if self.excitation == "ground" else f
+
+    def ground_input(self, f, p):
+        """The ground acceleration the mass feels: ag, or sum_j r_j ag_j (``f[..., j]``) for several inputs."""
+        if not self.inputs:
+            return f
+        total = None
+        for j, name in enumerate(self.inputs):
+            part = p[influence_name(name)] * f[..., j]
+            total = part if total is None else total + part
+        return total
+
+    def ground_motion(self, f, p):
+        return self.ground_input(f, p)[..., None]
 
     def residual(self, k: Kinematics, f: torch.Tensor, p: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
         x, v, a = k.x[:, 0], k.v[:, 0], k.a[:, 0]
@@ -144,6 +174,8 @@ class SDOFSystem(StructuralSystem):
     def describe(self, p: dict[str, float]) -> str:
         lhs = f"{p['m']:.5g} x'' + " + " + ".join(t.formula(p) for t in self.terms)
         rhs = f"-{p['m']:.5g} ag(t)" if self.excitation == "ground" else "u(t)"
+        if self.inputs:
+            rhs = f"-{p['m']:.5g} (" + " + ".join(f"{p[influence_name(i)]:.4g} ag_{i}(t)" for i in self.inputs) + ")"
         eqs = [f"{lhs} = {rhs}"]
         for t in self.terms:
             if isinstance(t, BoucWenHysteresis):
@@ -151,6 +183,11 @@ class SDOFSystem(StructuralSystem):
                 eqs.append(f"z' = x' {'-' if g >= 0 else '+'} {abs(g):.5g} |x'| |z|^({n:.5g}-1) z "
                            f"{'-' if b >= 0 else '+'} {abs(b):.5g} x' |z|^{n:.5g}")
         return "; ".join(eqs)
+
+
+def influence_name(input_name: str) -> str:
+    """The parameter name of an input's influence coefficient (``r_ch3`` for input ``ch3``)."""
+    return f"r_{input_name}"
 
 
 def LinearSDOF(c: float = 0.5, k: float = 15.0, **kw) -> SDOFSystem:
