@@ -76,6 +76,7 @@ def test_every_target_default_agrees_with_its_config():
 
 def _settings_classes():
     from pidyn.discrepancy.screening import Thresholds
+    from pidyn.discrepancy.settings import DiagnosisSettings
     from pidyn.models.identify import Schedule
     from pidyn.models.predict import PredictSettings
     from pidyn.refine import RefineSettings
@@ -86,7 +87,8 @@ def _settings_classes():
             (PredictSettings, "generalize", "generalization",
              {"duration", "own_scales", "own_stretches", "other_records", "other_scales", "match_pga", "align",
               "lead", "max_cases"}),
-            (Thresholds, "diagnose", "diagnosis.thresholds", set())]
+            (Thresholds, "diagnose", "diagnosis.thresholds", set()),
+            (DiagnosisSettings, "diagnose", "diagnosis", set())]
 
 
 @pytest.mark.parametrize("cls, config, key, task_keys", _settings_classes(), ids=lambda v: getattr(v, "__name__", ""))
@@ -98,6 +100,8 @@ def test_settings_dataclasses_mirror_their_config(cls, config, key, task_keys):
     assert not set(fields) - set(node), f"{cls.__name__} fields {sorted(set(fields) - set(node))} missing in {key}"
     for name, f in fields.items():
         default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc]
+        if dataclasses.is_dataclass(default):  # a nested settings block: compared whole
+            default = dataclasses.asdict(default)
         assert _same(default, node[name]), f"{cls.__name__}.{name}: {default!r} in code, {node[name]!r} in {key}"
 
 
@@ -108,11 +112,13 @@ def test_task_read_settings_default_to_the_config():
     assert list(DEFAULT_STARTS) == list(refine.starts)
 
 
-@pytest.mark.parametrize("method", ["output_error", "sindy", "ukf"])
+@pytest.mark.parametrize("method", ["output_error", "sindy", "ukf", "transfer_function", "srim", "okid_era"])
 def test_baseline_settings_agree_with_their_functions(method):
     import pidyn.baselines as B
+    from pidyn.baselines import peers
 
-    fn = {"output_error": B.output_error, "sindy": B.weak_sindy, "ukf": B.unscented_kalman_filter}[method]
+    fn = {"output_error": B.output_error, "sindy": B.weak_sindy, "ukf": B.unscented_kalman_filter,
+          "transfer_function": peers.transfer_function_estimate, "srim": peers.srim, "okid_era": peers.okid_era}[method]
     node = OmegaConf.to_container(compose("train").baselines, resolve=True).get(method) or {}
     params = inspect.signature(fn).parameters
     for k, v in node.items():

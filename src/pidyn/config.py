@@ -78,6 +78,8 @@ def compose(config_name: str = "train", groups: dict[str, Any] | None = None, va
         _check_key(cfg, key)
         OmegaConf.update(cfg, key, value, merge=False)
     with open_dict(cfg):
+        # settings given as values count as the user's, as on the command line (``user_settings``)
+        cfg.hydra.overrides.task = list(cfg.hydra.overrides.task) + [f"{k}={v}" for k, v in (values or {}).items()]
         if output_dir is not None:
             cfg.paths.output_dir = str(output_dir)
         cfg.paths.root_dir = str(root_dir if root_dir is not None else Path.cwd())
@@ -92,3 +94,15 @@ def make_system(name: str, **values: Any):
 
     cfg = compose("train", groups={"system": name}, values={f"system.{k}": v for k, v in values.items()})
     return hydra.utils.instantiate(cfg.system)
+
+
+def user_settings() -> list[str]:
+    """The keys the user set for this run (command-line overrides, and ``compose``'s values),
+    without Hydra's prefixes: what the config's own defaults must not overrule."""
+    from hydra.core.hydra_config import HydraConfig
+
+    try:
+        task = list(HydraConfig.get().overrides.task)
+    except ValueError:  # no Hydra context: nothing was set by the user
+        return []
+    return [o.split("=", 1)[0].lstrip("+~") for o in task]

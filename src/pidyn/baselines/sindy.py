@@ -59,13 +59,31 @@ def weak_sindy(record: Record, system, threshold: float = 0.01) -> BaselineResul
         return BaselineResult("sindy", {}, 0.0, note="not applicable: unmeasured latent state")
     if getattr(system, "n_dof", 1) != 1:
         return BaselineResult("sindy", {}, 0.0, note="single-degree-of-freedom systems only")
-    t, x = record.t, record.x[:, 0]
-    v_meas = None if record.v is None else record.v[:, 0]
+    if record.n_inputs > 1:
+        return BaselineResult("sindy", {}, 0.0, note="not applicable: several inputs whose influence is unknown (the "
+                              "relative motion the library needs depends on it)")
+    t = record.t
+    excitation = np.asarray(record.f, float)
+    if record.x is not None and not np.isnan(record.x[:, 0]).any():
+        x = record.x[:, 0]
+        v_meas = None if record.v is None else record.v[:, 0]
+    elif record.a is not None and not np.isnan(record.a[:, 0]).any():  # accelerometers: integrate, all alike
+        from pidyn.baselines.data_start import fundamental
+        from pidyn.signals import integrate
+
+        peak = fundamental(record)
+        if peak is None:
+            return BaselineResult("sindy", {}, 0.0, note="not applicable: the record shows no resonance")
+        corner = max(peak[0] / 5.0, 2.0 / float(t[-1] - t[0]))
+        x, v_meas = integrate(record.a[:, 0], record.dt, 2, corner), integrate(record.a[:, 0], record.dt, 1, corner)
+        excitation = integrate(excitation, record.dt, 0, corner)
+    else:
+        return BaselineResult("sindy", {}, 0.0, note="not applicable: needs a displacement or acceleration channel")
     period = dominant_period(t, x)
     xs, vs = smooth_signals(t, x, v_meas, period)
     weak = WeakForm.for_record(t, period)
     m = system.nominal_mass()
-    forcing = -m * record.f if system.excitation == "ground" else record.f
+    forcing = -m * excitation if system.excitation == "ground" else excitation
     y = weak.project(forcing)[:, 0] - weak.inertia(x, m)
     names = list(LIBRARY)
     A = weak.project(np.stack([LIBRARY[n](xs, vs) for n in names], axis=1))

@@ -18,7 +18,7 @@ import hydra
 import lightning as L
 import numpy as np
 import torch
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf, open_dict
 
 from pidyn.data.datamodule import SubperiodDataModule
 from pidyn.data.sources import Record
@@ -27,6 +27,7 @@ from pidyn.models.identify import Schedule, SubperiodIdentifier
 from pidyn.models.lit_module import PIDynNetModule
 from pidyn.models.pidynnet import PIDynNet
 from pidyn.reporting import diverged, nrmse, param_table, plot_convergence, plot_response, write_json, write_yaml
+from pidyn.simulate import simulate_identified, simulate_response  # noqa: F401  (re-exported)
 from pidyn.systems.base import StructuralSystem
 
 log = logging.getLogger(__name__)
@@ -58,7 +59,7 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     t_wall = time.perf_counter()
     run = build_run(cfg, record)
     # the classical baselines need nothing from PIDynNet: they run beside it on another core
-    pending = BaselineJob(cfg, run.system, run.record)
+    pending = BaselineJob(cfg, run.system, run.record, run.hold_out)
     try:
         results = run.ident.run(resume=cfg.get("resume", True))
     except BaseException:
@@ -68,7 +69,7 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     params = run.module.net.params
     pidyn_values = {n: params.as_floats()[n] for n in params.trainable_names}
     baselines = run_baselines(cfg, run.system, run.record, run.run_dir, params.as_floats(), pending)
-    refined = run_refinement(cfg, run.system, run.record, pidyn_values, baselines, results)
+    refined = run_refinement(cfg, run.system, run.record, pidyn_values, baselines, results, run.start)
     metrics = _report(cfg, run, results, pidyn_values, baselines, refined, t_wall)
     objects = {"module": run.module, "system": run.system, "record": run.record,
                "trainer_factory": run.trainer_factory, "run_dir": run.run_dir, "logger": run.logger,
@@ -87,6 +88,8 @@ class Run:
     trainer_factory: Any
     logger: Any
     run_dir: Path
+    start: Any = None  # the start read from the data (``pidyn.baselines.data_start``), or None
+    hold_out: bool = False  # identified on the record's fitting part; its held-out part judges the model
 
 
 def build_run(cfg: DictConfig, record: Record | None) -> Run:
@@ -108,6 +111,11 @@ def build_run(cfg: DictConfig, record: Record | None) -> Run:
             f"data '{record.name}' is {record.excitation}-excited but system '{system.name}' expects "
             f"'{system.excitation}' excitation: set system.excitation={record.excitation}"
         )
+    if record.n_inputs > 1 and system.n_inputs == 1 and OmegaConf.select(cfg, "system.inputs", default=1) is None:
+        system = hydra.utils.instantiate(cfg.system, inputs=record.inputs)  # the model takes the record's inputs
+    check_inputs(system, record)
+    hold_out = _hold_out(cfg, record)
+    system, start = data_start(cfg, system, record, run_dir)
     accel = system.excitation_as_acceleration(record.f) if cfg.model.excitation_transform else None
     dm: SubperiodDataModule = hydra.utils.instantiate(
         cfg.data.windows, record=record, data_seed=cfg.data_seed, accel_signal=accel
@@ -132,7 +140,60 @@ def build_run(cfg: DictConfig, record: Record | None) -> Run:
         return hydra.utils.instantiate(cfg.trainer, logger=logger if logger is not None else False, **kw)
 
     ident = SubperiodIdentifier(module, dm, trainer_factory, schedule, clamp, stopper, run_dir, extra_callbacks=extras)
-    return Run(system, record, module, ident, trainer_factory, logger, run_dir)
+    return Run(system, record, module, ident, trainer_factory, logger, run_dir, start, hold_out)
+
+
+def _hold_out(cfg: DictConfig, record: Record) -> bool:
+    """``data.hold_out``: identify on the record's own fitting part (``meta['split']``) only, and
+    report the held-out part (the windows and the refinement end where the fitting part does)."""
+    if not cfg.data.get("hold_out", False):
+        return False
+    split = (record.meta or {}).get("split")
+    if not split:
+        raise ValueError(f"data.hold_out is set but record '{record.name}' has no fitting / held-out split")
+    with open_dict(cfg):
+        cfg.data.windows.t_end = float(split["fit"][1])
+    log.info("identifying on %.4g-%.4g s; %.4g-%.4g s held out", *split["fit"], *split["heldout"])
+    return True
+
+
+START_METHODS = ("auto", "data", "config")
+
+
+def data_start(cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path) -> tuple[StructuralSystem, Any]:
+    """``model.start``: where PIDynNet's parameters start. ``data``: read from the record
+    (``pidyn.baselines.data_start``); ``config``: the system config's values; ``auto``: the data's
+    on a measured record, the config's on a simulated one. A start the user gave
+    (``system.params.<name>.init=...``) is always kept. Unless ``config``, the data's start is also
+    offered to the refinement (``model.refine.starts``: ``data``) and written to data_start.json."""
+    from pidyn.baselines.data_start import start_from_data, user_started, with_start
+    from pidyn.config import user_settings
+
+    method = str(cfg.model.get("start", "auto"))
+    if method not in START_METHODS:
+        raise ValueError(f"model.start: unknown method '{method}'; choose from {', '.join(START_METHODS)}")
+    if method == "config":
+        return system, None
+    start = start_from_data(record, system)
+    if start is None:
+        log.info("start from the data: the record shows no resonance; the config's values are used")
+        return system, None
+    used = method == "data" or not record.truth
+    if used:
+        kept = user_started(system, user_settings())
+        system = with_start(system, start.values, kept)
+        if kept:
+            log.info("start from the data, except %s (set by the user)", sorted(kept))
+    write_json(run_dir / "data_start.json", {**start.to_dict(), "used_by_pidynnet": used})
+    return system, start
+
+
+def check_inputs(system: StructuralSystem, record: Record) -> None:
+    """A record with several inputs needs a system with as many (and the other way round)."""
+    if record.n_inputs != system.n_inputs:
+        names = record.inputs or [f"{record.n_inputs} column(s)"]
+        raise ValueError(f"data '{record.name}' has {record.n_inputs} input(s) {names} but system '{system.name}' "
+                         f"takes {system.n_inputs}: set system.inputs={record.inputs or 'null'}")
 
 
 def _report(cfg: DictConfig, run: Run, results: list, pidyn_values: dict[str, float], baselines: list[dict],
@@ -183,6 +244,7 @@ def _report(cfg: DictConfig, run: Run, results: list, pidyn_values: dict[str, fl
     metrics["wall_seconds"] = time.perf_counter() - t_wall
     write_json(run_dir / "metrics.json", metrics)
     write_json(run_dir / "windows.json", {"windows": [r.__dict__ for r in results]})
+    _assess(run, final, refined, sim, metrics)
     if hasattr(system, "storey_equations"):
         from pidyn.tasks.building_report import write_building_report
 
@@ -194,6 +256,23 @@ def _report(cfg: DictConfig, run: Run, results: list, pidyn_values: dict[str, fl
     _figures(run, results, truths, baselines, refined, sim, metrics)
     _log_summary(system.describe(final), errors, pidyn_errors, metrics, run_dir)
     return metrics
+
+
+def _assess(run: Run, final: dict[str, float], refined: Any, sim: dict[str, np.ndarray], metrics: dict) -> None:
+    """modal.json (the modes with intervals) and, on a record with a held-out part, how the
+    identified model predicts it; both into metrics.json too."""
+    from pidyn.assessment import heldout_scores, modal_summary, write_modal
+
+    modes = modal_summary(run.system, final, refined)
+    if modes is not None:
+        write_modal(run.run_dir, modes)
+        metrics["modal"] = [{k: v for k, v in m.items() if k != "mode_shape"} for m in modes]
+    split = (run.record.meta or {}).get("split") if run.hold_out else None
+    if split:
+        metrics["heldout"] = heldout_scores(sim, run.record, split["heldout"], split["fit"])
+        log.info("held-out part %.4g-%.4g s: NRMSE %s", *split["heldout"],
+                 ", ".join(f"{k} {v:.3g}" for k, v in metrics["heldout"]["nrmse"].items()))
+    write_json(run.run_dir / "metrics.json", metrics)
 
 
 def _divergence_note(sim: dict[str, np.ndarray]) -> list[str]:
@@ -262,33 +341,6 @@ def _log_summary(equation: str, errors: dict, pidyn_errors: dict, metrics: dict,
     log.info("wall %.1f s, run folder %s", metrics["wall_seconds"], run_dir)
 
 
-def simulate_response(system: StructuralSystem, values: dict[str, float], record: Record, substeps: int = 4,
-                      state0: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """The identified model's response over the record: ``x, v, a`` (relative, (N, n_dof))
-    by the fixed-step batched RK4 (bounded cost: a model that blows up gives NaNs rather
-    than an adaptive integrator crawling) from ``state0`` (the full state, default rest)."""
-    from pidyn.integrate import rk4
-
-    n = system.n_dof
-    y0 = np.zeros(system.n_state) if state0 is None else np.asarray(state0, float)
-    with np.errstate(all="ignore"):
-        Y, R = rk4(system, dict(values), record.t, record.f, y0[None, :], substeps=substeps)
-    return {"x": Y[:, 0, :n], "v": Y[:, 0, n:2 * n], "a": R[:, 0, n:2 * n]}
-
-
-def simulate_identified(system: StructuralSystem, values: dict[str, float], record: Record,
-                        x0: float = 0.0, v0: float = 0.0, substeps: int = 4,
-                        state0: np.ndarray | None = None) -> np.ndarray:
-    """The identified model's displacement (N, n_dof) from ``state0``, else from (x0, v0), z = 0."""
-    n = system.n_dof
-    y0 = np.zeros(system.n_state)
-    if state0 is not None:
-        y0[:] = state0
-    else:
-        y0[:n], y0[n:2 * n] = x0, v0
-    return simulate_response(system, values, record, substeps, y0)["x"]
-
-
 def channel_nrmse(sim: dict[str, np.ndarray], record: Record) -> dict[str, float]:
     """NRMSE of the simulated response against every measured channel (``x``, or ``a3`` for
     floor 3 of a building)."""
@@ -323,21 +375,20 @@ def relative_errors(values: dict[str, float], truths: dict[str, float | None]) -
     return errors_pct(values, {n: truths.get(n) for n in values})
 
 
-DEFAULT_STARTS = ("output_error", "equation_error", "sindy", "ukf")
-#: the classical methods ``baselines.run`` and ``model.refine.starts`` may name
-BASELINE_METHODS = ("equation_error", "output_error", "sindy", "ukf")
+DEFAULT_STARTS = ("data", "output_error", "equation_error", "sindy", "ukf")
 
 
 def check_method_names(cfg: DictConfig) -> None:
     """Misspelled names and settings fail before PIDynNet runs, not minutes later (or never)."""
-    named = {"baselines.run": list((cfg.get("baselines") or {}).get("run") or [])}
+    from pidyn.baselines.registry import PARAMETRIC, check_names
+
+    check_names("baselines.run", list((cfg.get("baselines") or {}).get("run") or []))
     plan = refine_plan(cfg)
     if plan is not None:
-        named["model.refine.starts"] = sorted(plan[0])
-    for key, names in named.items():
-        unknown = sorted(set(names) - set(BASELINE_METHODS))
+        unknown = sorted(set(plan[0]) - set(PARAMETRIC) - {"data"})
         if unknown:
-            raise ValueError(f"{key}: unknown method(s) {unknown}; choose from {', '.join(BASELINE_METHODS)}")
+            raise ValueError(f"model.refine.starts: unknown method(s) {unknown}; choose from "
+                             f"{', '.join(sorted(set(PARAMETRIC) | {'data'}))}")
 
 
 def refine_plan(cfg: DictConfig) -> tuple[set[str], list[str], Any] | None:
@@ -364,7 +415,7 @@ def refine_plan(cfg: DictConfig) -> tuple[set[str], list[str], Any] | None:
 
 
 def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pidyn_values: dict[str, float],
-                   baselines: list[dict], results: list) -> Any:
+                   baselines: list[dict], results: list, start: Any = None) -> Any:
     """The refinement stage after PIDynNet (``model.refine``); None when it is off.
 
     Starts: PIDynNet's estimate with its networks' states, and the classical estimates named
@@ -378,6 +429,8 @@ def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pi
         return None
     allowed, compare, settings = plan
     starts = {"pidynnet": pidyn_values}
+    if start is not None and "data" in allowed:  # the data's values, PIDynNet's where the data give none
+        starts["data"] = {**pidyn_values, **{k: v for k, v in start.values.items() if k in pidyn_values}}
     for b in baselines:
         if b["method"] in allowed and b.get("params"):
             starts[b["method"]] = b["params"]
@@ -397,25 +450,22 @@ def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pi
     return out
 
 
-def baseline_rows(bcfg: dict, noise: float, system: StructuralSystem, record: Record) -> list[dict]:
+def baseline_rows(bcfg: dict, noise: float, system: StructuralSystem, record: Record,
+                  fit: tuple[float, float] | None = None) -> list[dict]:
     """The configured classical methods on one record (``bcfg``: the ``baselines`` config as a
-    plain dict); a method that fails gives a row saying so. Pure, so it runs in a worker."""
-    from pidyn import baselines as B
+    plain dict); a method that fails gives a row saying so. Pure, so it runs in a worker.
+    ``fit``: the span the parametric methods see (a held-out part stays unseen; the modal peers
+    fit the record's own fitting part and predict the rest)."""
+    from pidyn.baselines.registry import ESTIMATORS, PARAMETRIC, check_names
 
-    fns = {
-        "equation_error": lambda: B.equation_error(record, system),
-        "output_error": lambda: B.output_error(record, system, **dict(bcfg.get("output_error") or {})),
-        "sindy": lambda: B.weak_sindy(record, system, **dict(bcfg.get("sindy") or {})),
-        "ukf": lambda: B.unscented_kalman_filter(record, system, noise_level=noise, **dict(bcfg.get("ukf") or {})),
-    }
     out: list[dict] = []
     truth = record.truth or {}
-    for name in bcfg.get("run") or []:
-        if name not in fns:
-            raise ValueError(f"unknown baseline '{name}'; choose from {sorted(fns)}")
+    names = list(bcfg.get("run") or [])
+    check_names("baselines.run", names)
+    fitted = record if fit is None else record.segment(*fit)
+    for name in names:
         try:
-            r = fns[name]()
-            row = {"method": r.method, "params": r.params, "seconds": r.seconds, "note": r.note, "trajectory": r.trajectory}
+            row = ESTIMATORS[name](fitted if name in PARAMETRIC else record, system, dict(bcfg.get(name) or {}), noise)
         except Exception as exc:  # a failed baseline must not spoil the run
             row = {"method": name, "params": {}, "seconds": 0.0, "note": f"failed: {exc}"}
         if truth and row["params"]:
@@ -432,15 +482,17 @@ class BaselineJob:
     default run's wall time is PIDynNet's, not PIDynNet's plus the baselines'. Otherwise, or
     when the worker cannot start or dies, they run in this process when asked for."""
 
-    def __init__(self, cfg: DictConfig, system: StructuralSystem, record: Record) -> None:
+    def __init__(self, cfg: DictConfig, system: StructuralSystem, record: Record, hold_out: bool = False) -> None:
         bcfg = cfg.get("baselines") or {}
-        self._args = (OmegaConf.to_container(bcfg, resolve=True) if bcfg else {}, record_noise(cfg, record), system, record)
+        fit = (record.meta or {}).get("split", {}).get("fit") if hold_out else None
+        self._args = (OmegaConf.to_container(bcfg, resolve=True) if bcfg else {}, record_noise(cfg, record), system, record,
+                      None if fit is None else tuple(fit))
         self._proc: Any = None
         self._conn: Any = None
         names = set(self._args[0].get("run") or [])
-        unknown = names - {"equation_error", "output_error", "sindy", "ukf"}
-        if unknown:  # a typo fails now, not after PIDynNet's minutes
-            raise ValueError(f"unknown baseline {sorted(unknown)}; choose from equation_error, output_error, sindy, ukf")
+        from pidyn.baselines.registry import check_names
+
+        check_names("baselines.run", names)  # a typo fails now, not after PIDynNet's minutes
         if names and bcfg.get("parallel", False) and (os.cpu_count() or 1) > 1 and not _in_multirun():
             import multiprocessing as mp
 

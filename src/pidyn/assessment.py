@@ -1,0 +1,72 @@
+"""What a run says about the structure beyond its parameters: its modes with 95 % intervals
+(``modal.json``) and how well the identified model predicts data it was not fitted on."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pidyn.reporting import nrmse, write_json
+
+
+def modal_summary(system, values: dict[str, float], refined: Any = None) -> list[dict] | None:
+    """The identified model's modes about rest, fundamental first, with intervals from the
+    refinement's covariance (None for a model without a stiffness about rest)."""
+    from pidyn.systems.modal import modes_with_intervals
+
+    cov = getattr(refined, "covariance", None) if refined is not None else None
+    names = getattr(refined, "names", None) if refined is not None else None
+    try:
+        return modes_with_intervals(system, values, names, None if not cov else np.asarray(cov))
+    except (ValueError, KeyError, np.linalg.LinAlgError):
+        return None
+
+
+def write_modal(run_dir: Path, modes: list[dict] | None, extra: dict | None = None) -> None:
+    """``modal.json``: ``{"modes": [{period_s, period_ci95, frequency_hz, damping_ratio, damping_ci95}, ...]}``."""
+    if modes is not None:
+        write_json(run_dir / "modal.json", {"modes": modes, **(extra or {})})
+
+
+def heldout_scores(sim: dict[str, np.ndarray], record, span: tuple[float, float] | list[float],
+                   fit: tuple[float, float] | list[float] | None = None) -> dict[str, Any]:
+    """NRMSE of the simulated response on the held-out ``span`` per measured channel (``a1``,
+    ``x``...; accelerations as the sensors read them), their mean, and the same on ``fit``."""
+    def scores(lo: float, hi: float) -> dict[str, float]:
+        m = (record.t >= lo - 1e-9) & (record.t <= hi + 1e-9)
+        out = {}
+        for kind, floors in record.sensors().items():
+            meas = getattr(record, kind)
+            for fl in floors:
+                pred = measured_convention(sim, record, kind)[:, fl - 1]
+                truth = meas[:, fl - 1] + (_ground(record) if kind == "a" else 0.0)
+                out[f"{kind}{fl}"] = nrmse(pred[m], truth[m]) if np.all(np.isfinite(pred[m])) else float("inf")
+        return out
+
+    held = scores(*span)
+    out: dict[str, Any] = {"span": [float(span[0]), float(span[1])], "nrmse": held,
+                           "mean_nrmse_a": _mean([v for k, v in held.items() if k.startswith("a")])}
+    if fit is not None:
+        fitted = scores(*fit)
+        out["fit_span"] = [float(fit[0]), float(fit[1])]
+        out["fit_nrmse"] = fitted
+        out["fit_mean_nrmse_a"] = _mean([v for k, v in fitted.items() if k.startswith("a")])
+    return out
+
+
+def measured_convention(sim: dict[str, np.ndarray], record, kind: str) -> np.ndarray:
+    """The simulated channel as the sensor reads it: an accelerometer's absolute acceleration
+    (the record keeps one input's relative; ``_ground`` adds it back on both sides)."""
+    g = _ground(record)
+    return sim[kind] + (g[:, None] if kind == "a" and isinstance(g, np.ndarray) else 0.0)
+
+
+def _ground(record) -> np.ndarray | float:
+    """The ground acceleration to add back to a relative acceleration (one input), else 0."""
+    return np.asarray(record.f, float) if record.excitation == "ground" and record.n_inputs == 1 else 0.0
+
+
+def _mean(values: list[float]) -> float | None:
+    return float(np.mean(values)) if values else None

@@ -1,0 +1,296 @@
+"""A start read from the record itself, not from the config's numbers.
+
+A real structure's stiffness is rarely known to within a factor of ten (the Painter Street
+deck's k per unit mass is about 700 s^-2; a config's 10 is a two-second period), and from a
+start that far away the identification ends anywhere. Two estimates, both milliseconds:
+
+* **equation error on integrated signals** when every degree of freedom carries a sensor and
+  the model has no unmeasured latent state: accelerations (and the inputs) are high-passed and
+  integrated spectrally with one filter (``pidyn.signals.integrate``), so a linear model holds
+  exactly for the filtered signals, and the parameters the motion residual is linear in are
+  solved by least squares. With several inputs the residual is bilinear in the influence
+  coefficients and the rest (relative motion = absolute minus the weighted supports'), solved
+  by Gauss-Newton from equal shares.
+* **the transfer function's peak and width** otherwise (floors without sensors, a hysteretic
+  model): the fundamental frequency and damping ratio of the top measured floor's
+  transmissibility; the config's stiffness profile is scaled so the model's first frequency
+  matches, and stiffness-proportional damping gives its damping ratio.
+
+The train task uses it for PIDynNet's start on measured records (``model.start``) and offers
+it to the refinement as one more starting estimate.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from pidyn.params import in_range
+from pidyn.signals import dominant_peak, integrate, transfer_function
+
+log = logging.getLogger(__name__)
+
+#: the damping ratio taken when the resonance peak is no wider than the frequency resolution
+UNRESOLVED_DAMPING = 0.02
+
+
+@dataclass
+class DataStart:
+    """Starting values of the trainable parameters and how they were read from the record."""
+
+    values: dict[str, float]
+    method: str  # equation_error | transfer_function
+    frequency_hz: float | None
+    damping_ratio: float | None
+    note: str = ""
+    seconds: float = 0.0
+    rejected: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def period_s(self) -> float | None:
+        return None if not self.frequency_hz else 1.0 / self.frequency_hz
+
+    def to_dict(self) -> dict:
+        return {"values": self.values, "method": self.method, "frequency_hz": self.frequency_hz,
+                "period_s": self.period_s, "damping_ratio": self.damping_ratio, "note": self.note,
+                "seconds": self.seconds, "rejected": self.rejected}
+
+
+def start_from_data(record, system) -> DataStart | None:
+    """The data's start for ``system`` on ``record`` (None when the record shows no resonance)."""
+    t0 = time.perf_counter()
+    peak = fundamental(record)
+    if peak is None:
+        return None
+    fn, zeta = peak
+    corner = max(fn / 5.0, 2.0 / max(float(record.t[-1] - record.t[0]), 1e-9))
+    out = None
+    if _equation_error_applies(record, system):
+        try:
+            out = _equation_error(record, system, corner, fn)
+        except (np.linalg.LinAlgError, RuntimeError, ValueError) as exc:
+            log.info("equation-error start failed (%s); the transfer function's peak is used", exc)
+    if out is None:
+        out = _from_peak(system, fn, zeta)
+    out.seconds = time.perf_counter() - t0
+    log.info("start from the data (%s): %s", out.method, ", ".join(f"{k}={v:.5g}" for k, v in out.values.items()))
+    return out
+
+
+def equation_error_integrated(record, system) -> DataStart | None:
+    """Equation error on the high-passed integrated signals alone (None where it does not apply:
+    floors without a sensor, an unmeasured latent state, no resonance, a fit out of range)."""
+    peak = fundamental(record)
+    if peak is None or not _equation_error_applies(record, system):
+        return None
+    corner = max(peak[0] / 5.0, 2.0 / max(float(record.t[-1] - record.t[0]), 1e-9))
+    return _equation_error(record, system, corner, peak[0])
+
+
+def fundamental(record) -> tuple[float, float] | None:
+    """Frequency (Hz) and damping ratio of the fundamental resonance: the largest peak of the
+    top measured floor's transmissibility from the (mean) input, coherence-weighted."""
+    u, y = _input_output(record)
+    if u is None or y is None or not np.any(y) or not np.any(u):
+        return None
+    dt = record.dt
+    duration = float(record.t[-1] - record.t[0])
+    tf = transfer_function(u, y, dt)
+    band = (max(2.0 / duration, tf.freq[1]), 0.4 / dt)
+    try:
+        fn, zeta = dominant_peak(tf, band)
+    except ValueError:
+        return None
+    if not np.isfinite(zeta):  # narrower than the frequency bins: light damping, its value unresolved
+        zeta = UNRESOLVED_DAMPING
+    return fn, float(np.clip(zeta, 0.005, 0.5))
+
+
+def _input_output(record) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The excitation (several inputs: their mean) and the top measured floor's response: its
+    absolute acceleration where an accelerometer gives it (a transmissibility), else the
+    displacement or velocity as measured (a receptance: its peak sits at the resonance too, and
+    no noisy derivative is taken)."""
+    f = np.asarray(record.f, float)
+    u = f.mean(axis=1) if f.ndim == 2 else f
+    sensors = record.sensors()
+    if "a" in sensors and record.excitation == "ground":
+        y = record.a[:, max(sensors["a"]) - 1]
+        return u, (y if f.ndim == 2 else y + f)
+    kind = next((k for k in ("x", "v", "a") if k in sensors), None)
+    return (u, None) if kind is None else (u, getattr(record, kind)[:, max(sensors[kind]) - 1])
+
+
+def _equation_error_applies(record, system) -> bool:
+    if system.n_latent or not system.linear_params():
+        return False
+    sensors = record.sensors()
+    floors = set().union(*[set(v) for v in sensors.values()]) if sensors else set()
+    return floors == set(range(1, system.n_dof + 1)) and not any(
+        np.isnan(getattr(record, k)[:, [j - 1 for j in v]]).any() for k, v in sensors.items())
+
+
+def _filtered_channels(record, corner: float) -> dict[str, np.ndarray]:
+    """x, v, a per degree of freedom (as the record holds them) high-passed alike, each from its
+    own sensor where there is one, else integrated from a higher derivative, else differentiated
+    from a lower one."""
+    dt = record.dt
+    have = {k: getattr(record, k) for k in ("x", "v", "a") if getattr(record, k) is not None}
+    order = {"x": 0, "v": 1, "a": 2}
+    out: dict[str, np.ndarray] = {}
+    for kind in ("x", "v", "a"):
+        if kind in have:
+            out[kind] = integrate(have[kind], dt, 0, corner)
+            continue
+        above = [k for k in ("v", "a") if k in have and order[k] > order[kind]]
+        if above:
+            out[kind] = integrate(have[above[0]], dt, order[above[0]] - order[kind], corner)
+        else:
+            below = max((k for k in have if order[k] < order[kind]), key=lambda k: order[k])
+            out[kind] = _differentiate(integrate(have[below], dt, 0, corner), dt, order[kind] - order[below])
+    return out
+
+
+def _differentiate(y: np.ndarray, dt: float, times: int) -> np.ndarray:
+    n = y.shape[0]
+    Y = np.fft.rfft(y, 2 * n, axis=0)
+    w = 2j * np.pi * np.fft.rfftfreq(2 * n, dt)
+    return np.fft.irfft(Y * (w**times).reshape((-1,) + (1,) * (y.ndim - 1)), 2 * n, axis=0)[:n]
+
+
+def _equation_error(record, system, corner: float, fn: float) -> DataStart | None:
+    from pidyn.systems.base import Kinematics
+    from pidyn.systems.lstsq import forward_jacobian, solve_linear_params
+    from pidyn.systems.sdof import influence_name
+
+    dt = record.dt
+    ch = _filtered_channels(record, corner)
+    f = np.asarray(record.f, float)
+    F = integrate(f, dt, 0, corner)
+    edge = max(1, int(round(2.0 / fn / dt)))  # the filter's and the integration's ends ring
+    keep = slice(edge, len(record.t) - edge)
+    T = lambda a: torch.as_tensor(np.asarray(a, float)[keep], dtype=torch.float64)  # noqa: E731
+    values = {s.name: torch.tensor(float(s.init), dtype=torch.float64) for s in system.param_specs()}
+    names = list(system.linear_params())
+    r_names = [influence_name(i) for i in system.inputs]
+    t = T(record.t)
+    if not r_names:
+        k = Kinematics(t, T(ch["x"]), T(ch["v"]), T(ch["a"]))
+        est = solve_linear_params(system, k, T(F), values, names)
+    else:  # absolute signals; relative = absolute - the supports' motion weighted by r (bilinear)
+        FV, FD = integrate(f, dt, 1, corner), integrate(f, dt, 2, corner)
+        Ft, FVt, FDt = T(F), T(FV), T(FD)
+        xa, va, aa = T(ch["x"]), T(ch["v"]), T(ch["a"])
+
+        def kin(p: dict) -> Kinematics:
+            g = lambda q: system.ground_motion(q, p)  # noqa: E731
+            return Kinematics(t, xa - g(FDt), va - g(FVt), aa - g(Ft))
+
+        est = solve_linear_params(system, kin(values), Ft, values, names)
+        u = torch.tensor([est[n] for n in names] + [float(values[n]) for n in r_names], dtype=torch.float64)
+        all_names = names + r_names
+
+        def residual(q: torch.Tensor) -> torch.Tensor:
+            p = dict(values)
+            p.update({n: q[i] for i, n in enumerate(all_names)})
+            return system.residual(kin(p), Ft, p)["motion"].reshape(-1)
+
+        for _ in range(30):
+            J = forward_jacobian(residual, u)
+            step = torch.linalg.lstsq(J, -residual(u)[:, None], driver="gelsd").solution[:, 0]
+            u = u + step
+            if float(step.abs().max() / u.abs().clamp_min(1e-12).max()) < 1e-10:
+                break
+        est = {n: float(u[i]) for i, n in enumerate(all_names)}
+    specs = {s.name: s for s in system.param_specs()}
+    bad = {n: v for n, v in est.items() if not np.isfinite(v) or not in_range(specs[n], v)}
+    if bad:
+        log.info("equation-error start outside the parameters' ranges: %s", bad)
+        return None
+    freq, zeta = _modal(system, {**{n: float(v) for n, v in values.items()}, **est})
+    return DataStart(est, "equation_error", freq, zeta,
+                     note=f"integrated signals high-passed at {corner:.3g} Hz, {edge} samples cut at each end")
+
+
+def _modal(system, values: dict[str, float]) -> tuple[float | None, float | None]:
+    """The first mode's frequency (Hz) and damping ratio of the model at ``values``."""
+    from pidyn.systems.modal import linear_matrices, modal_properties
+
+    try:
+        modes = modal_properties(*linear_matrices(system, values))
+    except (KeyError, ValueError):
+        return None, None
+    return float(modes["frequency_hz"][0]), float(modes["damping_ratio"][0])
+
+
+def _from_peak(system, fn: float, zeta: float) -> DataStart:
+    """The model's linear part scaled to the measured fundamental frequency and damping ratio."""
+    specs = {s.name: s for s in system.param_specs()}
+    init = {n: float(s.init) for n, s in specs.items()}
+    w = 2 * np.pi * fn
+    values: dict[str, float] = {}
+    if hasattr(system, "linear_matrices"):
+        from pidyn.systems.modal import modal_properties
+
+        w0 = 2 * np.pi * modal_properties(*system.linear_matrices(init))["frequency_hz"][0]
+        scale = (w / max(w0, 1e-12)) ** 2
+        for term in system.terms:
+            kp, cp = term.initial_stiffness_param, term.damping_param
+            if kp and specs[kp].trainable:
+                values[kp] = init[kp] * scale
+        for term in system.terms:  # stiffness-proportional: every mode's ratio grows with its frequency
+            cp = term.damping_param
+            if cp and specs[cp].trainable:
+                kp = next(t.initial_stiffness_param for t in system.terms
+                          if t.storey == term.storey and t.initial_stiffness_param)
+                values[cp] = 2 * zeta / w * values.get(kp, init[kp])
+    else:
+        from pidyn.systems.modal import damping_params, stiffness_params
+
+        m = init.get("m", 1.0)
+        ks, cs = stiffness_params(system), damping_params(system)
+        for p in ks:
+            if specs[p].trainable:
+                values[p] = m * w**2 / len(ks)
+        for p in cs:
+            if specs[p].trainable:
+                values[p] = 2 * zeta * m * w / len(cs)
+    values = {n: v for n, v in values.items() if np.isfinite(v) and in_range(specs[n], v)}
+    return DataStart(values, "transfer_function", fn, zeta,
+                     note=f"transmissibility peak {fn:.4g} Hz, half-power damping {100 * zeta:.2g} %")
+
+
+def with_start(system, values: dict[str, float], keep: set[str] | frozenset = frozenset()):
+    """``system`` with its trainable parameters started at ``values`` (their scales with them),
+    except those in ``keep`` (a start the user gave)."""
+    from pidyn.systems.base import merge_specs
+
+    trainable = {s.name for s in system.param_specs() if s.trainable}
+    chosen = {n: {"init": float(v)} for n, v in values.items() if n in trainable and n not in keep}
+    if chosen:
+        system._specs = merge_specs(system.param_specs(), chosen)
+    return system
+
+
+def user_started(system, settings: list[str]) -> set[str]:
+    """The parameters whose start the user set (``system.params.<name>...``, ``system.guess``)."""
+    import re
+
+    names = [s.name for s in system.param_specs()]
+    out: set[str] = set()
+    for key in settings:
+        m = re.fullmatch(r"system\.params\.([^.]+)(\..*)?", key)
+        if m:
+            out.add(m.group(1))
+        elif key == "system.params":
+            out.update(names)
+        elif key == "system.guess":
+            out.update(names)
+        elif key.startswith("system.guess."):
+            base = key.split(".", 2)[2]
+            out.update(n for n in names if re.fullmatch(rf"{re.escape(base)}_?\d+", n) or n == base)
+    return out

@@ -1,0 +1,192 @@
+"""A strong-motion archive as a record: a station's input (support) and output (structure)
+channels, aligned, resampled and cut to the shaking.
+
+    python train.py data=csmip data.path=FILE.zip data.station=CE89324 data.direction=transverse
+
+The channel sets of a station come from ``stations.yaml`` beside the shipped records (the
+station is read from the files when not given); ``data.inputs=[...] data.outputs=[...]``
+choose any others. What is done to the data, each step said in the record's ``meta``:
+
+* **channels of different lengths** (film records: two recorders, which start together to
+  within a sample but stop apart) are cut to the shortest; different steps are refused;
+* **missing channels** end in ``MissingChannelError`` naming them, or with ``on_missing=drop``
+  are left out (and said so); an event left without an input or an output is refused;
+* **resampling** to ``dt`` (0.02 s, 50 Hz: ten samples a period up to 5 Hz) by zero-phase
+  polyphase filtering; a record already that coarse is kept as it is;
+* **the span** around the shaking: from ``pre`` seconds before 0.5 % of the inputs' Arias
+  intensity to ``post`` seconds after 99.5 %; the pre-event part's RMS (the sensors' noise) is
+  kept in ``meta['pre_event_rms']``; ``span=[t0, t1]`` (s, file time) overrides it;
+* **units**: SI (the V2 files' cm/s^2 times 0.01).
+
+With several inputs the record keeps absolute accelerations (there is no single ground to
+subtract); with one, the convention of every record: relative to it.
+"""
+
+from __future__ import annotations
+
+import logging
+from importlib import resources
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import yaml
+from scipy.signal import resample_poly
+
+from pidyn.data.csmip import Archive, CsmipFormatError, MissingChannelError, read_archive
+from pidyn.data.sources import DataError, Record
+
+log = logging.getLogger(__name__)
+
+STATIONS_FILE = "stations.yaml"
+
+
+def stations() -> dict:
+    """The channel sets of the stations the project knows (``pidyn/data/measured/stations.yaml``)."""
+    ref = resources.files("pidyn.data.measured").joinpath(STATIONS_FILE)
+    with ref.open("r", encoding="utf-8") as fh:
+        return dict(yaml.safe_load(fh) or {})
+
+
+def channel_sets(station: str | None, direction: str, inputs: Sequence[int] | None,
+                 outputs: Sequence[int] | None, archive: Archive) -> tuple[str, list[int], list[int]]:
+    """(station, inputs, outputs): the given channels, else the station's set for ``direction``."""
+    if station is None:
+        station = _station_of(archive)
+    if inputs is not None and outputs is not None:
+        return station or "", [int(c) for c in inputs], [int(c) for c in outputs]
+    known = stations()
+    if station not in known:
+        raise DataError(f"{archive.path.name}: station '{station}' has no channel sets in {STATIONS_FILE} (known: "
+                        f"{sorted(known)}); give data.inputs=[...] and data.outputs=[...]")
+    sets = known[station].get("directions", {})
+    if direction not in sets:
+        raise DataError(f"{archive.path.name}: station {station} has no direction '{direction}'; choose from "
+                        f"{sorted(sets)}")
+    ins = [int(c) for c in (inputs if inputs is not None else sets[direction]["inputs"])]
+    outs = [int(c) for c in (outputs if outputs is not None else sets[direction]["outputs"])]
+    return station, ins, outs
+
+
+def _station_of(archive: Archive) -> str | None:
+    """``CE<number>`` from the files' ``Station No.`` line (CSMIP's network code is CE)."""
+    import re
+
+    for ch in archive.channels.values():
+        for line in ch.header:
+            m = re.search(r"station\s+no\.?\s*(\d+)", line, re.IGNORECASE)
+            if m:
+                return f"CE{int(m.group(1))}"
+    return None
+
+
+def csmip_record(path: str | Path, station: str | None = None, direction: str = "transverse",
+                 inputs: Sequence[int] | None = None, outputs: Sequence[int] | None = None,
+                 on_missing: str = "error", dt: float | None = 0.02, span: Sequence[float] | None = None,
+                 pre: float = 2.0, post: float = 5.0, max_outputs: int | None = None, fit_share: float = 0.65,
+                 system=None) -> Record:
+    """The record of one event at one station (see the module's docstring).
+
+    ``max_outputs``: keep the first this many outputs (default: the model's degrees of
+    freedom when ``system`` is given, which the train task passes). ``fit_share``: the record's
+    split, the first share for fitting, the rest held out (``meta['split']``)."""
+    if not 0.1 <= fit_share <= 0.95:
+        raise DataError(f"data.fit_share must lie in [0.1, 0.95], got {fit_share}")
+    if on_missing not in ("error", "drop"):
+        raise DataError(f"data.on_missing must be 'error' or 'drop', got '{on_missing}'")
+    archive = read_archive(path)
+    station, ins, outs = channel_sets(station, direction, inputs, outputs, archive)
+    notes: list[str] = []
+    ins = _present(archive, ins, "input", on_missing, notes)
+    outs = _present(archive, outs, "output", on_missing, notes)
+    limit = max_outputs if max_outputs is not None else (None if system is None else system.n_dof)
+    if limit is not None and len(outs) > limit:
+        notes.append(f"outputs {outs[limit:]} not used: the model has {limit} degree(s) of freedom")
+        outs = outs[:limit]
+    chans = [archive.channels[c] for c in ins + outs]
+    steps = {round(c.dt, 9) for c in chans}
+    if len(steps) > 1:
+        raise CsmipFormatError(f"{archive.path.name}: channels sampled at different steps {sorted(steps)} s")
+    step = chans[0].dt
+    n = min(c.n for c in chans)
+    if any(c.n != n for c in chans):
+        lengths = {c.station_channel: c.n for c in chans}
+        notes.append(f"channels of different lengths {lengths} (two recorders): cut to the shortest, {n} samples "
+                     f"({(n - 1) * step:.3g} s)")
+    acc_in = np.stack([archive.channels[c].acc[:n] for c in ins], axis=1)
+    acc_out = np.stack([archive.channels[c].acc[:n] for c in outs], axis=1)
+    acc_in, acc_out, step = _resample(acc_in, acc_out, step, dt, notes)
+    i0, i1, pre_rms = _span(acc_in, acc_out, step, span, pre, post)
+    t = np.arange(i1 - i0) * step
+    f = acc_in[i0:i1]
+    a = acc_out[i0:i1]
+    names = [f"ch{c}" for c in ins]
+    several = len(ins) > 1
+    if not several:
+        f = f[:, 0]
+        a = a - f[:, None]  # one ground: accelerations relative to it, as every record keeps them
+    for note in notes:
+        log.info("%s: %s", archive.path.name, note)
+    meta = {"path": str(path), "station": station, "direction": direction, "inputs": names if several else [],
+            "input_channels": ins, "output_channels": outs, "dt": step, "t_offset": i0 * step,
+            "span": [i0 * step, (i1 - 1) * step], "pre_event_rms": pre_rms, "notes": notes,
+            "acceleration": "absolute" if several else "relative", "units": {"a": "m/s^2", "ag": "m/s^2"},
+            "pga": float(np.max(np.abs(f))), "band_hz": archive.channels[outs[0]].band_hz,
+            "locations": {c: archive.channels[c].location for c in ins + outs}}
+    cut = float(t[-1]) * fit_share
+    meta["split"] = {"fit": [0.0, cut], "heldout": [cut, float(t[-1])]}
+    name = Path(path).name.split(".")[0]
+    return Record(name=name, t=t, f=f, a=a, excitation="ground", meta=meta)
+
+
+def _present(archive: Archive, chans: list[int], what: str, on_missing: str, notes: list[str]) -> list[int]:
+    missing = [c for c in chans if c not in archive.channels]
+    if missing and on_missing == "error":
+        archive.require(chans, what)
+    kept = [c for c in chans if c in archive.channels]
+    if not kept:
+        raise MissingChannelError(f"{archive.path.name}: none of the {what} channels {chans} is in this archive "
+                                  f"(it holds {sorted(archive.channels)})")
+    if missing:
+        notes.append(f"{what} channel(s) {missing} missing in this event: left out (data.on_missing=drop)")
+    return kept
+
+
+def _resample(acc_in: np.ndarray, acc_out: np.ndarray, step: float, dt: float | None,
+              notes: list[str]) -> tuple[np.ndarray, np.ndarray, float]:
+    """Down to ``dt`` by zero-phase polyphase filtering (an integer or simple rational ratio)."""
+    if dt is None or dt <= step * (1 + 1e-9):
+        return acc_in, acc_out, step
+    from fractions import Fraction
+
+    ratio = Fraction(dt / step).limit_denominator(16)
+    if abs(float(ratio) - dt / step) > 1e-6 * dt / step:
+        raise DataError(f"cannot resample a step of {step} s to {dt} s (ratio {dt / step:g} not rational)")
+    up, down = ratio.denominator, ratio.numerator
+    notes.append(f"resampled from {step:g} s to {dt:g} s (polyphase, zero phase)")
+    return (resample_poly(acc_in, up, down, axis=0), resample_poly(acc_out, up, down, axis=0), float(dt))
+
+
+def _span(acc_in: np.ndarray, acc_out: np.ndarray, step: float, span: Sequence[float] | None, pre: float,
+          post: float) -> tuple[int, int, dict[str, float]]:
+    """Sample range [i0, i1) of the shaking, and the RMS of what comes before it per channel."""
+    n = acc_in.shape[0]
+    if span is not None:
+        t0, t1 = float(span[0]), float(span[1])
+        if not 0 <= t0 < t1:
+            raise DataError(f"data.span must be [t0, t1] with 0 <= t0 < t1, got {list(span)}")
+        i0, i1 = int(round(t0 / step)), min(n, int(round(t1 / step)) + 1)
+    else:
+        e = np.sum(acc_in**2, axis=1)
+        cum = np.cumsum(e) / max(float(np.sum(e)), 1e-300)
+        i0 = max(0, int(np.searchsorted(cum, 0.005)) - int(round(pre / step)))
+        i1 = min(n, int(np.searchsorted(cum, 0.995)) + int(round(post / step)) + 1)
+    if i1 - i0 < 50:
+        raise DataError(f"the span holds only {i1 - i0} samples")
+    pre_rms = {}
+    if i0 >= int(round(1.0 / step)):  # at least a second before the shaking: the sensors' noise
+        both = np.concatenate([acc_in, acc_out], axis=1)
+        pre_rms = {"inputs": np.sqrt(np.mean(acc_in[:i0] ** 2, axis=0)).tolist(),
+                   "outputs": np.sqrt(np.mean(acc_out[:i0] ** 2, axis=0)).tolist(),
+                   "share_of_peak": float(np.sqrt(np.mean(both[:i0] ** 2)) / max(np.max(np.abs(both)), 1e-300))}
+    return i0, i1, pre_rms

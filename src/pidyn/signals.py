@@ -1,0 +1,122 @@
+"""Signal processing every part shares (NumPy and SciPy only): integrating accelerations to
+velocities and displacements, and the transfer function of a measured structure.
+
+Integration is spectral, with one zero-phase high-pass applied to every signal alike. A
+linear equation of motion holds after any linear time-invariant filter applied to all its
+terms, so the same filter on the excitation, the acceleration and the integrated velocity and
+displacement keeps a linear model exactly true of the filtered signals, while the drift an
+integration of noise would bring is gone. (A rectangle-rule integration lags half a sample:
+at 4 Hz and 50 Hz sampling that phase is 0.25 rad, more than the damping of a bridge; a
+trapezoid rule warps the gain; the spectral one is exact in the band it keeps.)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import csd, welch
+
+
+def highpass_gain(freq: np.ndarray, corner: float, order: int = 4) -> np.ndarray:
+    """Zero-phase high-pass: the magnitude of a Butterworth filter of ``order`` at ``corner`` Hz."""
+    f = np.maximum(np.abs(freq), 1e-12)
+    return 1.0 / np.sqrt(1.0 + (corner / f) ** (2 * order))
+
+
+def integrate(y: np.ndarray, dt: float, times: int, corner: float, order: int = 4) -> np.ndarray:
+    """``y`` (N,) or (N, k) high-passed at ``corner`` Hz and integrated ``times`` times (0: the
+    filter alone), spectrally on a zero-padded grid: the same operator for every signal."""
+    y = np.asarray(y, float)
+    n = y.shape[0]
+    m = 2 * n
+    Y = np.fft.rfft(y, m, axis=0)
+    f = np.fft.rfftfreq(m, dt)
+    g = highpass_gain(f, corner, order)
+    w = 2j * np.pi * f
+    w[0] = 1.0
+    op = g / w**times
+    op[0] = 0.0
+    shape = (len(f),) + (1,) * (y.ndim - 1)
+    return np.fft.irfft(Y * op.reshape(shape), m, axis=0)[:n]
+
+
+#: half-power width of a pure tone seen through a Hann window, in frequency bins
+HANN_HALF_POWER_BINS = 1.44
+
+
+@dataclass
+class TransferFunction:
+    """H1 estimate of output / input (Welch), with the coherence."""
+
+    freq: np.ndarray
+    h: np.ndarray  # complex
+    coherence: np.ndarray
+    segments: int  # Welch averages (independent-ish segments)
+    input_power: np.ndarray | None = None  # S_uu: where the input has no power, H is noise
+
+
+def transfer_function(u: np.ndarray, y: np.ndarray, dt: float, nperseg: int | None = None) -> TransferFunction:
+    """H1 = S_uy / S_uu and the coherence, by Welch averaging (Hann windows, half overlap; by
+    default segments of about a quarter of the record: a resolution of 4 / duration)."""
+    u, y = np.asarray(u, float), np.asarray(y, float)
+    n = len(u)
+    if nperseg is None:
+        nperseg = int(min(n, max(256, 2 ** int(round(np.log2(max(n / 4, 2)))))))
+    f, suu = welch(u, fs=1 / dt, nperseg=nperseg)
+    _, syy = welch(y, fs=1 / dt, nperseg=nperseg)
+    _, suy = csd(u, y, fs=1 / dt, nperseg=nperseg)
+    with np.errstate(all="ignore"):
+        h = suy / suu
+        coh = np.abs(suy) ** 2 / (suu * syy)
+    segments = max(1, int((n - nperseg) // (nperseg // 2) + 1))
+    return TransferFunction(f, np.nan_to_num(h), np.nan_to_num(coh), segments, suu)
+
+
+def transmissibility(freq: np.ndarray, fn: float, zeta: float) -> np.ndarray:
+    """Absolute-acceleration transmissibility of a base-excited oscillator,
+    (wn^2 + 2 i zeta wn w) / (wn^2 - w^2 + 2 i zeta wn w)."""
+    w, wn = 2 * np.pi * np.asarray(freq, float), 2 * np.pi * fn
+    return (wn**2 + 2j * zeta * wn * w) / (wn**2 - w**2 + 2j * zeta * wn * w)
+
+
+def dominant_peak(tf: TransferFunction, band: tuple[float, float]) -> tuple[float, float]:
+    """(frequency, damping ratio by the half-power width; NaN when the peak is no wider than the
+    frequency bins) of the largest |H| in ``band`` (Hz),
+    on |H| weighted by the coherence, where the input carries power (above 1e-3 of its peak: a
+    band-limited record's H beyond its band is noise over nothing), so that a peak of noise does
+    not win; the frequency refined by a parabola through the log-magnitude's three top bins."""
+    sel = (tf.freq >= band[0]) & (tf.freq <= band[1])
+    if tf.input_power is not None:
+        sel &= tf.input_power >= 1e-3 * float(np.max(tf.input_power[sel])) if sel.any() else sel
+    if not sel.any():
+        raise ValueError(f"no frequency of the transfer function in {band} Hz")
+    mag = np.abs(tf.h) * np.sqrt(np.clip(tf.coherence, 0.0, 1.0))
+    idx = np.flatnonzero(sel)
+    i = int(idx[np.argmax(mag[idx])])
+    half = mag[i] / np.sqrt(2.0)
+    lo, hi = i, i
+    while lo > 0 and mag[lo] > half:
+        lo -= 1
+    while hi < len(mag) - 1 and mag[hi] > half:
+        hi += 1
+    f_lo = _cross(tf.freq[lo], tf.freq[lo + 1], mag[lo], mag[lo + 1], half)
+    f_hi = _cross(tf.freq[hi - 1], tf.freq[hi], mag[hi - 1], mag[hi], half)
+    df = float(tf.freq[1] - tf.freq[0])
+    fn = float(tf.freq[i])
+    if 0 < i < len(mag) - 1 and min(mag[i - 1], mag[i], mag[i + 1]) > 0:
+        a, b, c = np.log(mag[i - 1]), np.log(mag[i]), np.log(mag[i + 1])
+        den = a - 2 * b + c
+        if den < 0:
+            fn += df * float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
+    # the Hann window alone widens a line to 1.44 bins at half power: what is left is the resonance's
+    width = float(np.sqrt(max((f_hi - f_lo) ** 2 - (HANN_HALF_POWER_BINS * df) ** 2, 0.0)))
+    if width < df:  # no wider than the bins: the damping is below the resolution
+        return fn, float("nan")
+    return fn, float(width / (2 * fn))
+
+
+def _cross(f0: float, f1: float, m0: float, m1: float, level: float) -> float:
+    if m1 == m0:
+        return 0.5 * (f0 + f1)
+    return float(f0 + (level - m0) * (f1 - f0) / (m1 - m0))
