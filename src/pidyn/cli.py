@@ -22,21 +22,44 @@ log = logging.getLogger("pidyn")
 
 
 def _guarded(task, cfg: DictConfig) -> dict:
-    """Run a task; user errors (bad files, bad values) end with one clear line and exit 2."""
+    """Run a task; user errors (bad files, bad values) end with one clear line and exit 2. In a
+    multirun the job writes its reason to ``failed.json`` in its run folder instead, and the
+    sweep goes on with the other jobs (a missing channel in one event must not stop the rest)."""
     try:
         return task(cfg)
     except (ValueError, FileNotFoundError, RuntimeError) as exc:
         log.error("%s: %s", type(exc).__name__, exc)
         if cfg.get("raise_errors", False):
             raise
+        if _in_multirun():
+            _write_failure(cfg, exc)
+            return {}
         sys.exit(2)
+
+
+def _in_multirun() -> bool:
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
+    try:
+        return HydraConfig.get().mode == RunMode.MULTIRUN
+    except ValueError:
+        return False
+
+
+def _write_failure(cfg: DictConfig, exc: BaseException) -> None:
+    import json
+
+    folder = Path(cfg.paths.output_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "failed.json").write_text(json.dumps({"error": type(exc).__name__, "message": str(exc)}, indent=2))
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def train_main(cfg: DictConfig) -> float | None:
     from pidyn.tasks.train import train
 
-    metrics = _guarded(train, cfg)
+    metrics = _guarded(train, cfg) or {}
     value = metrics.get(cfg.get("optimized_metric", "max_error_pct"))
     return float(value) if value is not None else None
 
@@ -54,4 +77,6 @@ def diagnose_main(cfg: DictConfig) -> float | None:
     from pidyn.tasks.diagnose import diagnose
 
     result = _guarded(diagnose, cfg)
+    if not result:
+        return None
     return result["gain"]["extended"] if result["gain"]["extended"] is not None else result["gain"]["nominal"]

@@ -45,7 +45,7 @@ def _check_key(cfg: DictConfig, key: str) -> None:
             near = difflib.get_close_matches(part, public, n=1)
             hint = f" (did you mean '{'.'.join(walked + [near[0]])}'?)" if near else ""
             raise ValueError(f"unknown setting '{key}'{hint}; {where} has: {', '.join(map(str, public))}")
-        node = node[part]
+        node = node._get_node(part)  # the child node, not its value: a mandatory '???' is set, not read
         walked.append(part)
 
 

@@ -40,7 +40,7 @@ def rk4(
     Args:
         p: parameter values, scalars or (B,) arrays (plain or dual).
         f: excitation samples, (N,) shared or (N, B) per trajectory; a system with several
-            inputs takes (N, n_inputs) shared or (N, B, n_inputs).
+            inputs takes (N, W) shared or (N, B, W), W its ``excitation_width``.
         y0: initial states (B, n_state), plain or dual.
         t0: absolute start time of each trajectory (time-dependent terms see t0 + t - t[0]).
     Returns:
@@ -56,8 +56,9 @@ def rk4(
         float(t0) + np.asarray(t, float) - float(t[0])
     ff = np.asarray(f, float)
     multi = system.n_inputs > 1
-    if ff.ndim not in ((2, 3) if multi else (1, 2)) or (multi and ff.shape[-1] != system.n_inputs):
-        raise ValueError(f"{system.name}: excitation of shape {ff.shape} for {system.n_inputs} input(s)")
+    if ff.ndim not in ((2, 3) if multi else (1, 2)) or (multi and ff.shape[-1] != system.excitation_width):
+        raise ValueError(f"{system.name}: excitation of shape {ff.shape} for {system.n_inputs} input(s) "
+                         f"({system.excitation_width} columns)")
     per_trajectory = ff.ndim == (3 if multi else 2)
 
     def store(i: int, yi: Any) -> None:

@@ -116,7 +116,7 @@ def _input_output(record) -> tuple[np.ndarray | None, np.ndarray | None]:
     displacement or velocity as measured (a receptance: its peak sits at the resonance too, and
     no noisy derivative is taken)."""
     f = np.asarray(record.f, float)
-    u = f.mean(axis=1) if f.ndim == 2 else f
+    u = f[:, :record.n_inputs].mean(axis=1) if f.ndim == 2 else f  # several: the supports' mean acceleration
     sensors = record.sensors()
     if "a" in sensors and record.excitation == "ground":
         y = record.a[:, max(sensors["a"]) - 1]
@@ -165,7 +165,7 @@ def _differentiate(y: np.ndarray, dt: float, times: int) -> np.ndarray:
 def _equation_error(record, system, corner: float, fn: float) -> DataStart | None:
     from pidyn.systems.base import Kinematics
     from pidyn.systems.lstsq import forward_jacobian, solve_linear_params
-    from pidyn.systems.sdof import influence_name
+    from pidyn.systems.sdof import feedthrough_name, influence_name, support_damping_name
 
     dt = record.dt
     ch = _filtered_channels(record, corner)
@@ -176,7 +176,7 @@ def _equation_error(record, system, corner: float, fn: float) -> DataStart | Non
     T = lambda a: torch.as_tensor(np.asarray(a, float)[keep], dtype=torch.float64)  # noqa: E731
     values = {s.name: torch.tensor(float(s.init), dtype=torch.float64) for s in system.param_specs()}
     names = list(system.linear_params())
-    r_names = [influence_name(i) for i in system.inputs]
+    r_names = [fn(i) for fn in (influence_name, support_damping_name, feedthrough_name) for i in system.inputs]
     t = T(record.t)
     if not r_names:
         k = Kinematics(t, T(ch["x"]), T(ch["v"]), T(ch["a"]))
@@ -186,8 +186,8 @@ def _equation_error(record, system, corner: float, fn: float) -> DataStart | Non
         Ft, FVt, FDt = T(F), T(FV), T(FD)
         xa, va, aa = T(ch["x"]), T(ch["v"]), T(ch["a"])
 
-        def kin(p: dict) -> Kinematics:
-            g = lambda q: system.ground_motion(q, p)  # noqa: E731
+        def kin(p: dict) -> Kinematics:  # relative = absolute - what the sensor reads of the supports
+            g = lambda q: system.acceleration_output(torch.zeros_like(xa), q, p)  # noqa: E731
             return Kinematics(t, xa - g(FDt), va - g(FVt), aa - g(Ft))
 
         est = solve_linear_params(system, kin(values), Ft, values, names)

@@ -57,7 +57,7 @@ class PeerResult:
 def io_arrays(record) -> tuple[np.ndarray, np.ndarray]:
     """Inputs (q, N) and the outputs as the accelerometers read them, absolute (p, N)."""
     f = np.asarray(record.f, float)
-    U = f.T if f.ndim == 2 else f[None, :]
+    U = f[:, :record.n_inputs].T if f.ndim == 2 else f[None, :]  # the supports' accelerations (not velocities)
     if record.a is None:
         raise ValueError(f"record '{record.name}': the peers need accelerometer outputs")
     cols = [j - 1 for j in record.sensors().get("a", [])]

@@ -62,8 +62,9 @@ class Record:
         if self.f.ndim == 2 and self.f.shape[1] == 1:
             self.f = self.f[:, 0]
         names = (self.meta or {}).get("inputs")
-        if self.f.ndim == 2 and names is not None and len(names) != self.f.shape[1]:
-            raise DataError(f"record '{self.name}': {self.f.shape[1]} input columns but {len(names)} input names")
+        if self.f.ndim == 2 and (self.f.shape[1] % 2 or (names is not None and 2 * len(names) != self.f.shape[1])):
+            raise DataError(f"record '{self.name}': {self.f.shape[1]} excitation columns; several inputs need their "
+                            f"accelerations and velocities ({len(names or [])} names)")
         for kind, arr in measured.items():
             if len(arr) != len(self.t) or len(self.f) != len(self.t):
                 raise DataError(f"record '{self.name}': {len(self.t)} times, {len(arr)} samples of '{kind}', "
@@ -79,8 +80,9 @@ class Record:
 
     @property
     def n_inputs(self) -> int:
-        """Excitation channels: one (``f`` is (N,)) or several supports (``f`` is (N, n_inputs), ``a`` absolute)."""
-        return 1 if self.f.ndim == 1 else int(self.f.shape[1])
+        """Excitation channels: one (``f`` is (N,)), or several supports (``f`` is (N, 2 n_inputs):
+        their accelerations, then their velocities; ``a`` absolute)."""
+        return 1 if self.f.ndim == 1 else int(self.f.shape[1]) // 2
 
     @property
     def inputs(self) -> list[str]:
@@ -213,7 +215,8 @@ def synthetic_from_motion(
     if system.excitation != "ground":
         ground = 0.0
     else:  # the ground acceleration each floor feels (several supports: weighted by their influence)
-        ground = system.ground_motion(clean.f, truth) if several else clean.f[:, None]
+        ground = (system.acceleration_output(np.zeros((len(clean.t), system.n_dof)), clean.f, truth) if several
+                  else clean.f[:, None])
     if several:
         ground = ground[:, [s - 1 for s in floors]]
     sensed = {c: getattr(clean, c)[:, [s - 1 for s in floors]] for c in channels}

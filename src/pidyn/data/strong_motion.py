@@ -115,28 +115,48 @@ def csmip_record(path: str | Path, station: str | None = None, direction: str = 
                      f"({(n - 1) * step:.3g} s)")
     acc_in = np.stack([archive.channels[c].acc[:n] for c in ins], axis=1)
     acc_out = np.stack([archive.channels[c].acc[:n] for c in outs], axis=1)
-    acc_in, acc_out, step = _resample(acc_in, acc_out, step, dt, notes)
+    vel_in = _velocities(archive, ins, n, step, acc_in, notes)
+    acc_in, acc_out, step = _resample(np.concatenate([acc_in, vel_in], axis=1), acc_out, step, dt, notes)
+    acc_in, vel_in = acc_in[:, :len(ins)], acc_in[:, len(ins):]
     i0, i1, pre_rms = _span(acc_in, acc_out, step, span, pre, post)
     t = np.arange(i1 - i0) * step
-    f = acc_in[i0:i1]
     a = acc_out[i0:i1]
     names = [f"ch{c}" for c in ins]
     several = len(ins) > 1
-    if not several:
-        f = f[:, 0]
+    if several:  # the supports' accelerations, then their velocities (a support's dashpot acts on its velocity)
+        f = np.concatenate([acc_in[i0:i1], vel_in[i0:i1]], axis=1)
+    else:
+        f = acc_in[i0:i1, 0]
         a = a - f[:, None]  # one ground: accelerations relative to it, as every record keeps them
     for note in notes:
         log.info("%s: %s", archive.path.name, note)
     meta = {"path": str(path), "station": station, "direction": direction, "inputs": names if several else [],
+            "excitation_columns": ([f"ag_{c}" for c in names] + [f"vg_{c}" for c in names]) if several else ["ag"],
             "input_channels": ins, "output_channels": outs, "dt": step, "t_offset": i0 * step,
             "span": [i0 * step, (i1 - 1) * step], "pre_event_rms": pre_rms, "notes": notes,
             "acceleration": "absolute" if several else "relative", "units": {"a": "m/s^2", "ag": "m/s^2"},
-            "pga": float(np.max(np.abs(f))), "band_hz": archive.channels[outs[0]].band_hz,
+            "pga": float(np.max(np.abs(acc_in[i0:i1]))), "band_hz": archive.channels[outs[0]].band_hz,
             "locations": {c: archive.channels[c].location for c in ins + outs}}
     cut = float(t[-1]) * fit_share
     meta["split"] = {"fit": [0.0, cut], "heldout": [cut, float(t[-1])]}
     name = Path(path).name.split(".")[0]
     return Record(name=name, t=t, f=f, a=a, excitation="ground", meta=meta)
+
+
+def _velocities(archive: Archive, ins: list[int], n: int, step: float, acc: np.ndarray,
+                notes: list[str]) -> np.ndarray:
+    """The supports' velocities as the V2 files give them (integrated and band-passed with the
+    accelerations by the processing); integrated here (spectrally, above 0.05 Hz) where a file has none."""
+    from pidyn.signals import integrate
+
+    cols = []
+    for j, c in enumerate(ins):
+        vel = archive.channels[c].vel
+        if vel is None:
+            notes.append(f"channel {c}: no velocity block; integrated from its acceleration")
+            vel = integrate(acc[:, j], step, 1, 0.05)
+        cols.append(np.asarray(vel[:n], float))
+    return np.stack(cols, axis=1)
 
 
 def _present(archive: Archive, chans: list[int], what: str, on_missing: str, notes: list[str]) -> list[int]:

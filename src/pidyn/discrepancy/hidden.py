@@ -7,6 +7,8 @@ and measures it. The nominal model does not know the effect; the diagnosis has t
 
 from __future__ import annotations
 
+from typing import Sequence
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -130,12 +132,14 @@ def hidden_case(
     max_noise: float = 0.05,
     sign: float | None = None,
     params: dict[str, float] | None = None,
+    channels: Sequence[str] = ("x", "v"),
 ) -> HiddenCase:
     """Linear SDOF (m, c, k) plus ``effect`` (None: nothing hidden; "a+b": both) under a random record.
 
     ``noise`` None draws it uniformly in [0, max_noise] (std as a share of each channel's RMS).
     ``sign`` fixes the sign of a signed effect (softening cubic: -1); None draws it.
     ``params`` overrides drawn effect parameters (a change after the split: ``{"t_d": 19.0}``).
+    ``channels``: what is measured (``("a",)``: an accelerometer, as on real structures).
     """
     rng = np.random.default_rng(seed)
     motion = str(rng.choice(RECORDS))
@@ -162,7 +166,7 @@ def hidden_case(
     system = SDOFSystem(terms, mass=mass, name=f"linear_sdof+{effect or 'none'}")
     truth = {**truth_nom, **{k_: v for k_, v in system.true_values().items() if k_ not in truth_nom}}
     truth.update(hidden)
-    rec = synthetic_from_motion(system, gm, noise=level, data_seed=seed, channels=("x", "v"), params=truth)
+    rec = synthetic_from_motion(system, gm, noise=level, data_seed=seed, channels=tuple(channels), params=truth)
     rec.name = f"{motion}+{effect or 'none'}"
     rec.meta.update({"hidden_effect": effect, "hidden_params": hidden, "seed": seed})
     return HiddenCase(rec, effect, hidden, truth_nom, level, motion, fit_end)
@@ -170,11 +174,12 @@ def hidden_case(
 
 def hidden_record(effect: str | None = "cubic_stiffness", seed: int = 0, noise: float | None = None,
                   duration: float = 25.0, fit_end: float = 16.0, dt: float = 0.01,
-                  sign: float | None = None, params: dict[str, float] | None = None) -> Record:
+                  sign: float | None = None, params: dict[str, float] | None = None,
+                  channels: Sequence[str] = ("x", "v")) -> Record:
     """A hidden-effect case as a data source (``data=hidden``); ``effect: null`` hides nothing."""
     if effect in ("none", "null", ""):
         effect = None
     case = hidden_case(effect, seed, noise=noise, duration=duration, fit_end=fit_end, dt=dt, sign=sign,
-                       params=None if params is None else dict(params))
+                       params=None if params is None else dict(params), channels=tuple(channels))
     case.record.meta["split"] = {"fit": [0.0, fit_end], "heldout": [fit_end, float(case.record.t[-1])]}
     return case.record

@@ -315,13 +315,14 @@ def learned_row(structure: dict | None) -> dict:
 
 
 def save_unexplained(path, record: Record, system, values: dict[str, float], x_raw: np.ndarray,
-                     fit: tuple[float, float]):
+                     fit: tuple[float, float], f: np.ndarray | None = None):
     """The force ``system`` cannot explain on the fitting part (band-limited, the ringing ends
-    left out), with x and x' beside it: what a learned force term starts from."""
+    left out), with x and x' beside it: what a learned force term starts from. ``f``: the
+    excitation paired with ``x_raw`` (default the record's)."""
     from pidyn.discrepancy.residual import unexplained_force
 
     period = 2 * np.pi * np.sqrt(values["m"] / max(values.get("k", values.get("k1", 1.0)), 1e-300))
-    pw = unexplained_force(system, values, record.t, x_raw, record.f, period)
+    pw = unexplained_force(system, values, record.t, x_raw, record.f if f is None else f, period)
     dt = float(record.t[1] - record.t[0])
     edge = max(1, int(round(period / dt)))
     m = (record.t >= fit[0]) & (record.t <= fit[1])
@@ -359,13 +360,17 @@ def learned_predicts(record: Record, before, before_values: dict[str, float], af
     (a trilinear spring reached further in the held-out part): kept only if it predicts better.
     The held-out part decides here, as it does for the screening's held-out rules."""
     from pidyn.reporting import nrmse
-    from pidyn.simulate import simulate_identified
+    from pidyn.simulate import simulate_response
 
     mask = (record.t >= held[0]) & (record.t <= held[1])
+    kind = "x" if record.x is not None else "a"  # an accelerometer record is judged on its accelerations
+    measured = x_raw if kind == "x" else record.a[:, 0]
     errors = {}
     for key, system, vals in (("without", before, before_values), ("with", after, after_values)):
-        x = simulate_identified(system, vals, record, x0=float(x_raw[0]), v0=v0, substeps=substeps)[:, 0]
-        errors[key] = nrmse(x[mask], x_raw[mask]) if np.all(np.isfinite(x)) else float("inf")
+        y0 = np.zeros(system.n_state)
+        y0[0], y0[1] = float(x_raw[0]), v0
+        sim = simulate_response(system, vals, record, substeps, y0)[kind][:, 0]
+        errors[key] = nrmse(sim[mask], measured[mask]) if np.all(np.isfinite(sim)) else float("inf")
     return bool(mask.any() and errors["with"] < errors["without"]), errors
 
 

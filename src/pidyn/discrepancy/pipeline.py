@@ -21,7 +21,7 @@ it in, so this package never imports the task layer.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
@@ -39,7 +39,7 @@ from pidyn.discrepancy.residual import dominant_period
 from pidyn.discrepancy.screening import EXCLUSIVE, Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.weak_form import WeakForm, measurement_noise, smooth_signals, velocity_noise
-from pidyn.simulate import simulate_identified
+from pidyn.simulate import simulate_identified, simulate_response
 from pidyn.systems.sdof import SDOFSystem
 
 log = logging.getLogger(__name__)
@@ -99,7 +99,24 @@ class Case:
 
     @property
     def x_raw(self) -> np.ndarray:
-        return self.record.x[:, 0]
+        """The displacement: measured, or integrated from accelerometers (``accelerometers.motion_view``)."""
+        if self.record.x is not None:
+            return self.record.x[:, 0]
+        return np.asarray(self.record.meta["motion"]["x"], float)
+
+    @property
+    def weak_f(self) -> np.ndarray:
+        """The excitation the weak form pairs with ``x_raw``: high-passed alike on an accelerometer record
+        (identification and output error take the record's own, unfiltered)."""
+        motion = (self.record.meta or {}).get("motion")
+        return self.record.f if motion is None else np.asarray(motion["f"], float)
+
+    @property
+    def v_raw(self) -> np.ndarray | None:
+        if self.record.v is not None:
+            return self.record.v[:, 0]
+        motion = (self.record.meta or {}).get("motion")
+        return None if motion is None else np.asarray(motion["v"], float)
 
     @property
     def stiff(self) -> str:
@@ -111,7 +128,7 @@ class Case:
     def signals(self, period: float, k_nom: float, mass: float) -> tuple[Signals, WeakForm]:
         """Smoothed x, x' and the weak form, on the time scale of ``period``."""
         r = self.record
-        v_raw = None if r.v is None else r.v[:, 0]
+        v_raw = self.v_raw
         xs, vs = smooth_signals(r.t, self.x_raw, v_raw, period)
         return (Signals(r.t, xs, vs, mass, k_nom, self.stiff, t_fit_end=self.fit[1],
                         v_noise=velocity_noise(r.t, self.x_raw, v_raw, period)),
@@ -119,13 +136,39 @@ class Case:
 
     def screen(self, system: SDOFSystem, values: dict[str, float], s: Signals, weak: WeakForm,
                effects: dict | None = None) -> Screening:
-        return screen(system, values, s, self.record.f, self.x_raw, weak, self.fit[1], self.mass_known,
+        return screen(system, values, s, self.weak_f, self.x_raw, weak, self.fit[1], self.mass_known,
                       effects=self.effects if effects is None else effects, thresholds=self.thresholds)
 
     def free_run(self, system: SDOFSystem, values: dict[str, float], v0: float) -> np.ndarray:
         """The model from the measured initial state over the whole record."""
         return simulate_identified(system, values, self.record, x0=float(self.x_raw[0]), v0=v0,
                                    substeps=int(self.settings.substeps))[:, 0]
+
+    def free_response(self, system: SDOFSystem, values: dict[str, float], v0: float) -> dict[str, np.ndarray]:
+        """``free_run``'s x, v and a (relative) over the whole record."""
+        y0 = np.zeros(system.n_state)
+        y0[0], y0[1] = float(self.x_raw[0]), v0
+        return simulate_response(system, values, self.record, int(self.settings.substeps), y0)
+
+    def noise_std(self, measured: np.ndarray, period: float) -> float:
+        """The measurement noise of ``measured``: of an accelerometer, what the record says of it (the
+        simulated noise level, or the sensor's RMS before the shaking), since a smoother's residual
+        reads an acceleration's broadband content as noise; else the smoother's estimate."""
+        meta = self.record.meta or {}
+        if self.from_accelerometers:
+            level = (meta.get("noise_levels") or {}).get("a")
+            if level is not None:
+                absolute = measured + np.asarray(meta.get("sensor_ground", self.record.f), float)
+                return float(level) * float(np.sqrt(np.mean(absolute**2)))
+            pre = (meta.get("pre_event_rms") or {}).get("outputs")
+            if pre:
+                return float(pre[0])
+        return measurement_noise(self.record.t, measured, period)
+
+    @property
+    def from_accelerometers(self) -> bool:
+        """The record's motion was integrated from accelerations (``accelerometers.motion_view``)."""
+        return "accelerometers" in (self.record.meta or {})
 
 
 def prepare(record: Record, base: SDOFSystem, base_node: dict, settings: DiagnosisSettings, mass: float | None,
@@ -180,6 +223,9 @@ class Outcome:
     pointwise: dict
     x_nom: np.ndarray
     x_ext: np.ndarray | None
+    sims: dict = field(default_factory=dict)  # nominal / extended: x, v, a over the record (accelerometer records)
+    modal: list[dict] | None = None  # the nominal model's modes with 95 % intervals
+    running: dict | None = None  # period and damping window by window (accelerometer records)
 
 
 def run(case: Case) -> Outcome:
@@ -189,7 +235,7 @@ def run(case: Case) -> Outcome:
     from pidyn.discrepancy.residual import unexplained_force
 
     sc = case.screen(nom.system, nom.values, nom.s, nom.weak)
-    pointwise = unexplained_force(nom.system, nom.values, case.record.t, case.x_raw, case.record.f, nom.period)
+    pointwise = unexplained_force(nom.system, nom.values, case.record.t, case.x_raw, case.weak_f, nom.period)
     forced = case.settings.force_effect
     log.info("screening: %s", ", ".join(f"{r['effect']} {r['score']:.1f}" for r in sc.ranking[:4]))
     # does the nominal model hold on the held-out part? if not, when did the structure change?
@@ -197,13 +243,22 @@ def run(case: Case) -> Outcome:
     check, change_row = check_heldout(case, nom, sc, x_nom, bool(forced))
     cause = change_row["effect"] if change_row is not None else (forced or sc.cause)
     confirmation = None
-    if cause is None and not forced and sc.verdict == "none":
+    if case.from_accelerometers and change_row is None and not forced:
+        # integrated accelerations are a poor measurement of the motion: the weak form proposes, output
+        # error on the accelerations decides among every effect it could fit
+        confirmation = confirm_undecided(case, nom.system, nom.values, nom.node, sc, nom.s, 1, everything=True)
+        cause = None if confirmation.row is None else confirmation.row["effect"]
+    elif cause is None and not forced and sc.verdict == "none":
         # an effect the weak form leans towards without deciding: the simulated response decides
         confirmation = confirm_undecided(case, nom.system, nom.values, nom.node, sc, nom.s, 1)
         if confirmation.row is not None:
             cause = confirmation.row["effect"]
-    if cause is None and case.settings.learn_unexplained and not forced \
-            and (sc.verdict == "unexplained" or check.failed):
+    running = running_period(case, nom)
+    if case.from_accelerometers:  # the period that moves beyond its windows' intervals refutes one linear model
+        structured = check.failed or bool(running and running.get("variation", {}).get("varies"))
+    else:
+        structured = sc.verdict == "unexplained" or check.failed
+    if cause is None and case.settings.learn_unexplained and not forced and structured:
         cause = LEARNED  # structured, but nothing in the library explains it: learn the force
     row = None if cause is None else (learned_row(sc.structure) if cause == LEARNED else
                                       change_row or (confirmation.row if confirmation and confirmation.row else
@@ -211,7 +266,54 @@ def run(case: Case) -> Outcome:
     ext = extend_until_explained(case, nom, cause, row, bool(forced))
     causes = ext["causes"] if case.settings.extend else ([] if cause is None else [cause])
     x_ext = case.free_run(ext["system"], ext["values"], float(nom.s.v[0])) if ext["system"] is not None else None
-    return Outcome(nom, sc, check, change_row, ext, causes, cause, bool(forced), confirmation, pointwise, x_nom, x_ext)
+    sims = {}
+    if case.from_accelerometers:  # the gain is measured on the accelerations, as the sensors read them
+        v0 = float(nom.s.v[0])
+        sims = {"nominal": case.free_response(nom.system, nom.values, v0),
+                "extended": None if ext["system"] is None else case.free_response(ext["system"], ext["values"], v0)}
+    return Outcome(nom, sc, check, change_row, ext, causes, cause, bool(forced), confirmation, pointwise, x_nom, x_ext,
+                   sims, nominal_modes(case, nom), running)
+
+
+def running_period(case: Case, nom: Nominal) -> dict | None:
+    """On an accelerometer record: the period and damping window by window by output error
+    (``pidyn.discrepancy.running``), windows of about twelve periods (at least 2 s)."""
+    if not case.from_accelerometers:
+        return None
+    from pidyn.discrepancy.running import period_varies, running_modes
+
+    width = max(12.0 * nom.period, 2.0)
+    try:
+        out = running_modes(case.record, nom.system, nom.values, width=width, step=width / 4,
+                            substeps=int(case.settings.substeps))
+    except ValueError as exc:
+        log.info("no running period (%s)", exc)
+        return None
+    out["variation"] = period_varies(out, width)
+    v = out["variation"]
+    if v.get("varies"):
+        log.info("the period moves through the record beyond its windows' intervals: %.3g s at %.3g s against "
+                 "%.3g s at %.3g s", v["longest"]["period"], v["longest"]["t"], v["shortest"]["period"],
+                 v["shortest"]["t"])
+    return out
+
+
+def nominal_modes(case: Case, nom: Nominal) -> list[dict] | None:
+    """The nominal model's modes with 95 % intervals: its fitting part refined by multiple shooting
+    (from the polished values and the measured or integrated states) for the covariance."""
+    from pidyn.refine import RefineSettings, refine
+    from pidyn.systems.modal import modes_with_intervals
+
+    try:
+        seg = case.record.segment(*case.fit)
+        res = refine(nom.system, seg, {"nominal": nom.values}, RefineSettings(states="measured", initial_state="free"))
+        return modes_with_intervals(nom.system, {**nom.values, **res.params}, res.names, np.asarray(res.covariance))
+    except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
+        log.info("no intervals for the nominal model's modes (%s)", exc)
+        try:
+            return modes_with_intervals(nom.system, nom.values)
+        except (ValueError, KeyError):
+            return None
 
 
 def starting_point(case: Case) -> tuple[dict[str, float], float]:
@@ -263,9 +365,14 @@ def identify_nominal(case: Case, values0: dict[str, float], period: float) -> No
 def check_heldout(case: Case, nom: Nominal, sc: Screening, x_nom: np.ndarray,
                   forced: bool) -> tuple[HeldoutCheck, dict | None]:
     """The held-out failure check, and where the structure changed when the data say it did
-    (a located change moves ``case.fit`` / ``case.held`` to the change point)."""
-    check = heldout_check(case.x_raw, x_nom, case.mask(case.fit), case.mask(case.held),
-                          measurement_noise(case.record.t, case.x_raw, nom.period),
+    (a located change moves ``case.fit`` / ``case.held`` to the change point). On an
+    accelerometer record the check compares accelerations, as the sensors read them."""
+    if case.from_accelerometers:
+        meas = case.record.a[:, 0]
+        sim = case.free_response(nom.system, nom.values, float(nom.s.v[0]))["a"][:, 0]
+    else:
+        meas, sim = case.x_raw, x_nom
+    check = heldout_check(meas, sim, case.mask(case.fit), case.mask(case.held), case.noise_std(meas, nom.period),
                           threshold=float(case.settings.changes.heldout_ratio))
     log.info("%s", check.sentence())
     time_effects = {n: p_ for n, p_ in {"stiffness_loss": case.stiff, "damping_change": "c"}.items()
@@ -273,7 +380,7 @@ def check_heldout(case: Case, nom: Nominal, sc: Screening, x_nom: np.ndarray,
     if forced or not time_effects or not ((check.failed and sc.cause is None) or sc.cause in time_effects):
         return check, None
     change, case.fit, case.held = locate_step(
-        nom.system, nom.values, nom.s, case.record.f, case.x_raw, nom.weak, case.fit, case.held, case.mass_known,
+        nom.system, nom.values, nom.s, case.weak_f, case.x_raw, nom.weak, case.fit, case.held, case.mass_known,
         {n: p_ for n, p_ in time_effects.items() if sc.cause in (None, n)}, case.thresholds,
         bool(check.failed and sc.cause is None))
     if change is None:
@@ -327,7 +434,7 @@ def _extension_step(case: Case, nom: Nominal, node: dict, values: dict[str, floa
     k = len(out["causes"]) + 1
     if cause == LEARNED:  # start the network at the force the current model cannot explain
         path = save_unexplained(case.run_dir / f"unexplained_{k}.npz", record, build_system(node), values,
-                                case.x_raw, case.fit)
+                                case.x_raw, case.fit, f=case.weak_f)
         row = {**row, "parameters": {"init_from": str(path)}}
     ext_node = extension_node(node, values, cause, row, s.context(), k, case.mass_known)
     folder = case.run_dir / ("extended" if k == 1 else f"extended_{k}")
@@ -358,7 +465,7 @@ def next_cause(case: Case, system: SDOFSystem, values: dict[str, float], node: d
     leaves undecided goes to the output-error check, and a structured remainder no library
     effect explains to the learned force. The evidence lands on the last step of ``out``."""
     k = len(out["causes"])
-    sc = screen(system, values, s, case.record.f, case.x_raw, weak, case.fit[1], case.mass_known, remaining,
+    sc = screen(system, values, s, case.weak_f, case.x_raw, weak, case.fit[1], case.mass_known, remaining,
                 case.thresholds)
     step = out["steps"][-1]
     step["next_ranking"] = [{k_: r.get(k_) for k_ in STEP_EVIDENCE if k_ in r} for r in sc.ranking]
@@ -366,6 +473,10 @@ def next_cause(case: Case, system: SDOFSystem, values: dict[str, float], node: d
     step["next_verdict"] = sc.verdict
     log.info("screening the extended model: %s", ", ".join(f"{r['effect']} {r['score']:.1f}"
                                                            for r in sc.ranking[:4] if r.get("score") is not None))
+    if case.from_accelerometers:  # output error on the accelerations decides (see ``run``)
+        confirmation = confirm_undecided(case, system, values, node, sc, s, k + 1, everything=True)
+        step["next_confirmation"] = confirmation.tested
+        return (None, None) if confirmation.row is None else (confirmation.row["effect"], confirmation.row)
     if sc.cause is not None:
         return sc.cause, next(r for r in sc.ranking if r["effect"] == sc.cause)
     if sc.verdict == "none":  # the simulated response decides what the weak form leans to
@@ -379,18 +490,25 @@ def next_cause(case: Case, system: SDOFSystem, values: dict[str, float], node: d
 
 
 def confirm_undecided(case: Case, system: SDOFSystem, values: dict[str, float], node: dict, sc: Screening,
-                      s: Signals, k: int) -> Confirmation:
+                      s: Signals, k: int, everything: bool = False) -> Confirmation:
     """The output-error check of the effects screening ``sc`` leaves undecided
-    (``pidyn.discrepancy.confirm``); ``diagnosis.confirm.max_candidates`` = 0 turns it off."""
+    (``pidyn.discrepancy.confirm``); ``diagnosis.confirm.max_candidates`` = 0 turns it off.
+    ``everything``: every effect the weak form could fit at all (an accelerometer record)."""
     st = case.settings
-    candidates = undecided(sc.ranking, case.thresholds, int(st.confirm.max_candidates))
+    if everything:
+        candidates = [r for r in sc.ranking if r.get("score") is not None and np.isfinite(r["score"])
+                      and not r.get("step_in_time")]
+    else:
+        candidates = undecided(sc.ranking, case.thresholds, int(st.confirm.max_candidates))
     if not candidates:
         return Confirmation()
     node = release_held(node)  # as in the polish: a located change time is refined with the rest
     ctx = s.context()
     build = lambda row: build_system(extension_node(node, values, row["effect"], row, ctx, k, case.mass_known))  # noqa: E731
+    # deciding, not confirming (an accelerometer record): each fit run to its end
+    nfev = max(int(st.polish_max_nfev), 100) if everything else int(st.polish_max_nfev)
     return confirm(case.record, build_system(node), values, candidates, build, case.fit, case.held, case.thresholds,
-                   substeps=int(st.substeps), max_nfev=int(st.polish_max_nfev), polish_seconds=st.polish_seconds)
+                   substeps=int(st.substeps), max_nfev=nfev, polish_seconds=st.polish_seconds)
 
 
 def _fmt(values: dict[str, float]) -> str:

@@ -121,14 +121,20 @@ def plot_ranking(path: Path, ranking: list[dict], min_delta_bic: float) -> None:
     plt.close(fig)
 
 
-def plot_running_estimate(path: Path, running: dict, nominal: dict, fit, held, change=None) -> None:
+def plot_running_estimate(path: Path, running: dict, nominal: dict, fit, held, change=None,
+                          stiffness: str | None = None, signal: tuple | None = None) -> None:
     """The nominal parameters refitted in sliding windows over the record, relative to the
-    nominal fit: a change in time shows as a step, located with its interval when found."""
+    nominal fit: a change in time shows as a step, located with its interval when found. With
+    the ``stiffness`` parameter named, a second panel gives the running natural period
+    2 pi sqrt(m / k(t)) (and the damping ratio) beside the motion's envelope (``signal``: t, x),
+    so a period that lengthens in the strong motion and recovers in the coda shows as such."""
     import numpy as np
 
     plt = _plt()
     names = [n for n in running if n != "t" and n in nominal and n != "m"]
-    fig, ax = plt.subplots(figsize=(10, 3.8))
+    with_period = stiffness is not None and stiffness in running and nominal.get(stiffness, 0) > 0
+    fig, axes = plt.subplots(2 if with_period else 1, 1, figsize=(10, 6.8 if with_period else 3.8), squeeze=False)
+    ax = axes[0, 0]
     _shade(ax, fit, held)
     for n in names:
         ax.plot(running["t"], np.asarray(running[n]) / nominal[n], marker=".", lw=1, label=f"{n} / nominal {n}")
@@ -141,6 +147,29 @@ def plot_running_estimate(path: Path, running: dict, nominal: dict, fit, held, c
     ax.set(xlabel="t [s] (window centre)", ylabel="running estimate / nominal",
            title="Running estimate over the record (sliding weak-form fit)")
     ax.legend(fontsize=8, loc="best")
+    if with_period:
+        m = float(nominal.get("m", 1.0))
+        k = np.asarray(running[stiffness], float)
+        period = np.where(k > 0, 2 * np.pi * np.sqrt(m / np.where(k > 0, k, 1.0)), np.nan)
+        a2 = axes[1, 0]
+        _shade(a2, fit, held)
+        a2.plot(running["t"], period, marker=".", lw=1.2, color="tab:blue", label="running period")
+        a2.axhline(2 * np.pi * np.sqrt(m / nominal[stiffness]), color="tab:blue", lw=0.7, ls="--",
+                   label="nominal model's period")
+        a2.set(xlabel="t [s] (window centre)", ylabel="period [s]", title="Natural period through the record")
+        if signal is not None:
+            b = a2.twinx()
+            b.plot(signal[0], np.abs(signal[1]), color="0.6", lw=0.5, zorder=0)
+            b.set_ylabel("|x| (relative displacement)", color="0.5")
+        if "c" in running and nominal.get("c") is not None:
+            c = np.asarray(running["c"], float)
+            zeta = np.where(k > 0, c / (2 * np.sqrt(m * np.where(k > 0, k, 1.0))), np.nan)
+            a2.plot([], [], color="tab:red", marker=".", label="damping ratio (right axis, x100 %)")
+            z = a2.twinx()
+            z.spines["right"].set_position(("axes", 1.08))
+            z.plot(running["t"], 100 * zeta, marker=".", lw=0.8, color="tab:red")
+            z.set_ylabel("damping ratio [%]", color="tab:red")
+        a2.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -177,8 +206,8 @@ def _num(v) -> str:
 
 def write_report(path: Path, d: dict, figures: list[str]) -> None:
     """report.md: the verdict, the steps, the models' held-out errors, the evidence, the ranking."""
-    lines = (_verdict_lines(d) + _steps_lines(d) + _model_lines(d) + _evidence_lines(d) + _confirmation_lines(d)
-             + _ranking_lines(d)
+    lines = (_verdict_lines(d) + _accelerometer_lines(d) + _steps_lines(d) + _model_lines(d) + _evidence_lines(d)
+             + _confirmation_lines(d) + _ranking_lines(d)
              + ["## Figures", ""] + [f"![{f}](figures/{f})" for f in figures])
     path.write_text("\n".join(lines) + "\n")
 
@@ -199,6 +228,59 @@ def _verdict_lines(d: dict) -> list[str]:
                   + ", ".join(f"`{c}`" for c in causes) + "**"
                   + (" (named by the user, not by the screening)" if d.get("forced") else ""), ""]
     return lines
+
+
+def _accelerometer_lines(d: dict) -> list[str]:
+    """An accelerometer record: how its motion was read, what the running period says, and which
+    candidates the accelerations decide between and which they cannot."""
+    acc = d.get("accelerometers")
+    if not acc:
+        return []
+    lines = ["## From accelerometers", "",
+             f"The relative motion is the measured acceleration minus what the sensor reads of the supports "
+             f"({acc.get('note')}); the weak-form screening below ran on it integrated (high-passed at "
+             f"{acc.get('highpass_hz', 0):.3g} Hz) and only proposes: each candidate was fitted by output error "
+             f"to the accelerations, and that fit decides.", ""]
+    run = d.get("running") or {}
+    var = run.get("variation") or {}
+    if var.get("varies"):
+        lo, hi = var["longest"], var["shortest"]
+        lines += [f"**The period is not one.** It is {lo['period']:.3f} s (95 % {lo['ci95'][0]:.3f}-{lo['ci95'][1]:.3f}) "
+                  f"in the window at {lo['t']:.1f} s and {hi['period']:.3f} s ({hi['ci95'][0]:.3f}-{hi['ci95'][1]:.3f}) "
+                  f"in the one at {hi['t']:.1f} s, windows that share no sample: no one linear, time-invariant model "
+                  "holds through the record.", ""]
+    if "period_longest" in run:
+        lines += [f"Window by window (figure `running_period.png`) the period is {run['period_strongest_window']:.3f} s "
+                  f"in the strongest window (t = {run['t_strongest_window']:.1f} s), longest {run['period_longest']:.3f} s "
+                  f"(t = {run['t_period_longest']:.1f} s), {run['period_quietest_window']:.3f} s in the quietest and "
+                  f"{run['period_last_window']:.3f} s in the last; the damping ratio "
+                  f"{100 * run['damping_strongest_window']:.0f} % in the strongest window and "
+                  f"{100 * run['damping_last_window']:.0f} % in the last.", ""]
+    lines += decision_lines(d.get("confirmation") or [], (d.get("thresholds") or {}).get("tie_delta_bic", 6.0))
+    return lines
+
+
+def decision_lines(tested: list[dict], tie: float) -> list[str]:
+    """Which candidates the output-error fits decide for, which they cannot tell apart, which none."""
+    rows = [r for r in tested if r.get("score") is not None]
+    if not rows:
+        return []
+    best = max(rows, key=lambda r: r["score"])
+    passing = [r["effect"] for r in rows if r.get("passes")]
+    close = [r["effect"] for r in rows if r is not best and best["score"] - r["score"] < tie]
+    helps = [f"{r['effect']} ({r['heldout_gain']:+.2f})" for r in rows
+             if r.get("heldout_gain") is not None and r["heldout_gain"] > 0.02]
+    out = []
+    if passing:
+        out.append(f"The accelerations decide for `{best['effect']}` (BIC {best['delta_bic']:.1f} against the nominal "
+                   f"model" + (f"; `{'`, `'.join(close)}` within {tie:g} of it: not told apart" if close else "")
+                   + ").")
+    else:
+        out.append("No candidate passes the evidence threshold on the fitting part: the data do not decide for any "
+                   f"(best `{best['effect']}`, BIC {best['delta_bic']:.1f}).")
+    if helps:
+        out.append("Held-out gain of each candidate fitted alone: " + ", ".join(helps) + ".")
+    return out + [""]
 
 
 def _steps_lines(d: dict) -> list[str]:
@@ -330,3 +412,33 @@ def _ranking_lines(d: dict) -> list[str]:
     lines += ["", f"An effect counts when -dBIC >= {th['min_delta_bic']:g}, CV gain >= "
               f"{th['min_cv_gain']:g} and it removes at least {th['min_force_share']:g} of the force variance.", ""]
     return lines
+
+
+def plot_running_period(path: Path, running: dict, fit, held, signal: tuple | None = None,
+                        nominal_period: float | None = None) -> None:
+    """Period and damping ratio window by window (output error on the sensors' readings), each with
+    its 95 % interval, over the motion's envelope."""
+    import numpy as np
+
+    plt = _plt()
+    t = np.asarray(running["t"])
+    fig, axes = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True)
+    for ax, key, label, scale in ((axes[0], "period", "period [s]", 1.0),
+                                  (axes[1], "damping", "damping ratio [%]", 100.0)):
+        _shade(ax, fit, held)
+        ax.fill_between(t, scale * np.asarray(running[f"{key}_lo"]), scale * np.asarray(running[f"{key}_hi"]),
+                        color="tab:blue", alpha=0.25, label="95 % interval")
+        ax.plot(t, scale * np.asarray(running[key]), marker=".", color="tab:blue", lw=1.2, label=f"running {key}")
+        ax.set_ylabel(label)
+        if signal is not None:
+            b = ax.twinx()
+            b.plot(signal[0], np.abs(signal[1]), color="0.65", lw=0.5, zorder=0)
+            b.set_ylabel("|measured| (sensor)", color="0.5")
+    if nominal_period is not None:
+        axes[0].axhline(nominal_period, color="k", lw=0.7, ls="--", label="one model for the fitting part")
+    axes[0].legend(fontsize=8, loc="upper right")
+    axes[0].set_title("Natural period and damping through the record (windows fitted by output error)")
+    axes[1].set_xlabel("t [s] (window centre)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -29,6 +29,10 @@ def summarize(case: Case, o: Outcome) -> dict[str, Any]:
         xc = record.clean.x[:, 0]
         gain["nominal_vs_clean"] = nrmse(o.x_nom[held_mask], xc[held_mask])
         gain["extended_vs_clean"] = None if o.x_ext is None else nrmse(o.x_ext[held_mask], xc[held_mask])
+    if case.from_accelerometers:  # the sensors' quantity decides; the displacement's gain is kept beside it
+        from pidyn.discrepancy.accelerometers import acceleration_gain
+
+        gain = {**acceleration_gain(record, o.sims, held_mask), "x": gain}
     learned = LEARNED in o.causes
     causes = [c for c in o.causes if c != LEARNED]
     ext_system, ext_values, ext_metrics = ext["system"], ext["values"], ext["metrics"]
@@ -41,8 +45,10 @@ def summarize(case: Case, o: Outcome) -> dict[str, Any]:
         effect_params["t_change"] = effect_params.get("t_d", ch.t_change)
         effect_params["t_change_ci95"] = list(ch.ci95)
     sc, check = o.screening, o.check
+    varies = bool(((o.running or {}).get("variation") or {}).get("varies"))
+    structured = (check.failed or varies) if case.from_accelerometers else (check.failed or sc.verdict == "unexplained")
     verdict = ("discrepancy" if causes or (o.cause is not None and o.cause != LEARNED) else
-               "unexplained" if learned or check.failed or sc.verdict == "unexplained" else "none")
+               "unexplained" if learned or structured else "none")
     truth = dict(record.meta.get("hidden_params") or {}) if "hidden_effect" in record.meta else None
     return {
         "nominal": nom.system.describe(nom.values),
@@ -71,6 +77,9 @@ def summarize(case: Case, o: Outcome) -> dict[str, Any]:
         "pidynnet": {"nominal_errors_pct": nom.metrics.get("error_pct"),
                      "extended_errors_pct": None if ext_metrics is None else ext_metrics.get("error_pct")},
         "hidden": None if truth is None else {"effect": record.meta.get("hidden_effect"), "parameters": truth},
+        "modal": None if o.modal is None else [{k: v for k, v in m.items() if k != "mode_shape"} for m in o.modal],
+        "running": None if o.running is None else running_summary(o.running, case),
+        "accelerometers": (record.meta or {}).get("accelerometers"),
         "confirmation": None if o.confirmation is None else o.confirmation.tested,
         "learned_force_refused": ext.get("refused"),
     }
@@ -93,11 +102,18 @@ def write_figures(case: Case, o: Outcome, d: dict) -> None:
     pw = o.pointwise
     plot_residual(fig / "residual.png", record.t, pw["r"], pw["x"], pw["v"], fit, cause, explained, units, period)
     plot_ranking(fig / "ranking.png", sc.ranking, case.thresholds.min_delta_bic)
-    names, A0, y = weak_system(nom.system, nom.values, nom.s, record.f, case.x_raw, nom.weak, case.mass_known)
+    names, A0, y = weak_system(nom.system, nom.values, nom.s, case.weak_f, case.x_raw, nom.weak, case.mass_known)
     running = running_estimate(names, A0, y, nom.weak.centers,
                                max(4 * period, 3 * nom.weak.dt * (2 * nom.weak.half + 1)))
     plot_running_estimate(fig / "running_estimate.png", running, nom.values, fit, held,
-                          None if o.change_row is None else o.change_row["change"])
+                          None if o.change_row is None else o.change_row["change"], stiffness=case.stiff,
+                          signal=(record.t, case.x_raw))
+    if o.running is not None:
+        from pidyn.discrepancy.report import plot_running_period
+
+        meas = record.a[:, 0] + np.asarray(record.meta.get("sensor_ground", 0.0))
+        plot_running_period(fig / "running_period.png", o.running, fit, held, signal=(record.t, meas),
+                            nominal_period=(o.modal or [{}])[0].get("period_s"))
     ext = o.extension
     if d["learned_force"] and ext["system"] is not None and ext["system"].n_latent == 0:
         plot_learned(fig / "learned_force.png", record.t, nom.system, nom.values, ext["system"], ext["values"],
@@ -136,3 +152,26 @@ def explained_force(nominal: SDOFSystem, values: dict[str, float], row: dict, s:
     inertia = (p["m"] - values["m"]) * pw["a"]  # nonzero only when the mass is identified
     total = term.force(s.t, x, v, z, p) - change + inertia
     return band_limited(total, float(s.t[1] - s.t[0]), float(pw["f_cut"]))[0]  # the residual's band
+
+
+def running_summary(running: dict, case: Case) -> dict:
+    """The running period and damping in numbers: every window, and the extremes beside the
+    quietest and the strongest windows (what the figure shows, for a table)."""
+    t = np.asarray(running["t"])
+    ok = np.isfinite(np.asarray(running["period"]))
+    rows = {k: [None if not np.isfinite(v) else float(v) for v in np.asarray(running[k])] for k in running
+            if k != "variation"}
+    out: dict = {"windows": rows, "variation": running.get("variation")}
+    if ok.sum() >= 2:
+        peak = np.asarray(running["peak"])
+        strong, quiet = int(np.nanargmax(np.where(ok, peak, -np.inf))), int(np.nanargmin(np.where(ok, peak, np.inf)))
+        longest = int(np.nanargmax(np.where(ok, running["period"], -np.inf)))
+        out.update({
+            "period_strongest_window": float(running["period"][strong]), "t_strongest_window": float(t[strong]),
+            "period_quietest_window": float(running["period"][quiet]), "t_quietest_window": float(t[quiet]),
+            "period_longest": float(running["period"][longest]), "t_period_longest": float(t[longest]),
+            "period_last_window": float(np.asarray(running["period"])[ok][-1]),
+            "damping_strongest_window": float(running["damping"][strong]),
+            "damping_last_window": float(np.asarray(running["damping"])[ok][-1]),
+        })
+    return out

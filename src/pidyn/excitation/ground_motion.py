@@ -184,7 +184,9 @@ def prepare(
 @dataclass(frozen=True)
 class SupportMotions:
     """Several ground accelerations on one time grid, ``acc`` (N, n_inputs) in m/s^2: a
-    structure on supports that move differently (a bridge's abutments and bent)."""
+    structure on supports that move differently (a bridge's abutments and bent). It gives the
+    excitation of a model with several inputs: the accelerations, then the velocities
+    (integrated from rest by the trapezoidal rule, exact for an acceleration linear between samples)."""
 
     name: str
     dt: float
@@ -202,6 +204,13 @@ class SupportMotions:
             raise ValueError(f"support motions '{self.name}': dt={self.dt} must be positive")
         object.__setattr__(self, "acc", acc)
         object.__setattr__(self, "_grid", np.arange(acc.shape[0]) * self.dt)
+        vel = np.concatenate([np.zeros((1, acc.shape[1])), np.cumsum(0.5 * (acc[1:] + acc[:-1]) * self.dt, axis=0)])
+        object.__setattr__(self, "vel", vel)
+
+    @property
+    def columns(self) -> np.ndarray:
+        """The excitation's samples (N, 2 n_inputs): accelerations, then velocities."""
+        return np.concatenate([self.acc, self.vel], axis=1)
 
     @classmethod
     def from_motions(cls, motions: dict[str, GroundMotion], name: str = "supports") -> "SupportMotions":
@@ -225,6 +234,8 @@ class SupportMotions:
         return float(np.max(np.abs(self.acc)))
 
     def __call__(self, t: np.ndarray | float) -> np.ndarray:
-        """Linear interpolation of every input, zero outside the record: (n_inputs,) or (N, n_inputs)."""
+        """Linear interpolation of every column (accelerations, velocities), zero before the record
+        and the last velocity held after it: (2 n_inputs,) or (N, 2 n_inputs)."""
         cols = [np.interp(t, self._grid, self.acc[:, j], left=0.0, right=0.0) for j in range(self.acc.shape[1])]
+        cols += [np.interp(t, self._grid, self.vel[:, j], left=0.0) for j in range(self.vel.shape[1])]
         return np.stack(cols, axis=-1)

@@ -134,18 +134,38 @@ class SubperiodIdentifier:
             "windows": [r.__dict__ for r in self.results],
             "trajectory": self.trajectory,
             "ls_pending": self.ls_pending,
+            "fingerprint": self.fingerprint(),
         }
         tmp = self.state_path.with_suffix(".tmp")
         tmp.write_text(json.dumps(state, indent=1))
         tmp.replace(self.state_path)
 
+    def fingerprint(self) -> dict:
+        """What a saved state must match to be resumed: the model's parameters with their starts,
+        and the windows of the record."""
+        specs = self.module.net.params.specs
+        return {"params": {sp.name: round(float(sp.init), 12) for sp in specs},
+                "windows": [[round(w.t0, 9), round(w.t1, 9)] for w in self.dm.windows]}
+
     def try_resume(self) -> int:
-        """Restore from ``subperiod_state.json`` if present; returns the next window index."""
+        """Restore from ``subperiod_state.json`` if present; returns the next window index. A state
+        of another model or record (a run folder used again with other settings) is not resumed:
+        the run starts afresh and says so."""
         if not self.state_path.exists():
             return 0
         state = json.loads(self.state_path.read_text())
+        saved = state.get("fingerprint")
+        if saved is not None and saved != self.fingerprint():
+            log.warning("%s holds the state of another run (its model or windows differ): not resumed, starting "
+                        "afresh", self.state_path)
+            return 0
         blob = torch.load(self.run_dir / state["checkpoint"], weights_only=False)
-        self.module.load_state_dict(blob["module"])
+        try:
+            self.module.load_state_dict(blob["module"])
+        except RuntimeError as exc:  # a state saved before fingerprints, of another model
+            log.warning("%s holds the state of another model (%s): not resumed, starting afresh", self.state_path,
+                        str(exc).splitlines()[0])
+            return 0
         self.fusion.load_state_dict(blob["fusion"])
         if self.clamp and blob.get("clamp"):
             self.clamp.load_state_dict(blob["clamp"])

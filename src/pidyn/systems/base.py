@@ -5,12 +5,12 @@ A system knows its parameters (``ParamSpec``), its named physics residuals for t
 ground acceleration (``-M 1 ag``) or a force applied to the structure (``u``).
 
 Several ground inputs (a bridge on three supports that move differently): the excitation
-``f`` then has a last axis of length ``n_inputs``, each degree of freedom feels the ground
-acceleration ``sum_j r_j ag_j`` with influence coefficients ``r_j`` (identified, or given),
-and an accelerometer's absolute reading is x'' + sum_j r_j ag_j. With one input the record
-keeps accelerations relative to the ground (the measured ag is subtracted); with several
-there is no single ground to subtract, so the record keeps them absolute and
-``acceleration_output`` gives the model's reading in the same convention.
+``f`` then has a last axis of ``2 n_inputs`` columns, the supports' accelerations and then
+their velocities (``excitation_width``). Each degree of freedom feels the ground acceleration
+``sum_j r_j ag_j`` with influence coefficients ``r_j``, and an accelerometer's absolute reading
+is x'' + sum_j r_j ag_j. With one input the record keeps accelerations relative to the ground
+(the measured ag is subtracted); with several there is no single ground to subtract, so the
+record keeps them absolute and ``acceleration_output`` gives the model's reading alike.
 """
 
 from __future__ import annotations
@@ -55,6 +55,11 @@ class StructuralSystem(ABC):
     @property
     def n_inputs(self) -> int:
         return max(1, len(self.inputs))
+
+    @property
+    def excitation_width(self) -> int:
+        """Columns of the excitation: 1, or the supports' accelerations and velocities (2 n_inputs)."""
+        return 1 if self.n_inputs == 1 else 2 * self.n_inputs
 
     def __init__(self, excitation: ExcitationKind = "ground") -> None:
         if excitation not in ("ground", "force"):

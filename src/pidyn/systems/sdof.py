@@ -3,9 +3,20 @@
     m x'' + sum_i f_i(t, x, x', z) = -m ag(t)   (ground excitation)
                                    =  u(t)      (applied force)
 
-Several ground inputs (a deck on supports that move differently): the right-hand side is
-``-m sum_j r_j ag_j`` with one influence coefficient ``r_<input>`` per input, identified with
-the other parameters (they sum to about 1 when the supports move together) or given.
+Several ground inputs (a deck on supports that move differently), each support a spring k_j
+and a dashpot c_j: m x_abs'' + sum_j c_j (x_abs' - u_j') + k_j (x_abs - u_j) = 0. In the motion
+relative to the supports' weighted motion, x = x_abs - sum_j r_j u_j with r_j = k_j / k:
+
+    m x'' + c x' + k x + (terms) = -m sum_j r_j ag_j + sum_j g_j u_j'
+
+with one influence coefficient ``r_<input>`` per support (about 1 in all when they move
+together) and ``g_<input>`` = c_j - c r_j, the support's damping beyond its share (zero when
+every support damps in proportion to its stiffness). Support j's own spring and dashpot are
+k_j = r_j k and c_j = g_j + r_j c (``support_params``). The accelerometer reads
+x'' + sum_j (r_j + e_j) ag_j: ``e_<input>`` is what it takes from a support directly, the modes
+above the model's that move with the supports (the residual of a truncated modal model).
+With r, g and e a single degree of freedom spans every second-order response of one output
+to the supports' accelerations, the class of a state-space realization of order 2.
 
 The Bouc-Wen case of the paper (Eq. 16) prints ``-ag`` on the right-hand side without m.
 That is the same equation only when m = 1; with a known m != 1 no parameter set would zero
@@ -67,6 +78,12 @@ class SDOFSystem(StructuralSystem):
         share = 1.0 / max(len(self.inputs), 1)
         defaults += [ParamSpec(influence_name(i), init=share, scale=share, transform="identity", unit="-")
                      for i in self.inputs]
+        c0 = float(next((sp.init for sp in defaults if sp.name == "c"), 1.0))
+        defaults += [ParamSpec(support_damping_name(i), init=0.0, scale=max(abs(c0), 1e-6) * share,
+                               transform="identity", true=0.0, unit="N s/m")
+                     for i in self.inputs]
+        defaults += [ParamSpec(feedthrough_name(i), init=0.0, scale=0.1 * share, transform="identity", true=0.0,
+                               unit="-") for i in self.inputs]
         self._specs = merge_specs(defaults, params)
         self.n_latent = sum(t.n_latent for t in self.terms)
         self.latent_names = tuple(t.name for t in self.terms if t.n_latent)
@@ -117,8 +134,17 @@ class SDOFSystem(StructuralSystem):
         return 0.0 if total is None else total
 
     def forcing(self, f, p):
-        """Right-hand-side force from the excitation signal."""
-        return -p["m"] * self.ground_input(f, p) if self.excitation == "ground" else f
+        """Right-hand-side force from the excitation signal (several supports: their weighted
+        accelerations, and the velocities of the supports that damp beyond their share)."""
+        if self.excitation != "ground":
+            return f
+        if not self.inputs:
+            return -p["m"] * f
+        out = -p["m"] * self.ground_input(f, p)
+        n = len(self.inputs)
+        for j, name in enumerate(self.inputs):
+            out = out + p[support_damping_name(name)] * f[..., n + j]
+        return out
 
     def ground_input(self, f, p):
         """The ground acceleration the mass feels: ag, or sum_j r_j ag_j (``f[..., j]``) for several inputs."""
@@ -130,8 +156,26 @@ class SDOFSystem(StructuralSystem):
             total = part if total is None else total + part
         return total
 
+    def support_params(self, p: dict[str, float]) -> dict[str, dict[str, float]]:
+        """Each support's own spring and dashpot per unit mass: k_j = r_j k, c_j = g_j + r_j c."""
+        from pidyn.systems.modal import damping_params, stiffness_params
+
+        k = sum(float(p[n]) for n in stiffness_params(self))
+        c = sum(float(p[n]) for n in damping_params(self))
+        return {i: {"k": float(p[influence_name(i)]) * k,
+                    "c": float(p[support_damping_name(i)]) + float(p[influence_name(i)]) * c} for i in self.inputs}
+
     def ground_motion(self, f, p):
         return self.ground_input(f, p)[..., None]
+
+    def acceleration_output(self, a_rel, f, p):
+        """The accelerometer's reading: x'' + sum_j (r_j + e_j) ag_j for several supports."""
+        if not self.inputs:
+            return a_rel
+        out = a_rel + self.ground_motion(f, p)
+        for j, name in enumerate(self.inputs):
+            out = out + (p[feedthrough_name(name)] * f[..., j])[..., None]
+        return out
 
     def residual(self, k: Kinematics, f: torch.Tensor, p: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
         x, v, a = k.x[:, 0], k.v[:, 0], k.a[:, 0]
@@ -175,7 +219,10 @@ class SDOFSystem(StructuralSystem):
         lhs = f"{p['m']:.5g} x'' + " + " + ".join(t.formula(p) for t in self.terms)
         rhs = f"-{p['m']:.5g} ag(t)" if self.excitation == "ground" else "u(t)"
         if self.inputs:
-            rhs = f"-{p['m']:.5g} (" + " + ".join(f"{p[influence_name(i)]:.4g} ag_{i}(t)" for i in self.inputs) + ")"
+            rhs = (f"-{p['m']:.5g} (" + " + ".join(f"{p[influence_name(i)]:.4g} ag_{i}(t)" for i in self.inputs) + ") + "
+                   + " + ".join(f"{p[support_damping_name(i)]:.4g} vg_{i}(t)" for i in self.inputs)
+                   + "; sensor: x'' + " + " + ".join(f"{p[influence_name(i)] + p[feedthrough_name(i)]:.4g} ag_{i}(t)"
+                                                    for i in self.inputs))
         eqs = [f"{lhs} = {rhs}"]
         for t in self.terms:
             if isinstance(t, BoucWenHysteresis):
@@ -188,6 +235,16 @@ class SDOFSystem(StructuralSystem):
 def influence_name(input_name: str) -> str:
     """The parameter name of an input's influence coefficient (``r_ch3`` for input ``ch3``)."""
     return f"r_{input_name}"
+
+
+def feedthrough_name(input_name: str) -> str:
+    """The parameter name of what the accelerometer reads of a support directly (``e_ch3``)."""
+    return f"e_{input_name}"
+
+
+def support_damping_name(input_name: str) -> str:
+    """The parameter name of a support's damping beyond its share (``g_ch3``)."""
+    return f"g_{input_name}"
 
 
 def LinearSDOF(c: float = 0.5, k: float = 15.0, **kw) -> SDOFSystem:

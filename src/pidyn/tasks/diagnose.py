@@ -18,6 +18,7 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy import pipeline
+from pidyn.discrepancy.accelerometers import motion_view, needs_view
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.summary import summarize, write_figures
 from pidyn.reporting import write_json
@@ -51,6 +52,9 @@ def compose_case(cfg: DictConfig, record: Record | None = None) -> pipeline.Case
     record = build_record(cfg, base) if record is None else record
     if record.excitation != base.excitation:
         base = hydra.utils.instantiate(cfg.system, excitation=record.excitation)
+    if needs_view(record):  # accelerometers: the relative motion the screening needs, from the accelerations
+        full = hydra.utils.instantiate(cfg.system, inputs=record.inputs) if record.n_inputs > 1 else base
+        record = motion_view(record, full, pipeline.split_spans(record, float(settings.fit_share))[0])
     node = OmegaConf.to_container(cfg.system, resolve=True)
     assert isinstance(node, dict)
 

@@ -267,7 +267,12 @@ def _assess(run: Run, final: dict[str, float], refined: Any, sim: dict[str, np.n
     if modes is not None:
         write_modal(run.run_dir, modes)
         metrics["modal"] = [{k: v for k, v in m.items() if k != "mode_shape"} for m in modes]
-    split = (run.record.meta or {}).get("split") if run.hold_out else None
+    meta = run.record.meta or {}
+    if "station" in meta:  # a strong-motion record: what was read and done to it
+        metrics["record_meta"] = {k: meta.get(k) for k in ("path", "station", "direction", "input_channels",
+                                                            "output_channels", "pga", "span", "t_offset", "dt",
+                                                            "notes", "pre_event_rms", "band_hz")}
+    split = meta.get("split") if run.hold_out else None
     if split:
         metrics["heldout"] = heldout_scores(sim, run.record, split["heldout"], split["fit"])
         log.info("held-out part %.4g-%.4g s: NRMSE %s", *split["heldout"],

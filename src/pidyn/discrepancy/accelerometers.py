@@ -1,0 +1,111 @@
+"""The diagnosis of an accelerometer record: the relative motion it needs, from accelerations.
+
+The screening regresses the structure's restoring force on its relative displacement and
+velocity, which accelerometers do not measure. So the record is first seen as the motion it
+implies:
+
+1. the nominal model (one input per support) is started from the data and fitted by output
+   error to the accelerations of the fitting part: its influence coefficients combine the
+   supports into the one ground motion the structure feels, ``ag = sum_j r_j ag_j``;
+2. the relative acceleration (absolute minus that ground) and the ground are high-passed alike,
+   and the relative acceleration integrated spectrally to velocity and displacement
+   (``pidyn.signals.integrate``): one linear filter on every term, so a linear model holds
+   exactly for the filtered signals, and the drift of integrated noise is gone.
+
+The diagnosis then runs on that record: one effective input, the relative acceleration as its
+only measured channel (identification, output error and every held-out judgement use it, as the
+sensors read it), and the integrated motion in ``meta['motion']`` for the weak-form screening,
+which needs x and x'. On a stiff structure the relative motion is a small difference of two large
+accelerations and its integral is a poor measurement: the screening then only proposes, and an
+output-error fit of each candidate to the accelerations decides (``pipeline``). The combination
+and the filter are kept in the record's ``meta['accelerometers']``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+
+import numpy as np
+
+from pidyn.data.sources import Record
+from pidyn.signals import integrate
+
+log = logging.getLogger(__name__)
+
+
+def needs_view(record: Record) -> bool:
+    """A record without a displacement sensor on its one degree of freedom (and not a view already)."""
+    return "motion" not in (record.meta or {}) and (record.x is None or bool(np.isnan(record.x[:, 0]).all()))
+
+
+def motion_view(record: Record, system, fit: tuple[float, float], corner_share: float = 0.1) -> Record:
+    """The record as the relative motion of an accelerometer-measured structure (see the module's
+    docstring); ``system``: the nominal model with the record's inputs (influence coefficients)."""
+    from pidyn.baselines.data_start import fundamental, start_from_data, with_start
+    from pidyn.baselines.least_squares import output_error
+
+    if record.a is None:
+        raise ValueError(f"record '{record.name}': neither a displacement nor an acceleration channel")
+    peak = fundamental(record)
+    if peak is None:
+        raise ValueError(f"record '{record.name}': the accelerations show no resonance to integrate around")
+    fn = peak[0]
+    start = start_from_data(record, system)
+    values = {s.name: float(s.init) for s in system.param_specs()}
+    note = "nominal influence: the config's"
+    if start is not None:
+        values.update(start.values)
+        system = with_start(system, start.values)
+        note = f"start from the data ({start.method})"
+    if system.n_inputs > 1:
+        seg = record.segment(*fit)
+        res = output_error(seg, system, init={k: v for k, v in values.items() if k in {
+            s.name for s in system.param_specs() if s.trainable}})
+        values.update(res.params)
+        note += f", then output error on the accelerations of {fit[0]:.4g}-{fit[1]:.4g} s ({res.note})"
+    f = np.asarray(record.f, float)
+    several = system.n_inputs > 1
+    # the motion relative to the supports weighted by their influence (what the sensor reads of them
+    # directly taken off too), driven by the supports' weighted accelerations and their dashpots' share:
+    # the linear model with several inputs, written for one input. Its r, g, e stay as fitted
+    zero = np.zeros((len(f), 1))
+    ground = system.acceleration_output(zero, f, values)[:, 0] if several else f
+    drive = -system.forcing(f, values) / values["m"] if several else f
+    absolute = record.a[:, 0] if several else record.a[:, 0] + f
+    relative = absolute - ground
+    corner = max(corner_share * fn, 2.0 / float(record.t[-1] - record.t[0]))
+    dt = record.dt
+    x, v = (integrate(relative, dt, k, corner) for k in (2, 1))
+    g = integrate(drive, dt, 0, corner)  # the weak form's excitation, filtered as x and v are
+    influence = {k: v for k, v in values.items() if k.startswith(("r_", "g_", "e_"))}
+    meta = {**(record.meta or {}), "inputs": [], "sensor_ground": ground, "motion": {"x": x, "v": v, "f": g},
+            "accelerometers": {"influence": influence, "highpass_hz": corner, "resonance_hz": fn, "note": note,
+                               "inputs": list(record.inputs), "derived": "x, v integrated from a"}}
+    if influence:
+        log.info("accelerometer record: the supports combined by %s (%s); relative motion high-passed at %.3g Hz",
+                 ", ".join(f"{k}={val:.4g}" for k, val in influence.items()), note, corner)
+    else:
+        log.info("accelerometer record: relative motion integrated, high-passed at %.3g Hz", corner)
+    # the noise-free truth is no reference for filtered signals: left out (the parameters' truth stays)
+    # identification, output error and the held-out judgements: the relative acceleration and its
+    # drive as measured (unfiltered: a nonlinear structure's response to a filtered ground is not the
+    # filtered response)
+    return replace(record, f=drive, x=None, v=None, a=relative[:, None], meta=meta, clean=None)
+
+
+def acceleration_gain(record: Record, sims: dict[str, dict | None], held: np.ndarray) -> dict:
+    """``heldout_nrmse_a`` of each simulated model (``{"nominal": sim, "extended": sim}``): the
+    absolute acceleration (relative + ground, as the accelerometer reads it) on ``held``."""
+    from pidyn.reporting import nrmse
+
+    ground = np.asarray((record.meta or {}).get("sensor_ground", record.f), float)  # what the sensor adds to x''
+    measured = record.a[:, 0] + ground
+    out: dict = {"metric": "heldout_nrmse_a"}
+    for key, sim in sims.items():
+        if sim is None:
+            out[key] = None
+            continue
+        pred = sim["a"][:, 0] + ground
+        out[key] = nrmse(pred[held], measured[held]) if np.all(np.isfinite(pred[held])) else float("inf")
+    return out
