@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # the default index would serve a CUDA build.
 TORCH_INDEX ?=
 
-.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench basin robustness efficiency benchmarks
+.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench basin robustness efficiency benchmarks real
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -73,3 +73,13 @@ benchmarks: $(STAMP)
 	$(PY) experiments/benchmark_test_signals.py bouc_wen outputs/bouc_wen_benchmark
 	$(PY) diagnose.py data=silverbox system=linear hydra.run.dir=outputs/silverbox
 	$(PY) experiments/benchmark_test_signals.py silverbox outputs/silverbox
+
+# the Painter Street study: every shipped event as a Hydra multirun, the strong ones diagnosed ->
+# experiments/results/real/ (installs the peer extra, mdof and quakeio, for SRIM / OKID-ERA)
+PEER := $(VENV)/.peer
+$(PEER): $(STAMP)
+	$(PY) -m pip install -q -e ".[peer]"
+	touch $(PEER)
+
+real: $(PEER)
+	$(PY) experiments/real.py $(ARGS)

@@ -10,6 +10,32 @@ import numpy as np
 
 from pidyn.reporting import nrmse, write_json
 
+#: what a strong-motion record says of itself, kept in metrics.json
+RECORD_META = ("path", "station", "direction", "input_channels", "output_channels", "pga", "span", "t_offset", "dt",
+               "notes", "pre_event_rms", "band_hz")
+
+
+def assess(system, record, final: dict[str, float], refined: Any, sim: dict[str, np.ndarray], hold_out: bool,
+           run_dir: Path) -> dict[str, Any]:
+    """modal.json, and the metrics to add: the modes, the held-out scores (a record identified on
+    its fitting part only), what a strong-motion record says of itself."""
+    import logging
+
+    out: dict[str, Any] = {}
+    modes = modal_summary(system, final, refined)
+    if modes is not None:
+        write_modal(run_dir, modes)
+        out["modal"] = [{k: v for k, v in m.items() if k != "mode_shape"} for m in modes]
+    meta = record.meta or {}
+    if "station" in meta:
+        out["record_meta"] = {k: meta.get(k) for k in RECORD_META}
+    split = meta.get("split") if hold_out else None
+    if split:
+        out["heldout"] = heldout_scores(sim, record, split["heldout"], split["fit"])
+        logging.getLogger(__name__).info("held-out part %.4g-%.4g s: NRMSE %s", *split["heldout"], ", ".join(
+            f"{k} {v:.3g}" for k, v in out["heldout"]["nrmse"].items()))
+    return out
+
 
 def modal_summary(system, values: dict[str, float], refined: Any = None) -> list[dict] | None:
     """The identified model's modes about rest, fundamental first, with intervals from the

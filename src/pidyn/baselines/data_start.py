@@ -294,3 +294,29 @@ def user_started(system, settings: list[str]) -> set[str]:
             base = key.split(".", 2)[2]
             out.update(n for n in names if re.fullmatch(rf"{re.escape(base)}_?\d+", n) or n == base)
     return out
+
+
+#: where PIDynNet's parameters start (``model.start``)
+START_METHODS = ("auto", "data", "config")
+
+
+def start_policy(method: str, system, record, user_keys: list[str]):
+    """(system, start, used): ``data``: read from the record; ``config``: the system config's
+    values; ``auto``: the data's on a measured record (no truth), the config's on a simulated one.
+    A start the user gave (``system.params.<name>.init=...``, in ``user_keys``) is always kept.
+    Unless ``config``, the start is returned to be offered to the refinement as well."""
+    if method not in START_METHODS:
+        raise ValueError(f"model.start: unknown method '{method}'; choose from {', '.join(START_METHODS)}")
+    if method == "config":
+        return system, None, False
+    start = start_from_data(record, system)
+    if start is None:
+        log.info("start from the data: the record shows no resonance; the config's values are used")
+        return system, None, False
+    used = method == "data" or not record.truth
+    if used:
+        kept = user_started(system, user_keys)
+        system = with_start(system, start.values, kept)
+        if kept:
+            log.info("start from the data, except %s (set by the user)", sorted(kept))
+    return system, start, used

@@ -73,11 +73,12 @@ def unscented_kalman_filter(
         with np.errstate(all="ignore"):
             Ys, Rs = rk4(system, p, t[i : i + 2], f[i : i + 2], X[:ns].T.copy(), substeps=substeps)
             A = system.acceleration_output(Rs[1][:, nd:2 * nd], f[i + 1], p)  # as the accelerometers read
-        m, P, D = _predicted_belief(X, Ys[1], ns, wm, wc, Q)
-        # --- update with the measurement at t[i+1]
-        Y = np.nan_to_num(np.array([rows[c.kind](Ys[1], A, c.dof) for c in chans]), nan=0.0, posinf=1e6,
-                          neginf=-1e6)
-        m, P, ll = _update(m, P, D, Y, np.array([c.data[i + 1] for c in chans]), R, wm, wc)
+            # a filter that diverges says so by its likelihood (-inf), not by floating-point warnings
+            m, P, D = _predicted_belief(X, Ys[1], ns, wm, wc, Q)
+            # --- update with the measurement at t[i+1]
+            Y = np.nan_to_num(np.array([rows[c.kind](Ys[1], A, c.dof) for c in chans]), nan=0.0, posinf=1e6,
+                              neginf=-1e6)
+            m, P, ll = _update(m, P, D, Y, np.array([c.data[i + 1] for c in chans]), R, wm, wc)
         loglik += ll
         if i % thin == 0 or i == len(t) - 2:
             vals = from_theta(specs, m[ns:])

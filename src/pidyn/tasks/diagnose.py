@@ -8,6 +8,7 @@ The nominal and extended identifications are ordinary PIDynNet runs in ``nominal
 from __future__ import annotations
 
 import copy
+import json
 import logging
 import time
 from pathlib import Path
@@ -30,6 +31,10 @@ log = logging.getLogger(__name__)
 def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
     """What the nominal model ``cfg.system`` misses on ``record`` (default: built from
     ``cfg.data``); writes diagnosis.json, report.md and figures to the run folder."""
+    done = Path(cfg.paths.output_dir) / "diagnosis.json"
+    if record is None and cfg.get("skip_done", False) and done.exists():  # a sweep resumed: this run is finished
+        log.info("%s holds this diagnosis (skip_done): not run again", done.parent)
+        return json.loads(done.read_text())
     t_wall = time.perf_counter()
     case = compose_case(cfg, record)
     outcome = pipeline.run(case)

@@ -6,6 +6,7 @@ Every object with a ``_target_`` is instantiated here and nowhere else.
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import sys
@@ -34,8 +35,18 @@ log = logging.getLogger(__name__)
 
 
 def build_record(cfg: DictConfig, system: StructuralSystem) -> Record:
-    return hydra.utils.instantiate(cfg.data.source, system=system) if "system" in _target_args(cfg.data.source) \
-        else hydra.utils.instantiate(cfg.data.source)
+    """The record from ``cfg.data.source``; a data error (a bad file, a missing channel) comes out as
+    itself, not wrapped in Hydra's instantiation error, so it is named as such."""
+    from hydra.errors import InstantiationException
+
+    try:
+        if "system" in _target_args(cfg.data.source):
+            return hydra.utils.instantiate(cfg.data.source, system=system)
+        return hydra.utils.instantiate(cfg.data.source)
+    except InstantiationException as exc:
+        if isinstance(exc.__cause__, (ValueError, FileNotFoundError)):
+            raise exc.__cause__ from None
+        raise
 
 
 def _target_args(node: DictConfig) -> set[str]:
@@ -47,6 +58,10 @@ def _target_args(node: DictConfig) -> set[str]:
 
 def train(cfg: DictConfig) -> dict[str, Any]:
     """Identify the system's parameters from the configured data; returns the metrics."""
+    done = Path(cfg.paths.output_dir) / "metrics.json"
+    if cfg.get("skip_done", False) and done.exists():  # a sweep resumed: this run is finished
+        log.info("%s holds this run's results (skip_done): not run again", done.parent)
+        return json.loads(done.read_text())
     return identify(cfg)[0]
 
 
@@ -157,34 +172,14 @@ def _hold_out(cfg: DictConfig, record: Record) -> bool:
     return True
 
 
-START_METHODS = ("auto", "data", "config")
-
-
 def data_start(cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path) -> tuple[StructuralSystem, Any]:
-    """``model.start``: where PIDynNet's parameters start. ``data``: read from the record
-    (``pidyn.baselines.data_start``); ``config``: the system config's values; ``auto``: the data's
-    on a measured record, the config's on a simulated one. A start the user gave
-    (``system.params.<name>.init=...``) is always kept. Unless ``config``, the data's start is also
-    offered to the refinement (``model.refine.starts``: ``data``) and written to data_start.json."""
-    from pidyn.baselines.data_start import start_from_data, user_started, with_start
+    """``model.start`` (see ``pidyn.baselines.data_start.start_policy``); the start goes to data_start.json."""
+    from pidyn.baselines.data_start import start_policy
     from pidyn.config import user_settings
 
-    method = str(cfg.model.get("start", "auto"))
-    if method not in START_METHODS:
-        raise ValueError(f"model.start: unknown method '{method}'; choose from {', '.join(START_METHODS)}")
-    if method == "config":
-        return system, None
-    start = start_from_data(record, system)
-    if start is None:
-        log.info("start from the data: the record shows no resonance; the config's values are used")
-        return system, None
-    used = method == "data" or not record.truth
-    if used:
-        kept = user_started(system, user_settings())
-        system = with_start(system, start.values, kept)
-        if kept:
-            log.info("start from the data, except %s (set by the user)", sorted(kept))
-    write_json(run_dir / "data_start.json", {**start.to_dict(), "used_by_pidynnet": used})
+    system, start, used = start_policy(str(cfg.model.get("start", "auto")), system, record, user_settings())
+    if start is not None:
+        write_json(run_dir / "data_start.json", {**start.to_dict(), "used_by_pidynnet": used})
     return system, start
 
 
@@ -259,24 +254,10 @@ def _report(cfg: DictConfig, run: Run, results: list, pidyn_values: dict[str, fl
 
 
 def _assess(run: Run, final: dict[str, float], refined: Any, sim: dict[str, np.ndarray], metrics: dict) -> None:
-    """modal.json (the modes with intervals) and, on a record with a held-out part, how the
-    identified model predicts it; both into metrics.json too."""
-    from pidyn.assessment import heldout_scores, modal_summary, write_modal
+    """modal.json and, on a record with a held-out part, how the model predicts it (``pidyn.assessment``)."""
+    from pidyn.assessment import assess
 
-    modes = modal_summary(run.system, final, refined)
-    if modes is not None:
-        write_modal(run.run_dir, modes)
-        metrics["modal"] = [{k: v for k, v in m.items() if k != "mode_shape"} for m in modes]
-    meta = run.record.meta or {}
-    if "station" in meta:  # a strong-motion record: what was read and done to it
-        metrics["record_meta"] = {k: meta.get(k) for k in ("path", "station", "direction", "input_channels",
-                                                            "output_channels", "pga", "span", "t_offset", "dt",
-                                                            "notes", "pre_event_rms", "band_hz")}
-    split = meta.get("split") if run.hold_out else None
-    if split:
-        metrics["heldout"] = heldout_scores(sim, run.record, split["heldout"], split["fit"])
-        log.info("held-out part %.4g-%.4g s: NRMSE %s", *split["heldout"],
-                 ", ".join(f"{k} {v:.3g}" for k, v in metrics["heldout"]["nrmse"].items()))
+    metrics.update(assess(run.system, run.record, final, refined, sim, run.hold_out, run.run_dir))
     write_json(run.run_dir / "metrics.json", metrics)
 
 
@@ -442,6 +423,7 @@ def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pi
     w = cfg.data.windows
     span = {"t_start": w.get("t_start"), "t_end": w.get("t_end")}
     out = refine(system, record, starts, settings, network_states=network_states(results), **span)
+    check_refined(system, record, out, sorted(starts))
     # the same refinement from the same start (PIDynNet's, or the classical estimate that
     # simulated better) with the segment states taken elsewhere (e.g. accelerations integrated
     # twice): what the networks' states buy
@@ -453,6 +435,28 @@ def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pi
                                 "error_pct": relative_errors(alt.params, record.truth or {})}
         log.info("refinement from %s states: %s", source, ", ".join(f"{k}={v:.5g}" for k, v in alt.params.items()))
     return out
+
+
+class RefinementFailed(RuntimeError):
+    """The refinement ended on parameters that do not describe the record (non-finite, or a model
+    that blows up when simulated): a bad start, named, instead of NaNs further on."""
+
+
+def check_refined(system: StructuralSystem, record: Record, out: Any, starts: list[str]) -> None:
+    """Refuse a refinement that ended on non-finite parameters or on a model that diverges over the
+    record; the message names the starts tried and what to give instead."""
+    bad = sorted(n for n, v in out.params.items() if not np.isfinite(v))
+    blown = False
+    if not bad:
+        sim = simulate_response(system, {**{s.name: s.init for s in system.param_specs()}, **out.params}, record,
+                                state0=np.array(out.initial_state))
+        blown = any(diverged(v) for v in sim.values())
+    if bad or blown:
+        what = f"non-finite {bad}" if bad else "a model that blows up when simulated over the record"
+        raise RefinementFailed(
+            f"the refinement from {out.start} (starts tried: {', '.join(starts)}) ended on {what}; PIDynNet's "
+            f"windows are kept in the run folder. Give a better start: model.refine.starts=[data, output_error, ukf] "
+            f"with baselines.run naming the classical ones, or system.guess / system.params.<name>.init")
 
 
 def baseline_rows(bcfg: dict, noise: float, system: StructuralSystem, record: Record,
