@@ -356,6 +356,8 @@ def aggregate(base: Path) -> None:
                 shutil.copy(fig, RESULTS / "figures" / f"running_period_{r['event']}.png")
                 lines.append(f"![{r['event']}](figures/running_period_{r['event']}.png)")
         lines.append("")
+    lines += ["## Buildings on a shake table, measured by wearable IMUs", "",
+              "`python experiments/shake_table.py` (the second half of `make real`): [shake_table.md](shake_table.md).", ""]
     (RESULTS / "README.md").write_text("\n".join(lines))
     print(f"wrote {RESULTS / 'README.md'}")
 

@@ -13,6 +13,7 @@ from pidyn.reporting import nrmse, write_json
 #: what a strong-motion record says of itself, kept in metrics.json
 RECORD_META = ("path", "station", "direction", "input_channels", "output_channels", "pga", "span", "t_offset", "dt",
                "notes", "pre_event_rms", "band_hz")
+IMU_META = ("path", "run", "floors", "devices", "alignment", "align", "dt", "span", "pga", "notes", "pre_event_rms")
 
 
 def assess(system, record, final: dict[str, float], refined: Any, sim: dict[str, np.ndarray], hold_out: bool,
@@ -25,10 +26,12 @@ def assess(system, record, final: dict[str, float], refined: Any, sim: dict[str,
     modes = modal_summary(system, final, refined)
     if modes is not None:
         write_modal(run_dir, modes)
-        out["modal"] = [{k: v for k, v in m.items() if k != "mode_shape"} for m in modes]
+        out["modal"] = [{k: v for k, v in m.items() if not k.startswith("mode_shape")} for m in modes]
     meta = record.meta or {}
     if "station" in meta:
         out["record_meta"] = {k: meta.get(k) for k in RECORD_META}
+    elif "alignment" in meta:  # an IMU set
+        out["record_meta"] = {k: meta.get(k) for k in IMU_META}
     split = meta.get("split") if hold_out else None
     if split:
         out["heldout"] = heldout_scores(sim, record, split["heldout"], split["fit"])

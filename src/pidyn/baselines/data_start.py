@@ -207,13 +207,37 @@ def _equation_error(record, system, corner: float, fn: float) -> DataStart | Non
                 break
         est = {n: float(u[i]) for i, n in enumerate(all_names)}
     specs = {s.name: s for s in system.param_specs()}
-    bad = {n: v for n, v in est.items() if not np.isfinite(v) or not in_range(specs[n], v)}
+    bad = _out_of_range(est, specs)
+    note = f"integrated signals high-passed at {corner:.3g} Hz, {edge} samples cut at each end"
+    if bad and not r_names and set(bad) <= _damping_names(system):
+        # dampers are the least determined (a sensor's timing shifts the phase that holds them):
+        # fixed at the transmissibility's damping, stiffness-proportional, the rest solved again
+        peak = fundamental(record)
+        fixed = _from_peak(system, fn, peak[1] if peak else UNRESOLVED_DAMPING).values
+        held = {n: fixed[n] for n in _damping_names(system) if n in fixed and n in names}
+        values.update({n: torch.tensor(v, dtype=torch.float64) for n, v in held.items()})
+        est = {**solve_linear_params(system, Kinematics(t, T(ch["x"]), T(ch["v"]), T(ch["a"])), T(F), values,
+                                     [n for n in names if n not in held]), **held}
+        note += f"; dampers {sorted(held)} came out {bad}: held at the transmissibility's damping"
+        bad = _out_of_range(est, specs)
     if bad:
         log.info("equation-error start outside the parameters' ranges: %s", bad)
         return None
     freq, zeta = _modal(system, {**{n: float(v) for n, v in values.items()}, **est})
-    return DataStart(est, "equation_error", freq, zeta,
-                     note=f"integrated signals high-passed at {corner:.3g} Hz, {edge} samples cut at each end")
+    return DataStart(est, "equation_error", freq, zeta, note=note)
+
+
+def _out_of_range(est: dict[str, float], specs: dict) -> dict[str, float]:
+    return {n: v for n, v in est.items() if not np.isfinite(v) or not in_range(specs[n], v)}
+
+
+def _damping_names(system) -> set[str]:
+    """The viscous dampers' parameters (a building's storeys, or a single degree of freedom's)."""
+    from pidyn.systems.modal import damping_params
+
+    if hasattr(system, "terms") and hasattr(system, "storeys"):
+        return {t.damping_param for t in system.terms if t.damping_param}
+    return set(damping_params(system))
 
 
 def _modal(system, values: dict[str, float]) -> tuple[float | None, float | None]:
@@ -296,17 +320,41 @@ def user_started(system, settings: list[str]) -> set[str]:
     return out
 
 
-#: where PIDynNet's parameters start (``model.start``)
+def start_from_run(folder: str, system) -> DataStart:
+    """The estimate of an earlier run (its folder's ``metrics.json``) as the start: another record of
+    the same structure whose input does not show its resonance (a sine below it) starts from a
+    broadband record's estimate; the record at hand then decides."""
+    import json
+    from pathlib import Path
+
+    path = Path(folder) / "metrics.json"
+    if not path.is_file():
+        raise ValueError(f"model.start: '{folder}' is none of {', '.join(START_METHODS)} and not a run folder "
+                         f"(no metrics.json in it)")
+    params = json.loads(path.read_text()).get("params") or {}
+    trainable = {s.name for s in system.param_specs() if s.trainable}
+    values = {n: float(v) for n, v in params.items() if n in trainable}
+    missing = sorted(trainable - set(values))
+    if missing:
+        raise ValueError(f"model.start: the run in '{folder}' has no estimate of {missing} (another model?)")
+    freq, zeta = _modal(system, {**{s.name: float(s.init) for s in system.param_specs()}, **values})
+    return DataStart(values, "run", freq, zeta, note=f"the estimate of the run in {folder}")
+
+
+#: where PIDynNet's parameters start (``model.start``; or an earlier run's folder)
 START_METHODS = ("auto", "data", "config")
 
 
 def start_policy(method: str, system, record, user_keys: list[str]):
     """(system, start, used): ``data``: read from the record; ``config``: the system config's
-    values; ``auto``: the data's on a measured record (no truth), the config's on a simulated one.
+    values; ``auto``: the data's on a measured record (no truth), the config's on a simulated one;
+    a run folder: that run's estimate (``start_from_run``).
     A start the user gave (``system.params.<name>.init=...``, in ``user_keys``) is always kept.
     Unless ``config``, the start is returned to be offered to the refinement as well."""
     if method not in START_METHODS:
-        raise ValueError(f"model.start: unknown method '{method}'; choose from {', '.join(START_METHODS)}")
+        start = start_from_run(method, system)
+        kept = user_started(system, user_keys)
+        return with_start(system, start.values, kept), start, True
     if method == "config":
         return system, None, False
     start = start_from_data(record, system)

@@ -47,6 +47,7 @@ class PeerResult:
     fit_nrmse_a: float | None = None
     heldout_nrmse_a: float | None = None
     orders: list[dict] = field(default_factory=list)
+    realization: tuple | None = field(default=None, repr=False)  # (A, B, C, D) of the chosen order, to simulate other records
 
     def to_row(self) -> dict:
         return {"method": self.method, "params": {}, "seconds": self.seconds, "note": self.note,
@@ -113,6 +114,7 @@ def _realize(record, method: str, orders: Sequence[int], options: dict) -> PeerR
             rho = float(np.max(np.abs(np.linalg.eigvals(A))))
             out = simulate_realization(A, B, C, D, U)
             rows.append({"order": int(order), "spectral_radius": rho, "stable": bool(rho < 1.0), "modes": modes,
+                         "realization": (A, B, C, D),
                          "fit_nrmse_a": _mean_nrmse(out, Y, fit),
                          "heldout_nrmse_a": None if held is None else _mean_nrmse(out, Y, held)})
         except Exception as exc:  # an order the method cannot realise on this record
@@ -120,6 +122,8 @@ def _realize(record, method: str, orders: Sequence[int], options: dict) -> PeerR
     ok = [r for r in rows if r.get("stable") and r["modes"] and np.isfinite(r["fit_nrmse_a"])]
     name = method.replace("-", "_")
     if not ok:
+        for r in rows:
+            r.pop("realization", None)
         return PeerResult(name, [], time.perf_counter() - t0, note="no stable realization at orders "
                           f"{list(orders)}: every one diverges when simulated from rest", orders=rows)
     best = min(ok, key=lambda r: r["fit_nrmse_a"])
@@ -127,8 +131,12 @@ def _realize(record, method: str, orders: Sequence[int], options: dict) -> PeerR
     note = f"order {best['order']} (lowest fitting-part error of the stable orders)"
     if unstable:
         note += f"; order(s) {unstable} diverge from rest (spectral radius of A above 1)"
+    realization = best["realization"]
+    for r in rows:
+        r.pop("realization", None)
     return PeerResult(name, best["modes"], time.perf_counter() - t0, note=note, order=best["order"], stable=True,
-                      fit_nrmse_a=best["fit_nrmse_a"], heldout_nrmse_a=best["heldout_nrmse_a"], orders=rows)
+                      fit_nrmse_a=best["fit_nrmse_a"], heldout_nrmse_a=best["heldout_nrmse_a"], orders=rows,
+                      realization=realization)
 
 
 def _modes(real) -> list[dict]:

@@ -118,7 +118,7 @@ def csmip_record(path: str | Path, station: str | None = None, direction: str = 
     vel_in = _velocities(archive, ins, n, step, acc_in, notes)
     acc_in, acc_out, step = _resample(np.concatenate([acc_in, vel_in], axis=1), acc_out, step, dt, notes)
     acc_in, vel_in = acc_in[:, :len(ins)], acc_in[:, len(ins):]
-    i0, i1, pre_rms = _span(acc_in, acc_out, step, span, pre, post)
+    i0, i1, pre_rms = shaking_span(acc_in, acc_out, step, span, pre, post)
     t = np.arange(i1 - i0) * step
     a = acc_out[i0:i1]
     names = [f"ch{c}" for c in ins]
@@ -187,7 +187,7 @@ def _resample(acc_in: np.ndarray, acc_out: np.ndarray, step: float, dt: float | 
     return (resample_poly(acc_in, up, down, axis=0), resample_poly(acc_out, up, down, axis=0), float(dt))
 
 
-def _span(acc_in: np.ndarray, acc_out: np.ndarray, step: float, span: Sequence[float] | None, pre: float,
+def shaking_span(acc_in: np.ndarray, acc_out: np.ndarray, step: float, span: Sequence[float] | None, pre: float,
           post: float) -> tuple[int, int, dict[str, float]]:
     """Sample range [i0, i1) of the shaking, and the RMS of what comes before it per channel."""
     n = acc_in.shape[0]

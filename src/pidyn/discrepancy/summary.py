@@ -77,7 +77,7 @@ def summarize(case: Case, o: Outcome) -> dict[str, Any]:
         "pidynnet": {"nominal_errors_pct": nom.metrics.get("error_pct"),
                      "extended_errors_pct": None if ext_metrics is None else ext_metrics.get("error_pct")},
         "hidden": None if truth is None else {"effect": record.meta.get("hidden_effect"), "parameters": truth},
-        "modal": None if o.modal is None else [{k: v for k, v in m.items() if k != "mode_shape"} for m in o.modal],
+        "modal": None if o.modal is None else [{k: v for k, v in m.items() if not k.startswith("mode_shape")} for m in o.modal],
         "running": None if o.running is None else running_summary(o.running, case),
         "accelerometers": (record.meta or {}).get("accelerometers"),
         "confirmation": None if o.confirmation is None else o.confirmation.tested,

@@ -102,12 +102,14 @@ def modes_with_intervals(system, values: Mapping[str, float], names: list[str] |
     coordinates, ``names`` order, as the refinement gives it) by drawing ``draws`` parameter
     sets and taking the 2.5 and 97.5 % quantiles of each modal quantity: exact through the
     nonlinear maps k -> period and (c, k) -> damping ratio, which a first-order rule is not for
-    the wide intervals of a short record. Modes are matched by their order in frequency."""
+    the wide intervals of a short record. Modes are matched by their order in frequency. Mode
+    shapes are scaled to 1 on the top floor; ``mode_shape_ci95`` gives each floor's interval."""
     from pidyn.params import from_raw, to_raw
 
     point = modal_properties(*linear_matrices(system, values))
     n = len(point["frequency_hz"])
     ci = {key: [[None, None]] * n for key in ("period_s", "damping_ratio", "frequency_hz")}
+    shape_ci: list = [None] * n
     if names and covariance is not None and np.all(np.isfinite(covariance)):
         import torch
 
@@ -117,6 +119,7 @@ def modes_with_intervals(system, values: Mapping[str, float], names: list[str] |
         cov = np.asarray(covariance, float)
         sample = rng.multivariate_normal(theta, (cov + cov.T) / 2, size=draws, method="eigh")
         out = {key: [] for key in ci}
+        shapes: list = []
         for row in sample:
             p = dict(values)
             p.update({k: float(from_raw(specs[k], torch.tensor(float(row[i]), dtype=torch.float64)))
@@ -127,12 +130,16 @@ def modes_with_intervals(system, values: Mapping[str, float], names: list[str] |
                 continue
             for key in out:
                 out[key].append(m[key])
+            shapes.append(m["mode_shapes"])
         for key, rows in out.items():
             arr = np.asarray(rows, float)
             if len(arr) > 0.9 * draws:
                 ci[key] = [[float(np.quantile(arr[:, r], 0.025)), float(np.quantile(arr[:, r], 0.975))]
                            for r in range(n)]
+        if len(shapes) > 0.9 * draws:  # every floor's value, the top floor's being 1
+            arr = np.asarray(shapes, float)
+            shape_ci = [np.quantile(arr[:, r, :], [0.025, 0.975], axis=0).T.tolist() for r in range(n)]
     return [{"period_s": point["period_s"][r], "period_ci95": ci["period_s"][r],
              "frequency_hz": point["frequency_hz"][r], "frequency_ci95": ci["frequency_hz"][r],
              "damping_ratio": point["damping_ratio"][r], "damping_ci95": ci["damping_ratio"][r],
-             "mode_shape": point["mode_shapes"][r]} for r in range(n)]
+             "mode_shape": point["mode_shapes"][r], "mode_shape_ci95": shape_ci[r]} for r in range(n)]

@@ -12,6 +12,12 @@ with the usual tridiagonal C and K. The equations are written once, on array ope
 torch tensors (the physics loss), NumPy arrays (simulation) and dual arrays (exact
 sensitivities for the refinement and the Cramer-Rao bound) all run the same code.
 
+Masses unknown (``masses: unknown``): a record of accelerations and the ground's determines the
+model only up to one common scale (M, C, K and a M: the same accelerations), so floor 1's mass is
+the unit (``m1 = 1``), the others are identified as ratios to it, and every damping and
+stiffness is per kilogram of floor 1 (``k1`` in N/m per kg = s^-2). ``absolute_values`` refuses
+to turn them into N/m without a mass.
+
 Parameters carry their storey's number: ``c1, k1`` for storey 1, ``beta1, gamma1, n1`` for a
 Bouc-Wen storey, ``k3_2`` for a cubic spring in storey 2 (an underscore after a base name that
 ends in a digit).
@@ -74,6 +80,12 @@ class OnStorey(ForceTerm):
         return self.rename["c"] if isinstance(self.term, ViscousDamping) else None
 
 
+def _per_unit_m1(spec: ParamSpec) -> ParamSpec:
+    """A storey parameter's unit per kg of floor 1 (the masses unknown): N/m -> s^-2, N s/m -> s^-1."""
+    per = {"N/m": "N/m per kg of m1 (s^-2)", "N s/m": "N s/m per kg of m1 (s^-1)"}
+    return replace(spec, unit=per.get(spec.unit, f"{spec.unit} per kg of m1" if spec.unit else "per kg of m1"))
+
+
 def _per_storey(value: float | Sequence[float], n: int, what: str) -> list[float]:
     if isinstance(value, (int, float)):
         return [float(value)] * n
@@ -98,6 +110,14 @@ def _storey_term(spec: Mapping[str, Any], k: float) -> ForceTerm:
         raise ValueError(f"shear_building: storey term '{name}': {exc}") from None
 
 
+#: ``masses: unknown``: floor 1's mass is the unit, the others are identified as ratios to it
+UNKNOWN_MASSES = "unknown"
+
+
+class UnknownMassError(ValueError):
+    """An absolute stiffness or damping asked of a model whose masses the records do not give."""
+
+
 class ShearBuilding(StructuralSystem):
     """N-storey shear building; every storey a viscous damper plus a spring (linear, or
     hysteretic) plus any further force terms, all on its drift.
@@ -105,6 +125,8 @@ class ShearBuilding(StructuralSystem):
     Args:
         n_storeys: number of storeys (None: the length of the per-storey lists).
         masses, dampings, stiffnesses: per storey (kg, N s/m, N/m); a scalar means every storey.
+            ``masses="unknown"``: floor 1's mass is the unit and the others' ratios to it are
+            identified; dampings and stiffnesses are then per kg of floor 1 (s^-1, s^-2).
         stiffness_taper: with a scalar stiffness, the top storey's stiffness as a share of the
             first's, linear in between (1: uniform).
         storey_terms: ``{storey: [ {term: hysteresis, beta: .., gamma: .., n: ..}, ...]}``
@@ -117,7 +139,7 @@ class ShearBuilding(StructuralSystem):
     def __init__(
         self,
         n_storeys: int | None = 3,
-        masses: float | Sequence[float] = 1.0,
+        masses: float | Sequence[float] | str = 1.0,
         dampings: float | Sequence[float] = 0.5,
         stiffnesses: float | Sequence[float] = 200.0,
         stiffness_taper: float = 0.5,
@@ -129,12 +151,15 @@ class ShearBuilding(StructuralSystem):
     ) -> None:
         super().__init__(excitation)
         self.name = name
-        lists = [v for v in (masses, dampings, stiffnesses) if not isinstance(v, (int, float))]
+        self.mass_known = not (isinstance(masses, str) and masses == UNKNOWN_MASSES)
+        if isinstance(masses, str) and self.mass_known:
+            raise ValueError(f"shear_building: masses '{masses}': give kg per storey, a list, or '{UNKNOWN_MASSES}'")
+        lists = [v for v in (masses, dampings, stiffnesses) if not isinstance(v, (int, float, str))]
         n = int(n_storeys) if n_storeys is not None else (len(lists[0]) if lists else 3)
         if n < 1:
             raise ValueError(f"shear_building: n_storeys must be >= 1, got {n}")
         self.n_dof = n
-        self.masses = _per_storey(masses, n, "masses")
+        self.masses = _per_storey(1.0 if not self.mass_known else masses, n, "masses")
         c = _per_storey(dampings, n, "dampings")
         if isinstance(stiffnesses, (int, float)):
             k = [float(stiffnesses) * (1 - (1 - stiffness_taper) * i / max(n - 1, 1)) for i in range(n)]
@@ -148,15 +173,24 @@ class ShearBuilding(StructuralSystem):
                 terms.append(LinearStiffness(k[i]))
             terms += extra[i]
             self.storeys.append([OnStorey(t, i + 1) for t in terms])
-        defaults = [ParamSpec(f"m{i + 1}", init=m, scale=m, true=m, trainable=False, unit="kg")
-                    for i, m in enumerate(self.masses)]
+        defaults = self._mass_specs()
+        #: parameters in force units: per kg of floor 1 when the masses are unknown
+        self.force_params = {s.name for st in self.storeys for t in st for s in t.specs() if s.unit.startswith("N")}
         for storey in self.storeys:
             for term in storey:
-                defaults += term.specs()
+                defaults += term.specs() if self.mass_known else [_per_unit_m1(s) for s in term.specs()]
         defaults = self._apply_guess(defaults, guess or {})
         self._specs = merge_specs(defaults, params)
         self.n_latent = sum(t.n_latent for s in self.storeys for t in s)
         self.latent_names = tuple(t.name for s in self.storeys for t in s if t.n_latent)
+
+    def _mass_specs(self) -> list[ParamSpec]:
+        if self.mass_known:
+            return [ParamSpec(f"m{i + 1}", init=m, scale=m, true=m, trainable=False, unit="kg")
+                    for i, m in enumerate(self.masses)]
+        return [ParamSpec("m1", init=1.0, scale=1.0, true=1.0, trainable=False, unit="m1 (the unit)")] + [
+            ParamSpec(f"m{i + 1}", init=1.0, scale=1.0, lower=0.02, upper=50.0, unit="m1")
+            for i in range(1, self.n_dof)]
 
     @staticmethod
     def _extra_terms(storey_terms, n: int, k: list[float]) -> list[list[ForceTerm]]:
@@ -194,8 +228,32 @@ class ShearBuilding(StructuralSystem):
         return [t for s in self.storeys for t in s]
 
     def linear_params(self) -> list[str]:
+        """The parameters the motion residual is linear in: the terms' linear ones and, with the
+        masses unknown, the mass ratios (m_i a_i enters linearly too)."""
         trainable = {s.name for s in self._specs if s.trainable}
-        return [n for t in self.terms for n in t.linear if n in trainable]
+        masses = [f"m{i + 1}" for i in range(self.n_dof) if f"m{i + 1}" in trainable]
+        return masses + [n for t in self.terms for n in t.linear if n in trainable]
+
+    def own_units(self, truth: Mapping[str, Any] | None) -> dict[str, Any] | None:
+        """A simulation's true values (kg, N/m) in this model's units: with the masses unknown,
+        the masses and every force parameter divided by floor 1's mass."""
+        if truth is None or self.mass_known or truth.get("m1") is None:
+            return None if truth is None else dict(truth)
+        m1 = float(truth["m1"])
+        scaled = self.force_params | {f"m{i + 1}" for i in range(self.n_dof)}
+        return {k: (v / m1 if k in scaled and v is not None else v) for k, v in truth.items()}
+
+    def absolute_values(self, values: Mapping[str, float], m1: float | None = None) -> dict[str, float]:
+        """The parameters in absolute units. With the masses unknown they are per kg of floor 1,
+        and only a mass of floor 1 (kg) turns them into kg, N s/m, N/m: without one this refuses."""
+        if self.mass_known:
+            return {k: float(v) for k, v in values.items()}
+        if m1 is None:
+            raise UnknownMassError(
+                f"{self.name}: the masses are unknown (masses: {UNKNOWN_MASSES}); the records determine the mass "
+                f"ratios m_i/m1 and the stiffnesses and dampings per kg of floor 1 (k_i/m1 in s^-2), not absolute "
+                f"N/m: give floor 1's mass (m1 in kg) to scale them")
+        return {k: float(v) * float(m1) for k, v in values.items()}
 
     def _latent_slices(self) -> list[list[slice | None]]:
         key = tuple(id(t) for storey in self.storeys for t in storey)

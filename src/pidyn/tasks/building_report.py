@@ -36,13 +36,24 @@ def _drift_and_force(system, values: Mapping[str, float], t: np.ndarray, Y: np.n
     return drift, force
 
 
+def _interface_modes(path: Path) -> dict:
+    """The ``modes`` list (periods and damping ratios with intervals) already in ``modal.json``,
+    kept beside the building's own tables."""
+    import json
+
+    try:
+        return {"modes": json.loads(path.read_text())["modes"]}
+    except (OSError, ValueError, KeyError):
+        return {}
+
+
 def write_building_report(system, record, identified: Mapping[str, float], truth: Mapping[str, Any] | None,
                           state0: np.ndarray | None, run_dir: Path, logger: Any = None, step: int = 0) -> dict:
     """Modal table, storey equations and loops into ``run_dir``; returns the modal comparison."""
     modes = compare_modes(system, identified, truth if truth and all(v is not None for v in truth.values()) else None)
     d_id, f_id = storey_response(system, identified, record.t, record.f, state0)
     modes["diverged"] = diverged(d_id) or diverged(f_id)
-    write_json(run_dir / "modal.json", modes)
+    write_json(run_dir / "modal.json", {**_interface_modes(run_dir / "modal.json"), **modes})
     eqs = system.storey_equations(identified)
     lines = [f"# {system.name}: {system.n_dof} storeys under {record.name}", "",
              "## Modes of the identified linear part (about rest)", "", modal_table(modes), "",
@@ -53,6 +64,13 @@ def write_building_report(system, record, identified: Mapping[str, float], truth
         lines += ["", "**The identified model diverges when simulated over the record** (its response blows "
                   "up): the estimate is not a usable model of this building, and the loops show only the part "
                   "before the blow-up."]
+    if not record.truth:  # a measured building: what the model leaves of each storey's force
+        split = (record.meta or {}).get("split")
+        modes["storey_residuals"] = storey_residuals(system, identified, record, split["heldout"] if split else None)
+        lines += residual_lines(modes["storey_residuals"], bool(split))
+    if not getattr(system, "mass_known", True):
+        lines += ["", "Masses unknown: floor 1's mass is the unit; stiffness and damping are per kg of floor 1 "
+                  "(k in s^-2, c in s^-1) and the masses are ratios to floor 1's. Absolute N/m need a mass."]
     (run_dir / "building.md").write_text("\n".join(lines) + "\n")
     fig_dir = run_dir / "figures"
     fig_dir.mkdir(exist_ok=True)
@@ -100,3 +118,72 @@ def plot_storey_loops(path: Path, drift: np.ndarray, force: np.ndarray,
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+#: what a storey's residual force is compared with: the force shape each would leave behind
+RESIDUAL_SHAPES = {"stiffness (d)": lambda d, v: d, "viscous (d')": lambda d, v: v,
+                   "friction (sign d')": lambda d, v: np.tanh(v / max(3 * float(np.std(v)) * 0.05, 1e-12)),
+                   "cubic (d^3)": lambda d, v: d**3}
+
+
+def residual_lines(rows: list[dict], heldout: bool) -> list[str]:
+    """building.md's table of the storeys' residual forces."""
+    if not rows:
+        return []
+    shapes = list(rows[0]["explained_by"])
+    out = ["", f"## What the model leaves of each storey's force ({'held-out part' if heldout else 'whole record'})",
+           "", "F_i = -sum_(j>=i) m_j a_j from the floors' accelerations against the model's storey force on the "
+           "integrated drifts; the share of the residual each force shape would explain says where to look.", "",
+           "| storey | residual / force (RMS) | residual's peak (Hz) | " + " | ".join(shapes) + " |",
+           "|---|---|---|" + "---|" * len(shapes)]
+    for r in rows:
+        out.append(f"| {r['storey']} | {r['residual_share']:.3f} | {r['residual_peak_hz']:.2f} | "
+                   + " | ".join(f"{r['explained_by'][k]:.2f}" for k in shapes) + " |")
+    return out
+
+
+def storey_residuals(system, values: Mapping[str, float], record, span: tuple[float, float] | None = None) -> list[dict]:
+    """Per storey, what the identified model leaves of the storey force the floors' accelerations
+    give: F_i = -sum_{j >= i} m_j a_j (absolute; masses as identified, per kg of floor 1 when
+    unknown) against the model's F_i on the drifts integrated from the same accelerations (both
+    high-passed alike at a fifth of the fundamental). Its RMS share of F_i, its dominant frequency,
+    and the share of it each simple force shape would explain (a stiffness, damping, friction or
+    cubic error of that storey): where to look, not a verdict."""
+    from scipy.signal import welch
+
+    from pidyn.baselines.data_start import fundamental
+    from pidyn.signals import integrate
+
+    if record.a is None or np.isnan(record.a).any() or record.n_inputs != 1:
+        return []
+    peak = fundamental(record)
+    corner = max((peak[0] if peak else 1.0) / 5.0, 2.0 / max(float(record.t[-1]), 1e-9))
+    dt, n = record.dt, system.n_dof
+    absolute = record.a + np.asarray(record.f, float)[:, None]
+    masses = np.array([float(values[f"m{i + 1}"]) for i in range(n)])
+    measured = -np.cumsum((absolute * masses)[:, ::-1], axis=1)[:, ::-1]  # F_i = -sum_{j>=i} m_j a_j
+    measured = integrate(measured, dt, 0, corner)
+    x, v = integrate(record.a, dt, 2, corner), integrate(record.a, dt, 1, corner)
+    z = np.zeros((len(record.t), system.n_latent))
+    model = np.stack([np.broadcast_to(f, record.t.shape) for f in
+                      system.storey_forces(record.t, x, v, z, dict(values))], axis=1)
+    edge = max(1, int(round(2.0 / (5 * corner) / dt)))
+    keep = np.zeros(len(record.t), bool)
+    keep[edge:len(record.t) - edge] = True
+    if span is not None:
+        keep &= (record.t >= span[0]) & (record.t <= span[1])
+    d = np.diff(np.concatenate([np.zeros((len(x), 1)), x], axis=1), axis=1)[keep]
+    dv = np.diff(np.concatenate([np.zeros((len(v), 1)), v], axis=1), axis=1)[keep]
+    rows = []
+    for i in range(n):
+        r, F = (measured - model)[keep, i], measured[keep, i]
+        freq, P = welch(r, fs=1.0 / dt, nperseg=min(len(r), 1024))
+        shares = {}
+        for name, shape in RESIDUAL_SHAPES.items():
+            g = shape(d[:, i], dv[:, i])
+            coef = float(g @ r) / max(float(g @ g), 1e-300)
+            shares[name] = float(1.0 - np.sum((r - coef * g) ** 2) / max(float(r @ r), 1e-300))
+        rows.append({"storey": i + 1, "residual_share": float(np.std(r) / max(np.std(F), 1e-300)),
+                     "residual_peak_hz": float(freq[int(np.argmax(P[1:])) + 1]),
+                     "explained_by": shares})
+    return rows

@@ -129,6 +129,8 @@ def build_run(cfg: DictConfig, record: Record | None) -> Run:
     if record.n_inputs > 1 and system.n_inputs == 1 and OmegaConf.select(cfg, "system.inputs", default=1) is None:
         system = hydra.utils.instantiate(cfg.system, inputs=record.inputs)  # the model takes the record's inputs
     check_inputs(system, record)
+    if record.truth and hasattr(system, "own_units"):  # masses unknown: the truth per kg of floor 1
+        record = replace(record, truth=system.own_units(record.truth))
     hold_out = _hold_out(cfg, record)
     system, start = data_start(cfg, system, record, run_dir)
     accel = system.excitation_as_acceleration(record.f) if cfg.model.excitation_transform else None
@@ -280,6 +282,11 @@ def identified_params(system: StructuralSystem, final: dict[str, float], values:
     out = {"system": system.name, "equation": system.describe(final), "params": table, "notes": notes}
     if hasattr(system, "storey_equations"):
         out["storey_equations"] = system.storey_equations(final)
+    if not getattr(system, "mass_known", True):  # the records give the model up to one scale
+        try:
+            system.absolute_values(final)
+        except ValueError as exc:
+            out["absolute_values"] = str(exc)
     if refined is not None:
         out["correlation"] = {"names": refined.names, "matrix": refined.correlation}
         out["noise_std"] = refined.noise_std
