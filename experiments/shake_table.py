@@ -128,7 +128,8 @@ def run_rows(folder: Path, model: str) -> list[dict]:
     rows = []
     for label, run in _runs(folder).items():
         m = json.loads((run / "metrics.json").read_text())
-        modes = json.loads((run / "modal.json").read_text()).get("modes") or [{}]
+        modal = json.loads((run / "modal.json").read_text())
+        modes = modal.get("modes") or [{}]
         base = json.loads((run / "baselines.json").read_text()).get("baselines", []) if (run / "baselines.json").exists() else []
         peer = next((b for b in base if b.get("method") == "srim"), {})
         held = (m.get("heldout") or {}).get("nrmse", {})
@@ -140,6 +141,9 @@ def run_rows(folder: Path, model: str) -> list[dict]:
                      "srim_heldout_mean": peer.get("heldout_nrmse_a"),
                      "srim_fundamental_hz": (peer.get("modes") or [{}])[0].get("frequency_hz"),
                      "params": m.get("params"), "ci95": m.get("ci95"), "wall_s": m.get("wall_seconds"),
+                     "storey_residuals": modal.get("storey_residuals") or [],
+                     "start": json.loads((run / "data_start.json").read_text()).get("method")
+                     if (run / "data_start.json").exists() else None,
                      "run_dir": str(run)})
     return rows
 
@@ -262,6 +266,19 @@ def report_lines(runs: list[dict], preds: list[dict], align: list[dict]) -> list
             theirs = ", ".join(_fmt(p[f"srim_a{j + 1}"]) for j in range(n))
             out.append(f"| {p['model']} | {p['identified_on']} | {p['predicted_run']} | {ours} | "
                        f"{_fmt(p['pidyn_mean'])} | {theirs} | {_fmt(p['srim_mean'])} |")
+    resid = [r for r in runs if r["run"] == MODELS[r["model"]][1] and r["storey_residuals"]]
+    if resid:
+        shapes = list(resid[0]["storey_residuals"][0]["explained_by"])
+        out += ["", "## What the shear model leaves of each storey's force (identification run, held-out part)", "",
+                "F_i = -sum_(j>=i) m_j a_j from the floors' accelerations against the identified storey force on the "
+                "integrated drifts (`building.md` of each run); the share of the residual each simple force shape "
+                "would explain says where to look.", "",
+                "| model | storey | residual / force (RMS) | residual's peak (Hz) | " + " | ".join(shapes) + " |",
+                "|---|---|---|---|" + "---|" * len(shapes)]
+        for r in resid:
+            for q in r["storey_residuals"]:
+                out.append(f"| {r['model']} | {q['storey']} | {q['residual_share']:.3f} | {q['residual_peak_hz']:.2f} | "
+                           + " | ".join(f"{q['explained_by'][k]:.2f}" for k in shapes) + " |")
     if align:
         out += ["", "## The sensors' timing", "",
                 "Each floor's lag against the table where the floor moves with it (0.2-2 Hz), after the sensors' shared "

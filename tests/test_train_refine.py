@@ -77,6 +77,7 @@ def test_compare_states_refines_from_the_start_the_stage_chose(tmp_path, monkeyp
     from types import SimpleNamespace
 
     import pidyn.refine
+    import pidyn.tasks.train
     from pidyn.tasks.train import run_refinement
 
     calls = []
@@ -87,6 +88,8 @@ def test_compare_states_refines_from_the_start_the_stage_chose(tmp_path, monkeyp
                                cost=1.0, converged=True, max_defect=0.0, seconds=0.0)
 
     monkeypatch.setattr(pidyn.refine, "refine", fake_refine)
+    # the fake refinement has no model to simulate: the divergence check is another test's
+    monkeypatch.setattr(pidyn.tasks.train, "check_refined", lambda *a, **k: None)
     cfg = make_cfg(SMOKE + ["model.refine.starts=[output_error]", "model.refine.compare_states=[integrated]"], tmp_path)
     pidyn_values, oe = {"c": 9.0, "k1": 9.0, "k3": 9.0}, {"c": 0.5, "k1": 15.0, "k3": 120.0}
     record = SimpleNamespace(truth=None)
