@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # the default index would serve a CUDA build.
 TORCH_INDEX ?=
 
-.PHONY: install train test test-fast bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench basin robustness efficiency benchmarks real
+.PHONY: install train test test-fast lint format bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench basin robustness efficiency benchmarks real
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,8 +22,17 @@ install: $(STAMP)
 train: $(STAMP)
 	$(PY) train.py $(ARGS)
 
+# the project's ruff settings (pyproject.toml) before the tests: lint, then the format
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+format: $(STAMP)
+	$(VENV)/bin/ruff check --fix .
+	$(VENV)/bin/ruff format .
+
 # one BLAS/OpenMP thread per test worker: the workers already fill the cores
-test: $(STAMP)
+test: $(STAMP) lint
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n auto --dist worksteal $(ARGS)
 
 test-fast: $(STAMP)

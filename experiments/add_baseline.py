@@ -24,9 +24,14 @@ sys.path.insert(0, str(ROOT / "src"))
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("sweep", type=Path)
-    ap.add_argument("--method", default="sindy", help="a baseline of conf/baselines, or cramer_rao (the bound)")
-    ap.add_argument("--keep-saved-settings", action="store_true",
-                    help="use the method's settings from each job's saved config, not today's conf/baselines/default.yaml")
+    ap.add_argument(
+        "--method", default="sindy", help="a baseline of conf/baselines, or cramer_rao (the bound)"
+    )
+    ap.add_argument(
+        "--keep-saved-settings",
+        action="store_true",
+        help="use the method's settings from each job's saved config, not today's conf/baselines/default.yaml",
+    )
     a = ap.parse_args()
     current = OmegaConf.load(ROOT / "src" / "pidyn" / "conf" / "baselines" / "default.yaml")
     from pidyn.tasks.train import build_record, run_baselines
@@ -51,7 +56,8 @@ def main() -> None:
         merged = [b for b in old if b["method"] != a.method] + new
         old_path.write_text(json.dumps({"baselines": merged}, indent=2, default=float))
         metrics.setdefault("baselines", {}).update(
-            {b["method"]: {"error_pct": b.get("error_pct"), "seconds": b["seconds"]} for b in new})
+            {b["method"]: {"error_pct": b.get("error_pct"), "seconds": b["seconds"]} for b in new}
+        )
         (job / "metrics.json").write_text(json.dumps(metrics, indent=2, default=float))
         done += 1
         print(f"{job.name}: " + "; ".join(f"{b['method']} {b.get('error_pct')}" for b in new), flush=True)

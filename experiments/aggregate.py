@@ -27,20 +27,58 @@ from omegaconf import OmegaConf
 
 # Paper Tables I-III (value, error %), PIDynNet and UKF.
 PAPER = {
-    ("duffing", 0.0): {"PIDynNet": {"c": (0.494, 1.19), "k1": (14.981, 0.13), "k3": (122.392, 1.99)},
-                       "UKF": {"c": (0.513, 2.86), "k1": (14.564, 2.91), "k3": (118.164, 1.53)}},
-    ("bouc_wen", 0.0): {"PIDynNet": {"c": (0.295, 1.50), "k": (11.954, 0.38), "beta": (0.982, 1.77),
-                                     "gamma": (1.963, 1.87), "n": (2.051, 2.57)},
-                        "UKF": {"c": (0.286, 4.58), "k": (11.987, 0.11), "beta": (0.988, 1.25),
-                                "gamma": (2.051, 2.57), "n": (2.064, 3.21)}},
-    ("bouc_wen", 0.025): {"PIDynNet": {"c": (0.301, 0.37), "k": (12.032, 0.27), "beta": (1.017, 1.72),
-                                       "gamma": (1.952, 2.41), "n": (1.989, 0.56)},
-                          "UKF": {"c": (0.292, 2.53), "k": (12.016, 0.13), "beta": (0.975, 2.49),
-                                  "gamma": (2.022, 1.08), "n": (1.960, 2.02)}},
-    ("bouc_wen", 0.05): {"PIDynNet": {"c": (0.294, 1.84), "k": (11.987, 0.11), "beta": (1.027, 2.70),
-                                      "gamma": (1.950, 2.50), "n": (2.020, 1.02)},
-                         "UKF": {"c": (0.316, 5.49), "k": (11.956, 0.36), "beta": (0.971, 2.86),
-                                 "gamma": (1.948, 2.58), "n": (2.064, 3.18)}},
+    ("duffing", 0.0): {
+        "PIDynNet": {"c": (0.494, 1.19), "k1": (14.981, 0.13), "k3": (122.392, 1.99)},
+        "UKF": {"c": (0.513, 2.86), "k1": (14.564, 2.91), "k3": (118.164, 1.53)},
+    },
+    ("bouc_wen", 0.0): {
+        "PIDynNet": {
+            "c": (0.295, 1.50),
+            "k": (11.954, 0.38),
+            "beta": (0.982, 1.77),
+            "gamma": (1.963, 1.87),
+            "n": (2.051, 2.57),
+        },
+        "UKF": {
+            "c": (0.286, 4.58),
+            "k": (11.987, 0.11),
+            "beta": (0.988, 1.25),
+            "gamma": (2.051, 2.57),
+            "n": (2.064, 3.21),
+        },
+    },
+    ("bouc_wen", 0.025): {
+        "PIDynNet": {
+            "c": (0.301, 0.37),
+            "k": (12.032, 0.27),
+            "beta": (1.017, 1.72),
+            "gamma": (1.952, 2.41),
+            "n": (1.989, 0.56),
+        },
+        "UKF": {
+            "c": (0.292, 2.53),
+            "k": (12.016, 0.13),
+            "beta": (0.975, 2.49),
+            "gamma": (2.022, 1.08),
+            "n": (1.960, 2.02),
+        },
+    },
+    ("bouc_wen", 0.05): {
+        "PIDynNet": {
+            "c": (0.294, 1.84),
+            "k": (11.987, 0.11),
+            "beta": (1.027, 2.70),
+            "gamma": (1.950, 2.50),
+            "n": (2.020, 1.02),
+        },
+        "UKF": {
+            "c": (0.316, 5.49),
+            "k": (11.956, 0.36),
+            "beta": (0.971, 2.86),
+            "gamma": (1.948, 2.58),
+            "n": (2.064, 3.18),
+        },
+    },
 }
 METHODS = ["equation_error", "sindy", "output_error", "ukf"]
 LABEL = {"equation_error": "EE", "sindy": "SINDy", "output_error": "OE", "ukf": "UKF"}
@@ -80,8 +118,14 @@ def load_jobs(root: Path, label: str = "") -> tuple[list[dict], list[str]]:
 
 
 def cell_key(j: dict) -> tuple:
-    return (j["system"], j["record"], float(j["noise"]), int(j["batch_size"]), float(j.get("eq_scale", 1.0)),
-            float(j.get("eq_stretch", 1.0)))
+    return (
+        j["system"],
+        j["record"],
+        float(j["noise"]),
+        int(j["batch_size"]),
+        float(j.get("eq_scale", 1.0)),
+        float(j.get("eq_stretch", 1.0)),
+    )
 
 
 def load_cells(roots: Path | list[Path]) -> tuple[dict[tuple, list[dict]], list[str]]:
@@ -98,8 +142,9 @@ def load_cells(roots: Path | list[Path]) -> tuple[dict[tuple, list[dict]], list[
 
 def figure_name(key: tuple) -> str:
     system, record, noise, batch, scale, stretch = key
-    return (f"{system}_{record}_x{scale:g}_stretch{stretch:g}_noise{100 * noise:g}_batch{batch}"
-            .replace(".", "p"))
+    return f"{system}_{record}_x{scale:g}_stretch{stretch:g}_noise{100 * noise:g}_batch{batch}".replace(
+        ".", "p"
+    )
 
 
 def plot_cells(cells: dict[tuple, list[dict]], fig_dir: Path, prefix: str) -> dict[tuple, str]:
@@ -110,15 +155,24 @@ def plot_cells(cells: dict[tuple, list[dict]], fig_dir: Path, prefix: str) -> di
     fig_dir.mkdir(parents=True, exist_ok=True)
     names = {}
     for key, js in sorted(cells.items()):
-        runs = {"PIDynNet": [j["_trajectory"] for j in js],
-                "UKF": [b.get("trajectory") or [] for j in js for b in j["_baselines"] if b["method"] == "ukf"]}
+        runs = {
+            "PIDynNet": [j["_trajectory"] for j in js],
+            "UKF": [b.get("trajectory") or [] for j in js for b in j["_baselines"] if b["method"] == "ukf"],
+        }
         crb = [j["_crb"]["std_pct"] for j in js if j["_crb"]]
-        bound = {n: float(np.nanmean([c.get(n, np.nan) for c in crb])) for n in js[0]["params"]} if crb else None
+        bound = (
+            {n: float(np.nanmean([c.get(n, np.nan) for c in crb])) for n in js[0]["params"]} if crb else None
+        )
         name = f"{prefix}_{figure_name(key)}.png"
         system, record, noise, batch, scale, stretch = key
-        if plot_convergence_seeds(fig_dir / name, runs, js[0]["truth"], bound,
-                                  title=f"{system} under {record} x{scale:g} (stretch {stretch:g}), noise "
-                                        f"{100 * noise:g} %, batch {batch}: {len(js)} seed(s)"):
+        if plot_convergence_seeds(
+            fig_dir / name,
+            runs,
+            js[0]["truth"],
+            bound,
+            title=f"{system} under {record} x{scale:g} (stretch {stretch:g}), noise "
+            f"{100 * noise:g} %, batch {batch}: {len(js)} seed(s)",
+        ):
             names[key] = name
     return names
 
@@ -141,8 +195,18 @@ def _refined_columns(js: list[dict], n: str, truth: float | None, crb: float) ->
     """PIDynNet + refinement: mean, std, RMS error, RMS / Cramer-Rao std, 95 % interval coverage."""
     ref = _refined(js)
     if not ref:
-        return {k: np.nan for k in ("refined_mean", "refined_std", "refined_rms_err", "refined_over_crb",
-                                    "coverage", "ci_half_pct", "refine_seconds")}
+        return {
+            k: np.nan
+            for k in (
+                "refined_mean",
+                "refined_std",
+                "refined_rms_err",
+                "refined_over_crb",
+                "coverage",
+                "ci_half_pct",
+                "refine_seconds",
+            )
+        }
     vals = np.array([j["params"][n] for j in ref])
     errs = np.array([j["error_pct"].get(n, np.nan) for j in ref])
     rms = float(np.sqrt(np.nanmean(errs**2)))
@@ -151,10 +215,14 @@ def _refined_columns(js: list[dict], n: str, truth: float | None, crb: float) ->
     noisy = any((j.get("noise") or 0) > 0 for j in ref)
     cover = [lo <= truth <= hi for lo, hi in cis] if truth is not None and noisy else []
     return {
-        "refined_mean": vals.mean(), "refined_std": vals.std(ddof=1) if len(vals) > 1 else 0.0,
-        "refined_rms_err": rms, "refined_over_crb": rms / crb if crb and crb > 0 else np.nan,
+        "refined_mean": vals.mean(),
+        "refined_std": vals.std(ddof=1) if len(vals) > 1 else 0.0,
+        "refined_rms_err": rms,
+        "refined_over_crb": rms / crb if crb and crb > 0 else np.nan,
         "coverage": float(np.mean(cover)) if cover else np.nan,
-        "ci_half_pct": float(np.mean([100 * (hi - lo) / 2 / abs(truth) for lo, hi in cis])) if cis and truth else np.nan,
+        "ci_half_pct": float(np.mean([100 * (hi - lo) / 2 / abs(truth) for lo, hi in cis]))
+        if cis and truth
+        else np.nan,
         "refine_seconds": float(np.mean([j["refinement"]["seconds"] for j in ref if j.get("refinement")])),
     }
 
@@ -162,7 +230,11 @@ def _refined_columns(js: list[dict], n: str, truth: float | None, crb: float) ->
 def _compared_rms(js: list[dict], source: str, n: str) -> float:
     """RMS error of the refinement from PIDynNet's parameters with segment states from
     ``source`` (``model.refine.compare_states``), where the runs have it."""
-    e = [j["refine_compare"][source]["error_pct"].get(n) for j in js if source in (j.get("refine_compare") or {})]
+    e = [
+        j["refine_compare"][source]["error_pct"].get(n)
+        for j in js
+        if source in (j.get("refine_compare") or {})
+    ]
     e = [x for x in e if x is not None]
     return float(np.sqrt(np.mean(np.square(e)))) if e else np.nan
 
@@ -179,15 +251,25 @@ def table(cells: dict[tuple, list[dict]]) -> pd.DataFrame:
             vals = np.array([_pidynnet(j)["params"][n] for j in js])
             errs = np.array([_pidynnet(j)["error_pct"].get(n, np.nan) for j in js])
             row = {
-                "system": system, "record": record, "noise": noise, "batch_size": batch, "eq_scale": scale,
-                "eq_stretch": stretch, "param": n, "truth": truth, "seeds": len(js),
+                "system": system,
+                "record": record,
+                "noise": noise,
+                "batch_size": batch,
+                "eq_scale": scale,
+                "eq_stretch": stretch,
+                "param": n,
+                "truth": truth,
+                "seeds": len(js),
                 "paper_pidynnet": paper.get("PIDynNet", {}).get(n, (np.nan, np.nan))[0],
                 "paper_pidynnet_err": paper.get("PIDynNet", {}).get(n, (np.nan, np.nan))[1],
                 "paper_ukf_err": paper.get("UKF", {}).get(n, (np.nan, np.nan))[1],
-                "pidynnet_mean": vals.mean(), "pidynnet_std": vals.std(ddof=1) if len(vals) > 1 else 0.0,
+                "pidynnet_mean": vals.mean(),
+                "pidynnet_std": vals.std(ddof=1) if len(vals) > 1 else 0.0,
                 "pidynnet_err_mean": np.nanmean(errs),
                 "pidynnet_rms_err": float(np.sqrt(np.nanmean(errs**2))),
-                "crb_std_pct": np.nanmean([j["_crb"]["std_pct"].get(n, np.nan) for j in js if j["_crb"]]) if any(j["_crb"] for j in js) else np.nan,
+                "crb_std_pct": np.nanmean([j["_crb"]["std_pct"].get(n, np.nan) for j in js if j["_crb"]])
+                if any(j["_crb"] for j in js)
+                else np.nan,
                 "pidynnet_seconds": np.mean([j["wall_seconds"] for j in js]),
             }
             row.update(_refined_columns(js, n, truth, row["crb_std_pct"]))
@@ -228,33 +310,51 @@ def summary(df: pd.DataFrame) -> list[str]:
         if cells.ngroups < 2:
             continue
         names = list(dict.fromkeys(gs.param))
-        out.append(f"\n## Summary, {system}: RMS error % over seeds, PIDynNet / PIDynNet + refinement / "
-                   "output-error LS / UKF (Cramer-Rao std %)\n")
+        out.append(
+            f"\n## Summary, {system}: RMS error % over seeds, PIDynNet / PIDynNet + refinement / "
+            "output-error LS / UKF (Cramer-Rao std %)\n"
+        )
         out.append("| record | scale | stretch | noise % | batch | seeds | " + " | ".join(names) + " |")
         out.append("|---|---|---|---|---|---|" + "---|" * len(names))
         for key, g in cells:
             _, record, noise, batch, scale, stretch = key
             by = g.set_index("param")
-            vals = [f"{_short(by.pidynnet_rms_err[n])} / {_short(by.refined_rms_err[n])} / "
-                    f"{_short(by.output_error_rms_err[n])} / "
-                    f"{_short(by.ukf_rms_err[n])} ({_short(by.crb_std_pct[n])})" for n in names]
-            out.append(f"| {record} | {scale:g} | {stretch:g} | {100 * noise:g} | {batch} | {int(g.seeds.iloc[0])} | "
-                       + " | ".join(vals) + " |")
+            vals = [
+                f"{_short(by.pidynnet_rms_err[n])} / {_short(by.refined_rms_err[n])} / "
+                f"{_short(by.output_error_rms_err[n])} / "
+                f"{_short(by.ukf_rms_err[n])} ({_short(by.crb_std_pct[n])})"
+                for n in names
+            ]
+            out.append(
+                f"| {record} | {scale:g} | {stretch:g} | {100 * noise:g} | {batch} | {int(g.seeds.iloc[0])} | "
+                + " | ".join(vals)
+                + " |"
+            )
     return out
 
 
-def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str],
-                figures: dict[tuple, str] | None = None, fig_rel: str = "figures") -> str:
+def to_markdown(
+    df: pd.DataFrame,
+    title: str,
+    command: str,
+    failed: list[str],
+    figures: dict[tuple, str] | None = None,
+    fig_rel: str = "figures",
+) -> str:
     f = _num
     out = [f"# {title}\n", f"Command: `{command}`\n", *summary(df)]
     for key, g in df.groupby(CELL, sort=False):
         system, record, noise, batch, scale, stretch = key
-        out.append(f"\n## {system} under {record} x{scale:g} (stretch {stretch:g}), noise {100 * noise:g} %, "
-                   f"batch {batch}, {int(g.seeds.iloc[0])} seed(s)\n")
-        out.append("| param | truth | paper PIDynNet (err %) | paper UKF err % | PIDynNet mean +- std | "
-                   "PIDynNet RMS err % | PIDynNet + refinement RMS err % | CRB std % | refined RMS / CRB | "
-                   "95 % interval coverage (mean half width %) | EE RMS err % | SINDy RMS err % | OE RMS err % | "
-                   "UKF RMS err % |")
+        out.append(
+            f"\n## {system} under {record} x{scale:g} (stretch {stretch:g}), noise {100 * noise:g} %, "
+            f"batch {batch}, {int(g.seeds.iloc[0])} seed(s)\n"
+        )
+        out.append(
+            "| param | truth | paper PIDynNet (err %) | paper UKF err % | PIDynNet mean +- std | "
+            "PIDynNet RMS err % | PIDynNet + refinement RMS err % | CRB std % | refined RMS / CRB | "
+            "95 % interval coverage (mean half width %) | EE RMS err % | SINDy RMS err % | OE RMS err % | "
+            "UKF RMS err % |"
+        )
         out.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         integrated = bool(g.integrated_rms_err.notna().any())
         if integrated:  # the refinement from the same parameters, states from integrated accelerations
@@ -271,15 +371,19 @@ def to_markdown(df: pd.DataFrame, title: str, command: str, failed: list[str],
                 + (f" {f(r.integrated_rms_err, 3)} |" if integrated else "")
             )
         r0 = g.iloc[0]
-        out.append(f"\nWall seconds per run: PIDynNet run {f(r0.pidynnet_seconds, 0)} (of which refinement "
-                   f"{f(r0.refine_seconds, 1)}), EE {f(r0.equation_error_seconds, 2)}, "
-                   f"SINDy {f(r0.sindy_seconds, 2)}, OE {f(r0.output_error_seconds, 1)}, UKF {f(r0.ukf_seconds, 1)}.")
+        out.append(
+            f"\nWall seconds per run: PIDynNet run {f(r0.pidynnet_seconds, 0)} (of which refinement "
+            f"{f(r0.refine_seconds, 1)}), EE {f(r0.equation_error_seconds, 2)}, "
+            f"SINDy {f(r0.sindy_seconds, 2)}, OE {f(r0.output_error_seconds, 1)}, UKF {f(r0.ukf_seconds, 1)}."
+        )
         na = {LABEL[m]: r0[f"{m}_note"] for m in METHODS if r0.get(f"{m}_note")}
         if na:
             out.append("\n" + "; ".join(f"{m}: {note}" for m, note in na.items()) + ".")
         if figures and key in figures:
-            out.append(f"\nFigure 3, estimates over record time, every seed, PIDynNet and UKF: "
-                       f"[{figures[key]}]({fig_rel}/{figures[key]})")
+            out.append(
+                f"\nFigure 3, estimates over record time, every seed, PIDynNet and UKF: "
+                f"[{figures[key]}]({fig_rel}/{figures[key]})"
+            )
     if failed:
         out.append(f"\nFailed jobs (no metrics.json): {', '.join(failed)}")
     return "\n".join(out) + "\n"
@@ -295,22 +399,28 @@ def modes_summary(cells: dict[tuple, list[dict]]) -> str:
             continue
         first = ms[0]  # seed 0's identified frequencies label the modes
         n = len(ms[0]["frequency_error_pct"])
-        out.append(f"\n## Modes, {key[0]} under {key[1]} x{key[4]:g}, noise {100 * key[2]:g} %: final estimate, "
-                   f"{len(ms)} seeds\n")
+        out.append(
+            f"\n## Modes, {key[0]} under {key[1]} x{key[4]:g}, noise {100 * key[2]:g} %: final estimate, "
+            f"{len(ms)} seeds\n"
+        )
         out.append("| mode | f (Hz), seed 0 | frequency RMS err % | damping ratio RMS err % | min MAC |")
         out.append("|---|---|---|---|---|")
         for r in range(n):
             fe = np.sqrt(np.mean([m["frequency_error_pct"][r] ** 2 for m in ms]))
             de = np.sqrt(np.mean([m["damping_error_pct"][r] ** 2 for m in ms]))
             mac = min(m["mac"][r] for m in ms)
-            out.append(f"| {r + 1} | {first['identified']['frequency_hz'][r]:.4f} | {_short(fe)} | {_short(de)} | "
-                       f"{mac:.6f} |")
+            out.append(
+                f"| {r + 1} | {first['identified']['frequency_hz'][r]:.4f} | {_short(fe)} | {_short(de)} | "
+                f"{mac:.6f} |"
+            )
     return "\n".join(out) + ("\n" if out else "")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("root", type=Path, nargs="+", help="one or more multirun folders (outputs/tables/<stamp>/<exp>)")
+    ap.add_argument(
+        "root", type=Path, nargs="+", help="one or more multirun folders (outputs/tables/<stamp>/<exp>)"
+    )
     ap.add_argument("--out", type=Path, default=None, help="output stem (default: <root>/table)")
     ap.add_argument("--title", default=None)
     ap.add_argument("--command", default="")

@@ -46,8 +46,12 @@ CELLS = {
 }
 METHODS = ["pidynnet", "output_error", "ms_measured", "ukf"]
 #: PIDynNet's schedule in this study (the refinement needs a start and states, not PIDynNet's best)
-SHORT = ["model.schedule.pretrain_iters=500", "model.schedule.pretrain_iters_window=500",
-         "model.schedule.max_iters=1000", "model.schedule.max_windows=4"]
+SHORT = [
+    "model.schedule.pretrain_iters=500",
+    "model.schedule.pretrain_iters_window=500",
+    "model.schedule.max_iters=1000",
+    "model.schedule.max_windows=4",
+]
 STIFF = {"k", "k1"}
 
 
@@ -55,16 +59,25 @@ def compose(overrides: list[str], out: Path):
     """The train config with ``overrides``, its run folder ``out`` (the package's one composer)."""
     from pidyn.config import compose as compose_config
 
-    return compose_config("train", overrides=overrides, output_dir=out, root_dir=ROOT,
-                          values={"trainer.enable_progress_bar": False})
+    return compose_config(
+        "train",
+        overrides=overrides,
+        output_dir=out,
+        root_dir=ROOT,
+        values={"trainer.enable_progress_bar": False},
+    )
 
 
 def draw_starts(truth: dict[str, float], n: int, seed: int = 0) -> list[dict[str, float]]:
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(n):
-        out.append({k: float(v * np.exp(rng.uniform(*(np.log([0.5, 2.0]) if k in STIFF else np.log([1 / 3, 3])))))
-                    for k, v in truth.items()})
+        out.append(
+            {
+                k: float(v * np.exp(rng.uniform(*(np.log([0.5, 2.0]) if k in STIFF else np.log([1 / 3, 3])))))
+                for k, v in truth.items()
+            }
+        )
     return out
 
 
@@ -85,14 +98,25 @@ def run_one(cell: dict, method: str, start: dict[str, float], out: Path) -> dict
     from pidyn.refine import RefineSettings, refine
     from pidyn.tasks.train import build_record, train
 
-    base = [f"system={cell['system']}", f"excitation={cell['excitation']}", f"eq_scale={cell['eq_scale']}",
-            "logger=none", "noise=0"]
+    base = [
+        f"system={cell['system']}",
+        f"excitation={cell['excitation']}",
+        f"eq_scale={cell['eq_scale']}",
+        "logger=none",
+        "noise=0",
+    ]
     inits = [f"system.params.{k}.init={v!r}" for k, v in start.items()]
     t0 = time.perf_counter()
     if method == "pidynnet":
-        cfg = compose(base + inits + SHORT + ["baselines=none", "model.refine.starts=[]", "resume=false"], out)
+        cfg = compose(
+            base + inits + SHORT + ["baselines=none", "model.refine.starts=[]", "resume=false"], out
+        )
         m = train(cfg)
-        return {"params": m["params"], "pidynnet_params": m["pidynnet"]["params"], "seconds": time.perf_counter() - t0}
+        return {
+            "params": m["params"],
+            "pidynnet_params": m["pidynnet"]["params"],
+            "seconds": time.perf_counter() - t0,
+        }
     cfg = compose(base + inits, out)
     system = hydra.utils.instantiate(cfg.system)
     record = build_record(cfg, system)
@@ -102,8 +126,9 @@ def run_one(cell: dict, method: str, start: dict[str, float], out: Path) -> dict
     elif method == "ms_measured":
         params = refine(system, record, {"start": start}, RefineSettings(states="measured")).params
     elif method == "ukf":
-        params = unscented_kalman_filter(record, system, noise_level=0.0, init=start,
-                                         tune=list(cfg.baselines.ukf.tune)).params
+        params = unscented_kalman_filter(
+            record, system, noise_level=0.0, init=start, tune=list(cfg.baselines.ukf.tune)
+        ).params
     else:
         raise ValueError(f"unknown method '{method}'; choose from {METHODS}")
     return {"params": params, "seconds": time.perf_counter() - t0}
@@ -116,10 +141,15 @@ def main() -> None:
     ap.add_argument("--methods", nargs="*", default=METHODS)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--shard", default=None, help="k/n: run only starts i with i %% n == k, no summary")
-    ap.add_argument("--machine-note", default="", help="how the starts were run (parallel shards), for the summary")
-    ap.add_argument("--collect", action="store_true",
-                    help="run nothing: write the table from the starts finished so far (an interrupted study, "
-                         "committed, resumes from it)")
+    ap.add_argument(
+        "--machine-note", default="", help="how the starts were run (parallel shards), for the summary"
+    )
+    ap.add_argument(
+        "--collect",
+        action="store_true",
+        help="run nothing: write the table from the starts finished so far (an interrupted study, "
+        "committed, resumes from it)",
+    )
     a = ap.parse_args()
     if a.collect and a.shard:
         ap.error("--collect gathers every shard's results; give no --shard")
@@ -162,9 +192,16 @@ def main() -> None:
                 f.write_text(json.dumps(r, default=float))
             errs = errors_pct(r["params"], truth)
             max_err = max(errs.values()) if r["params"] else float("inf")
-            rows.append({"start": i, "method": method, "max_error_pct": max_err,
-                         "success": bool(np.isfinite(max_err) and max_err <= 1.0), "seconds": r["seconds"],
-                         **{f"start_{k}": start[k] / truth[k] for k in truth}})
+            rows.append(
+                {
+                    "start": i,
+                    "method": method,
+                    "max_error_pct": max_err,
+                    "success": bool(np.isfinite(max_err) and max_err <= 1.0),
+                    "seconds": r["seconds"],
+                    **{f"start_{k}": start[k] / truth[k] for k in truth},
+                }
+            )
             print(f"start {i:3d} {method:13s} max error {max_err:10.4g} %  {r['seconds']:.0f} s", flush=True)
     if a.shard:
         return
@@ -183,34 +220,49 @@ def committed_rows(path: Path, starts: list[dict[str, float]], truth: dict[str, 
     kept = {}
     for r in pd.read_csv(path).to_dict("records"):
         i = int(r["start"])
-        if i < len(starts) and all(np.isclose(r[f"start_{k}"], starts[i][k] / truth[k], rtol=1e-9) for k in truth):
+        if i < len(starts) and all(
+            np.isclose(r[f"start_{k}"], starts[i][k] / truth[k], rtol=1e-9) for k in truth
+        ):
             kept[(i, r["method"])] = r
     return kept
 
 
 def write_summary(df: pd.DataFrame, stem: Path, a, cell: dict, truth: dict) -> None:
-    lines = [f"# Basin of attraction: {a.cell} ({cell['system']} under {cell['excitation']} x{cell['eq_scale']:g}, "
-             "noise-free)\n",
-             f"Command: `python experiments/basin.py --cell {a.cell} --starts {a.starts}`  ",
-             f"Machine: {platform.machine()}, one thread{'; ' + a.machine_note if a.machine_note else ''}  ",
-             f"Starts: {a.starts}, each parameter log-uniform in [1/3, 3] x truth (k, k1 in [1/2, 2] x), seed {a.seed}. "
-             "Success: every parameter within 1 % of the truth.  ",
-             f"PIDynNet's schedule here: {' '.join(SHORT)}; then the multiple-shooting refinement from its "
-             "estimate and networks only.\n",
-             *_progress_line(df, a),
-             "| method | success rate | median seconds | median max error % |", "|---|---|---|---|"]
-    label = {"pidynnet": "PIDynNet + refinement", "output_error": "output error (single shooting)",
-             "ms_measured": "multiple shooting, states from measured x, x'", "ukf": "UKF (tuned)"}
+    lines = [
+        f"# Basin of attraction: {a.cell} ({cell['system']} under {cell['excitation']} x{cell['eq_scale']:g}, "
+        "noise-free)\n",
+        f"Command: `python experiments/basin.py --cell {a.cell} --starts {a.starts}`  ",
+        f"Machine: {platform.machine()}, one thread{'; ' + a.machine_note if a.machine_note else ''}  ",
+        f"Starts: {a.starts}, each parameter log-uniform in [1/3, 3] x truth (k, k1 in [1/2, 2] x), seed {a.seed}. "
+        "Success: every parameter within 1 % of the truth.  ",
+        f"PIDynNet's schedule here: {' '.join(SHORT)}; then the multiple-shooting refinement from its "
+        "estimate and networks only.\n",
+        *_progress_line(df, a),
+        "| method | success rate | median seconds | median max error % |",
+        "|---|---|---|---|",
+    ]
+    label = {
+        "pidynnet": "PIDynNet + refinement",
+        "output_error": "output error (single shooting)",
+        "ms_measured": "multiple shooting, states from measured x, x'",
+        "ukf": "UKF (tuned)",
+    }
     rates = {}
     for m, g in df.groupby("method", sort=False):
         rates[m] = g.success.mean()
-        lines.append(f"| {label.get(m, m)} | {g.success.mean():.2f} ({int(g.success.sum())}/{len(g)}) | "
-                     f"{np.nanmedian(g.seconds):.0f} | {np.nanmedian(g.max_error_pct):.3g} |")
+        lines.append(
+            f"| {label.get(m, m)} | {g.success.mean():.2f} ({int(g.success.sum())}/{len(g)}) | "
+            f"{np.nanmedian(g.seconds):.0f} | {np.nanmedian(g.max_error_pct):.3g} |"
+        )
     if "pidynnet" in rates:
         best_other = max((v for k, v in rates.items() if k != "pidynnet"), default=np.nan)
-        verdict = ("PIDynNet's start beats every other method here" if rates["pidynnet"] > best_other else
-                   "PIDynNet's start ties with the best other method here" if rates["pidynnet"] == best_other else
-                   "PIDynNet's start does **not** beat the best other method here")
+        verdict = (
+            "PIDynNet's start beats every other method here"
+            if rates["pidynnet"] > best_other
+            else "PIDynNet's start ties with the best other method here"
+            if rates["pidynnet"] == best_other
+            else "PIDynNet's start does **not** beat the best other method here"
+        )
         lines.append(f"\n{verdict} ({rates['pidynnet']:.2f} against {best_other:.2f}).")
     fig = stem.parent / "figures" / f"{stem.name}.png"
     plot_starts(df, list(truth), fig)
@@ -225,9 +277,11 @@ def _progress_line(df: pd.DataFrame, a) -> list[str]:
     full = int((done == len(set(df.method))).sum())
     if full >= a.starts and len(done) >= a.starts:
         return []
-    return [f"**Partial: {len(done)} of the {a.starts} starts have results ({full} with every method).** The study "
-            f"resumes from this table: `python experiments/basin.py --cell {a.cell} --starts {a.starts}` (or in "
-            "shards with `--shard k/n`, then `--collect`).\n"]
+    return [
+        f"**Partial: {len(done)} of the {a.starts} starts have results ({full} with every method).** The study "
+        f"resumes from this table: `python experiments/basin.py --cell {a.cell} --starts {a.starts}` (or in "
+        "shards with `--shard k/n`, then `--collect`).\n"
+    ]
 
 
 def plot_starts(df: pd.DataFrame, names: list[str], path: Path) -> None:

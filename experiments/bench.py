@@ -108,7 +108,9 @@ def gpu_ms(n: int = 200) -> dict:
     torch.set_default_dtype(torch.float32)
     for storeys in STOREYS:
         net, w = _building_window(storeys)
-        out[f"storeys/{storeys}"] = _ms_per_step(net, w, net.physics_losses, warmup=10, n=n // 2, device="cuda")
+        out[f"storeys/{storeys}"] = _ms_per_step(
+            net, w, net.physics_losses, warmup=10, n=n // 2, device="cuda"
+        )
     return out
 
 
@@ -154,16 +156,25 @@ def storey_cost(n: int, iters: int = 100) -> dict:
     for _ in range(reps):
         problem.linearize(u)
     ms_lin = 1e3 * (time.perf_counter() - t0) / reps
-    return {"storeys": n, "unknowns": int(problem.n_unknowns), "ms_per_iteration": ms_iter,
-            "ms_per_linearisation": ms_lin, "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+    return {
+        "storeys": n,
+        "unknowns": int(problem.n_unknowns),
+        "ms_per_iteration": ms_iter,
+        "ms_per_linearisation": ms_lin,
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    }
 
 
 def storey_scaling() -> list[dict]:
     out = []
     for n in STOREYS:
-        code = (f"import sys, json; sys.path.insert(0, {str(ROOT / 'experiments')!r}); import torch; "
-                f"torch.set_num_threads(1); import bench; print(json.dumps(bench.storey_cost({n})))")
-        res = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True, cwd=ROOT)
+        code = (
+            f"import sys, json; sys.path.insert(0, {str(ROOT / 'experiments')!r}); import torch; "
+            f"torch.set_num_threads(1); import bench; print(json.dumps(bench.storey_cost({n})))"
+        )
+        res = subprocess.run(
+            [sys.executable, "-c", code], check=True, capture_output=True, text=True, cwd=ROOT
+        )
         out.append(json.loads(res.stdout.strip().splitlines()[-1]))
         print(out[-1], flush=True)
     return out
@@ -197,9 +208,16 @@ def simulation_ms(reps: int = 3) -> list[dict]:
         truth = system.true_values()
         row = {"system": system.name, "truth_ms": best(lambda: simulate(system, truth, gm, gm.t))}
         rec = synthetic_from_motion(system, gm, noise=0.0, data_seed=0, params=truth)
-        oe = ShootingProblem(system, rec.t, rec.f, record_channels(rec, system.n_dof), segment_bounds(rec.t, None), 4,
-                             fixed_state0=np.zeros(system.n_state))
-        th = oe.pack(truth, np.zeros((1, system.n_state)))[:oe.n_theta]
+        oe = ShootingProblem(
+            system,
+            rec.t,
+            rec.f,
+            record_channels(rec, system.n_dof),
+            segment_bounds(rec.t, None),
+            4,
+            fixed_state0=np.zeros(system.n_state),
+        )
+        th = oe.pack(truth, np.zeros((1, system.n_state)))[: oe.n_theta]
         row["output_error_step_ms"] = best(lambda: oe.residuals_and_fd_jacobian(th))
         problem = build_problem(system, rec, RefineSettings(initial_state="free"))
         b = problem.bounds[:-1]
@@ -216,8 +234,14 @@ def lightning_overhead(n_iter: int = 1500, repeats: int = 3) -> dict:
     runs = [_overhead_once(n_iter) for _ in range(repeats)]
     plain = sorted(r["plain_s"] for r in runs)[len(runs) // 2]
     lit = sorted(r["lightning_s"] for r in runs)[len(runs) // 2]
-    return {"iterations": n_iter, "plain_s": plain, "lightning_s": lit, "overhead_pct": 100 * (lit / plain - 1),
-            "repeats": repeats, "pairs_pct": [round(r["overhead_pct"], 1) for r in runs]}
+    return {
+        "iterations": n_iter,
+        "plain_s": plain,
+        "lightning_s": lit,
+        "overhead_pct": 100 * (lit / plain - 1),
+        "repeats": repeats,
+        "pairs_pct": [round(r["overhead_pct"], 1) for r in runs],
+    }
 
 
 def _overhead_once(n_iter: int) -> dict:
@@ -261,18 +285,36 @@ def _overhead_once(n_iter: int) -> dict:
 
     mod = fresh()
     dm.activate(3, n_iter, mod.inner_steps, True)
-    trainer = L.Trainer(accelerator="cpu", max_epochs=1, logger=False, enable_checkpointing=False,
-                        enable_progress_bar=False, enable_model_summary=False, num_sanity_val_steps=0)
+    trainer = L.Trainer(
+        accelerator="cpu",
+        max_epochs=1,
+        logger=False,
+        enable_checkpointing=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        num_sanity_val_steps=0,
+    )
     t0 = time.perf_counter()
     trainer.fit(mod, datamodule=dm)
     lit = time.perf_counter() - t0
-    return {"iterations": n_iter, "plain_s": plain, "lightning_s": lit, "overhead_pct": 100 * (lit / plain - 1)}
+    return {
+        "iterations": n_iter,
+        "plain_s": plain,
+        "lightning_s": lit,
+        "overhead_pct": 100 * (lit / plain - 1),
+    }
 
 
 def end_to_end(args: list[str]) -> dict:
     run_dir = ROOT / "outputs" / "bench" / ("_".join(a.replace("=", "-") for a in args) or "default")
-    cmd = [sys.executable, str(ROOT / "train.py"), *args, f"hydra.run.dir={run_dir}",
-           "trainer.enable_progress_bar=false", "resume=false"]
+    cmd = [
+        sys.executable,
+        str(ROOT / "train.py"),
+        *args,
+        f"hydra.run.dir={run_dir}",
+        "trainer.enable_progress_bar=false",
+        "resume=false",
+    ]
     if run_dir.exists():
         import shutil
 
@@ -281,16 +323,25 @@ def end_to_end(args: list[str]) -> dict:
     subprocess.run(cmd, check=True, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     wall = time.perf_counter() - t0
     m = json.loads((run_dir / "metrics.json").read_text())
-    return {"command": "python train.py " + " ".join(args), "wall_s": wall, "error_pct": m["error_pct"],
-            "max_error_pct": m["max_error_pct"], "iterations": m["iterations"], "windows": m["windows"]}
+    return {
+        "command": "python train.py " + " ".join(args),
+        "wall_s": wall,
+        "error_pct": m["error_pct"],
+        "max_error_pct": m["max_error_pct"],
+        "iterations": m["iterations"],
+        "windows": m["windows"],
+    }
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="skip end-to-end runs")
     ap.add_argument("--render", action="store_true", help="only write bench.md again from bench.json")
-    ap.add_argument("--simulation", action="store_true",
-                    help="only the simulation section, written into the last bench.json (its other rows kept)")
+    ap.add_argument(
+        "--simulation",
+        action="store_true",
+        help="only the simulation section, written into the last bench.json (its other rows kept)",
+    )
     a = ap.parse_args()
     if a.render:
         write_markdown(json.loads((OUT / "bench.json").read_text()))
@@ -305,12 +356,15 @@ def main() -> None:
         (OUT / "bench.json").write_text(json.dumps(res, indent=2))
         write_markdown(res)
         return
-    res: dict = {"command": "python experiments/bench.py" + (" --quick" if a.quick else ""),
-                 "machine": f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} thread, torch {torch.__version__}",
-                 "date": time.strftime("%Y-%m-%d")}
+    res: dict = {
+        "command": "python experiments/bench.py" + (" --quick" if a.quick else ""),
+        "machine": f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} thread, torch {torch.__version__}",
+        "date": time.strftime("%Y-%m-%d"),
+    }
     res["ms_per_iteration"] = {
         f"{mode}/{name}": per_iteration_ms(dt, mode)
-        for mode in ("taylor", "autograd") for name, dt in (("float32", torch.float32), ("float64", torch.float64))
+        for mode in ("taylor", "autograd")
+        for name, dt in (("float32", torch.float32), ("float64", torch.float64))
     }
     res["gpu_ms_per_iteration"] = gpu_ms()
     res["lightning_overhead"] = lightning_overhead()
@@ -329,45 +383,90 @@ def main() -> None:
 
 
 def write_markdown(res: dict) -> None:
-    lines = [f"# Benchmark\n\nCommand: `{res['command']}`  \nMachine: {res['machine']}  \nDate: {res['date']}\n",
-             "## ms per training iteration (500 collocation points, x, x', x'', plus data loss)\n",
-             "| derivatives | ms |", "|---|---|"]
+    lines = [
+        f"# Benchmark\n\nCommand: `{res['command']}`  \nMachine: {res['machine']}  \nDate: {res['date']}\n",
+        "## ms per training iteration (500 collocation points, x, x', x'', plus data loss)\n",
+        "| derivatives | ms |",
+        "|---|---|",
+    ]
     lines += [f"| {k} | {v:.2f} |" for k, v in res["ms_per_iteration"].items()]
     gpu = res.get("gpu_ms_per_iteration") or {"device": None}
     if gpu["device"]:
-        lines += ["", f"## The same steps on the GPU ({gpu['device']}), beside one CPU thread\n",
-                  "| step | GPU ms | CPU ms |", "|---|---|---|"]
-        cpu = {**res["ms_per_iteration"], **{f"storeys/{r['storeys']}": r["ms_per_iteration"] for r in res.get("storeys", [])}}
-        lines += [f"| {k} | {v:.2f} | {cpu.get(k, float('nan')):.2f} |" for k, v in gpu.items() if k != "device"]
+        lines += [
+            "",
+            f"## The same steps on the GPU ({gpu['device']}), beside one CPU thread\n",
+            "| step | GPU ms | CPU ms |",
+            "|---|---|---|",
+        ]
+        cpu = {
+            **res["ms_per_iteration"],
+            **{f"storeys/{r['storeys']}": r["ms_per_iteration"] for r in res.get("storeys", [])},
+        }
+        lines += [
+            f"| {k} | {v:.2f} | {cpu.get(k, float('nan')):.2f} |" for k, v in gpu.items() if k != "device"
+        ]
     else:
-        lines += ["", "GPU: none on this machine (`make bench` adds GPU rows where `torch.cuda.is_available()`)."]
+        lines += [
+            "",
+            "GPU: none on this machine (`make bench` adds GPU rows where `torch.cuda.is_available()`).",
+        ]
     lo = res["lightning_overhead"]
-    lines += ["", "## Lightning against a plain loop (same module, same batches)\n",
-              f"{lo['iterations']} iterations: plain {lo['plain_s']:.2f} s, Lightning {lo['lightning_s']:.2f} s, "
-              f"overhead {lo['overhead_pct']:+.1f} % (medians of {lo.get('repeats', 1)} alternating runs; "
-              f"each pair: {lo.get('pairs_pct', [])} %)"]
-    lines += ["", "## Shear buildings: cost against the number of storeys (accelerometers on every floor, "
-              "El Centro 20 s)\n",
-              "| storeys | refinement unknowns (1 s segments) | PIDynNet ms / iteration | refinement ms / "
-              "linearisation (residuals + exact Jacobian) | peak memory MB |", "|---|---|---|---|---|"]
-    lines += [f"| {r['storeys']} | {r['unknowns']} | {r['ms_per_iteration']:.1f} | {r['ms_per_linearisation']:.0f} | "
-              f"{r['peak_rss_mb']:.0f} |" for r in res["storeys"]]
+    lines += [
+        "",
+        "## Lightning against a plain loop (same module, same batches)\n",
+        f"{lo['iterations']} iterations: plain {lo['plain_s']:.2f} s, Lightning {lo['lightning_s']:.2f} s, "
+        f"overhead {lo['overhead_pct']:+.1f} % (medians of {lo.get('repeats', 1)} alternating runs; "
+        f"each pair: {lo.get('pairs_pct', [])} %)",
+    ]
+    lines += [
+        "",
+        "## Shear buildings: cost against the number of storeys (accelerometers on every floor, "
+        "El Centro 20 s)\n",
+        "| storeys | refinement unknowns (1 s segments) | PIDynNet ms / iteration | refinement ms / "
+        "linearisation (residuals + exact Jacobian) | peak memory MB |",
+        "|---|---|---|---|---|",
+    ]
+    lines += [
+        f"| {r['storeys']} | {r['unknowns']} | {r['ms_per_iteration']:.1f} | {r['ms_per_linearisation']:.0f} | "
+        f"{r['peak_rss_mb']:.0f} |"
+        for r in res["storeys"]
+    ]
     if "simulation" in res:
-        when = f", measured {res['simulation_date']} by `python experiments/bench.py --simulation`" \
-            if res.get("simulation_date") else ""
+        when = (
+            f", measured {res['simulation_date']} by `python experiments/bench.py --simulation`"
+            if res.get("simulation_date")
+            else ""
+        )
         if res.get("simulation_reference_ms"):
-            when += (f" on a machine where the taylor/float32 iteration above took "
-                     f"{res['simulation_reference_ms']:.2f} ms")
-        lines += ["", f"## Simulation (El Centro 25 s at dt 0.01 s, RK4 with 4 substeps; best of 3{when})\n",
-                  "| system | ground truth (LSODA) ms | output-error step (residuals + FD Jacobian) ms | "
-                  "refinement linearisation (residuals + exact Jacobian, 1 s segments) ms |", "|---|---|---|---|"]
-        lines += [f"| {r['system']} | {r['truth_ms']:.0f} | {r['output_error_step_ms']:.0f} | {r['linearisation_ms']:.0f} |"
-                  for r in res["simulation"]]
+            when += (
+                f" on a machine where the taylor/float32 iteration above took "
+                f"{res['simulation_reference_ms']:.2f} ms"
+            )
+        lines += [
+            "",
+            f"## Simulation (El Centro 25 s at dt 0.01 s, RK4 with 4 substeps; best of 3{when})\n",
+            "| system | ground truth (LSODA) ms | output-error step (residuals + FD Jacobian) ms | "
+            "refinement linearisation (residuals + exact Jacobian, 1 s segments) ms |",
+            "|---|---|---|---|",
+        ]
+        lines += [
+            f"| {r['system']} | {r['truth_ms']:.0f} | {r['output_error_step_ms']:.0f} | {r['linearisation_ms']:.0f} |"
+            for r in res["simulation"]
+        ]
     if "end_to_end" in res:
-        lines += ["", "## End to end" + (f" (from the full run of {res['end_to_end_date']})" if res.get("end_to_end_date") else "") + "\n", "| command | wall s | windows | iterations | errors % |", "|---|---|---|---|---|"]
+        lines += [
+            "",
+            "## End to end"
+            + (f" (from the full run of {res['end_to_end_date']})" if res.get("end_to_end_date") else "")
+            + "\n",
+            "| command | wall s | windows | iterations | errors % |",
+            "|---|---|---|---|---|",
+        ]
         for e in res["end_to_end"]:
             errs = ", ".join(f"{k} {v:.2g}" for k, v in e["error_pct"].items())
-            lines.append(f"| `{e['command']}` | {e['wall_s']:.0f} | {e['windows']} | {e['iterations']} | {errs} |")
+            lines.append(
+                f"| `{e['command']}` | {e['wall_s']:.0f} | {e['windows']} | {e['iterations']} | {errs} |"
+            )
     (OUT / "bench.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

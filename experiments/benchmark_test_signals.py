@@ -38,13 +38,17 @@ BOUC_WEN_TRUTH = {"m": 2.0, "c": 10.0, "k": 5e4, "kh": 5e4, "beta": -1100.0, "ga
 #: read is listed, with what could not be checked said beside it.
 PUBLISHED: dict[str, list[dict]] = {
     "bouc_wen": [
-        {"signal": "val_multisine", "method": "black-box PNLSS (polynomial nonlinear state space), degrees 3-5-7, "
-                                              "217 parameters; the best of that table",
-         "db": -98.32, "source": "J.P. Noël et al., arXiv:1610.09138 (PNLSS identification of the Bouc-Wen system)",
-         "read_from": "the paper's table ('RMS validation error (dB)') as reproduced in the docstring of "
-                      "examples/pnlss/boucwen.py of the pyvib repository (pawsen/pyvib, commit cc108c4), whose "
-                      "validation set is the benchmark's val_multisine; the paper itself could not be consulted, so "
-                      "that its validation signal is this one is not confirmed"},
+        {
+            "signal": "val_multisine",
+            "method": "black-box PNLSS (polynomial nonlinear state space), degrees 3-5-7, "
+            "217 parameters; the best of that table",
+            "db": -98.32,
+            "source": "J.P. Noël et al., arXiv:1610.09138 (PNLSS identification of the Bouc-Wen system)",
+            "read_from": "the paper's table ('RMS validation error (dB)') as reproduced in the docstring of "
+            "examples/pnlss/boucwen.py of the pyvib repository (pawsen/pyvib, commit cc108c4), whose "
+            "validation set is the benchmark's val_multisine; the paper itself could not be consulted, so "
+            "that its validation signal is this one is not confirmed",
+        },
     ],
     "silverbox": [],
 }
@@ -82,7 +86,7 @@ def simulate(system, values: dict, u: np.ndarray, fs: float, repeat: int = 1) ->
     t = np.arange(len(f)) / fs
     with np.errstate(all="ignore"):
         Y, _ = rk4(system, dict(values), t, f, np.zeros((1, system.n_state)), substeps=4)
-    return Y[-len(u):, 0, 0]
+    return Y[-len(u) :, 0, 0]
 
 
 def bouc_wen(run: Path) -> tuple[list[dict], list[str]]:
@@ -99,12 +103,21 @@ def bouc_wen(run: Path) -> tuple[list[dict], list[str]]:
         for label, system, values in mods:
             sim = simulate(system, values, rec.f, FS, repeat)
             err = sim - y
-            rows.append({"signal": name, "model": label, "rms_error": float(np.sqrt(np.mean(err**2))),
-                         "nrms_pct": float(100 * np.sqrt(np.mean(err**2)) / np.std(y)), "unit": "m",
-                         "samples": int(len(y))})
-    notes = [f"Diagnosis run: verdict `{d['verdict']}`, causes {d.get('causes')}; extended model "
-             f"`{d.get('extended')}`; held-out NRMSE nominal {d['gain']['nominal']:.4g}, "
-             f"extended {d['gain']['extended']:.4g}."]
+            rows.append(
+                {
+                    "signal": name,
+                    "model": label,
+                    "rms_error": float(np.sqrt(np.mean(err**2))),
+                    "nrms_pct": float(100 * np.sqrt(np.mean(err**2)) / np.std(y)),
+                    "unit": "m",
+                    "samples": int(len(y)),
+                }
+            )
+    notes = [
+        f"Diagnosis run: verdict `{d['verdict']}`, causes {d.get('causes')}; extended model "
+        f"`{d.get('extended')}`; held-out NRMSE nominal {d['gain']['nominal']:.4g}, "
+        f"extended {d['gain']['extended']:.4g}."
+    ]
     return rows, notes
 
 
@@ -119,16 +132,28 @@ def silverbox(run: Path) -> tuple[list[dict], list[str]]:
     u, y = u - u[e].mean(), y - y[e].mean()
     mods, d = models(run)
     rows = []
-    for name, (lo, hi) in (("arrow (full)", (100, 40575)), ("arrow (no extrapolation)", (100, 32100)),
-                           ("multisine test", (105712, 127400))):
+    for name, (lo, hi) in (
+        ("arrow (full)", (100, 40575)),
+        ("arrow (no extrapolation)", (100, 32100)),
+        ("multisine test", (105712, 127400)),
+    ):
         for label, system, values in mods:
             sim = simulate(system, values, u[lo:hi], FS)
             err = (sim - y[lo:hi])[50:]
-            rows.append({"signal": name, "model": label, "rms_error": float(1e3 * np.sqrt(np.mean(err**2))),
-                         "nrms_pct": float(100 * np.sqrt(np.mean(err**2)) / np.std(y[lo:hi][50:])), "unit": "mV",
-                         "samples": int(len(err))})
-    notes = [f"Diagnosis: verdict `{d['verdict']}`, causes {d.get('causes') or [d.get('cause')]}; extended "
-             f"model `{d.get('extended')}`."]
+            rows.append(
+                {
+                    "signal": name,
+                    "model": label,
+                    "rms_error": float(1e3 * np.sqrt(np.mean(err**2))),
+                    "nrms_pct": float(100 * np.sqrt(np.mean(err**2)) / np.std(y[lo:hi][50:])),
+                    "unit": "mV",
+                    "samples": int(len(err)),
+                }
+            )
+    notes = [
+        f"Diagnosis: verdict `{d['verdict']}`, causes {d.get('causes') or [d.get('cause')]}; extended "
+        f"model `{d.get('extended')}`."
+    ]
     return rows, notes
 
 
@@ -136,9 +161,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("benchmark", choices=["bouc_wen", "silverbox"])
     ap.add_argument("run", type=Path, help="a diagnosis run folder (diagnosis.json)")
-    ap.add_argument("--out", type=Path, default=None, help="folder for test_signals.md/json (default: the run)")
-    ap.add_argument("--render", action="store_true",
-                    help="simulate nothing: write test_signals.md again from the run's test_signals.json")
+    ap.add_argument(
+        "--out", type=Path, default=None, help="folder for test_signals.md/json (default: the run)"
+    )
+    ap.add_argument(
+        "--render",
+        action="store_true",
+        help="simulate nothing: write test_signals.md again from the run's test_signals.json",
+    )
     a = ap.parse_args()
     out = a.out or a.run
     if a.render:
@@ -161,11 +191,20 @@ def main() -> None:
 def render(benchmark: str, rows: list[dict], notes: list[str]) -> list[str]:
     """The table of the models' errors, and beside it what has been published for the same signals."""
     unit = rows[0]["unit"]
-    lines = [f"# {benchmark}: simulation error on the benchmark's test signals", "",
-             f"Command: `python experiments/benchmark_test_signals.py {benchmark} RUN`", "", *notes, "",
-             f"| test signal | model | RMS error ({unit}) | NRMS % | samples |", "|---|---|---|---|---|"]
+    lines = [
+        f"# {benchmark}: simulation error on the benchmark's test signals",
+        "",
+        f"Command: `python experiments/benchmark_test_signals.py {benchmark} RUN`",
+        "",
+        *notes,
+        "",
+        f"| test signal | model | RMS error ({unit}) | NRMS % | samples |",
+        "|---|---|---|---|---|",
+    ]
     for r in rows:
-        lines.append(f"| {r['signal']} | {r['model']} | {r['rms_error']:.4g} | {r['nrms_pct']:.3g} | {r['samples']} |")
+        lines.append(
+            f"| {r['signal']} | {r['model']} | {r['rms_error']:.4g} | {r['nrms_pct']:.3g} | {r['samples']} |"
+        )
     lines += ["", "## Published results for these signals", ""]
     pub = PUBLISHED.get(benchmark, [])
     if not pub:
@@ -182,12 +221,18 @@ def render(benchmark: str, rows: list[dict], notes: list[str]) -> list[str]:
             value = 10 ** (p["db"] / 20) if "db" in p else p["rms_error"]
             err = ours[p["signal"]]
             where = f"{value / err:.2g}x below" if err < value else f"{err / value:.2g}x above"
-            tail = ("the extended model has the benchmark's own structure, found by the diagnosis, so the "
-                    "comparison says what knowing the structure is worth, not that one fitting method beats "
-                    "another." if err < value else
-                    "the extended model, with the benchmark's own structure, does not reach it on this run.")
-            lines += ["", f"On {p['signal']} the extended model's error is {err:.3g} {unit}, {where} the "
-                      f"published figure. That figure is a black-box model's; {tail}"]
+            tail = (
+                "the extended model has the benchmark's own structure, found by the diagnosis, so the "
+                "comparison says what knowing the structure is worth, not that one fitting method beats "
+                "another."
+                if err < value
+                else "the extended model, with the benchmark's own structure, does not reach it on this run."
+            )
+            lines += [
+                "",
+                f"On {p['signal']} the extended model's error is {err:.3g} {unit}, {where} the "
+                f"published figure. That figure is a black-box model's; {tail}",
+            ]
     return lines
 
 

@@ -40,8 +40,11 @@ from pidyn.errors import error_pct  # noqa: E402
 
 NAMES = ["none", *sorted(EFFECTS)]
 #: the benchmark's PIDynNet schedule, stated in every row's table; diagnose's default since db7a6c1
-FAST = ["model.schedule.pretrain_iters=300", "model.schedule.pretrain_iters_window=300",
-        "model.schedule.max_iters=500"]
+FAST = [
+    "model.schedule.pretrain_iters=300",
+    "model.schedule.pretrain_iters_window=300",
+    "model.schedule.max_iters=500",
+]
 
 
 @dataclass
@@ -65,22 +68,35 @@ class Kind:
     def score(self, d: dict) -> bool:
         causes = set(d.get("causes") or ([d["cause"]] if d.get("cause") else []))
         if self.outside:
-            return d["verdict"] in ("unexplained", "discrepancy") and causes <= EQUIVALENT[self.effect] \
+            return (
+                d["verdict"] in ("unexplained", "discrepancy")
+                and causes <= EQUIVALENT[self.effect]
                 and d["verdict"] != "none"
+            )
         if not self.expect:
             return d["verdict"] == "none"
         return causes == self.expect
 
 
-KINDS = ([Kind("none", "none")] + [Kind(n, n, {n}) for n in sorted(EFFECTS)]
-         + [Kind("softening_cubic", "cubic_stiffness", {"cubic_stiffness"}, ["data.source.sign=-1"]),
-            Kind("negative_k2", "quadratic_stiffness", {"quadratic_stiffness"}, ["data.source.sign=-1"]),
-            Kind("stiffness_loss_after_split", "stiffness_loss", {"stiffness_loss"}, change_after_split=True),
-            Kind("damping_change_after_split", "damping_change", {"damping_change"}, change_after_split=True)]
-         + [Kind(f"pair:{a}+{b}", f"{a}+{b}", {a, b}) for a, b in (("quadratic_stiffness", "quadratic_damping"),
-                                                                  ("gap_contact", "coulomb_friction"),
-                                                                  ("cubic_stiffness", "coulomb_friction"))]
-         + [Kind(f"outside:{n}", n, set(), outside=True) for n in EQUIVALENT])
+KINDS = (
+    [Kind("none", "none")]
+    + [Kind(n, n, {n}) for n in sorted(EFFECTS)]
+    + [
+        Kind("softening_cubic", "cubic_stiffness", {"cubic_stiffness"}, ["data.source.sign=-1"]),
+        Kind("negative_k2", "quadratic_stiffness", {"quadratic_stiffness"}, ["data.source.sign=-1"]),
+        Kind("stiffness_loss_after_split", "stiffness_loss", {"stiffness_loss"}, change_after_split=True),
+        Kind("damping_change_after_split", "damping_change", {"damping_change"}, change_after_split=True),
+    ]
+    + [
+        Kind(f"pair:{a}+{b}", f"{a}+{b}", {a, b})
+        for a, b in (
+            ("quadratic_stiffness", "quadratic_damping"),
+            ("gap_contact", "coulomb_friction"),
+            ("cubic_stiffness", "coulomb_friction"),
+        )
+    ]
+    + [Kind(f"outside:{n}", n, set(), outside=True) for n in EQUIVALENT]
+)
 BY_LABEL = {k.label: k for k in KINDS}
 
 
@@ -89,19 +105,37 @@ def run_case(i: int, out: Path, extra: list[str], kinds: list[Kind]) -> dict:
     folder = out / f"case_{i:03d}_{kind.label.replace(':', '_').replace('+', '_')}"
     result = folder / "diagnosis.json"
     if not result.exists():
-        cmd = [sys.executable, str(ROOT / "diagnose.py"), *kind.args(i), f"data_seed={1000 + i}",
-               "noise=null", "logger=none", "trainer.enable_progress_bar=false", "num_threads=1",
-               f"hydra.run.dir={folder}", *extra]
+        cmd = [
+            sys.executable,
+            str(ROOT / "diagnose.py"),
+            *kind.args(i),
+            f"data_seed={1000 + i}",
+            "noise=null",
+            "logger=none",
+            "trainer.enable_progress_bar=false",
+            "num_threads=1",
+            f"hydra.run.dir={folder}",
+            *extra,
+        ]
         proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
         if proc.returncode != 0 or not result.exists():
             return {"case": i, "hidden": kind.label, "error": (proc.stderr or proc.stdout)[-800:]}
     d = json.loads(result.read_text())
     hidden = d["hidden"] or {}
     causes = d.get("causes") or ([d["cause"]] if d.get("cause") else [])
-    row = {"case": i, "hidden": kind.label, "found": "+".join(causes) or d["verdict"], "verdict": d["verdict"],
-           "hit": kind.score(d), "record": d["record"], "noise": d.get("noise"), "seconds": d["wall_seconds"],
-           "nrmse_nominal": d["gain"]["nominal"], "nrmse_extended": d["gain"]["extended"],
-           "top_score": d["ranking"][0]["score"]}
+    row = {
+        "case": i,
+        "hidden": kind.label,
+        "found": "+".join(causes) or d["verdict"],
+        "verdict": d["verdict"],
+        "hit": kind.score(d),
+        "record": d["record"],
+        "noise": d.get("noise"),
+        "seconds": d["wall_seconds"],
+        "nrmse_nominal": d["gain"]["nominal"],
+        "nrmse_extended": d["gain"]["extended"],
+        "top_score": d["ranking"][0]["score"],
+    }
     if len(kind.expect) == 1 and kind.score(d):
         (effect,) = kind.expect
         key = EFFECTS[effect].key
@@ -139,11 +173,16 @@ def summarise(df: pd.DataFrame) -> dict:
 def code_commit() -> str:
     """The checkout's commit (with ``+dirty`` for uncommitted changes), stamped on every row."""
     try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT,
-                              check=True).stdout.strip()
+        head = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT, check=True
+        ).stdout.strip()
         # the code only: the study rewrites its own table under experiments/results as it goes
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", "src", "*.py", "conf"],
-                               capture_output=True, text=True, cwd=ROOT).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no", "--", "src", "*.py", "conf"],
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+        ).stdout.strip()
         return head + ("+dirty" if dirty else "")
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
@@ -166,54 +205,96 @@ def committed_rows(path: Path, kinds: list[Kind]) -> dict[int, dict]:
     return out
 
 
-def write_results(rows: list[dict], planned: int, schedule: str, results: Path, stem: str = "discrepancy_bench",
-                  command: str | None = None, split: tuple[float, float] = (16.0, 25.0)) -> list[str]:
+def write_results(
+    rows: list[dict],
+    planned: int,
+    schedule: str,
+    results: Path,
+    stem: str = "discrepancy_bench",
+    command: str | None = None,
+    split: tuple[float, float] = (16.0, 25.0),
+) -> list[str]:
     """The table over the cases finished so far (rewritten after every case, so an interrupted
     study loses nothing and says how far it got)."""
     df = pd.DataFrame(rows).sort_values("case")
     summary = summarise(df)
     summary["cases_planned"] = planned
     summary["schedule"] = schedule
-    summary["total_case_seconds"] = float(df["seconds"].sum()) if "seconds" in df else None  # 2 cases at a time
-    summary["code_commits"] = " ".join(sorted(set(df["commit"].dropna().astype(str)))) if "commit" in df else ""
+    summary["total_case_seconds"] = (
+        float(df["seconds"].sum()) if "seconds" in df else None
+    )  # 2 cases at a time
+    summary["code_commits"] = (
+        " ".join(sorted(set(df["commit"].dropna().astype(str)))) if "commit" in df else ""
+    )
     rows_per = []
     for name, g in df.groupby("hidden", sort=False):
         errs = g["param_error_pct"] if "param_error_pct" in g else pd.Series(dtype=float)
-        rows_per.append({"hidden": name, "cases": len(g), "top1": float(g.hit.fillna(False).astype(bool).mean()),
-                         "median_param_error_pct": float(errs.median()) if errs.notna().any() else np.nan,
-                         "median_nrmse_ratio": float((g.nrmse_extended / g.nrmse_nominal).median())
-                         if name != "none" else np.nan,
-                         "max_seconds": float(g.seconds.max()) if "seconds" in g else np.nan})
+        rows_per.append(
+            {
+                "hidden": name,
+                "cases": len(g),
+                "top1": float(g.hit.fillna(False).astype(bool).mean()),
+                "median_param_error_pct": float(errs.median()) if errs.notna().any() else np.nan,
+                "median_nrmse_ratio": float((g.nrmse_extended / g.nrmse_nominal).median())
+                if name != "none"
+                else np.nan,
+                "max_seconds": float(g.seconds.max()) if "seconds" in g else np.nan,
+            }
+        )
     per = pd.DataFrame(rows_per)
     order = {k.label: n for n, k in enumerate(KINDS)}
-    per = per.sort_values("hidden", key=lambda c: c.map(lambda v: order.get(v, len(order)))).set_index("hidden")
+    per = per.sort_values("hidden", key=lambda c: c.map(lambda v: order.get(v, len(order)))).set_index(
+        "hidden"
+    )
     results.mkdir(parents=True, exist_ok=True)
     df.to_csv(results / f"{stem}.csv", index=False)
-    (results / f"{stem}.json").write_text(json.dumps(
-        {"summary": summary, "per_effect": per.reset_index().to_dict("records")}, indent=2, default=float))
-    done = "" if len(df) >= planned else f" ({len(df)} of the {planned} planned cases finished; the rest resume)"
-    lines = ["# Diagnosis benchmark: hidden effects", "",
-             f"{summary['cases']} seeded cases{done} (linear SDOF m=1, c=0.5, k=15; nothing, one library effect "
-             "(either sign where the sign is a finding), a change after the split, a pair, or an effect outside the "
-             "library hidden; a change before the split drawn where the structure moves, after 20-70 % (stiffness) or "
-             "20-60 % (damping) of the stepping signal's energy in the fitting part; "
-             "shipped records scaled to PGA 3 m/s^2; noise uniform 0-5 %; "
-             f"fit 0-{split[0]:g} s, held out {split[0]:g}-{split[1]:g} s). PIDynNet schedule: {summary['schedule']}.", "",
-             f"Command: `{command or f'python experiments/discrepancy_bench.py --cases {planned} --jobs 2'}`"
-             f"{'' if command else ' (`make discrepancy-bench`)'}; "
-             f"code {summary['code_commits'] or 'unknown'}.", "",
-             "| metric | value |", "|---|---|"]
+    (results / f"{stem}.json").write_text(
+        json.dumps(
+            {"summary": summary, "per_effect": per.reset_index().to_dict("records")}, indent=2, default=float
+        )
+    )
+    done = (
+        "" if len(df) >= planned else f" ({len(df)} of the {planned} planned cases finished; the rest resume)"
+    )
+    lines = [
+        "# Diagnosis benchmark: hidden effects",
+        "",
+        f"{summary['cases']} seeded cases{done} (linear SDOF m=1, c=0.5, k=15; nothing, one library effect "
+        "(either sign where the sign is a finding), a change after the split, a pair, or an effect outside the "
+        "library hidden; a change before the split drawn where the structure moves, after 20-70 % (stiffness) or "
+        "20-60 % (damping) of the stepping signal's energy in the fitting part; "
+        "shipped records scaled to PGA 3 m/s^2; noise uniform 0-5 %; "
+        f"fit 0-{split[0]:g} s, held out {split[0]:g}-{split[1]:g} s). PIDynNet schedule: {summary['schedule']}.",
+        "",
+        f"Command: `{command or f'python experiments/discrepancy_bench.py --cases {planned} --jobs 2'}`"
+        f"{'' if command else ' (`make discrepancy-bench`)'}; "
+        f"code {summary['code_commits'] or 'unknown'}.",
+        "",
+        "| metric | value |",
+        "|---|---|",
+    ]
     lines += [f"| {k} | {v:.4g} |" if isinstance(v, float) else f"| {k} | {v} |" for k, v in summary.items()]
-    lines += ["", "Hit: the hidden effect(s) named and nothing else; `none` on clean data; for effects outside the "
-              "library `unexplained` or a physically equivalent name (" + ", ".join(f"{k}: {sorted(v)}" for k, v in EQUIVALENT.items()) + ").", "",
-              "| hidden | cases | hit rate | median parameter error % | median NRMSE ratio ext/nom | max seconds |",
-              "|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        "Hit: the hidden effect(s) named and nothing else; `none` on clean data; for effects outside the "
+        "library `unexplained` or a physically equivalent name ("
+        + ", ".join(f"{k}: {sorted(v)}" for k, v in EQUIVALENT.items())
+        + ").",
+        "",
+        "| hidden | cases | hit rate | median parameter error % | median NRMSE ratio ext/nom | max seconds |",
+        "|---|---|---|---|---|---|",
+    ]
     for name, r in per.iterrows():
-        lines.append(f"| {name} | {int(r.cases)} | {r.top1:.2f} | {r.median_param_error_pct:.3g} | "
-                     f"{r.median_nrmse_ratio:.3g} | {r.max_seconds:.0f} |")
+        lines.append(
+            f"| {name} | {int(r.cases)} | {r.top1:.2f} | {r.median_param_error_pct:.3g} | "
+            f"{r.median_nrmse_ratio:.3g} | {r.max_seconds:.0f} |"
+        )
     misses = df[~df.hit.fillna(False).astype(bool)] if "hit" in df else df
     if len(misses):
-        lines += ["", "Misses: " + "; ".join(f"case {r.case} {r.hidden} -> {r.found}" for r in misses.itertuples())]
+        lines += [
+            "",
+            "Misses: " + "; ".join(f"case {r.case} {r.hidden} -> {r.found}" for r in misses.itertuples()),
+        ]
     (results / f"{stem}.md").write_text("\n".join(lines) + "\n")
     return lines
 
@@ -221,17 +302,28 @@ def write_results(rows: list[dict], planned: int, schedule: str, results: Path, 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", type=int, default=180)  # 10 of each of the 18 kinds
-    ap.add_argument("--first", type=int, default=0,
-                    help="first case (with --name: a study of cases FIRST..CASES-1, seeds the benchmark does not use)")
+    ap.add_argument(
+        "--first",
+        type=int,
+        default=0,
+        help="first case (with --name: a study of cases FIRST..CASES-1, seeds the benchmark does not use)",
+    )
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=ROOT / "outputs" / "discrepancy_bench")
-    ap.add_argument("--full", action="store_true", help="no schedule overrides: diagnose's default (the same as FAST since db7a6c1)")
+    ap.add_argument(
+        "--full",
+        action="store_true",
+        help="no schedule overrides: diagnose's default (the same as FAST since db7a6c1)",
+    )
     ap.add_argument("--results", type=Path, default=ROOT / "experiments" / "results")
     ap.add_argument("--kinds", nargs="*", default=None, help=f"a subset of the kinds: {', '.join(BY_LABEL)}")
     ap.add_argument("--rerun", action="store_true", help="ignore the committed table's finished cases")
-    ap.add_argument("--name", default=None,
-                    help="write the table as experiments/results/NAME.{md,csv,json} (a study of its own, e.g. the "
-                         "default schedule on 40 s records; with --kinds too)")
+    ap.add_argument(
+        "--name",
+        default=None,
+        help="write the table as experiments/results/NAME.{md,csv,json} (a study of its own, e.g. the "
+        "default schedule on 40 s records; with --kinds too)",
+    )
     args, extra = ap.parse_known_args()
     if args.kinds:  # key=value after --kinds are config overrides, not kinds
         extra += [k for k in args.kinds if "=" in k]
@@ -240,7 +332,9 @@ def main() -> None:
     if unknown:
         ap.error(f"unknown kind(s) {sorted(unknown)}; choose from {', '.join(BY_LABEL)}")
     if args.first and not args.name:
-        ap.error("--first needs --name: cases from FIRST on are a study of their own, not the benchmark's table")
+        ap.error(
+            "--first needs --name: cases from FIRST on are a study of their own, not the benchmark's table"
+        )
     if not 0 <= args.first < args.cases:
         ap.error(f"--first {args.first} must lie in 0..{args.cases - 1} (--cases {args.cases})")
     kinds = [BY_LABEL[k] for k in args.kinds] if args.kinds else KINDS
@@ -252,9 +346,14 @@ def main() -> None:
     name = args.name or "discrepancy_bench"
     # a subset run writes the benchmark's own table nowhere; a named study writes its own
     where = args.results if (args.name or not args.kinds) else args.out / "subset"
-    command = None if name == "discrepancy_bench" and not args.kinds else "python " + " ".join(
-        ["experiments/discrepancy_bench.py", *sys.argv[1:]])
-    kept = {} if args.rerun or (args.kinds and not args.name) else committed_rows(where / f"{name}.csv", kinds)
+    command = (
+        None
+        if name == "discrepancy_bench" and not args.kinds
+        else "python " + " ".join(["experiments/discrepancy_bench.py", *sys.argv[1:]])
+    )
+    kept = (
+        {} if args.rerun or (args.kinds and not args.name) else committed_rows(where / f"{name}.csv", kinds)
+    )
     kept = {i: r for i, r in kept.items() if args.first <= i < args.cases}
     rows = list(kept.values())
     todo = [i for i in range(args.first, args.cases) if i not in kept]
@@ -274,6 +373,7 @@ def main() -> None:
         lines = write_results(rows, args.cases - args.first, schedule, where, name, command, split)
     print(f"table: {where / (name + '.md')}")
     print("\n".join(lines))
+
 
 if __name__ == "__main__":
     main()

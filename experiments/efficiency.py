@@ -55,14 +55,28 @@ def draw(cell: dict, noise: float, seed: int, duration: float, dt: float) -> dic
     from pidyn.refine import RefineSettings, refine
 
     system = _system(cell["system"])
-    record = synthetic(system, cell["record"], eq_scale=cell["eq_scale"], stretch=cell.get("stretch", 1.0),
-                       duration=duration, dt=dt, noise=noise, data_seed=seed)
+    record = synthetic(
+        system,
+        cell["record"],
+        eq_scale=cell["eq_scale"],
+        stretch=cell.get("stretch", 1.0),
+        duration=duration,
+        dt=dt,
+        noise=noise,
+        data_seed=seed,
+    )
     guess = {s.name: float(s.init) for s in system.param_specs() if s.trainable}
     t0 = time.perf_counter()
     res = refine(system, record, {"guess": guess}, RefineSettings(states="measured"))
-    out = {"seed": seed, "params": res.params, "truth": {k: record.truth[k] for k in res.params},
-           "ci95": {k: res.intervals[k]["ci95"] for k in res.params}, "mode": res.initial_state_mode,
-           "converged": res.converged, "seconds": time.perf_counter() - t0}
+    out = {
+        "seed": seed,
+        "params": res.params,
+        "truth": {k: record.truth[k] for k in res.params},
+        "ci95": {k: res.intervals[k]["ci95"] for k in res.params},
+        "mode": res.initial_state_mode,
+        "converged": res.converged,
+        "seconds": time.perf_counter() - t0,
+    }
     if seed == 0:
         crb = cramer_rao(system, system.true_values(), record.t, record.f, noise)
         out["crb"] = {"rest": crb["std_pct"], "unknown_start": crb["std_pct_unknown_start"]}
@@ -81,10 +95,21 @@ def summarise(rows: list[dict], crb: dict) -> pd.DataFrame:
         bound = crb["rest"][name]
         lo, hi = rms / np.sqrt(chi2.ppf(0.975, n) / n), rms / np.sqrt(chi2.ppf(0.025, n) / n)
         covered = np.mean([r["ci95"][name][0] <= truth <= r["ci95"][name][1] for r in rows])
-        table.append({"param": name, "truth": truth, "draws": n, "rms_err_pct": rms, "bias_pct": float(rel.mean()),
-                      "crb_std_pct": bound, "crb_unknown_start_pct": crb["unknown_start"][name],
-                      "rms_over_crb": rms / bound, "ratio_ci95_lo": lo / bound, "ratio_ci95_hi": hi / bound,
-                      "coverage": float(covered)})
+        table.append(
+            {
+                "param": name,
+                "truth": truth,
+                "draws": n,
+                "rms_err_pct": rms,
+                "bias_pct": float(rel.mean()),
+                "crb_std_pct": bound,
+                "crb_unknown_start_pct": crb["unknown_start"][name],
+                "rms_over_crb": rms / bound,
+                "ratio_ci95_lo": lo / bound,
+                "ratio_ci95_hi": hi / bound,
+                "coverage": float(covered),
+            }
+        )
     return pd.DataFrame(table)
 
 
@@ -120,20 +145,27 @@ def main() -> None:
     at_rest = sum(r["mode"] == "rest" for r in rows)
     secs = np.median([r["seconds"] for r in rows])
     stretched = f" stretched {cell['stretch']:g}" if cell.get("stretch", 1.0) != 1.0 else ""
-    lines = [f"# Efficiency of the final estimator: {a.cell}, noise {100 * a.noise:g} %, {a.draws} noise draws "
-             f"({platform.machine()}, one thread)", "",
-             f"Command: `python experiments/efficiency.py --cell {a.cell} --noise {a.noise:g} --draws {a.draws}`", "",
-             f"Record: {cell['record']} x{cell['eq_scale']:g}{stretched}, first {a.duration:g} s at dt {a.dt:g} s, x and x' "
-             f"measured. Refinement from the config's initial guesses, segment states from the measurements; "
-             f"initial state held at rest in {at_rest} of {a.draws} draws (likelihood-ratio test); "
-             f"median {secs:.0f} s a draw.", "",
-             "| param | truth | RMS err % | bias % | CRB std % (at rest) | CRB std % (unknown start) | RMS / CRB "
-             "| 95 % CI of RMS / CRB | 95 % interval coverage |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"# Efficiency of the final estimator: {a.cell}, noise {100 * a.noise:g} %, {a.draws} noise draws "
+        f"({platform.machine()}, one thread)",
+        "",
+        f"Command: `python experiments/efficiency.py --cell {a.cell} --noise {a.noise:g} --draws {a.draws}`",
+        "",
+        f"Record: {cell['record']} x{cell['eq_scale']:g}{stretched}, first {a.duration:g} s at dt {a.dt:g} s, x and x' "
+        f"measured. Refinement from the config's initial guesses, segment states from the measurements; "
+        f"initial state held at rest in {at_rest} of {a.draws} draws (likelihood-ratio test); "
+        f"median {secs:.0f} s a draw.",
+        "",
+        "| param | truth | RMS err % | bias % | CRB std % (at rest) | CRB std % (unknown start) | RMS / CRB "
+        "| 95 % CI of RMS / CRB | 95 % interval coverage |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for _, r in df.iterrows():
-        lines.append(f"| {r.param} | {r.truth:.5g} | {r.rms_err_pct:.3g} | {r.bias_pct:+.2g} | {r.crb_std_pct:.3g} | "
-                     f"{r.crb_unknown_start_pct:.3g} | {r.rms_over_crb:.2f} | [{r.ratio_ci95_lo:.2f}, "
-                     f"{r.ratio_ci95_hi:.2f}] | {r.coverage:.2f} |")
+        lines.append(
+            f"| {r.param} | {r.truth:.5g} | {r.rms_err_pct:.3g} | {r.bias_pct:+.2g} | {r.crb_std_pct:.3g} | "
+            f"{r.crb_unknown_start_pct:.3g} | {r.rms_over_crb:.2f} | [{r.ratio_ci95_lo:.2f}, "
+            f"{r.ratio_ci95_hi:.2f}] | {r.coverage:.2f} |"
+        )
     (a.out / f"efficiency_{tag}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

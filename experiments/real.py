@@ -31,9 +31,19 @@ RESULTS = ROOT / "experiments" / "results" / "real"
 RECORDS = ROOT / "data" / "painter_street"
 #: events looked at while the methods were set up (the data's start, the model with several
 #: supports, the peers' settings, the accelerometer diagnosis): reported apart from the others
-TUNING = {"RioDell_14Sep2012_71842255", "bayview_11oct2013_72086051", "petrolia_25apr1992", "riodell82",
-          "petroliaaftershock1_26apr1992", "nc73821046", "nc73201181", "nc73943846", "nc73666231",
-          "capemendocinoaftershock_21nov1986", "eureka_24aug1983"}
+TUNING = {
+    "RioDell_14Sep2012_71842255",
+    "bayview_11oct2013_72086051",
+    "petrolia_25apr1992",
+    "riodell82",
+    "petroliaaftershock1_26apr1992",
+    "nc73821046",
+    "nc73201181",
+    "nc73943846",
+    "nc73666231",
+    "capemendocinoaftershock_21nov1986",
+    "eureka_24aug1983",
+}
 WEAK_G = 0.1  # weak events: peak ground acceleration below this (g)
 
 
@@ -51,18 +61,37 @@ def catalogue() -> dict[str, dict]:
 
 def run_sweeps(base: Path, chosen: list[str], jobs: int, launcher: str, diagnose: bool) -> None:
     sweep = ",".join(chosen)
-    todo = [("identify", "train.py", "painter_street", [f"data.event={sweep}"]),
-            # the reduced choice, measured: the bent's base alone as the ground of the whole deck
-            ("one_input", "train.py", "painter_street", [f"data.event={sweep}", "data.direction=transverse",
-                                                         "data.inputs=[3]", "data.outputs=[7]"])]
+    todo = [
+        ("identify", "train.py", "painter_street", [f"data.event={sweep}"]),
+        # the reduced choice, measured: the bent's base alone as the ground of the whole deck
+        (
+            "one_input",
+            "train.py",
+            "painter_street",
+            [f"data.event={sweep}", "data.direction=transverse", "data.inputs=[3]", "data.outputs=[7]"],
+        ),
+    ]
     if diagnose:
         strong = [e for e in chosen if e in DIAGNOSED]
         if strong:
-            todo.append(("diagnose", "diagnose.py", "painter_street_diagnose",
-                         ["data=csmip", f"data.event={','.join(strong)}"]))
+            todo.append(
+                (
+                    "diagnose",
+                    "diagnose.py",
+                    "painter_street_diagnose",
+                    ["data=csmip", f"data.event={','.join(strong)}"],
+                )
+            )
     for name, script, experiment, extra in todo:
-        cmd = [sys.executable, script, f"experiment={experiment}", f"hydra.sweep.dir={base / name}",
-               f"hydra.launcher.n_jobs={jobs}", "skip_done=true", *extra]
+        cmd = [
+            sys.executable,
+            script,
+            f"experiment={experiment}",
+            f"hydra.sweep.dir={base / name}",
+            f"hydra.launcher.n_jobs={jobs}",
+            "skip_done=true",
+            *extra,
+        ]
         if launcher != "joblib":
             cmd.append(f"hydra/launcher={launcher}")
         print("+", " ".join(cmd[1:]), flush=True)
@@ -73,8 +102,14 @@ def run_sweeps(base: Path, chosen: list[str], jobs: int, launcher: str, diagnose
 
 #: the events the diagnosis sweep takes (conf/experiment/painter_street_diagnose.yaml): the strong ones
 #: and two weak ones where nothing should be missing
-DIAGNOSED = ("petrolia_25apr1992", "petroliaaftershock1_26apr1992", "petroliaaftershock2_26apr1992", "riodell82",
-             "RioDell_14Sep2012_71842255", "nc73667866")
+DIAGNOSED = (
+    "petrolia_25apr1992",
+    "petroliaaftershock1_26apr1992",
+    "petroliaaftershock2_26apr1992",
+    "riodell82",
+    "RioDell_14Sep2012_71842255",
+    "nc73667866",
+)
 
 
 def _runs(folder: Path) -> list[tuple[dict, Path]]:
@@ -97,9 +132,14 @@ def identification_rows(folder: Path) -> list[dict]:
     rows = []
     for cfg, run in _runs(folder):
         event, direction = cfg["data"]["event"], cfg["data"]["direction"]
-        row = {"event": event, "direction": direction, "role": "tuning" if event in TUNING else "untouched",
-               "date": cat.get(event, {}).get("time_utc", "")[:10], "magnitude": cat.get(event, {}).get("magnitude"),
-               "pga_catalogue_g": float(cat.get(event, {}).get("pga_str_g") or "nan")}
+        row = {
+            "event": event,
+            "direction": direction,
+            "role": "tuning" if event in TUNING else "untouched",
+            "date": cat.get(event, {}).get("time_utc", "")[:10],
+            "magnitude": cat.get(event, {}).get("magnitude"),
+            "pga_catalogue_g": float(cat.get(event, {}).get("pga_str_g") or "nan"),
+        }
         failed, metrics = _load(run / "failed.json"), _load(run / "metrics.json")
         if failed or not metrics:
             row["status"] = "failed: " + (failed["message"] if failed else "no results (interrupted?)")
@@ -107,13 +147,23 @@ def identification_rows(folder: Path) -> list[dict]:
             continue
         meta, mode = metrics.get("record_meta") or {}, (metrics.get("modal") or [{}])[0]
         held = metrics.get("heldout") or {}
-        row.update({"status": "ok", "pga_g": meta.get("pga", float("nan")) / 9.80665,
-                    "inputs": meta.get("input_channels"), "outputs": meta.get("output_channels"),
-                    "notes": "; ".join(meta.get("notes") or []),
-                    "period_s": mode.get("period_s"), "period_ci95": mode.get("period_ci95"),
-                    "damping": mode.get("damping_ratio"), "damping_ci95": mode.get("damping_ci95"),
-                    "heldout_nrmse_a": held.get("mean_nrmse_a"), "fit_nrmse_a": held.get("fit_mean_nrmse_a"),
-                    "wall_s": metrics.get("wall_seconds"), "equation": None})
+        row.update(
+            {
+                "status": "ok",
+                "pga_g": meta.get("pga", float("nan")) / 9.80665,
+                "inputs": meta.get("input_channels"),
+                "outputs": meta.get("output_channels"),
+                "notes": "; ".join(meta.get("notes") or []),
+                "period_s": mode.get("period_s"),
+                "period_ci95": mode.get("period_ci95"),
+                "damping": mode.get("damping_ratio"),
+                "damping_ci95": mode.get("damping_ci95"),
+                "heldout_nrmse_a": held.get("mean_nrmse_a"),
+                "fit_nrmse_a": held.get("fit_mean_nrmse_a"),
+                "wall_s": metrics.get("wall_seconds"),
+                "equation": None,
+            }
+        )
         base = _load(run / "baselines.json") or {"baselines": []}
         for b in base["baselines"]:
             modes = b.get("modes") or []
@@ -160,10 +210,13 @@ def _f(v, fmt=".3f") -> str:
 
 
 def identification_table(rows: list[dict], direction: str) -> list[str]:
-    lines = [f"### {direction.capitalize()}", "",
-             "| event | date | PGA (g) | inputs -> output | T (s), 95 % | damping (%), 95 % | transfer fn T | SRIM T | "
-             "OKID-ERA T | held-out NRMSE: ours / SRIM / OKID-ERA | s |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"### {direction.capitalize()}",
+        "",
+        "| event | date | PGA (g) | inputs -> output | T (s), 95 % | damping (%), 95 % | transfer fn T | SRIM T | "
+        "OKID-ERA T | held-out NRMSE: ours / SRIM / OKID-ERA | s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in sorted((r for r in rows if r["direction"] == direction), key=lambda r: r.get("pga_g") or 0):
         tag = " *(t)*" if r["role"] == "tuning" else ""
         if r["status"] != "ok":
@@ -178,7 +231,8 @@ def identification_table(rows: list[dict], direction: str) -> list[str]:
             f"{_f(r['period_s'])} [{_f(ci[0])}, {_f(ci[1])}]{inside} | {_f(100 * r['damping'], '.1f')} "
             f"[{_f(100 * zc[0], '.1f')}, {_f(100 * zc[1], '.1f')}] | {_f(r.get('transfer_function_period_s'))} | "
             f"{_f(r.get('srim_period_s'))} | {_f(r.get('okid_era_period_s'))} | {_f(r['heldout_nrmse_a'])} / "
-            f"{_f(r.get('srim_heldout_nrmse_a'))} / {_f(r.get('okid_era_heldout_nrmse_a'))}{beats} | {_f(r['wall_s'], '.0f')} |")
+            f"{_f(r.get('srim_heldout_nrmse_a'))} / {_f(r.get('okid_era_heldout_nrmse_a'))}{beats} | {_f(r['wall_s'], '.0f')} |"
+        )
     return lines + [""]
 
 
@@ -186,17 +240,21 @@ def summary_lines(rows: list[dict]) -> list[str]:
     out = []
     for role in ("untouched", "tuning"):
         for direction in ("transverse", "longitudinal"):
-            sel = [r for r in rows if r["role"] == role and r["direction"] == direction and r["status"] == "ok"]
+            sel = [
+                r for r in rows if r["role"] == role and r["direction"] == direction and r["status"] == "ok"
+            ]
             if not sel:
                 continue
             js = [judge(r) for r in sel]
             inside = [j["inside_peers"] for j in js if "inside_peers" in j]
             beats = [j["beats_srim"] for j in js if "beats_srim" in j]
             wall = max(r["wall_s"] or 0 for r in sel)
-            out.append(f"- {direction}, events {'kept out of all tuning' if role == 'untouched' else 'used in tuning'} "
-                       f"({len(sel)}): period inside the peers' span on {sum(inside)} of {len(inside)} weak events; "
-                       f"held-out NRMSE at or below SRIM's on {sum(beats)} of {len(beats)} events where SRIM gives a "
-                       f"stable model; at most {wall:.0f} s an event.")
+            out.append(
+                f"- {direction}, events {'kept out of all tuning' if role == 'untouched' else 'used in tuning'} "
+                f"({len(sel)}): period inside the peers' span on {sum(inside)} of {len(inside)} weak events; "
+                f"held-out NRMSE at or below SRIM's on {sum(beats)} of {len(beats)} events where SRIM gives a "
+                f"stable model; at most {wall:.0f} s an event."
+            )
     failed = sorted({r["event"] for r in rows if r["status"] != "ok"})
     for e in failed:
         msg = next(r["status"] for r in rows if r["event"] == e and r["status"] != "ok")
@@ -210,18 +268,31 @@ def reduced_choice_lines(rows: list[dict], one: list[dict]) -> list[str]:
     pairs = [(full[r["event"]], r) for r in one if r["status"] == "ok" and r["event"] in full]
     if not pairs:
         return []
-    lines = ["## Three supports against one", "",
-             "The same transverse model with the bent's base (channel 3) as the only ground, against the three "
-             "supports of the table above: what the reduced choice costs on the held-out part.", "",
-             "| event | PGA (g) | held-out NRMSE: 3 supports / 1 | period (s): 3 supports / 1 |", "|---|---|---|---|"]
+    lines = [
+        "## Three supports against one",
+        "",
+        "The same transverse model with the bent's base (channel 3) as the only ground, against the three "
+        "supports of the table above: what the reduced choice costs on the held-out part.",
+        "",
+        "| event | PGA (g) | held-out NRMSE: 3 supports / 1 | period (s): 3 supports / 1 |",
+        "|---|---|---|---|",
+    ]
     for f, o in sorted(pairs, key=lambda p: p[0]["pga_g"]):
-        lines.append(f"| {f['event']} | {_f(f['pga_g'])} | {_f(f['heldout_nrmse_a'])} / {_f(o['heldout_nrmse_a'])} | "
-                     f"{_f(f['period_s'])} / {_f(o['period_s'])} |")
-    gain = [o["heldout_nrmse_a"] - f["heldout_nrmse_a"] for f, o in pairs
-            if f["heldout_nrmse_a"] is not None and o["heldout_nrmse_a"] is not None]
+        lines.append(
+            f"| {f['event']} | {_f(f['pga_g'])} | {_f(f['heldout_nrmse_a'])} / {_f(o['heldout_nrmse_a'])} | "
+            f"{_f(f['period_s'])} / {_f(o['period_s'])} |"
+        )
+    gain = [
+        o["heldout_nrmse_a"] - f["heldout_nrmse_a"]
+        for f, o in pairs
+        if f["heldout_nrmse_a"] is not None and o["heldout_nrmse_a"] is not None
+    ]
     if gain:
-        lines += ["", f"Median held-out NRMSE with one input minus with three: {np.median(gain):+.3f} over {len(gain)} "
-                      f"events (three better on {sum(g > 0 for g in gain)})."]
+        lines += [
+            "",
+            f"Median held-out NRMSE with one input minus with three: {np.median(gain):+.3f} over {len(gain)} "
+            f"events (three better on {sum(g > 0 for g in gain)}).",
+        ]
     skipped = sorted(r["event"] for r in one if r["status"] != "ok")
     if skipped:
         lines.append(f"Not run with one input (channel 3 missing): {', '.join(skipped)}.")
@@ -242,19 +313,39 @@ def period_figure(rows: list[dict], path: Path) -> None:
             if not pts:
                 continue
             x = np.array([r["pga_g"] for r in pts])
-            for row_i, (key, ci_key, scale, label) in enumerate((("period_s", "period_ci95", 1.0, "period [s]"),
-                                                                   ("damping", "damping_ci95", 100.0, "damping [%]"))):
+            for row_i, (key, ci_key, scale, label) in enumerate(
+                (
+                    ("period_s", "period_ci95", 1.0, "period [s]"),
+                    ("damping", "damping_ci95", 100.0, "damping [%]"),
+                )
+            ):
                 y = scale * np.array([r[key] for r in pts])
                 lo = scale * np.array([r[ci_key][0] if r[ci_key][0] is not None else np.nan for r in pts])
                 hi = scale * np.array([r[ci_key][1] if r[ci_key][1] is not None else np.nan for r in pts])
                 ax = axes[row_i, col]
-                ax.errorbar(x, y, yerr=[np.nan_to_num(y - lo), np.nan_to_num(hi - y)], fmt=marker, ms=5, capsize=2,
-                            label=f"pidyn, events {'kept out of tuning' if role == 'untouched' else 'used in tuning'}")
+                ax.errorbar(
+                    x,
+                    y,
+                    yerr=[np.nan_to_num(y - lo), np.nan_to_num(hi - y)],
+                    fmt=marker,
+                    ms=5,
+                    capsize=2,
+                    label=f"pidyn, events {'kept out of tuning' if role == 'untouched' else 'used in tuning'}",
+                )
                 if key == "period_s":
                     srim = np.array([r.get("srim_period_s") or np.nan for r in pts], float)
                     tf = np.array([r.get("transfer_function_period_s") or np.nan for r in pts], float)
-                    ax.plot(x, srim, "x", color="0.4", ms=5, label="SRIM (mdof)" if role == "untouched" else None)
-                    ax.plot(x, tf, "+", color="tab:red", ms=6, label="transfer function" if role == "untouched" else None)
+                    ax.plot(
+                        x, srim, "x", color="0.4", ms=5, label="SRIM (mdof)" if role == "untouched" else None
+                    )
+                    ax.plot(
+                        x,
+                        tf,
+                        "+",
+                        color="tab:red",
+                        ms=6,
+                        label="transfer function" if role == "untouched" else None,
+                    )
                 ax.set_xscale("log")
                 ax.set_ylabel(label)
         axes[0, col].set_title(f"{direction}: period and damping against the event's PGA")
@@ -272,8 +363,12 @@ def diagnosis_rows(folder: Path) -> list[dict]:
         event = cfg["data"]["event"]
         d = _load(run / "diagnosis.json")
         failed = _load(run / "failed.json")
-        row = {"event": event, "role": "tuning" if event in TUNING else "untouched",
-               "pga_catalogue_g": float(cat.get(event, {}).get("pga_str_g") or "nan"), "run": run}
+        row = {
+            "event": event,
+            "role": "tuning" if event in TUNING else "untouched",
+            "pga_catalogue_g": float(cat.get(event, {}).get("pga_str_g") or "nan"),
+            "run": run,
+        }
         if failed or d is None:
             row["status"] = "failed: " + (failed["message"] if failed else "no results")
             rows.append(row)
@@ -281,20 +376,38 @@ def diagnosis_rows(folder: Path) -> list[dict]:
         run_info = d.get("running") or {}
         var = run_info.get("variation") or {}
         tested = d.get("confirmation") or []
-        best_ho = max((t for t in tested if t.get("heldout_gain") is not None), key=lambda t: t["heldout_gain"],
-                      default=None)
-        row.update({"status": "ok", "verdict": d["verdict"], "causes": d["causes"],
-                    "learned": d["learned_force"], "gain": d["gain"], "modal": (d.get("modal") or [{}])[0],
-                    "varies": var.get("varies"), "longest": var.get("longest"), "shortest": var.get("shortest"),
-                    "best_candidate_heldout": None if best_ho is None else (best_ho["effect"], best_ho["heldout_gain"]),
-                    "wall_s": d.get("wall_seconds")})
+        best_ho = max(
+            (t for t in tested if t.get("heldout_gain") is not None),
+            key=lambda t: t["heldout_gain"],
+            default=None,
+        )
+        row.update(
+            {
+                "status": "ok",
+                "verdict": d["verdict"],
+                "causes": d["causes"],
+                "learned": d["learned_force"],
+                "gain": d["gain"],
+                "modal": (d.get("modal") or [{}])[0],
+                "varies": var.get("varies"),
+                "longest": var.get("longest"),
+                "shortest": var.get("shortest"),
+                "best_candidate_heldout": None
+                if best_ho is None
+                else (best_ho["effect"], best_ho["heldout_gain"]),
+                "wall_s": d.get("wall_seconds"),
+            }
+        )
         rows.append(row)
     return rows
 
 
 def diagnosis_table(rows: list[dict]) -> list[str]:
-    lines = ["| event | PGA (g) | verdict | period through the record (95 %) | held-out NRMSE of a: nominal -> "
-             "extended | best library effect on the held-out part | s |", "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| event | PGA (g) | verdict | period through the record (95 %) | held-out NRMSE of a: nominal -> "
+        "extended | best library effect on the held-out part | s |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for r in sorted(rows, key=lambda r: -(r.get("pga_catalogue_g") or 0)):
         tag = " *(t)*" if r["role"] == "tuning" else ""
         if r["status"] != "ok":
@@ -303,14 +416,22 @@ def diagnosis_table(rows: list[dict]) -> list[str]:
         verdict = r["verdict"] + (f" ({', '.join(r['causes'])})" if r["causes"] else "")
         verdict += " + learned force" if r["learned"] else ""
         lo, hi = r.get("longest"), r.get("shortest")
-        moves = "-" if not lo else (f"{lo['period']:.3f} ({lo['ci95'][0]:.3f}-{lo['ci95'][1]:.3f}) at {lo['t']:.0f} s, "
-                                   f"{hi['period']:.3f} ({hi['ci95'][0]:.3f}-{hi['ci95'][1]:.3f}) at {hi['t']:.0f} s"
-                                   + (": **moves**" if r["varies"] else ": one period"))
+        moves = (
+            "-"
+            if not lo
+            else (
+                f"{lo['period']:.3f} ({lo['ci95'][0]:.3f}-{lo['ci95'][1]:.3f}) at {lo['t']:.0f} s, "
+                f"{hi['period']:.3f} ({hi['ci95'][0]:.3f}-{hi['ci95'][1]:.3f}) at {hi['t']:.0f} s"
+                + (": **moves**" if r["varies"] else ": one period")
+            )
+        )
         g = r["gain"]
         best = r["best_candidate_heldout"]
-        lines.append(f"| {r['event']}{tag} | {_f(r['pga_catalogue_g'])} | {verdict} | {moves} | {_f(g.get('nominal'))} -> "
-                     f"{_f(g.get('extended'))} | {'-' if not best else f'{best[0]} ({best[1]:+.2f})'} | "
-                     f"{_f(r['wall_s'], '.0f')} |")
+        lines.append(
+            f"| {r['event']}{tag} | {_f(r['pga_catalogue_g'])} | {verdict} | {moves} | {_f(g.get('nominal'))} -> "
+            f"{_f(g.get('extended'))} | {'-' if not best else f'{best[0]} ({best[1]:+.2f})'} | "
+            f"{_f(r['wall_s'], '.0f')} |"
+        )
     return lines + [""]
 
 
@@ -328,36 +449,56 @@ def aggregate(base: Path) -> None:
             w.writerow({k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in r.items()})
     if rows:
         period_figure(rows, RESULTS / "figures" / "period_vs_pga.png")
-    lines = ["# Painter Street Overpass (CSMIP CE89324): every shipped event", "",
-             f"Produced by `python experiments/real.py` (`make real`) on {platform.machine()}, two jobs at a time, "
-             f"{time.strftime('%Y-%m-%d')}. Model: one degree of freedom on three supports (transverse: inputs 3, 17, "
-             "20 -> output 7; longitudinal: 15, 1, 18 -> 11), each support with its influence, its dashpot and what the "
-             "sensor reads of it directly; identified by PIDynNet and the refinement on the first 65 % of the shaking "
-             "(from a start read from the record), the last 35 % held out. Peers on the same channels and span: "
-             "the transfer function's fundamental (H1 from the mean input, with its interval), mdof's SRIM and "
-             "OKID-ERA (the order with the lowest fitting-part error among those that do not diverge from rest).",
-             "", "Events marked *(t)* were looked at while the methods were set up; the others were kept out of all "
-             "tuning. (in) / (**out**): the period's interval inside the peers' span (weak events, PGA below 0.1 g).",
-             "", "## Summary", "", *summary_lines(rows), "## Identification", "",
-             *identification_table(rows, "transverse"), *identification_table(rows, "longitudinal"),
-             "![period against PGA](figures/period_vs_pga.png)", ""]
+    lines = [
+        "# Painter Street Overpass (CSMIP CE89324): every shipped event",
+        "",
+        f"Produced by `python experiments/real.py` (`make real`) on {platform.machine()}, two jobs at a time, "
+        f"{time.strftime('%Y-%m-%d')}. Model: one degree of freedom on three supports (transverse: inputs 3, 17, "
+        "20 -> output 7; longitudinal: 15, 1, 18 -> 11), each support with its influence, its dashpot and what the "
+        "sensor reads of it directly; identified by PIDynNet and the refinement on the first 65 % of the shaking "
+        "(from a start read from the record), the last 35 % held out. Peers on the same channels and span: "
+        "the transfer function's fundamental (H1 from the mean input, with its interval), mdof's SRIM and "
+        "OKID-ERA (the order with the lowest fitting-part error among those that do not diverge from rest).",
+        "",
+        "Events marked *(t)* were looked at while the methods were set up; the others were kept out of all "
+        "tuning. (in) / (**out**): the period's interval inside the peers' span (weak events, PGA below 0.1 g).",
+        "",
+        "## Summary",
+        "",
+        *summary_lines(rows),
+        "## Identification",
+        "",
+        *identification_table(rows, "transverse"),
+        *identification_table(rows, "longitudinal"),
+        "![period against PGA](figures/period_vs_pga.png)",
+        "",
+    ]
     one = identification_rows(base / "one_input") if (base / "one_input").exists() else []
     lines += reduced_choice_lines(rows, one)
     diag = diagnosis_rows(base / "diagnose") if (base / "diagnose").exists() else []
     if diag:
-        lines += ["## Diagnosis of the strong events (transverse)", "",
-                  "`python diagnose.py experiment=painter_street_diagnose`: the accelerations decide (output error "
-                  "of every library effect), the period and damping are fitted window by window; a period that moves "
-                  "beyond its windows' intervals refutes one linear model (verdict `unexplained`, a learned force "
-                  "tried and kept only when it predicts the held-out part better).", "", *diagnosis_table(diag)]
+        lines += [
+            "## Diagnosis of the strong events (transverse)",
+            "",
+            "`python diagnose.py experiment=painter_street_diagnose`: the accelerations decide (output error "
+            "of every library effect), the period and damping are fitted window by window; a period that moves "
+            "beyond its windows' intervals refutes one linear model (verdict `unexplained`, a learned force "
+            "tried and kept only when it predicts the held-out part better).",
+            "",
+            *diagnosis_table(diag),
+        ]
         for r in diag:
             fig = Path(r["run"]) / "figures" / "running_period.png"
             if fig.exists():
                 shutil.copy(fig, RESULTS / "figures" / f"running_period_{r['event']}.png")
                 lines.append(f"![{r['event']}](figures/running_period_{r['event']}.png)")
         lines.append("")
-    lines += ["## Buildings on a shake table, measured by wearable IMUs", "",
-              "`python experiments/shake_table.py` (the second half of `make real`): [shake_table.md](shake_table.md).", ""]
+    lines += [
+        "## Buildings on a shake table, measured by wearable IMUs",
+        "",
+        "`python experiments/shake_table.py` (the second half of `make real`): [shake_table.md](shake_table.md).",
+        "",
+    ]
     (RESULTS / "README.md").write_text("\n".join(lines))
     print(f"wrote {RESULTS / 'README.md'}")
 

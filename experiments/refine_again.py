@@ -28,7 +28,9 @@ sys.path.insert(0, str(ROOT / "src"))
 
 
 def _settings(saved: dict | str | None, overrides: list[str]) -> dict:
-    current = OmegaConf.to_container(OmegaConf.load(ROOT / "src" / "pidyn" / "conf" / "model" / "refine" / "multiple_shooting.yaml"))
+    current = OmegaConf.to_container(
+        OmegaConf.load(ROOT / "src" / "pidyn" / "conf" / "model" / "refine" / "multiple_shooting.yaml")
+    )
     assert isinstance(current, dict)
     if isinstance(saved, dict):
         for key in ("starts", "compare_states"):
@@ -44,21 +46,25 @@ def _settings(saved: dict | str | None, overrides: list[str]) -> dict:
 
 def refine_job(job: Path, overrides: list[str]) -> dict:
     from pidyn.models.identify import WindowResult
+    from pidyn.reporting import write_json, write_yaml
     from pidyn.tasks.train import (
-        refined_metrics,
         build_record,
         channel_nrmse,
         identified_params,
+        refined_metrics,
         relative_errors,
         run_refinement,
         simulate_response,
     )
-    from pidyn.reporting import write_json, write_yaml
 
     cfg = OmegaConf.load(job / ".hydra" / "config.yaml")
     with open_dict(cfg):
-        cfg.model.refine = _settings(OmegaConf.to_container(cfg.model.get("refine"), resolve=True)
-                                     if OmegaConf.is_config(cfg.model.get("refine")) else None, overrides)
+        cfg.model.refine = _settings(
+            OmegaConf.to_container(cfg.model.get("refine"), resolve=True)
+            if OmegaConf.is_config(cfg.model.get("refine"))
+            else None,
+            overrides,
+        )
     system = hydra.utils.instantiate(cfg.system)
     record = build_record(cfg, system)
     metrics = json.loads((job / "metrics.json").read_text())
@@ -79,31 +85,55 @@ def refine_job(job: Path, overrides: list[str]) -> dict:
     notes = [n for r in results for n in (r.notes or [])] + refined.notes
     for key in ("covered", "refine_compare"):
         metrics.pop(key, None)
-    metrics.update({"params": values, "error_pct": errors, "max_error_pct": max(errors.values()) if errors else None,
-                    "mean_error_pct": float(np.mean(list(errors.values()))) if errors else None,
-                    "sim_nrmse": channel_nrmse(sim, record), "notes": notes, "refine": "multiple_shooting"})
+    metrics.update(
+        {
+            "params": values,
+            "error_pct": errors,
+            "max_error_pct": max(errors.values()) if errors else None,
+            "mean_error_pct": float(np.mean(list(errors.values()))) if errors else None,
+            "sim_nrmse": channel_nrmse(sim, record),
+            "notes": notes,
+            "refine": "multiple_shooting",
+        }
+    )
     metrics.update(refined_metrics(refined, names, truths))
     write_json(job / "metrics.json", metrics)
     write_json(job / "refinement.json", refined.to_dict())
     units = {s.name: s.unit for s in system.param_specs()}
-    write_yaml(job / "identified_params.yaml", identified_params(system, final, values, truths, units, refined, notes))
+    write_yaml(
+        job / "identified_params.yaml",
+        identified_params(system, final, values, truths, units, refined, notes),
+    )
     return metrics
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("sweep", type=Path, help="a multirun folder (its jobs are sub-folders) or one run folder")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="a refinement setting (conf/model/refine/multiple_shooting.yaml), repeatable")
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a refinement setting (conf/model/refine/multiple_shooting.yaml), repeatable",
+    )
     a = ap.parse_args()
-    jobs = [a.sweep] if (a.sweep / "metrics.json").exists() else \
-        sorted(p for p in a.sweep.iterdir() if (p / "metrics.json").exists() and (p / "windows.json").exists())
+    jobs = (
+        [a.sweep]
+        if (a.sweep / "metrics.json").exists()
+        else sorted(
+            p for p in a.sweep.iterdir() if (p / "metrics.json").exists() and (p / "windows.json").exists()
+        )
+    )
     if not jobs:
         raise SystemExit(f"{a.sweep}: no finished job (metrics.json and windows.json) found")
     for job in jobs:
         m = refine_job(job, a.set)
         err = ", ".join(f"{k} {v:.3g}" for k, v in (m.get("error_pct") or {}).items())
-        print(f"{job.name}: initial state {m['refinement'].get('initial_state_mode')}; errors % {err or '-'}", flush=True)
+        print(
+            f"{job.name}: initial state {m['refinement'].get('initial_state_mode')}; errors % {err or '-'}",
+            flush=True,
+        )
     print(f"{len(jobs)} job(s) refined again")
 
 

@@ -34,14 +34,28 @@ from pidyn.errors import errors_pct  # noqa: E402
 
 #: one parameter set per system that the tables do not use (Bouc-Wen: a clear hysteretic share)
 SYSTEMS = {
-    "duffing": {"target": "pidyn.systems.Duffing", "truth": {"c": 0.3, "k1": 25.0, "k3": 400.0},
-                "init": {"c": 1.0, "k1": 10.0, "k3": 50.0}},
-    "bouc_wen": {"target": "pidyn.systems.BoucWen", "truth": {"c": 0.2, "k": 9.0, "beta": 2.0, "gamma": 3.0, "n": 1.5},
-                 "init": {"c": 0.5, "k": 10.0, "beta": 0.5, "gamma": 1.0, "n": 1.5}},
-    "linear": {"target": "pidyn.systems.LinearSDOF", "truth": {"c": 0.4, "k": 20.0}, "init": {"c": 1.0, "k": 10.0}},
+    "duffing": {
+        "target": "pidyn.systems.Duffing",
+        "truth": {"c": 0.3, "k1": 25.0, "k3": 400.0},
+        "init": {"c": 1.0, "k1": 10.0, "k3": 50.0},
+    },
+    "bouc_wen": {
+        "target": "pidyn.systems.BoucWen",
+        "truth": {"c": 0.2, "k": 9.0, "beta": 2.0, "gamma": 3.0, "n": 1.5},
+        "init": {"c": 0.5, "k": 10.0, "beta": 0.5, "gamma": 1.0, "n": 1.5},
+    },
+    "linear": {
+        "target": "pidyn.systems.LinearSDOF",
+        "truth": {"c": 0.4, "k": 20.0},
+        "init": {"c": 1.0, "k": 10.0},
+    },
 }
-SHORT = ["model.schedule.pretrain_iters=500", "model.schedule.pretrain_iters_window=500",
-         "model.schedule.max_iters=1000", "model.schedule.max_windows=4"]
+SHORT = [
+    "model.schedule.pretrain_iters=500",
+    "model.schedule.pretrain_iters_window=500",
+    "model.schedule.max_iters=1000",
+    "model.schedule.max_windows=4",
+]
 PGA = 3.0
 DURATION = 30.0
 
@@ -79,8 +93,19 @@ def run_case(record: str, system: str, noise: float, seed: int, work: Path) -> d
         return out
     csv, known = make_case(record, system, noise, seed, folder)
     inits = [f"system.params.{k}.init={v}" for k, v in SYSTEMS[system]["init"].items()]
-    cmd = [sys.executable, "train.py", f"system={system}", "data=csv", f"data.path={csv}", f"noise={noise}",
-           f"hydra.run.dir={folder / 'run'}", "trainer.enable_progress_bar=false", "logger=none", *inits, *SHORT]
+    cmd = [
+        sys.executable,
+        "train.py",
+        f"system={system}",
+        "data=csv",
+        f"data.path={csv}",
+        f"noise={noise}",
+        f"hydra.run.dir={folder / 'run'}",
+        "trainer.enable_progress_bar=false",
+        "logger=none",
+        *inits,
+        *SHORT,
+    ]
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
     out = {"record": record, "system": system, "noise": noise, **known}
     if proc.returncode != 0:
@@ -105,11 +130,21 @@ def _ok(err: dict, crb: dict) -> bool:
 
 def _score(run: Path, known: dict) -> dict:
     m = json.loads((run / "metrics.json").read_text())
-    b = json.loads((run / "baselines.json").read_text())["baselines"] if (run / "baselines.json").exists() else []
+    b = (
+        json.loads((run / "baselines.json").read_text())["baselines"]
+        if (run / "baselines.json").exists()
+        else []
+    )
     truth, crb = known["truth"], known["crb_std_pct"]
     final, pid = _errors(m["params"], truth), _errors(m["pidynnet"]["params"], truth)
-    out = {"final_ok": _ok(final, crb), "pidynnet_ok": _ok(pid, crb), "final_max_err": max(final.values()),
-           "pidynnet_max_err": max(pid.values()), "notes": m.get("notes", []), "refine_start": m.get("refinement", {}).get("start")}
+    out = {
+        "final_ok": _ok(final, crb),
+        "pidynnet_ok": _ok(pid, crb),
+        "final_max_err": max(final.values()),
+        "pidynnet_max_err": max(pid.values()),
+        "notes": m.get("notes", []),
+        "refine_start": m.get("refinement", {}).get("start"),
+    }
     best = None
     for row in b:
         if not row.get("params"):
@@ -140,66 +175,93 @@ def main() -> None:
     from pidyn.excitation.ground_motion import SHIPPED
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--records", nargs="*", default=[k for k in SHIPPED if k not in ("el_centro_peer2000",
-                                                                                    "el_centro_peknold")])
+    ap.add_argument(
+        "--records",
+        nargs="*",
+        default=[k for k in SHIPPED if k not in ("el_centro_peer2000", "el_centro_peknold")],
+    )
     ap.add_argument("--systems", nargs="*", default=list(SYSTEMS))
     ap.add_argument("--noise", nargs="*", type=float, default=[0.0, 0.025])
     ap.add_argument("--out", type=Path, default=ROOT / "experiments" / "results" / "robustness")
-    ap.add_argument("--finished-only", action="store_true",
-                    help="summarise the cases already run (an interrupted study), run nothing")
+    ap.add_argument(
+        "--finished-only",
+        action="store_true",
+        help="summarise the cases already run (an interrupted study), run nothing",
+    )
     a = ap.parse_args()
     work = ROOT / "outputs" / "robustness"
     rows = []
     for system in a.systems:
         for record in a.records:
             for noise in a.noise:
-                if a.finished_only and not (work / f"{system}_{record}_noise{noise:g}" / "case.json").exists():
+                if (
+                    a.finished_only
+                    and not (work / f"{system}_{record}_noise{noise:g}" / "case.json").exists()
+                ):
                     continue
                 r = run_case(record, system, noise, seed=1, work=work)
                 rows.append(r)
-                print(f"{system:9s} {record:14s} noise {noise:<6g} final ok {r.get('final_ok')} "
-                      f"PIDynNet ok {r.get('pidynnet_ok')} {r.get('error', '')[:80]}", flush=True)
+                print(
+                    f"{system:9s} {record:14s} noise {noise:<6g} final ok {r.get('final_ok')} "
+                    f"PIDynNet ok {r.get('pidynnet_ok')} {r.get('error', '')[:80]}",
+                    flush=True,
+                )
     df = pd.DataFrame(rows)
     previous = a.out.with_suffix(".csv")
     if previous.exists():
         # the summary covers every case run so far: rows of cases not run now are kept as they were
         old = pd.read_csv(previous)
         ran = set(zip(df["system"], df["record"], df["noise"].astype(float)))
-        old = old[[(s, r, float(n)) not in ran for s, r, n in zip(old["system"], old["record"], old["noise"])]]
+        old = old[
+            [(s, r, float(n)) not in ran for s, r, n in zip(old["system"], old["record"], old["noise"])]
+        ]
         df = pd.concat([old, df], ignore_index=True)
         order = {s: i for i, s in enumerate(SYSTEMS)}
         df = df.sort_values("system", key=lambda c: c.map(order), kind="stable").reset_index(drop=True)
     a.out.parent.mkdir(parents=True, exist_ok=True)
     df.drop(columns=[c for c in ("notes", "truth", "crb_std_pct") if c in df], errors="ignore").to_csv(
-        a.out.with_suffix(".csv"), index=False)
+        a.out.with_suffix(".csv"), index=False
+    )
     write_md(df, a.out.with_suffix(".md"), a)
 
 
 def write_md(df: pd.DataFrame, path: Path, a) -> None:
-    lines = ["# Robustness across records\n",
-             f"Command: `python experiments/robustness.py --systems {' '.join(a.systems)} --noise "
-             f"{' '.join(f'{n:g}' for n in a.noise)}` (systems run by earlier invocations are kept from the CSV: "
-             f"{', '.join(sorted(set(df['system']) - set(a.systems))) or 'none'})  ",
-             f"Machine: {platform.machine()}, one thread. Records: {len(a.records)} shipped ground motions, strong part "
-             f"({DURATION:g} s from 2 s before 5 % Arias intensity), PGA {PGA:g} m/s^2. PIDynNet schedule: "
-             f"{' '.join(SHORT)}. Success: max error <= 1 % noise-free, every parameter within 3x its Cramer-Rao std "
-             "with noise.\n",
-             "| system | noise % | cases | PIDynNet alone | final (refined) | EE | SINDy | OE | UKF | final worse than best baseline beyond its interval |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "# Robustness across records\n",
+        f"Command: `python experiments/robustness.py --systems {' '.join(a.systems)} --noise "
+        f"{' '.join(f'{n:g}' for n in a.noise)}` (systems run by earlier invocations are kept from the CSV: "
+        f"{', '.join(sorted(set(df['system']) - set(a.systems))) or 'none'})  ",
+        f"Machine: {platform.machine()}, one thread. Records: {len(a.records)} shipped ground motions, strong part "
+        f"({DURATION:g} s from 2 s before 5 % Arias intensity), PGA {PGA:g} m/s^2. PIDynNet schedule: "
+        f"{' '.join(SHORT)}. Success: max error <= 1 % noise-free, every parameter within 3x its Cramer-Rao std "
+        "with noise.\n",
+        "| system | noise % | cases | PIDynNet alone | final (refined) | EE | SINDy | OE | UKF | final worse than best baseline beyond its interval |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
     if a.finished_only:
         mine = df[df["system"].isin(a.systems) & df["noise"].astype(float).isin([float(n) for n in a.noise])]
-        lines.insert(3, f"Cases of {', '.join(a.systems)} run: {len(mine)} of {len(a.systems) * len(a.records) * len(a.noise)} "
-                        "(summarised from the finished cases; `make robustness` runs any that are missing).\n")
+        lines.insert(
+            3,
+            f"Cases of {', '.join(a.systems)} run: {len(mine)} of {len(a.systems) * len(a.records) * len(a.noise)} "
+            "(summarised from the finished cases; `make robustness` runs any that are missing).\n",
+        )
     for (system, noise), g in df.groupby(["system", "noise"], sort=False):
+
         def rate(col: str) -> str:
             return f"{g[col].fillna(False).astype(bool).mean():.2f}" if col in g else "-"
+
         worse = int(g.get("final_worse_than_best_baseline", pd.Series(dtype=bool)).fillna(False).sum())
-        lines.append(f"| {system} | {100 * noise:g} | {len(g)} | {rate('pidynnet_ok')} | {rate('final_ok')} | "
-                     f"{rate('equation_error_ok')} | {rate('sindy_ok')} | {rate('output_error_ok')} | {rate('ukf_ok')} | "
-                     f"{worse} |")
+        lines.append(
+            f"| {system} | {100 * noise:g} | {len(g)} | {rate('pidynnet_ok')} | {rate('final_ok')} | "
+            f"{rate('equation_error_ok')} | {rate('sindy_ok')} | {rate('output_error_ok')} | {rate('ukf_ok')} | "
+            f"{worse} |"
+        )
     failed = df[df.get("error").notna()] if "error" in df else df.iloc[0:0]
     if len(failed):
-        lines.append("\nRuns that failed: " + ", ".join(f"{r.system}/{r.record}/{r.noise:g}" for r in failed.itertuples()))
+        lines.append(
+            "\nRuns that failed: "
+            + ", ".join(f"{r.system}/{r.record}/{r.noise:g}" for r in failed.itertuples())
+        )
     path.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

@@ -23,8 +23,12 @@ SMOKE = {
     "table1": ["debug=smoke", "hydra.sweeper.params.seed=0", "hydra.sweeper.params.batch_size='100,400'"],
     "table2": ["debug=smoke", "hydra.sweeper.params.seed=0"],
     "table3": ["debug=smoke", "hydra.sweeper.params.seed=0", "hydra.sweeper.params.system=duffing"],
-    "scaling": ["debug=smoke", "hydra.sweeper.params.seed=0", "hydra.sweeper.params.eq_stretch=1",
-                "hydra.sweeper.params.noise=0.05"],
+    "scaling": [
+        "debug=smoke",
+        "hydra.sweeper.params.seed=0",
+        "hydra.sweeper.params.eq_stretch=1",
+        "hydra.sweeper.params.noise=0.05",
+    ],
 }
 
 
@@ -39,18 +43,32 @@ def main() -> None:
     for exp in a.only:
         sweep_dir = base / exp
         extra = SMOKE[exp] if a.smoke else []
-        cmd = [sys.executable, "train.py", f"experiment={exp}", f"hydra.sweep.dir={sweep_dir}",
-               f"hydra.launcher.n_jobs={a.jobs}", *extra]
+        cmd = [
+            sys.executable,
+            "train.py",
+            f"experiment={exp}",
+            f"hydra.sweep.dir={sweep_dir}",
+            f"hydra.launcher.n_jobs={a.jobs}",
+            *extra,
+        ]
         print("+", " ".join(cmd[1:]), flush=True)
         t0 = time.perf_counter()
         rc = subprocess.run(cmd, cwd=ROOT).returncode
         print(f"  {exp}: exit {rc} after {time.perf_counter() - t0:.0f} s", flush=True)
         out = (base / f"{exp}") if a.smoke else ROOT / "experiments" / "results" / exp
         machine = f"{platform.machine()}, {a.jobs} parallel jobs, one thread each"
-        agg = [sys.executable, "experiments/aggregate.py", str(sweep_dir), "--out", str(out),
-               "--title", f"{exp} ({'smoke' if a.smoke else 'full'}; {machine})",
-               "--command", f"python experiments/run_tables.py {'--smoke ' if a.smoke else ''}--only {exp} --jobs {a.jobs}"
-               f"  (runs: python train.py experiment={exp} {' '.join(extra)})".rstrip()]
+        agg = [
+            sys.executable,
+            "experiments/aggregate.py",
+            str(sweep_dir),
+            "--out",
+            str(out),
+            "--title",
+            f"{exp} ({'smoke' if a.smoke else 'full'}; {machine})",
+            "--command",
+            f"python experiments/run_tables.py {'--smoke ' if a.smoke else ''}--only {exp} --jobs {a.jobs}"
+            f"  (runs: python train.py experiment={exp} {' '.join(extra)})".rstrip(),
+        ]
         if subprocess.run(agg, cwd=ROOT, stdout=subprocess.DEVNULL).returncode != 0:
             raise SystemExit(f"{exp}: aggregation failed (see {sweep_dir})")
 

@@ -25,8 +25,11 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"
 MODELS_DIR = ROOT / "data" / "mini_shake_table"
 #: model folder -> (storeys, the run each is identified on to predict the others)
-MODELS = {"Flexible 3 story": (3, "Northridge"), "Stiff 3 story": (3, "Northridge"),
-          "Stiff 1 story": (1, "Northridge Trial 1")}
+MODELS = {
+    "Flexible 3 story": (3, "Northridge"),
+    "Stiff 3 story": (3, "Northridge"),
+    "Stiff 1 story": (1, "Northridge Trial 1"),
+}
 AGREE = 0.05  # a model's fundamental frequency agrees across its runs to within this share
 
 
@@ -44,18 +47,43 @@ def run_sweeps(base: Path, jobs: int = 2, launcher: str = "joblib") -> None:
         others = [r for r in run_labels(MODELS_DIR / model) if r != ident]
         folder = base / "shake_table" / slug(model)
         _sweep(model, storeys, [ident], folder, jobs, launcher)
-        _sweep(model, storeys, [ident], base / "shake_table_clock" / slug(model), jobs, launcher, ["data.align=clock"])
+        _sweep(
+            model,
+            storeys,
+            [ident],
+            base / "shake_table_clock" / slug(model),
+            jobs,
+            launcher,
+            ["data.align=clock"],
+        )
         start = _runs(folder).get(ident)
         if others and start is not None:
-            _sweep(model, storeys, others, base / "shake_table" / f"{slug(model)}_others", jobs, launcher,
-                   [f"model.start='{start}'"])
+            _sweep(
+                model,
+                storeys,
+                others,
+                base / "shake_table" / f"{slug(model)}_others",
+                jobs,
+                launcher,
+                [f"model.start='{start}'"],
+            )
 
 
-def _sweep(model: str, storeys: int, runs: list[str], folder: Path, jobs: int, launcher: str,
-           extra: list[str] = ()) -> None:
-    cmd = [sys.executable, "train.py", "experiment=shake_table", f"data.path='{MODELS_DIR.relative_to(ROOT) / model}'",
-           "data.run=" + ",".join(f"'{r}'" for r in runs), f"system.n_storeys={storeys}", f"hydra.sweep.dir={folder}",
-           f"hydra.launcher.n_jobs={jobs}", "skip_done=true", *extra]
+def _sweep(
+    model: str, storeys: int, runs: list[str], folder: Path, jobs: int, launcher: str, extra: list[str] = ()
+) -> None:
+    cmd = [
+        sys.executable,
+        "train.py",
+        "experiment=shake_table",
+        f"data.path='{MODELS_DIR.relative_to(ROOT) / model}'",
+        "data.run=" + ",".join(f"'{r}'" for r in runs),
+        f"system.n_storeys={storeys}",
+        f"hydra.sweep.dir={folder}",
+        f"hydra.launcher.n_jobs={jobs}",
+        "skip_done=true",
+        *extra,
+    ]
     if launcher != "joblib":
         cmd.append(f"hydra/launcher={launcher}")
     print("+", " ".join(cmd[1:]), flush=True)
@@ -89,8 +117,10 @@ def identified(run: Path):
 def floor_nrmse(pred: np.ndarray, meas: np.ndarray) -> list[float]:
     from pidyn.reporting import nrmse
 
-    return [float(nrmse(pred[:, j], meas[:, j])) if np.all(np.isfinite(pred[:, j])) else float("inf")
-            for j in range(meas.shape[1])]
+    return [
+        float(nrmse(pred[:, j], meas[:, j])) if np.all(np.isfinite(pred[:, j])) else float("inf")
+        for j in range(meas.shape[1])
+    ]
 
 
 def predict_runs(model: str, ident_run: Path, others: list[str]) -> list[dict]:
@@ -111,14 +141,25 @@ def predict_runs(model: str, ident_run: Path, others: list[str]) -> list[dict]:
         U, Y = io_arrays(rec)
         sim = simulate_response(system, values, rec)
         ours = floor_nrmse(sim["a"] + rec.f[:, None], Y.T)
-        theirs = (floor_nrmse(simulate_realization(*peer.realization, U).T, Y.T) if peer.realization is not None
-                  else [None] * n)
-        rows.append({"model": model, "identified_on": MODELS[model][1], "predicted_run": label,
-                     "duration_s": float(rec.t[-1]), "pga_m_s2": rec.meta["pga"],
-                     **{f"pidyn_a{j + 1}": ours[j] for j in range(n)},
-                     **{f"srim_a{j + 1}": theirs[j] for j in range(n)},
-                     "pidyn_mean": float(np.mean(ours)),
-                     "srim_mean": None if theirs[0] is None else float(np.mean(theirs)), "srim_order": peer.order})
+        theirs = (
+            floor_nrmse(simulate_realization(*peer.realization, U).T, Y.T)
+            if peer.realization is not None
+            else [None] * n
+        )
+        rows.append(
+            {
+                "model": model,
+                "identified_on": MODELS[model][1],
+                "predicted_run": label,
+                "duration_s": float(rec.t[-1]),
+                "pga_m_s2": rec.meta["pga"],
+                **{f"pidyn_a{j + 1}": ours[j] for j in range(n)},
+                **{f"srim_a{j + 1}": theirs[j] for j in range(n)},
+                "pidyn_mean": float(np.mean(ours)),
+                "srim_mean": None if theirs[0] is None else float(np.mean(theirs)),
+                "srim_order": peer.order,
+            }
+        )
     return rows
 
 
@@ -130,21 +171,37 @@ def run_rows(folder: Path, model: str) -> list[dict]:
         m = json.loads((run / "metrics.json").read_text())
         modal = json.loads((run / "modal.json").read_text())
         modes = modal.get("modes") or [{}]
-        base = json.loads((run / "baselines.json").read_text()).get("baselines", []) if (run / "baselines.json").exists() else []
+        base = (
+            json.loads((run / "baselines.json").read_text()).get("baselines", [])
+            if (run / "baselines.json").exists()
+            else []
+        )
         peer = next((b for b in base if b.get("method") == "srim"), {})
         held = (m.get("heldout") or {}).get("nrmse", {})
         fm = modes[0]
-        rows.append({"model": model, "run": label, "frequency_hz": fm.get("frequency_hz"),
-                     "frequency_ci95": fm.get("frequency_ci95"), "damping_ratio": fm.get("damping_ratio"),
-                     "damping_ci95": fm.get("damping_ci95"), "frequencies_hz": [md["frequency_hz"] for md in modes],
-                     "heldout": held, "heldout_mean": (m.get("heldout") or {}).get("mean_nrmse_a"),
-                     "srim_heldout_mean": peer.get("heldout_nrmse_a"),
-                     "srim_fundamental_hz": (peer.get("modes") or [{}])[0].get("frequency_hz"),
-                     "params": m.get("params"), "ci95": m.get("ci95"), "wall_s": m.get("wall_seconds"),
-                     "storey_residuals": modal.get("storey_residuals") or [],
-                     "start": json.loads((run / "data_start.json").read_text()).get("method")
-                     if (run / "data_start.json").exists() else None,
-                     "run_dir": str(run)})
+        rows.append(
+            {
+                "model": model,
+                "run": label,
+                "frequency_hz": fm.get("frequency_hz"),
+                "frequency_ci95": fm.get("frequency_ci95"),
+                "damping_ratio": fm.get("damping_ratio"),
+                "damping_ci95": fm.get("damping_ci95"),
+                "frequencies_hz": [md["frequency_hz"] for md in modes],
+                "heldout": held,
+                "heldout_mean": (m.get("heldout") or {}).get("mean_nrmse_a"),
+                "srim_heldout_mean": peer.get("heldout_nrmse_a"),
+                "srim_fundamental_hz": (peer.get("modes") or [{}])[0].get("frequency_hz"),
+                "params": m.get("params"),
+                "ci95": m.get("ci95"),
+                "wall_s": m.get("wall_seconds"),
+                "storey_residuals": modal.get("storey_residuals") or [],
+                "start": json.loads((run / "data_start.json").read_text()).get("method")
+                if (run / "data_start.json").exists()
+                else None,
+                "run_dir": str(run),
+            }
+        )
     return rows
 
 
@@ -169,11 +226,20 @@ def alignment_rows(base: Path) -> list[dict]:
         al = (ml.get("record_meta") or {}).get("alignment") or {}
         fl = json.loads((lag / "modal.json").read_text())["modes"][0]
         fc = json.loads((clock / "modal.json").read_text())["modes"][0]
-        out.append({"model": model, "run": ident, "lags_ms": al.get("lag_ms"), "correlation": al.get("lag_correlation"),
-                    "lag_heldout": (ml.get("heldout") or {}).get("mean_nrmse_a"),
-                    "clock_heldout": (mc.get("heldout") or {}).get("mean_nrmse_a"),
-                    "lag_f": fl["frequency_hz"], "lag_zeta": fl["damping_ratio"],
-                    "clock_f": fc["frequency_hz"], "clock_zeta": fc["damping_ratio"]})
+        out.append(
+            {
+                "model": model,
+                "run": ident,
+                "lags_ms": al.get("lag_ms"),
+                "correlation": al.get("lag_correlation"),
+                "lag_heldout": (ml.get("heldout") or {}).get("mean_nrmse_a"),
+                "clock_heldout": (mc.get("heldout") or {}).get("mean_nrmse_a"),
+                "lag_f": fl["frequency_hz"],
+                "lag_zeta": fl["damping_ratio"],
+                "clock_f": fc["frequency_hz"],
+                "clock_zeta": fc["damping_ratio"],
+            }
+        )
     return out
 
 
@@ -194,7 +260,9 @@ def prediction_figure(model: str, ident_run: Path, label: str, path: Path) -> No
     fig, ax = plt.subplots(figsize=(10, 3.2))
     ax.plot(rec.t, rec.a[:, n - 1] + rec.f, lw=0.6, label="measured")
     ax.plot(rec.t, sim["a"][:, n - 1] + rec.f, lw=0.6, label=f"identified on {MODELS[model][1]}, simulated")
-    ax.set(xlabel="t (s)", ylabel=f"floor {n} acceleration (m/s^2)", title=f"{model}: run '{label}' predicted")
+    ax.set(
+        xlabel="t (s)", ylabel=f"floor {n} acceleration (m/s^2)", title=f"{model}: run '{label}' predicted"
+    )
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -217,16 +285,31 @@ def aggregate(base: Path) -> None:
         others = [r for r in run_labels(MODELS_DIR / model) if r != ident]
         preds += predict_runs(model, ident_run, others)
         if others:
-            prediction_figure(model, ident_run, others[0], RESULTS / "figures" / f"shake_table_prediction_{slug(model)}.png")
+            prediction_figure(
+                model, ident_run, others[0], RESULTS / "figures" / f"shake_table_prediction_{slug(model)}.png"
+            )
     with (RESULTS / "shake_table_runs.csv").open("w", newline="") as fh:
-        keys = ["model", "run", "frequency_hz", "frequency_ci95", "damping_ratio", "damping_ci95", "heldout_mean",
-                "srim_heldout_mean", "srim_fundamental_hz", "wall_s"]
+        keys = [
+            "model",
+            "run",
+            "frequency_hz",
+            "frequency_ci95",
+            "damping_ratio",
+            "damping_ci95",
+            "heldout_mean",
+            "srim_heldout_mean",
+            "srim_fundamental_hz",
+            "wall_s",
+        ]
         w = csv.DictWriter(fh, keys, extrasaction="ignore")
         w.writeheader()
         w.writerows(runs)
     if preds:
         with (RESULTS / "shake_table_predictions.csv").open("w", newline="") as fh:
-            keys = sorted({k for r in preds for k in r}, key=lambda k: (k not in ("model", "identified_on", "predicted_run"), k))
+            keys = sorted(
+                {k for r in preds for k in r},
+                key=lambda k: (k not in ("model", "identified_on", "predicted_run"), k),
+            )
             w = csv.DictWriter(fh, keys)
             w.writeheader()
             w.writerows(preds)
@@ -235,60 +318,89 @@ def aggregate(base: Path) -> None:
 
 
 def report_lines(runs: list[dict], preds: list[dict], align: list[dict]) -> list[str]:
-    out = ["# Mini shake table: three building models measured by wearable IMUs", "",
-           "Data: `data/mini_shake_table` (Xsens DOT at 120 Hz, one on the table and one per floor; see its README). "
-           "Model: a shear building with viscous storey dampers, masses unknown (floor 1's is the unit), "
-           "`python train.py experiment=shake_table`; every run split 65 % fitted / 35 % held out. "
-           "Peer: mdof's SRIM on the same fitting part (orders 2n to 2n+4, the best stable one).", "",
-           "## Every run: the fundamental mode with its 95 % interval", "",
-           "| model | run | f1 (Hz) | 95 % | zeta1 (%) | 95 % | vs the identification run | held-out NRMSE (mean of floors) | SRIM's | SRIM f1 (Hz) | wall (s) |",
-           "|---|---|---|---|---|---|---|---|---|---|---|"]
+    out = [
+        "# Mini shake table: three building models measured by wearable IMUs",
+        "",
+        "Data: `data/mini_shake_table` (Xsens DOT at 120 Hz, one on the table and one per floor; see its README). "
+        "Model: a shear building with viscous storey dampers, masses unknown (floor 1's is the unit), "
+        "`python train.py experiment=shake_table`; every run split 65 % fitted / 35 % held out. "
+        "Peer: mdof's SRIM on the same fitting part (orders 2n to 2n+4, the best stable one).",
+        "",
+        "## Every run: the fundamental mode with its 95 % interval",
+        "",
+        "| model | run | f1 (Hz) | 95 % | zeta1 (%) | 95 % | vs the identification run | held-out NRMSE (mean of floors) | SRIM's | SRIM f1 (Hz) | wall (s) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for model, (_, ident) in MODELS.items():
         rows = [r for r in runs if r["model"] == model]
         ref = next((r["frequency_hz"] for r in rows if r["run"] == ident), None)
         for r in rows:
             dev = None if ref is None or r["frequency_hz"] is None else r["frequency_hz"] / ref - 1
             z, zci = r["damping_ratio"], r["damping_ci95"] or [None, None]
-            out.append(f"| {model} | {r['run']} | {_fmt(r['frequency_hz'])} | {_ci(r['frequency_ci95'])} | "
-                       f"{_fmt(None if z is None else 100 * z, '.2f')} | "
-                       f"{_ci(None if zci[0] is None else [100 * zci[0], 100 * zci[1]], '.2f')} | "
-                       f"{'n/a' if dev is None else f'{100 * dev:+.1f} %'}{'' if dev is None or abs(dev) <= AGREE else ' (beyond 5 %)'} | "
-                       f"{_fmt(r['heldout_mean'])} | {_fmt(r['srim_heldout_mean'])} | {_fmt(r['srim_fundamental_hz'])} | "
-                       f"{_fmt(r['wall_s'], '.0f')} |")
+            out.append(
+                f"| {model} | {r['run']} | {_fmt(r['frequency_hz'])} | {_ci(r['frequency_ci95'])} | "
+                f"{_fmt(None if z is None else 100 * z, '.2f')} | "
+                f"{_ci(None if zci[0] is None else [100 * zci[0], 100 * zci[1]], '.2f')} | "
+                f"{'n/a' if dev is None else f'{100 * dev:+.1f} %'}{'' if dev is None or abs(dev) <= AGREE else ' (beyond 5 %)'} | "
+                f"{_fmt(r['heldout_mean'])} | {_fmt(r['srim_heldout_mean'])} | {_fmt(r['srim_fundamental_hz'])} | "
+                f"{_fmt(r['wall_s'], '.0f')} |"
+            )
     if preds:
-        out += ["", "## Identified on one run, the others predicted (simulated from rest from their table motion)", "",
-                "NRMSE of the absolute floor accelerations over the whole run, per floor (floor 1 first).", "",
-                "| model | identified on | predicted run | pidyn per floor | pidyn mean | SRIM per floor | SRIM mean |",
-                "|---|---|---|---|---|---|---|"]
+        out += [
+            "",
+            "## Identified on one run, the others predicted (simulated from rest from their table motion)",
+            "",
+            "NRMSE of the absolute floor accelerations over the whole run, per floor (floor 1 first).",
+            "",
+            "| model | identified on | predicted run | pidyn per floor | pidyn mean | SRIM per floor | SRIM mean |",
+            "|---|---|---|---|---|---|---|",
+        ]
         for p in preds:
             n = len([k for k in p if k.startswith("pidyn_a")])
             ours = ", ".join(_fmt(p[f"pidyn_a{j + 1}"]) for j in range(n))
             theirs = ", ".join(_fmt(p[f"srim_a{j + 1}"]) for j in range(n))
-            out.append(f"| {p['model']} | {p['identified_on']} | {p['predicted_run']} | {ours} | "
-                       f"{_fmt(p['pidyn_mean'])} | {theirs} | {_fmt(p['srim_mean'])} |")
+            out.append(
+                f"| {p['model']} | {p['identified_on']} | {p['predicted_run']} | {ours} | "
+                f"{_fmt(p['pidyn_mean'])} | {theirs} | {_fmt(p['srim_mean'])} |"
+            )
     resid = [r for r in runs if r["run"] == MODELS[r["model"]][1] and r["storey_residuals"]]
     if resid:
         shapes = list(resid[0]["storey_residuals"][0]["explained_by"])
-        out += ["", "## What the shear model leaves of each storey's force (identification run, held-out part)", "",
-                "F_i = -sum_(j>=i) m_j a_j from the floors' accelerations against the identified storey force on the "
-                "integrated drifts (`building.md` of each run); the share of the residual each simple force shape "
-                "would explain says where to look.", "",
-                "| model | storey | residual / force (RMS) | residual's peak (Hz) | " + " | ".join(shapes) + " |",
-                "|---|---|---|---|" + "---|" * len(shapes)]
+        out += [
+            "",
+            "## What the shear model leaves of each storey's force (identification run, held-out part)",
+            "",
+            "F_i = -sum_(j>=i) m_j a_j from the floors' accelerations against the identified storey force on the "
+            "integrated drifts (`building.md` of each run); the share of the residual each simple force shape "
+            "would explain says where to look.",
+            "",
+            "| model | storey | residual / force (RMS) | residual's peak (Hz) | " + " | ".join(shapes) + " |",
+            "|---|---|---|---|" + "---|" * len(shapes),
+        ]
         for r in resid:
             for q in r["storey_residuals"]:
-                out.append(f"| {r['model']} | {q['storey']} | {q['residual_share']:.3f} | {q['residual_peak_hz']:.2f} | "
-                           + " | ".join(f"{q['explained_by'][k]:.2f}" for k in shapes) + " |")
+                out.append(
+                    f"| {r['model']} | {q['storey']} | {q['residual_share']:.3f} | {q['residual_peak_hz']:.2f} | "
+                    + " | ".join(f"{q['explained_by'][k]:.2f}" for k in shapes)
+                    + " |"
+                )
     if align:
-        out += ["", "## The sensors' timing", "",
-                "Each floor's lag against the table where the floor moves with it (0.2-2 Hz), after the sensors' shared "
-                "clock; `align=lag` (the default) moves each floor by it, `align=clock` keeps the clock as it is.", "",
-                "| model | run | lags (ms, table first) | f1 lag / clock (Hz) | zeta1 lag / clock (%) | held-out NRMSE lag / clock |",
-                "|---|---|---|---|---|---|"]
+        out += [
+            "",
+            "## The sensors' timing",
+            "",
+            "Each floor's lag against the table where the floor moves with it (0.2-2 Hz), after the sensors' shared "
+            "clock; `align=lag` (the default) moves each floor by it, `align=clock` keeps the clock as it is.",
+            "",
+            "| model | run | lags (ms, table first) | f1 lag / clock (Hz) | zeta1 lag / clock (%) | held-out NRMSE lag / clock |",
+            "|---|---|---|---|---|---|",
+        ]
         for a in align:
-            out.append(f"| {a['model']} | {a['run']} | {', '.join(f'{v:.1f}' for v in a['lags_ms'] or [])} | "
-                       f"{a['lag_f']:.3f} / {a['clock_f']:.3f} | {100 * a['lag_zeta']:.2f} / {100 * a['clock_zeta']:.2f} | "
-                       f"{_fmt(a['lag_heldout'])} / {_fmt(a['clock_heldout'])} |")
+            out.append(
+                f"| {a['model']} | {a['run']} | {', '.join(f'{v:.1f}' for v in a['lags_ms'] or [])} | "
+                f"{a['lag_f']:.3f} / {a['clock_f']:.3f} | {100 * a['lag_zeta']:.2f} / {100 * a['clock_zeta']:.2f} | "
+                f"{_fmt(a['lag_heldout'])} / {_fmt(a['clock_heldout'])} |"
+            )
     return out
 
 

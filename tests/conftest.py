@@ -36,5 +36,10 @@ def _clean_state():
 
 def make_cfg(overrides: list[str], out: Path | None = None, config_name: str = "train") -> DictConfig:
     """Compose ``conf/<config_name>.yaml`` as ``python <config_name>.py <overrides>`` would."""
-    return compose(config_name, overrides=overrides, output_dir=out, root_dir=ROOT,
-                   values={"trainer.enable_progress_bar": False, "raise_errors": True})
+    return compose(
+        config_name,
+        overrides=overrides,
+        output_dir=out,
+        root_dir=ROOT,
+        values={"trainer.enable_progress_bar": False, "raise_errors": True},
+    )

@@ -13,14 +13,42 @@ import aggregate  # noqa: E402
 
 def job(d: Path, seed: int, k3: float, ukf_err: float) -> None:
     d.mkdir(parents=True)
-    (d / "metrics.json").write_text(json.dumps({
-        "system": "duffing", "record": "kobe", "noise": 0.05, "batch_size": 500, "eq_scale": 1.0, "seed": seed,
-        "params": {"k3": k3}, "truth": {"k3": 120.0}, "error_pct": {"k3": abs(k3 - 120) / 1.2}, "wall_seconds": 10.0}))
-    (d / "baselines.json").write_text(json.dumps({"baselines": [
-        {"method": "ukf", "params": {"k3": 0.0}, "error_pct": {"k3": ukf_err}, "seconds": 1.0,
-         "trajectory": [{"t": 0.1 * i, "k3": 100.0 + i} for i in range(30)]}]}))
-    (d / "subperiod_state.json").write_text(json.dumps({"trajectory": [
-        {"iteration": 10 * i, "t": 0.2 * i, "k3": 110.0 + 0.1 * i} for i in range(20)]}))
+    (d / "metrics.json").write_text(
+        json.dumps(
+            {
+                "system": "duffing",
+                "record": "kobe",
+                "noise": 0.05,
+                "batch_size": 500,
+                "eq_scale": 1.0,
+                "seed": seed,
+                "params": {"k3": k3},
+                "truth": {"k3": 120.0},
+                "error_pct": {"k3": abs(k3 - 120) / 1.2},
+                "wall_seconds": 10.0,
+            }
+        )
+    )
+    (d / "baselines.json").write_text(
+        json.dumps(
+            {
+                "baselines": [
+                    {
+                        "method": "ukf",
+                        "params": {"k3": 0.0},
+                        "error_pct": {"k3": ukf_err},
+                        "seconds": 1.0,
+                        "trajectory": [{"t": 0.1 * i, "k3": 100.0 + i} for i in range(30)],
+                    }
+                ]
+            }
+        )
+    )
+    (d / "subperiod_state.json").write_text(
+        json.dumps(
+            {"trajectory": [{"iteration": 10 * i, "t": 0.2 * i, "k3": 110.0 + 0.1 * i} for i in range(20)]}
+        )
+    )
     (d / "cramer_rao.json").write_text(json.dumps({"std_pct": {"k3": 0.1}}))
 
 
@@ -30,8 +58,14 @@ def test_aggregate_means_rms_and_failed_jobs(tmp_path):
     (tmp_path / "2_seed=2").mkdir()  # a failed job: no metrics.json
     for d in ("0_seed=0", "1_seed=1"):  # a baseline that cannot apply: no error, no seconds, its reason shown
         b = json.loads((tmp_path / d / "baselines.json").read_text())
-        b["baselines"].append({"method": "equation_error", "params": {}, "seconds": 0.0,
-                               "note": "not applicable: unmeasured latent state"})
+        b["baselines"].append(
+            {
+                "method": "equation_error",
+                "params": {},
+                "seconds": 0.0,
+                "note": "not applicable: unmeasured latent state",
+            }
+        )
         (tmp_path / d / "baselines.json").write_text(json.dumps(b))
     df, failed = aggregate.aggregate(tmp_path)
     row = df.iloc[0]
@@ -62,8 +96,10 @@ def test_aggregate_joins_sweeps_reads_stretch_from_config_and_summarises(tmp_pat
     assert "(stretch 1.5)" in md and "(stretch 1)" in md
     summary = md.split("## Summary, duffing")[1].split("\n## ")[0]
     rows = [r for r in summary.splitlines() if r.startswith("| kobe")]
-    assert rows == ["| kobe | 1 | 1 | 5 | 500 | 1 | 1 / - / - / 3 (0.1) |",
-                    "| kobe | 1 | 1.5 | 5 | 500 | 1 | 5 / - / - / 6 (0.1) |"]
+    assert rows == [
+        "| kobe | 1 | 1 | 5 | 500 | 1 | 1 / - / - / 3 (0.1) |",
+        "| kobe | 1 | 1.5 | 5 | 500 | 1 | 5 / - / - / 6 (0.1) |",
+    ]
     one, _ = aggregate.aggregate(a)
     assert "## Summary" not in aggregate.to_markdown(one, "t", "cmd", [])
 
@@ -75,8 +111,14 @@ def test_refined_runs_give_the_refinement_column_and_interval_coverage(tmp_path)
         d = tmp_path / f"{seed}_seed={seed}"
         job(d, seed, k3, 3.0)
         m = json.loads((d / "metrics.json").read_text())
-        m.update({"refine": "multiple_shooting", "pidynnet": {"params": {"k3": 126.0}, "error_pct": {"k3": 5.0}},
-                  "ci95": {"k3": ci}, "refinement": {"seconds": 4.0}})
+        m.update(
+            {
+                "refine": "multiple_shooting",
+                "pidynnet": {"params": {"k3": 126.0}, "error_pct": {"k3": 5.0}},
+                "ci95": {"k3": ci},
+                "refinement": {"seconds": 4.0},
+            }
+        )
         (d / "metrics.json").write_text(json.dumps(m))
     df, _ = aggregate.aggregate(tmp_path)
     row = df.iloc[0]
@@ -90,8 +132,21 @@ def test_aggregate_draws_figure_3_per_cell_and_links_it(tmp_path):
     job(tmp_path / "sweep" / "0_seed=0", 0, 121.2, 3.0)
     job(tmp_path / "sweep" / "1_seed=1", 1, 118.8, 4.0)
     out = tmp_path / "results" / "table9"
-    r = subprocess.run([sys.executable, "experiments/aggregate.py", str(tmp_path / "sweep"), "--out", str(out),
-                        "--title", "t"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "experiments/aggregate.py",
+            str(tmp_path / "sweep"),
+            "--out",
+            str(out),
+            "--title",
+            "t",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     (png,) = (tmp_path / "results" / "figures").glob("table9_*.png")
     assert png.name == "table9_duffing_kobe_x1_stretch1_noise5_batch500.png"
@@ -106,8 +161,13 @@ def test_aggregate_draws_figure_3_per_cell_and_links_it(tmp_path):
 
 @pytest.mark.slow
 def test_tables_smoke_runs_a_multirun_and_aggregates(tmp_path):
-    r = subprocess.run([sys.executable, "experiments/run_tables.py", "--smoke", "--only", "table2", "--jobs", "1"],
-                       cwd=ROOT, capture_output=True, text=True, timeout=900)
+    r = subprocess.run(
+        [sys.executable, "experiments/run_tables.py", "--smoke", "--only", "table2", "--jobs", "1"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     mds = sorted((ROOT / "outputs" / "tables-smoke").glob("*/table2.md"))
     assert mds and "| beta |" in mds[-1].read_text()
@@ -119,8 +179,18 @@ def test_submitit_launcher_runs_a_multirun_locally(tmp_path):
     SLURM node), each job in its own process and folder."""
     pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
     root = Path(__file__).resolve().parents[1]
-    cmd = [sys.executable, "train.py", "-m", "hydra/launcher=submitit_local", "debug=smoke", "logger=none",
-           "baselines=none", "seed=0,1", f"hydra.sweep.dir={tmp_path}", "hydra.launcher.timeout_min=10"]
+    cmd = [
+        sys.executable,
+        "train.py",
+        "-m",
+        "hydra/launcher=submitit_local",
+        "debug=smoke",
+        "logger=none",
+        "baselines=none",
+        "seed=0,1",
+        f"hydra.sweep.dir={tmp_path}",
+        "hydra.launcher.timeout_min=10",
+    ]
     proc = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     jobs = sorted(p for p in tmp_path.iterdir() if (p / "metrics.json").exists())

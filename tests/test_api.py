@@ -25,12 +25,15 @@ def test_public_surface_is_listed_and_loads():
         pidyn.not_a_name  # noqa: B018
 
 
-@pytest.mark.parametrize("options, message", [
-    ({"system": "dufing"}, "did you mean 'duffing'"),
-    ({"model__schedule__max_windowz": 3}, "did you mean 'model.schedule.max_windows'"),
-    ({"refine": "multiple"}, "choose from multiple_shooting, none"),
-    ({"sytem__params__k3__init": 1.0}, "did you mean 'system'"),
-])
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        ({"system": "dufing"}, "did you mean 'duffing'"),
+        ({"model__schedule__max_windowz": 3}, "did you mean 'model.schedule.max_windows'"),
+        ({"refine": "multiple"}, "choose from multiple_shooting, none"),
+        ({"sytem__params__k3__init": 1.0}, "did you mean 'system'"),
+    ],
+)
 def test_a_misspelled_option_names_the_valid_ones(options, message, tmp_path):
     record = pidyn.Record.simulate("duffing", duration=5.0)
     with pytest.raises(ValueError, match=message):
@@ -64,7 +67,11 @@ def test_identify_returns_a_result_a_notebook_can_use(tmp_path):
     assert "x^3" in res.equation and len(res.history) > 0
     assert res.plot() is not None
     saved = res.save(tmp_path / "copy")
-    assert (saved / "params.csv").exists() and (saved / "history.csv").exists() and (saved / "metrics.json").exists()
+    assert (
+        (saved / "params.csv").exists()
+        and (saved / "history.csv").exists()
+        and (saved / "metrics.json").exists()
+    )
     again = pidyn.Result.load(saved)
     assert again.params == res.params and again.ci95 == res.ci95
     with pytest.raises(ValueError, match="networks of an identification run"):
@@ -76,8 +83,13 @@ def test_identify_returns_a_result_a_notebook_can_use(tmp_path):
 @pytest.mark.slow
 def test_walkthrough_example_runs(tmp_path):
     """examples/api_walkthrough.py --quick: identification, prediction and diagnosis through the API."""
-    run = subprocess.run([sys.executable, str(ROOT / "examples" / "api_walkthrough.py"), "--quick", "--out",
-                          str(tmp_path)], cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    run = subprocess.run(
+        [sys.executable, str(ROOT / "examples" / "api_walkthrough.py"), "--quick", "--out", str(tmp_path)],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     assert "verdict: discrepancy, causes ['quadratic_damping']" in run.stdout, run.stdout[-2000:]
     assert (tmp_path / "duffing_saved" / "params.csv").exists()

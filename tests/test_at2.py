@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from pidyn.excitation import G, SHIPPED, AT2FormatError, load_record, prepare, read_at2, record_index
+from pidyn.excitation import SHIPPED, AT2FormatError, G, load_record, prepare, read_at2, record_index
 
 HEADER = "PEER NGA STRONG MOTION DATABASE RECORD\nTest, 1/1/2000, Station, 000\nACCELERATION TIME SERIES IN UNITS OF G\n"
 
@@ -22,7 +22,9 @@ def test_every_shipped_record_parses(name):
 
 
 def test_good_file(tmp_path):
-    p = write(tmp_path, HEADER + "NPTS=    6, DT=   .0100 SEC,\n .1E-01 -.2E-01 .3E-01\n .0 1.0E-2 -5.0E-03\n")
+    p = write(
+        tmp_path, HEADER + "NPTS=    6, DT=   .0100 SEC,\n .1E-01 -.2E-01 .3E-01\n .0 1.0E-2 -5.0E-03\n"
+    )
     rec = read_at2(p)
     assert rec.dt == 0.01 and rec.acc_g.tolist() == [0.01, -0.02, 0.03, 0.0, 0.01, -0.005]
 
@@ -79,7 +81,9 @@ def test_arias_onset_and_start():
     assert gm.arias_time(0.05) == pytest.approx(3.04, abs=0.011)
     assert gm.arias_time(0.95) == pytest.approx(3.94, abs=0.011)
     cut = gm.starting_at(2.5)
-    assert cut.duration == pytest.approx(7.5) and cut.arias_time(0.05) == pytest.approx(gm.arias_time(0.05) - 2.5)
+    assert cut.duration == pytest.approx(7.5) and cut.arias_time(0.05) == pytest.approx(
+        gm.arias_time(0.05) - 2.5
+    )
     with pytest.raises(ValueError, match="past its end"):
         gm.starting_at(20.0)
     # Chi-Chi TCU078 is nearly silent for its first 20 s: the strong motion starts after 20 s

@@ -21,7 +21,9 @@ def errors(res, truth):
 def test_fast_simulator_matches_solve_ivp():
     for s, rec in [(Duffing(), "kobe"), (BoucWen(), "el_centro")]:
         r = synthetic(s, rec, duration=10.0, dt=0.01)
-        out = simulate_batch(s, {k: np.array([v, v]) for k, v in s.true_values().items()}, r.t, r.f, substeps=4)
+        out = simulate_batch(
+            s, {k: np.array([v, v]) for k, v in s.true_values().items()}, r.t, r.f, substeps=4
+        )
         assert np.abs(out["x"][:, 1] - r.x[:, 0]).max() < 1e-5 * np.abs(r.x).max()
         if s.n_latent:
             assert np.abs(out["z"][:, 1, 0] - r.clean.z[:, 0]).max() < 1e-5 * np.abs(r.clean.z).max()

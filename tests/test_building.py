@@ -9,11 +9,11 @@ import torch
 from pidyn.baselines import cramer_rao, unscented_kalman_filter
 from pidyn.data.sources import Record, synthetic
 from pidyn.data.windows import make_windows
-from pidyn.nets import TaylorMLP
+from pidyn.excitation import prepare
 from pidyn.models.pidynnet import PIDynNet
+from pidyn.nets import TaylorMLP
 from pidyn.refine import RefineSettings, refine
 from pidyn.simulate import simulate
-from pidyn.excitation import prepare
 from pidyn.systems import ShearBuilding
 from pidyn.systems.base import Kinematics
 from pidyn.systems.modal import compare_modes, modal_properties
@@ -44,8 +44,11 @@ def test_parameters_carry_their_storey_and_guesses_apply_to_every_storey():
         ShearBuilding(guess={"kk": 1.0})
 
 
-@pytest.mark.parametrize("system", [five_storey(), ShearBuilding(storey_terms={2: {"term": "cubic_stiffness", "k3": 5e3}})],
-                         ids=["bouc_wen_storey", "cubic_storey"])
+@pytest.mark.parametrize(
+    "system",
+    [five_storey(), ShearBuilding(storey_terms={2: {"term": "cubic_stiffness", "k3": 5e3}})],
+    ids=["bouc_wen_storey", "cubic_storey"],
+)
 def test_torch_residual_and_numpy_rate_are_one_equation(system):
     """The residual vanishes on a solve_ivp trajectory: the same code serves the loss and the
     simulation (the dual-array rate against finite differences: ``test_refine.py``)."""
@@ -56,13 +59,19 @@ def test_torch_residual_and_numpy_rate_are_one_equation(system):
     y = np.concatenate([tr.x, tr.v] + ([tr.z] if tr.z is not None else []), axis=1)
     rate = system.state_rate(tr.t, y, p, tr.f)
     T = lambda a: torch.tensor(a, dtype=torch.float64)  # noqa: E731
-    k = Kinematics(T(tr.t), T(tr.x), T(tr.v), T(rate[:, n:2 * n]), None if tr.z is None else T(tr.z),
-                   None if tr.z is None else T(rate[:, 2 * n:]))
+    k = Kinematics(
+        T(tr.t),
+        T(tr.x),
+        T(tr.v),
+        T(rate[:, n : 2 * n]),
+        None if tr.z is None else T(tr.z),
+        None if tr.z is None else T(rate[:, 2 * n :]),
+    )
     res = system.residual(k, T(tr.f), {a: torch.tensor(b, dtype=torch.float64) for a, b in p.items()})
     assert res["motion"].shape == (len(tr.t), n)
     for name, r in res.items():
         assert float(r.abs().max()) < 1e-9, name
-    assert np.abs(rate[:, n:2 * n] - tr.a).max() < 1e-9
+    assert np.abs(rate[:, n : 2 * n] - tr.a).max() < 1e-9
 
 
 def test_modal_properties_match_closed_forms():
@@ -85,8 +94,16 @@ def test_modal_properties_match_closed_forms():
 
 def test_accelerometers_on_some_floors_measure_absolute_acceleration_with_its_own_noise():
     sb = five_storey()
-    r = synthetic(sb, "el_centro", eq_scale=3.0, duration=8.0, noise={"a": 0.02, "x": 0.0}, channels=("a", "x"),
-                  sensors=[1, 3, 5], data_seed=4)
+    r = synthetic(
+        sb,
+        "el_centro",
+        eq_scale=3.0,
+        duration=8.0,
+        noise={"a": 0.02, "x": 0.0},
+        channels=("a", "x"),
+        sensors=[1, 3, 5],
+        data_seed=4,
+    )
     assert r.sensors() == {"x": [1, 3, 5], "a": [1, 3, 5]} and r.x is not None
     assert np.all(np.isnan(r.a[:, [1, 3]])) and not np.isnan(r.a[:, [0, 2, 4]]).any()
     absolute = r.clean.a[:, 4] + r.f
@@ -107,7 +124,9 @@ def test_refinement_recovers_a_building_from_floor_accelerations_to_solver_preci
     sb = ShearBuilding()
     r = synthetic(sb, "el_centro", duration=10.0, channels=("a",), sensors=[1, 3])
     truth = sb.true_values()
-    start = {n: v * (1.2 if i % 2 else 0.8) for i, (n, v) in enumerate(truth.items()) if not n.startswith("m")}
+    start = {
+        n: v * (1.2 if i % 2 else 0.8) for i, (n, v) in enumerate(truth.items()) if not n.startswith("m")
+    }
     res = refine(sb, r, {"start": start}, RefineSettings(states="integrated", segment_length=2.0))
     for n, v in res.params.items():
         assert v == pytest.approx(truth[n], rel=2e-5), n  # RK4 (4 substeps) against solve_ivp
@@ -133,15 +152,13 @@ def test_pidynnet_pins_the_drift_that_accelerations_leave_free():
     torch.manual_seed(0)
     sb = ShearBuilding()
     r = synthetic(sb, "el_centro", duration=6.0, channels=("a",))
-    w = make_windows(r.t, r.f, None, None, r.a, 3.0, 400, dtype=torch.float64,
-                     accel_signal=r.f)[1]
+    w = make_windows(r.t, r.f, None, None, r.a, 3.0, 400, dtype=torch.float64, accel_signal=r.f)[1]
     net = PIDynNet(sb, TaylorMLP(out_features=3, width=8, depth=1, n_fourier=1)).double()
     net.enter_window(w)
     assert net.use_drift
     # a stand-in for a perfectly pretrained network: the true y = x + q plus a drift
     clean = r.clean
     tp = w.t_pool.numpy()
-    q, qd = w.q_pool.numpy(), w.qd_pool.numpy()
     x = np.stack([np.interp(tp, clean.t, clean.x[:, j]) for j in range(3)], 1)
     v = np.stack([np.interp(tp, clean.t, clean.v[:, j]) for j in range(3)], 1)
     a = np.stack([np.interp(tp, clean.t, clean.a[:, j]) for j in range(3)], 1)
@@ -152,7 +169,9 @@ def test_pidynnet_pins_the_drift_that_accelerations_leave_free():
         d = net.scale_x * (net.drift[0] + net.drift[1] * torch.as_tensor(tau)[:, None])
         dv = net.scale_x * net.drift[1] / net.rpn.t_half
         T = lambda z: torch.as_tensor(z)  # noqa: E731
-        return Kinematics(T(tp), T(x + drift) + d, T(v + drift[:, 1:2] * 0 + np.gradient(drift, tp, axis=0)) + dv, T(a))
+        return Kinematics(
+            T(tp), T(x + drift) + d, T(v + drift[:, 1:2] * 0 + np.gradient(drift, tp, axis=0)) + dv, T(a)
+        )
 
     net.kinematics = fake
     net.use_drift = False  # the solve sees the networks alone
@@ -162,7 +181,6 @@ def test_pidynnet_pins_the_drift_that_accelerations_leave_free():
         assert v_ == pytest.approx(truth[n], rel=2e-2), n
     recovered = (net.scale_x * net.drift[0]).detach().numpy()
     assert np.allclose(recovered, -np.array([0.02, -0.01, 0.03]), atol=2e-3)
-
 
 
 @pytest.mark.slow
@@ -184,19 +202,38 @@ def test_a_users_accelerometer_file_identifies_a_two_storey_building(tmp_path):
     csv = tmp_path / "floors.csv"
     pd.DataFrame({"t": r.t, "ag": r.f, "a1": r.a[:, 0] + r.f, "a2": r.a[:, 1] + r.f}).to_csv(csv, index=False)
     root = Path(__file__).resolve().parents[1]
-    run = subprocess.run([sys.executable, str(root / "train.py"), "system=shear_building", "system.n_storeys=2",
-                          "system.masses=[1.0,1.0]", "data=csv", f"data.path={csv}", "hydra.run.dir=run",
-                          "logger=none", "baselines=none", "model.schedule.max_windows=2",
-                          "model.schedule.max_iters=500", "model.schedule.pretrain_iters=300",
-                          "model.schedule.pretrain_iters_window=300"],
-                         cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    run = subprocess.run(
+        [
+            sys.executable,
+            str(root / "train.py"),
+            "system=shear_building",
+            "system.n_storeys=2",
+            "system.masses=[1.0,1.0]",
+            "data=csv",
+            f"data.path={csv}",
+            "hydra.run.dir=run",
+            "logger=none",
+            "baselines=none",
+            "model.schedule.max_windows=2",
+            "model.schedule.max_iters=500",
+            "model.schedule.pretrain_iters=300",
+            "model.schedule.pretrain_iters_window=300",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
     ident = yaml.safe_load((tmp_path / "run" / "identified_params.yaml").read_text())
     truth = sb.true_values()
     assert set(metrics["params"]) == {"c1", "k1", "c2", "k2"}
     for n in ("k1", "k2"):
-        assert abs(metrics["pidynnet"]["params"][n] / truth[n] - 1) < 0.05, (n, metrics["pidynnet"]["params"][n])
+        assert abs(metrics["pidynnet"]["params"][n] / truth[n] - 1) < 0.05, (
+            n,
+            metrics["pidynnet"]["params"][n],
+        )
     for n, v in metrics["params"].items():
         lo, hi = ident["params"][n]["ci95"]
         assert lo < v < hi

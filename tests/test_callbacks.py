@@ -53,7 +53,9 @@ def test_clamp_box_opens_for_a_parameter_the_windows_did_not_determine():
     flat = torch.tensor([[0.5, 50.0]] * 5)
     clamp.update_from_trajectory(["c", "k3"], flat, {"c": 0.5, "k3": 50.0}, {"c": 1e-4, "k3": 2.0}, specs)
     lo, hi = clamp.bounds["k3"]
-    assert lo == pytest.approx(50.0 * math.exp(-6.0), rel=1e-6) and hi == pytest.approx(50.0 * math.exp(6.0), rel=1e-6)
+    assert lo == pytest.approx(50.0 * math.exp(-6.0), rel=1e-6) and hi == pytest.approx(
+        50.0 * math.exp(6.0), rel=1e-6
+    )
     assert clamp.bounds["c"] == pytest.approx((0.475, 0.525))  # the floor; 3 x 1e-4 in log c is inside it
     m.net.params.set_values({"c": 0.5, "k3": 400.0})
     assert clamp.apply(m) == 0  # the truth of k3 is reachable

@@ -6,10 +6,9 @@ from pathlib import Path
 
 import hydra
 import pytest
+from conftest import CONF, make_cfg
 from hydra.errors import ConfigCompositionException
 from omegaconf.errors import ConfigAttributeError
-
-from conftest import CONF, make_cfg
 
 SYSTEMS = sorted(p.stem for p in (Path(CONF) / "system").glob("*.yaml"))
 EXPERIMENTS = sorted(p.stem for p in (Path(CONF) / "experiment").glob("*.yaml"))
@@ -49,9 +48,15 @@ def test_config_typos_fail_loudly(bad, tmp_path):
         make_cfg([bad], tmp_path)
 
 
-@pytest.mark.parametrize("overrides", [[], ["data=silverbox", "system=linear"],
-                                       ["data=bouc_wen_benchmark", "system=linear"],
-                                       ["data=csv", "data.path=x.csv", "data.mass=2.0"]])
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        [],
+        ["data=silverbox", "system=linear"],
+        ["data=bouc_wen_benchmark", "system=linear"],
+        ["data=csv", "data.path=x.csv", "data.mass=2.0"],
+    ],
+)
 def test_diagnose_configs_compose(overrides, tmp_path):
     cfg = make_cfg(overrides, tmp_path, config_name="diagnose")
     assert cfg.task_name == "diagnose" and cfg.diagnosis.thresholds.min_delta_bic > 0
@@ -65,7 +70,9 @@ def test_diagnose_configs_compose(overrides, tmp_path):
 def test_a_misspelled_schedule_option_names_the_valid_ones(tmp_path):
     from pidyn.tasks.train import train
 
-    for over, word in (("model.schedule.fusion=informaton", "information, last"),
-                       ("model.schedule.ls_init=frist", "none, first, every")):
+    for over, word in (
+        ("model.schedule.fusion=informaton", "information, last"),
+        ("model.schedule.ls_init=frist", "none, first, every"),
+    ):
         with pytest.raises(ValueError, match=word):
             train(make_cfg(["debug=smoke", "logger=none", "baselines=none", over], tmp_path))

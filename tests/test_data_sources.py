@@ -13,7 +13,9 @@ def write(tmp_path, text):
 
 def good_rows(n=20, dt=0.01):
     t = np.arange(n) * dt
-    return "t,x,v,ag\n" + "\n".join(f"{a:.4f},{np.sin(a):.6f},{np.cos(a):.6f},{0.1*a:.6f}" for a in t) + "\n"
+    return (
+        "t,x,v,ag\n" + "\n".join(f"{a:.4f},{np.sin(a):.6f},{np.cos(a):.6f},{0.1 * a:.6f}" for a in t) + "\n"
+    )
 
 
 def test_good_csv(tmp_path):

@@ -12,14 +12,16 @@ import copy
 
 import pytest
 import torch
-
 from conftest import make_cfg
+
 from pidyn.tasks.train import build_run
 
 
 @pytest.fixture(scope="module", params=["duffing", "bouc_wen", "shear_building"])
 def built(request, tmp_path_factory):
-    return build_run(make_cfg([f"system={request.param}", "debug=smoke"], tmp_path_factory.mktemp("run")), None)
+    return build_run(
+        make_cfg([f"system={request.param}", "debug=smoke"], tmp_path_factory.mktemp("run")), None
+    )
 
 
 def test_window_to_moves_every_tensor_and_leaves_the_original(built):
@@ -46,7 +48,10 @@ def test_the_losses_read_no_tensor_left_on_the_host(built, fill, anchored):
         net.anchor = (torch.tensor(w.t0), torch.zeros(nd), torch.zeros(nd), torch.zeros(nz) if nz else None)
     net.to("meta")
     wm = w.to("meta")
-    losses = {**net.data_losses(wm, fill=fill), **net.physics_losses(wm.t_pool, wm.f_pool, wm.q_pool, wm.qd_pool)}
+    losses = {
+        **net.data_losses(wm, fill=fill),
+        **net.physics_losses(wm.t_pool, wm.f_pool, wm.q_pool, wm.qd_pool),
+    }
     assert losses and all(v.device.type == "meta" for v in losses.values())
 
 

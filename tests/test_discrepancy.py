@@ -32,11 +32,20 @@ PERIOD = 2 * np.pi / np.sqrt(15.0)
 def _screen(case, effects=None):
     r = case.record
     xs, vs = smooth_signals(r.t, r.x[:, 0], r.v[:, 0], PERIOD)
-    s = Signals(r.t, xs, vs, 1.0, 15.0, "k", t_fit_end=case.fit_end,
-                v_noise=velocity_noise(r.t, r.x[:, 0], r.v[:, 0], PERIOD))
+    s = Signals(
+        r.t,
+        xs,
+        vs,
+        1.0,
+        15.0,
+        "k",
+        t_fit_end=case.fit_end,
+        v_noise=velocity_noise(r.t, r.x[:, 0], r.v[:, 0], PERIOD),
+    )
     weak = WeakForm.for_record(r.t, PERIOD)
-    return screen(LinearSDOF(), {"m": 1.0, "c": 0.5, "k": 15.0}, s, r.f, r.x[:, 0], weak, case.fit_end,
-                  effects=effects)
+    return screen(
+        LinearSDOF(), {"m": 1.0, "c": 0.5, "k": 15.0}, s, r.f, r.x[:, 0], weak, case.fit_end, effects=effects
+    )
 
 
 def test_every_effect_term_matches_its_regression_columns():
@@ -55,7 +64,10 @@ def test_every_effect_term_matches_its_regression_columns():
         z = bouc_wen_z(x, p["beta"], p["gamma"], p["n"]) if term.n_latent else None
         col = cand.columns @ np.array([coef[n] for n in cand.coef_names])
         got = term.force(t, x, v, z, p)
-        if name in ("stiffness_loss", "damping_change"):  # a smoothed step in the term, a sharp one in the column
+        if name in (
+            "stiffness_loss",
+            "damping_change",
+        ):  # a smoothed step in the term, a sharp one in the column
             far = np.abs(t - cand.fixed["t_d"]) > 1.0
             np.testing.assert_allclose(got[far], col[far], rtol=1e-6, atol=1e-9)
         else:
@@ -86,7 +98,9 @@ def test_information_count_is_calibrated_on_noise():
     stats = []
     for seed in range(40):
         sc = _screen(hidden_case(None, seed, noise=0.03), effects=two_sided)
-        stats += [-sc.n_independent * np.log(1.0 - r["explained"]) for r in sc.ranking if r.get("score") is not None]
+        stats += [
+            -sc.n_independent * np.log(1.0 - r["explained"]) for r in sc.ranking if r.get("score") is not None
+        ]
     assert len(stats) == 80
     # chi2_1: mean 1, sd of an 80-draw mean 0.16 (1.23 here; 0.67 with the old count)
     assert 0.75 < np.mean(stats) < 1.5, np.mean(stats)
@@ -123,8 +137,16 @@ def test_silverbox_screening_finds_the_cubic_stiffness():
     xs, vs = smooth_signals(r.t, r.x[:, 0], None, period)
     s = Signals(r.t, xs, vs, 1.0, 1.0, "k", t_fit_end=fit_end)
     sys_ = LinearSDOF(excitation="force", identify_mass=True)
-    sc = screen(sys_, {"m": 1.0, "c": 1.0, "k": 1.0}, s, r.f, r.x[:, 0], WeakForm.for_record(r.t, period), fit_end,
-                mass_known=False)
+    sc = screen(
+        sys_,
+        {"m": 1.0, "c": 1.0, "k": 1.0},
+        s,
+        r.f,
+        r.x[:, 0],
+        WeakForm.for_record(r.t, period),
+        fit_end,
+        mass_known=False,
+    )
     assert sc.cause == "cubic_stiffness"
     assert sc.ranking[0]["parameters"]["k3"] > 0
     fn = np.sqrt(sc.nominal_params["k"] / sc.nominal_params["m"]) / (2 * np.pi)
@@ -142,8 +164,12 @@ def test_bad_settings_fail_clearly(tmp_path):
         diagnose(cfg)
 
 
-FAST = ["model.schedule.pretrain_iters=150", "model.schedule.pretrain_iters_window=150",
-        "model.schedule.max_iters=200", "logger=none"]
+FAST = [
+    "model.schedule.pretrain_iters=150",
+    "model.schedule.pretrain_iters_window=150",
+    "model.schedule.max_iters=200",
+    "logger=none",
+]
 
 
 @pytest.mark.slow
@@ -157,13 +183,20 @@ def test_diagnosis_finds_estimates_and_gains(effect, tmp_path):
     ``make discrepancy-bench``."""
     from pidyn.tasks.diagnose import diagnose
 
-    cfg = make_cfg([f"data.source.effect={effect}", "noise=0.02", "data_seed=5", *FAST], tmp_path,
-                   config_name="diagnose")
+    cfg = make_cfg(
+        [f"data.source.effect={effect}", "noise=0.02", "data_seed=5", *FAST], tmp_path, config_name="diagnose"
+    )
     d = diagnose(cfg)
     saved = json.loads((tmp_path / "diagnosis.json").read_text())
     assert saved["verdict"] == d["verdict"]
-    for f in ["report.md", "figures/residual.png", "figures/simulation_vs_measured.png", "figures/ranking.png",
-              "nominal/config.yaml", "nominal/identified_params.yaml"]:
+    for f in [
+        "report.md",
+        "figures/residual.png",
+        "figures/simulation_vs_measured.png",
+        "figures/ranking.png",
+        "nominal/config.yaml",
+        "nominal/identified_params.yaml",
+    ]:
         assert (tmp_path / f).exists(), f
     if effect == "none":
         assert d["verdict"] == "none" and d["cause"] is None and d["gain"]["extended"] is None
@@ -185,11 +218,14 @@ def test_diagnosis_of_a_users_csv_file(tmp_path):
     r = case.record
     path = tmp_path / "measured.csv"
     pd.DataFrame({"t": r.t, "x": r.x[:, 0], "ag": r.f}).to_csv(path, index=False)
-    cfg = make_cfg(["data=csv", f"data.path={path}", "data.mass=1.0", *FAST], tmp_path / "run",
-                   config_name="diagnose")
+    cfg = make_cfg(
+        ["data=csv", f"data.path={path}", "data.mass=1.0", *FAST], tmp_path / "run", config_name="diagnose"
+    )
     d = diagnose(cfg)
     assert d["cause"] == "quadratic_damping"
-    assert d["parameters"]["c2"] == pytest.approx(case.truth["c2"], rel=get_effect("quadratic_damping").tolerance)
+    assert d["parameters"]["c2"] == pytest.approx(
+        case.truth["c2"], rel=get_effect("quadratic_damping").tolerance
+    )
     assert d["gain"]["extended"] < 0.7 * d["gain"]["nominal"]
     assert d["split"]["fit"][1] == pytest.approx(0.65 * r.t[-1], rel=1e-6)
 
@@ -224,8 +260,16 @@ def test_bouc_wen_benchmark_screening_names_the_hysteresis():
     xs, vs = smooth_signals(r.t, r.x[:, 0], None, period)
     s = Signals(r.t, xs, vs, 1.0, 1.0, "k", t_fit_end=fit_end)
     sys_ = LinearSDOF(excitation="force", identify_mass=True)
-    sc = screen(sys_, {"m": 1.0, "c": 1.0, "k": 1.0}, s, r.f, r.x[:, 0], WeakForm.for_record(r.t, period), fit_end,
-                mass_known=False)
+    sc = screen(
+        sys_,
+        {"m": 1.0, "c": 1.0, "k": 1.0},
+        s,
+        r.f,
+        r.x[:, 0],
+        WeakForm.for_record(r.t, period),
+        fit_end,
+        mass_known=False,
+    )
     assert sc.cause == "hysteresis", [row["effect"] for row in sc.ranking]
     params = sc.ranking[0]["parameters"]
     specs = {sp.name: sp for sp in get_effect("hysteresis").term(params, s.context()).specs()}
@@ -237,7 +281,8 @@ def test_the_bouc_wen_benchmark_data_match_its_equations():
     """The shipped test signal against the benchmark's equations in the project's notation
     (PROVENANCE.md): simulated from rest, one repeated period of the validation multisine
     matches its output to about 1 %."""
-    from pidyn.data.measured.bouc_wen_benchmark import FS, PERIOD as P, load_bouc_wen_benchmark, load_bouc_wen_validation
+    from pidyn.data.measured.bouc_wen_benchmark import FS, load_bouc_wen_benchmark, load_bouc_wen_validation
+    from pidyn.data.measured.bouc_wen_benchmark import PERIOD as P
     from pidyn.discrepancy.extend import extended_system
     from pidyn.integrate import rk4
 
@@ -245,8 +290,12 @@ def test_the_bouc_wen_benchmark_data_match_its_equations():
     assert len(train.t) == 5 * P and abs(train.meta["dt"] - 1 / FS) < 1e-15
     assert train.meta["split"]["fit"][1] < train.meta["split"]["heldout"][0]
     rec = load_bouc_wen_validation("val_multisine")
-    system = extended_system(LinearSDOF(mass=2.0, excitation="force", identify_mass=True), "hysteresis",
-                             {"kh": 5e4, "beta": -1100.0, "gamma": 800.0, "n": 1.0}, {})
+    system = extended_system(
+        LinearSDOF(mass=2.0, excitation="force", identify_mass=True),
+        "hysteresis",
+        {"kh": 5e4, "beta": -1100.0, "gamma": 800.0, "n": 1.0},
+        {},
+    )
     truth = {"m": 2.0, "c": 10.0, "k": 5e4, "kh": 5e4, "beta": -1100.0, "gamma": 800.0, "n": 1.0}
     assert "+ 1100 x' |z|^1" in system.describe(truth)
     f = np.tile(rec.f, 3)
@@ -305,20 +354,48 @@ def test_a_change_in_time_is_located_before_and_after_the_split(t_d):
     s, weak, values, names, A0, y, t_first, t_last = _change_rows(case, float(r.t[-1]))
     x_sim = simulate_identified(LinearSDOF(), values, r, x0=float(r.x[0, 0]), v0=float(r.v[0, 0]))[:, 0]
     fit, held = r.t <= case.fit_end, r.t >= case.fit_end
-    check = heldout_check(r.x[:, 0], x_sim, fit, held, noise_std=0.02 * float(np.sqrt(np.mean(r.x[:, 0] ** 2))))
+    check = heldout_check(
+        r.x[:, 0], x_sim, fit, held, noise_std=0.02 * float(np.sqrt(np.mean(r.x[:, 0] ** 2)))
+    )
     assert check.failed == (t_d > case.fit_end), check
     rows = np.ones(len(y), bool)
     n_eff = rows.sum() / weak.rows_per_independent
-    ch = locate_change(names, A0, y, t_first, t_last, rows, s.x, s.v, s.t, weak, n_eff,
-                       {"stiffness_loss": "k", "damping_change": "c"}, values)
+    ch = locate_change(
+        names,
+        A0,
+        y,
+        t_first,
+        t_last,
+        rows,
+        s.x,
+        s.v,
+        s.t,
+        weak,
+        n_eff,
+        {"stiffness_loss": "k", "damping_change": "c"},
+        values,
+    )
     assert ch is not None and ch.effect == "stiffness_loss" and ch.delta_bic < -10
     assert ch.ci95[0] <= t_d <= ch.ci95[1] and ch.ci95[1] - ch.ci95[0] < 1.0, ch.ci95
     assert -ch.fraction == pytest.approx(case.truth["drop"], rel=0.2)
 
     nothing = hidden_case(None, 21, noise=0.02)
     s0, weak0, _, names0, A00, y0, tf0, tl0 = _change_rows(nothing, float(r.t[-1]))
-    ch0 = locate_change(names0, A00, y0, tf0, tl0, np.ones(len(y0), bool), s0.x, s0.v, s0.t, weak0, n_eff,
-                        {"stiffness_loss": "k", "damping_change": "c"}, values)
+    ch0 = locate_change(
+        names0,
+        A00,
+        y0,
+        tf0,
+        tl0,
+        np.ones(len(y0), bool),
+        s0.x,
+        s0.v,
+        s0.t,
+        weak0,
+        n_eff,
+        {"stiffness_loss": "k", "damping_change": "c"},
+        values,
+    )
     assert ch0 is None or ch0.delta_bic > -10, ch0
 
 
@@ -327,15 +404,31 @@ def test_a_step_found_over_the_whole_record_must_persist():
     stiffness "loss" in the strong motion (dBIC below -10), which fits the rows after the
     fitting part far worse than no step; that step does not persist and nothing is named, the
     split unchanged. A real loss at 9 s is located, and its step fits the held-out rows better."""
-    from pidyn.discrepancy.screening import Thresholds
     from pidyn.discrepancy.changes import locate_step
+    from pidyn.discrepancy.screening import Thresholds
 
     def locate(case):
         r = case.record
         s, weak, values, *_ = _change_rows(case, float(r.t[-1]))
         fit, held = (0.0, case.fit_end), (case.fit_end, float(r.t[-1]))
-        return locate_step(LinearSDOF(), values, s, r.f, r.x[:, 0], weak, fit, held, True,
-                              {"stiffness_loss": "k", "damping_change": "c"}, Thresholds(), True), fit, held
+        return (
+            locate_step(
+                LinearSDOF(),
+                values,
+                s,
+                r.f,
+                r.x[:, 0],
+                weak,
+                fit,
+                held,
+                True,
+                {"stiffness_loss": "k", "damping_change": "c"},
+                Thresholds(),
+                True,
+            ),
+            fit,
+            held,
+        )
 
     for seed in (1, 8):  # the whole record's best step: a loss with dBIC below -10
         (change, fit, held), fit0, held0 = locate(hidden_case("trilinear_spring", seed, noise=0.02))
@@ -354,9 +447,11 @@ def test_diagnosis_of_signed_effects_and_changes_in_time(case, tmp_path):
     one late in the fitting part."""
     from pidyn.tasks.diagnose import diagnose
 
-    over = {"softening_cubic": ["data.source.effect=cubic_stiffness", "data.source.sign=-1"],
-            "change_after_split": ["data.source.effect=stiffness_loss", "+data.source.params={t_d: 19.0}"],
-            "change_before_split": ["data.source.effect=stiffness_loss", "+data.source.params={t_d: 14.5}"]}[case]
+    over = {
+        "softening_cubic": ["data.source.effect=cubic_stiffness", "data.source.sign=-1"],
+        "change_after_split": ["data.source.effect=stiffness_loss", "+data.source.params={t_d: 19.0}"],
+        "change_before_split": ["data.source.effect=stiffness_loss", "+data.source.params={t_d: 14.5}"],
+    }[case]
     cfg = make_cfg([*over, "noise=0.02", "data_seed=5", *FAST], tmp_path, config_name="diagnose")
     d = diagnose(cfg)
     truth = d["hidden"]["parameters"]
@@ -369,7 +464,9 @@ def test_diagnosis_of_signed_effects_and_changes_in_time(case, tmp_path):
         lo, hi = d["parameters"]["t_change_ci95"]
         assert lo <= truth["t_d"] <= hi
         assert d["parameters"]["drop"] == pytest.approx(truth["drop"], rel=0.25)
-        assert d["split"]["heldout"][0] > truth["t_d"]  # the gain is measured after the change, on unused data
+        assert (
+            d["split"]["heldout"][0] > truth["t_d"]
+        )  # the gain is measured after the change, on unused data
         assert (tmp_path / "figures" / "running_estimate.png").exists()
     assert d["gain"]["extended"] < 0.5 * d["gain"]["nominal"]
 
@@ -382,15 +479,18 @@ def test_diagnosis_names_two_hidden_effects_and_no_third(pair, tmp_path):
     model passes nothing more."""
     from pidyn.tasks.diagnose import diagnose
 
-    cfg = make_cfg([f"data.source.effect={pair}", "noise=0.02", "data_seed=5", *FAST], tmp_path,
-                   config_name="diagnose")
+    cfg = make_cfg(
+        [f"data.source.effect={pair}", "noise=0.02", "data_seed=5", *FAST], tmp_path, config_name="diagnose"
+    )
     d = diagnose(cfg)
     assert d["verdict"] == "discrepancy"
     assert sorted(d["causes"]) == sorted(pair.split("+")), d["steps"]
     assert d["cause"] == d["causes"][0]
     for name in pair.split("+"):
         eff = get_effect(name)
-        assert d["parameters"][eff.key] == pytest.approx(d["hidden"]["parameters"][eff.key], rel=eff.tolerance)
+        assert d["parameters"][eff.key] == pytest.approx(
+            d["hidden"]["parameters"][eff.key], rel=eff.tolerance
+        )
     last = d["steps"][-1]["next_ranking"]
     assert not any(r["passes"] for r in last), last
     assert (tmp_path / "extended_2" / "config.yaml").exists()
@@ -398,9 +498,14 @@ def test_diagnosis_names_two_hidden_effects_and_no_third(pair, tmp_path):
     assert "Steps" in (tmp_path / "report.md").read_text()
 
 
-@pytest.mark.parametrize("pair, seed", [("gap_contact+coulomb_friction", 1014),
-                                        ("gap_contact+coulomb_friction", 1050),
-                                        ("cubic_stiffness+coulomb_friction", 1000)])
+@pytest.mark.parametrize(
+    "pair, seed",
+    [
+        ("gap_contact+coulomb_friction", 1014),
+        ("gap_contact+coulomb_friction", 1050),
+        ("cubic_stiffness+coulomb_friction", 1000),
+    ],
+)
 def test_screening_names_a_pair_that_a_third_effect_stands_in_for(pair, seed):
     """Friction plus a stop score, one at a time, most like a cubic spring (seed 1014); friction
     plus a cubic, most like a stop (1000); or friction alone, soaked up by the refitted damping,
@@ -409,7 +514,10 @@ def test_screening_names_a_pair_that_a_third_effect_stands_in_for(pair, seed):
     sc = _screen(hidden_case(pair, seed))
     greedy = sc.ranking[0]
     assert not (greedy["passes"] and greedy["effect"] in pair.split("+")), "greedy naming alone would do here"
-    assert sc.verdict == "discrepancy" and sc.cause in pair.split("+"), (sc.ranking[:3], sc.structure.get("pair"))
+    assert sc.verdict == "discrepancy" and sc.cause in pair.split("+"), (
+        sc.ranking[:3],
+        sc.structure.get("pair"),
+    )
     assert sorted(sc.structure["pair"]["effects"]) == sorted(pair.split("+"))
 
 
@@ -424,12 +532,28 @@ def test_the_true_friction_model_screens_clean(seed):
     case = hidden_case("coulomb_friction", seed)
     r = case.record
     xs, vs = smooth_signals(r.t, r.x[:, 0], r.v[:, 0], PERIOD)
-    s = Signals(r.t, xs, vs, 1.0, 15.0, "k", t_fit_end=case.fit_end,
-                v_noise=velocity_noise(r.t, r.x[:, 0], r.v[:, 0], PERIOD))
+    s = Signals(
+        r.t,
+        xs,
+        vs,
+        1.0,
+        15.0,
+        "k",
+        t_fit_end=case.fit_end,
+        v_noise=velocity_noise(r.t, r.x[:, 0], r.v[:, 0], PERIOD),
+    )
     found = LinearSDOF().with_term(CoulombFriction(case.truth["Fc"], eps=s.friction_eps))
     rest = {n: e for n, e in EFFECTS.items() if n != "coulomb_friction"}
-    sc = screen(found, {"m": 1.0, "c": 0.5, "k": 15.0, "Fc": case.truth["Fc"]}, s, r.f, r.x[:, 0],
-                WeakForm.for_record(r.t, PERIOD), case.fit_end, effects=rest)
+    sc = screen(
+        found,
+        {"m": 1.0, "c": 0.5, "k": 15.0, "Fc": case.truth["Fc"]},
+        s,
+        r.f,
+        r.x[:, 0],
+        WeakForm.for_record(r.t, PERIOD),
+        case.fit_end,
+        effects=rest,
+    )
     assert sc.verdict == "none", sc.ranking[:2]
     change = next(q for q in sc.ranking if q["effect"] == "damping_change")
     assert change["score"] is None or change["parameters"]["change"] > -1.0
@@ -479,8 +603,12 @@ def test_a_learned_force_term_starts_at_the_force_it_is_shown():
     term = LearnedForce(0.1, 0.5, 1.0, seed=1)
     assert np.all(term.force(0.0, x, v, None, {}) == 0.0)
     assert term.fit_to(x, v, f, iters=400) < 0.1
-    torch_f = term.force(0.0, torch.as_tensor(x, dtype=torch.float32), torch.as_tensor(v, dtype=torch.float32), None, {})
-    np.testing.assert_allclose(torch_f.detach().numpy(), term.force(0.0, x, v, None, {}), rtol=1e-4, atol=1e-5)
+    torch_f = term.force(
+        0.0, torch.as_tensor(x, dtype=torch.float32), torch.as_tensor(v, dtype=torch.float32), None, {}
+    )
+    np.testing.assert_allclose(
+        torch_f.detach().numpy(), term.force(0.0, x, v, None, {}), rtol=1e-4, atol=1e-5
+    )
 
 
 @pytest.mark.slow
@@ -491,8 +619,17 @@ def test_diagnosis_of_an_effect_outside_the_library(effect, tmp_path):
     another; either way the extended model gains on the held-out data."""
     from pidyn.tasks.diagnose import diagnose
 
-    cfg = make_cfg([f"data.source.effect={effect}", "noise=0.02", "data_seed=5", "diagnosis.learned.max_evaluations=30",
-                    *FAST], tmp_path, config_name="diagnose")
+    cfg = make_cfg(
+        [
+            f"data.source.effect={effect}",
+            "noise=0.02",
+            "data_seed=5",
+            "diagnosis.learned.max_evaluations=30",
+            *FAST,
+        ],
+        tmp_path,
+        config_name="diagnose",
+    )
     d = diagnose(cfg)
     assert d["verdict"] in ("unexplained", "discrepancy")
     assert set(d["causes"]) <= EQUIVALENT[effect], d["causes"]
@@ -510,9 +647,8 @@ def test_a_stiffness_that_rises_in_time_is_no_stiffness_loss():
     once the strong motion is over. Named `stiffness_loss`, it used to be the wrong name for
     an effect outside the library; the screening now fits only losses, and a located step
     that is a rise is not named."""
-    from pidyn.discrepancy.changes import Change
+    from pidyn.discrepancy.changes import Change, is_stiffening
     from pidyn.discrepancy.screening import _fit_candidate
-    from pidyn.discrepancy.changes import is_stiffening
 
     t = np.linspace(0.0, 20.0, 2001)
     x = np.sin(2 * np.pi * 0.6 * t) * np.exp(-0.05 * t)

@@ -56,9 +56,13 @@ def test_a_parameter_no_window_informs_keeps_the_windows_estimate():
     # the same when the convex fallback is taken (windows far apart in the informed parameter)
     g = InformationFusion()
     a = torch.tensor([1.0, 1.0, 0.0])
-    g.add(torch.tensor([0.5, 1.0, 0.3]), 1e4 * torch.outer(a, a) + torch.diag(torch.tensor([1e-2, 1e-2, 0.0])))
+    g.add(
+        torch.tensor([0.5, 1.0, 0.3]), 1e4 * torch.outer(a, a) + torch.diag(torch.tensor([1e-2, 1e-2, 0.0]))
+    )
     b = torch.tensor([1.0, 1.2, 0.0])
-    out = g.add(torch.tensor([0.55, 0.7, 0.3]), 1e4 * torch.outer(b, b) + torch.diag(torch.tensor([1e-2, 1e-2, 0.0])))
+    out = g.add(
+        torch.tensor([0.55, 0.7, 0.3]), 1e4 * torch.outer(b, b) + torch.diag(torch.tensor([1e-2, 1e-2, 0.0]))
+    )
     assert g.fallback and torch.isfinite(out).all()
     assert float(out[2]) == pytest.approx(0.3, rel=1e-5)
 

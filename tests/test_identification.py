@@ -24,7 +24,9 @@ def test_duffing_identified_from_one_kobe_window(tmp_path):
 
 @pytest.mark.slow
 def test_noisy_duffing_still_within_a_few_percent(tmp_path):
-    cfg = make_cfg(["excitation.duration=12", "model.schedule.max_windows=1", "noise=0.05", "logger=none"], tmp_path)
+    cfg = make_cfg(
+        ["excitation.duration=12", "model.schedule.max_windows=1", "noise=0.05", "logger=none"], tmp_path
+    )
     m = train(cfg)
     for name, err in m["error_pct"].items():
         assert err < 5.0, (name, err, m["params"])
@@ -49,12 +51,27 @@ def test_undetermined_k3_is_not_locked_by_the_first_window(tmp_path):
     rec = synthetic_from_motion(Duffing(c=0.3, k1=25.0, k3=400.0), gm)
     csv = tmp_path / "record.csv"
     pd.DataFrame({"t": rec.t, "ag": rec.f, "x": rec.x[:, 0], "v": rec.v[:, 0]}).to_csv(csv, index=False)
-    cfg = make_cfg(["system=duffing", "data=csv", f"data.path={csv}", "logger=none", "model.refine=none",
-                    "baselines=none", "system.params.c.init=1.0", "system.params.k1.init=10.0",
-                    "system.params.k3.init=50.0", "model.schedule.pretrain_iters=500",
-                    "model.schedule.pretrain_iters_window=500", "model.schedule.max_iters=800",
-                    "model.schedule.max_windows=2"], tmp_path / "run")
+    cfg = make_cfg(
+        [
+            "system=duffing",
+            "data=csv",
+            f"data.path={csv}",
+            "logger=none",
+            "model.refine=none",
+            "baselines=none",
+            "system.params.c.init=1.0",
+            "system.params.k1.init=10.0",
+            "system.params.k3.init=50.0",
+            "model.schedule.pretrain_iters=500",
+            "model.schedule.pretrain_iters_window=500",
+            "model.schedule.max_iters=800",
+            "model.schedule.max_windows=2",
+        ],
+        tmp_path / "run",
+    )
     m = train(cfg)
-    assert any("least-squares start puts k3" in n for n in m["notes"])  # the first window did not determine it
+    assert any(
+        "least-squares start puts k3" in n for n in m["notes"]
+    )  # the first window did not determine it
     assert any("determined k3" in n for n in m["notes"])
     assert abs(m["params"]["k3"] / 400.0 - 1) < 0.05, m["params"]

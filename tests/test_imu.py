@@ -12,8 +12,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pidyn.data.imu import (ImuFile, ImuFormatError, align_floors, along, read_xsens, run_files, run_labels,
-                            shaking_axis, xsens_record)
+from pidyn.data.imu import (
+    ImuFormatError,
+    align_floors,
+    along,
+    read_xsens,
+    run_files,
+    run_labels,
+    shaking_axis,
+    xsens_record,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "data" / "mini_shake_table"
@@ -81,13 +89,13 @@ def test_the_alignment_recovers_lags_put_in_on_purpose():
     assert rep.applied_ms[1] == pytest.approx(1e3 * late - rep0.lag_ms[1], abs=1e3 / 240)  # it started late
     k = int(round(rep.start_s * 120))  # the common part starts where the late floor does
     n = min(len(data), len(ref) - k)
-    assert _same(data[:n, 1], ref[k:k + n, 1])
+    assert _same(data[:n, 1], ref[k : k + n, 1])
     delayed = replace(m, acc=np.stack([np.interp(m.t - 0.019, m.t, m.acc[:, j]) for j in range(3)], axis=1))
     _, moved, rep = align_floors([imus[0], delayed, *imus[2:]], axes, "lag")
     assert rep.coarse == "clock" and rep.lag_ms[1] == pytest.approx(19.0 + rep0.lag_ms[1], abs=1.0)
     k = int(round(rep.start_s * 120))
     n = min(len(moved), len(ref) - k)
-    assert _same(moved[:n, 1], ref[k:k + n, 1])
+    assert _same(moved[:n, 1], ref[k : k + n, 1])
 
 
 def test_axis_gravity_and_bias_come_off_a_rotated_biased_copy():
@@ -118,7 +126,9 @@ def test_masses_unknown_identify_the_frequencies_and_refuse_absolute_stiffness()
     from pidyn.systems.modal import modal_properties, modes_with_intervals
     from pidyn.systems.shear_building import UnknownMassError
 
-    known = ShearBuilding(3, masses=[2.0, 1.5, 1.0], stiffnesses=[400.0, 300.0, 200.0], dampings=[1.0, 0.8, 0.5])
+    known = ShearBuilding(
+        3, masses=[2.0, 1.5, 1.0], stiffnesses=[400.0, 300.0, 200.0], dampings=[1.0, 0.8, 0.5]
+    )
     rec = synthetic(known, "el_centro", duration=15.0, channels=("a",), noise=0.01, data_seed=2)
     free = ShearBuilding(3, masses="unknown")
     truth = free.own_units(known.true_values() | {"m1": 2.0, "m2": 1.5, "m3": 1.0})
@@ -129,7 +139,9 @@ def test_masses_unknown_identify_the_frequencies_and_refuse_absolute_stiffness()
         assert res.params[n] == pytest.approx(truth[n], rel=0.02), n
     values = {"m1": 1.0, **res.params}
     modes = modes_with_intervals(free, values, res.names, np.asarray(res.covariance))
-    true_f = modal_properties(*known.linear_matrices(known.true_values() | {"m1": 2.0, "m2": 1.5, "m3": 1.0}))["frequency_hz"]
+    true_f = modal_properties(
+        *known.linear_matrices(known.true_values() | {"m1": 2.0, "m2": 1.5, "m3": 1.0})
+    )["frequency_hz"]
     for m, f in zip(modes, true_f):
         assert m["frequency_hz"] == pytest.approx(f, rel=0.005)
         assert m["frequency_ci95"][0] < m["frequency_hz"] < m["frequency_ci95"][1]

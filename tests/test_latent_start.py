@@ -16,8 +16,15 @@ def _start(system, clean, start_values, z0=True):
     params = PhysicalParameters(system.param_specs())
     params.set_values(start_values)
     T = torch.from_numpy
-    return LatentStart(system, params, T(clean.t), T(clean.x), T(clean.v), T(clean.f),
-                       np.zeros(system.n_latent) if z0 else None)
+    return LatentStart(
+        system,
+        params,
+        T(clean.t),
+        T(clean.x),
+        T(clean.v),
+        T(clean.f),
+        np.zeros(system.n_latent) if z0 else None,
+    )
 
 
 def test_latent_path_matches_the_simulation():
@@ -57,8 +64,12 @@ def test_unknown_initial_latent_state_is_estimated():
 
 
 def test_shear_building_hysteretic_storey():
-    s = ShearBuilding(n_storeys=3, storey_terms={1: [{"term": "hysteresis", "beta": 20.0, "gamma": 40.0, "n": 2.0,
-                                                      "shape_scale": 20.0}]})
+    s = ShearBuilding(
+        n_storeys=3,
+        storey_terms={
+            1: [{"term": "hysteresis", "beta": 20.0, "gamma": 40.0, "n": 2.0, "shape_scale": 20.0}]
+        },
+    )
     assert latent_shape_params(s) == ["beta1", "gamma1", "n1"]
     r = synthetic(s, "el_centro", eq_scale=3.0, duration=6.0)
     truth = s.true_values()
@@ -73,7 +84,12 @@ def test_no_latent_state_no_problem():
 
 
 def test_motions_join_without_repeating_an_edge():
-    a = {"t": torch.tensor([0.0, 1.0, 2.0]), "x": torch.zeros(3, 1), "v": torch.zeros(3, 1), "f": torch.zeros(3)}
+    a = {
+        "t": torch.tensor([0.0, 1.0, 2.0]),
+        "x": torch.zeros(3, 1),
+        "v": torch.zeros(3, 1),
+        "f": torch.zeros(3),
+    }
     b = {"t": torch.tensor([2.0, 3.0]), "x": torch.ones(2, 1), "v": torch.ones(2, 1), "f": torch.ones(2)}
     m = join_motions([a, b])
     assert m["t"].tolist() == [0.0, 1.0, 2.0, 3.0]

@@ -12,9 +12,9 @@ from pidyn.discrepancy.hidden import hidden_case
 from pidyn.discrepancy.learned_fit import fit_learned_force
 from pidyn.discrepancy.residual import unexplained_force
 from pidyn.reporting import nrmse
+from pidyn.simulate import simulate_response
 from pidyn.systems.sdof import LinearSDOF
 from pidyn.systems.terms import LearnedForce
-from pidyn.simulate import simulate_response
 
 NOMINAL = {"m": 1.0, "c": 0.5, "k": 15.0}
 PERIOD = 2 * np.pi / np.sqrt(15.0)
@@ -22,8 +22,12 @@ PERIOD = 2 * np.pi / np.sqrt(15.0)
 
 def _with_network(case) -> tuple:
     x = case.record.x[:, 0]
-    term = LearnedForce(float(np.abs(x).max()), float(np.abs(case.record.v[:, 0]).max()),
-                        15.0 * float(np.abs(x).max()), seed=0)
+    term = LearnedForce(
+        float(np.abs(x).max()),
+        float(np.abs(case.record.v[:, 0]).max()),
+        15.0 * float(np.abs(x).max()),
+        seed=0,
+    )
     return LinearSDOF(**{k: NOMINAL[k] for k in ("c", "k")}).with_term(term), term
 
 
@@ -35,8 +39,9 @@ def test_the_training_integrates_what_the_simulation_integrates():
     case = hidden_case(None, seed=2, noise=0.0, duration=14.0, fit_end=11.0)
     system, _ = _with_network(case)
     truth = (case.record.clean.x[:, 0], case.record.clean.v[:, 0])
-    res = fit_learned_force(system, dict(NOMINAL), case.record, (0.0, 11.0), PERIOD, smoothed=truth,
-                            max_evaluations=1)
+    res = fit_learned_force(
+        system, dict(NOMINAL), case.record, (0.0, 11.0), PERIOD, smoothed=truth, max_evaluations=1
+    )
     assert res is not None and res.segments >= 2
     assert res.loss_before < 1e-6, res.note
 
@@ -65,11 +70,15 @@ def test_a_learned_force_trained_on_the_response_predicts_a_trilinear_spring(cha
 
     nominal, pointwise = heldout(LinearSDOF(c=0.5, k=15.0), dict(NOMINAL)), heldout(system, dict(NOMINAL))
     res = fit_learned_force(system, dict(NOMINAL), r, (0.0, 9.0), PERIOD, max_evaluations=40)
-    assert res is not None and res.loss_after < res.loss_before, res.note  # (an accelerometer's noise floor is high)
+    assert res is not None and res.loss_after < res.loss_before, (
+        res.note
+    )  # (an accelerometer's noise floor is high)
     trained = heldout(system, res.values)
     assert trained < 0.5 * min(nominal, pointwise), (nominal, pointwise, trained, res.note)
 
 
 def test_no_learned_force_no_training():
     case = hidden_case(None, seed=2, noise=0.0, duration=6.0, fit_end=4.0)
-    assert fit_learned_force(LinearSDOF(c=0.5, k=15.0), dict(NOMINAL), case.record, (0.0, 4.0), PERIOD) is None
+    assert (
+        fit_learned_force(LinearSDOF(c=0.5, k=15.0), dict(NOMINAL), case.record, (0.0, 4.0), PERIOD) is None
+    )

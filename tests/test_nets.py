@@ -7,7 +7,9 @@ def test_taylor_mode_matches_autograd():
     torch.manual_seed(0)
     net = TaylorMLP(out_features=2, n_fourier=4).double()
     net.set_window(3.0, 6.0)
-    net.set_output_scale(torch.tensor([0.3, 2.0], dtype=torch.float64), torch.tensor([0.1, -0.2], dtype=torch.float64))
+    net.set_output_scale(
+        torch.tensor([0.3, 2.0], dtype=torch.float64), torch.tensor([0.1, -0.2], dtype=torch.float64)
+    )
     t = torch.linspace(3.0, 6.0, 37, dtype=torch.float64, requires_grad=True)
     y, dy, ddy = net.taylor(t)
     for j in range(2):

@@ -30,10 +30,14 @@ def test_white_noise_counts_every_sample_and_a_coloured_one_fewer():
 
 def test_only_leaning_unrefused_effects_are_checked():
     th = Thresholds()
-    rows = [{"effect": "gap_contact", "score": 25.0}, {"effect": "cubic_stiffness", "score": 4.0},
-            {"effect": "stiffness_loss", "score": 6.0, "step_in_time": True},
-            {"effect": "quadratic_stiffness", "score": 3.0, "heldout_miss": True},
-            {"effect": "quadratic_damping", "score": -2.0}, {"effect": "hysteresis", "score": None}]
+    rows = [
+        {"effect": "gap_contact", "score": 25.0},
+        {"effect": "cubic_stiffness", "score": 4.0},
+        {"effect": "stiffness_loss", "score": 6.0, "step_in_time": True},
+        {"effect": "quadratic_stiffness", "score": 3.0, "heldout_miss": True},
+        {"effect": "quadratic_damping", "score": -2.0},
+        {"effect": "hysteresis", "score": None},
+    ]
     assert [r["effect"] for r in undecided(rows, th, 3)] == ["cubic_stiffness"]
 
 
@@ -48,9 +52,16 @@ def _check(effect: str | None, seed: int, noise: float, sign: float | None = Non
     values = {"m": 1.0, **fitted}
     start = -30.0 if (sign or 1.0) < 0 else 30.0
     row = {"effect": "cubic_stiffness", "score": 4.0, "parameters": {"k3": start}}
-    out = confirm(rec, nominal, values, [row], lambda r: extended_system(nominal, r["effect"], r["parameters"],
-                                                                        s.context()),
-                  (0.0, case.fit_end), (case.fit_end, float(rec.t[-1])), Thresholds())
+    out = confirm(
+        rec,
+        nominal,
+        values,
+        [row],
+        lambda r: extended_system(nominal, r["effect"], r["parameters"], s.context()),
+        (0.0, case.fit_end),
+        (case.fit_end, float(rec.t[-1])),
+        Thresholds(),
+    )
     return case, out
 
 
@@ -83,11 +94,20 @@ def test_a_located_change_time_is_held_in_the_extension():
 
 def test_a_pair_holding_an_effect_the_held_out_rule_refuses_leads_nowhere():
     th = Thresholds()
-    ranking = [{"effect": "quadratic_stiffness", "score": 14.0, "passes": False, "heldout_miss": True},
-               {"effect": "cubic_stiffness", "score": 12.0, "passes": True},
-               {"effect": "gap_contact", "score": 11.0, "passes": True}]
-    pairs = [{"effects": ["gap_contact", "quadratic_stiffness"], "score": 40.0, "delta_bic": -40.0, "cv_gain": 0.9},
-             {"effects": ["cubic_stiffness", "gap_contact"], "score": 15.0, "delta_bic": -15.0, "cv_gain": 0.8}]
+    ranking = [
+        {"effect": "quadratic_stiffness", "score": 14.0, "passes": False, "heldout_miss": True},
+        {"effect": "cubic_stiffness", "score": 12.0, "passes": True},
+        {"effect": "gap_contact", "score": 11.0, "passes": True},
+    ]
+    pairs = [
+        {
+            "effects": ["gap_contact", "quadratic_stiffness"],
+            "score": 40.0,
+            "delta_bic": -40.0,
+            "cv_gain": 0.9,
+        },
+        {"effects": ["cubic_stiffness", "gap_contact"], "score": 15.0, "delta_bic": -15.0, "cv_gain": 0.8},
+    ]
     structure = {"cv_gain": 0.9}
     assert _pair_lead(ranking, pairs, structure, th) is None  # the best pair holds the refused spring
     ranking[0].pop("heldout_miss")
@@ -102,8 +122,8 @@ def test_a_learned_force_is_kept_only_when_it_predicts_the_held_out_part_better(
     (here the hidden cubic spring itself) predicts the held-out part better and is kept; one
     started at a force the structure does not have (a softening cubic twice as strong, an extra
     linear spring) predicts it worse and is not."""
-    from pidyn.systems.terms import LearnedForce
     from pidyn.discrepancy.learned_fit import learned_predicts
+    from pidyn.systems.terms import LearnedForce
 
     case = hidden_case("cubic_stiffness", 5, noise=0.0, sign=1.0)
     rec = case.record
@@ -115,11 +135,12 @@ def test_a_learned_force_is_kept_only_when_it_predicts_the_held_out_part_better(
     scales = (float(np.abs(x).max()), float(np.abs(v).max()), float(k3 * np.abs(x).max() ** 3))
     fit = rec.t <= case.fit_end
     kept = {}
-    for name, force in (("truth", k3 * x ** 3), ("softening", -2 * k3 * x ** 3), ("spring", 5 * x)):
+    for name, force in (("truth", k3 * x**3), ("softening", -2 * k3 * x**3), ("spring", 5 * x)):
         term = LearnedForce(*scales, seed=0)
         term.fit_to(x[fit], v[fit], force[fit], iters=200)
-        kept[name], errors = learned_predicts(rec, nominal, values, nominal.with_term(term), values, x,
-                                               float(v[0]), held, 4)
+        kept[name], errors = learned_predicts(
+            rec, nominal, values, nominal.with_term(term), values, x, float(v[0]), held, 4
+        )
         assert errors["without"] > 0.3, errors  # the linear model misses the cubic spring
         if name == "truth":
             assert errors["with"] < 0.1 * errors["without"], errors

@@ -28,8 +28,23 @@ def _build_wheel(tmp: Path) -> Path:
         shutil.copy(ROOT / name, src / name)
     shutil.copytree(ROOT / "src", src / "src", ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
     out = tmp / "wheel"
-    subprocess.run([sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "--no-build-isolation",
-                    "-q", "-w", str(out)], check=True, capture_output=True, text=True)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            str(src),
+            "--no-deps",
+            "--no-build-isolation",
+            "-q",
+            "-w",
+            str(out),
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
     (wheel,) = out.glob("pidyn-*.whl")
     return wheel
 
@@ -37,13 +52,34 @@ def _build_wheel(tmp: Path) -> Path:
 def _fresh_env(tmp: Path, wheel: Path) -> Path:
     env_dir = tmp / "fresh"
     subprocess.run([sys._base_executable, "-m", "venv", "--without-pip", str(env_dir)], check=True)
-    purelib = Path(subprocess.check_output([str(env_dir / "bin" / "python"), "-c",
-                                            "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                                           text=True).strip())
+    purelib = Path(
+        subprocess.check_output(
+            [
+                str(env_dir / "bin" / "python"),
+                "-c",
+                "import sysconfig; print(sysconfig.get_paths()['purelib'])",
+            ],
+            text=True,
+        ).strip()
+    )
     # the dependencies (torch, lightning, hydra, ...) come from this environment, pidyn from the wheel
     (purelib / "_deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
-    subprocess.run([sys.executable, "-m", "pip", "--python", str(env_dir / "bin" / "python"), "install",
-                    "--no-deps", "-q", str(wheel)], check=True, capture_output=True, text=True)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "--python",
+            str(env_dir / "bin" / "python"),
+            "install",
+            "--no-deps",
+            "-q",
+            str(wheel),
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
     return env_dir
 
 
@@ -58,13 +94,29 @@ def test_wheel_installs_and_pidyn_train_runs_from_any_directory(tmp_path):
     work = tmp_path / "elsewhere"
     work.mkdir()
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
-    where = subprocess.check_output([str(env_dir / "bin" / "python"), "-c", "import pidyn; print(pidyn.__file__)"],
-                                    cwd=work, env=env, text=True).strip()
+    where = subprocess.check_output(
+        [str(env_dir / "bin" / "python"), "-c", "import pidyn; print(pidyn.__file__)"],
+        cwd=work,
+        env=env,
+        text=True,
+    ).strip()
     assert Path(where).is_relative_to(env_dir), f"pidyn imported from {where}, not from the installed wheel"
 
-    run = subprocess.run([str(env_dir / "bin" / "pidyn-train"), "debug=smoke", "logger=none", "baselines=none",
-                          "model.refine=none", "hydra.run.dir=run"], cwd=work, env=env,
-                         capture_output=True, text=True, timeout=600)
+    run = subprocess.run(
+        [
+            str(env_dir / "bin" / "pidyn-train"),
+            "debug=smoke",
+            "logger=none",
+            "baselines=none",
+            "model.refine=none",
+            "hydra.run.dir=run",
+        ],
+        cwd=work,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
     metrics = json.loads((work / "run" / "metrics.json").read_text())
     assert set(metrics["params"]) == {"c", "k1", "k3"}

@@ -3,7 +3,6 @@ data, the peers, and the diagnosis of accelerometer records (each test able to f
 
 from __future__ import annotations
 
-import io
 import zipfile
 from pathlib import Path
 
@@ -50,13 +49,19 @@ def test_reader_names_the_file_and_the_problem(tmp_path):
     lines = text.split("\r\n")
     start = next(i for i, ln in enumerate(lines) if "POINTS OF ACCEL DATA" in ln)
     cut = "\r\n".join(lines[: start + 50])  # the acceleration block stops after 49 lines of 135
-    with pytest.raises(CsmipFormatError, match=r"CHAN07\.V2: accel block: 392 values where the header states 1080"):
+    with pytest.raises(
+        CsmipFormatError, match=r"CHAN07\.V2: accel block: 392 values where the header states 1080"
+    ):
         read_v2(cut, "riodell82/CHAN07.V2")
-    garbled = "\r\n".join(lines[: start + 3] + ["    1.284    -8.9x9   -12.322"] + lines[start + 4:])
+    garbled = "\r\n".join(lines[: start + 3] + ["    1.284    -8.9x9   -12.322"] + lines[start + 4 :])
     with pytest.raises(CsmipFormatError, match=r"line \d+ has '-8\.9x9', not a number"):
         read_v2(garbled, "riodell82/CHAN07.V2")
-    shifted = text.replace("ACCELERATION =  -411.527", "ACCELERATION =  -411.111")  # a header not of these data
-    with pytest.raises(CsmipFormatError, match="peak acceleration 411.527 in the samples, 411.111 in the header"):
+    shifted = text.replace(
+        "ACCELERATION =  -411.527", "ACCELERATION =  -411.111"
+    )  # a header not of these data
+    with pytest.raises(
+        CsmipFormatError, match="peak acceleration 411.527 in the samples, 411.111 in the header"
+    ):
         read_v2(shifted, "riodell82/CHAN07.V2")
     broken = tmp_path / "broken.zip"
     broken.write_bytes(b"PK\x03\x04 not a zip")
@@ -87,7 +92,9 @@ def test_a_record_cuts_aligns_and_resamples_what_it_reads():
     # the velocities beside the accelerations are the files' own (integrated by the processing)
     v2 = read_archive(RECORDS / "nc73667866_ce89324p.zip").channels[3]
     i0 = int(round(rec.meta["t_offset"] / v2.dt))
-    assert np.max(np.abs(rec.f[:, 3] - v2.vel[i0:i0 + 2 * len(rec.t):2][:len(rec.t)])) < 0.05 * np.max(np.abs(v2.vel))
+    assert np.max(np.abs(rec.f[:, 3] - v2.vel[i0 : i0 + 2 * len(rec.t) : 2][: len(rec.t)])) < 0.05 * np.max(
+        np.abs(v2.vel)
+    )
 
 
 def _two_support_record(noise: float = 0.01, **truth):
@@ -95,11 +102,16 @@ def _two_support_record(noise: float = 0.01, **truth):
     from pidyn.excitation.ground_motion import SupportMotions, prepare
     from pidyn.systems import LinearSDOF
 
-    gm = SupportMotions.from_motions({"a": prepare("el_centro", dt=0.02, duration=20.0),
-                                      "b": prepare("kobe", dt=0.02, duration=20.0, scale=0.6)})
+    gm = SupportMotions.from_motions(
+        {
+            "a": prepare("el_centro", dt=0.02, duration=20.0),
+            "b": prepare("kobe", dt=0.02, duration=20.0, scale=0.6),
+        }
+    )
     p = {"c": 0.8, "k": 400.0, "r_a": 0.7, "r_b": 0.3, **truth}
-    system = LinearSDOF(c=p["c"], k=p["k"], inputs=["a", "b"],
-                        params={"r_a": {"true": p["r_a"]}, "r_b": {"true": p["r_b"]}})
+    system = LinearSDOF(
+        c=p["c"], k=p["k"], inputs=["a", "b"], params={"r_a": {"true": p["r_a"]}, "r_b": {"true": p["r_b"]}}
+    )
     return synthetic_from_motion(system, gm, noise=noise, channels=["a"]), p
 
 
@@ -141,10 +153,16 @@ def test_a_measured_record_starts_pidynnet_from_the_data(tmp_path):
     assert res.params["k"] == pytest.approx(1500.0, rel=0.005)
     modal = json.loads((tmp_path / "data" / "modal.json").read_text())["modes"][0]
     lo, hi = modal["period_ci95"]
-    assert lo < 2 * np.pi / np.sqrt(1500.0) < hi and set(modal) >= {"period_s", "period_ci95", "frequency_hz",
-                                                                     "damping_ratio", "damping_ci95"}
-    res = pidyn.identify(measured, "linear", baselines="none", debug="smoke", init={"k": 900.0},
-                         out_dir=tmp_path / "user")
+    assert lo < 2 * np.pi / np.sqrt(1500.0) < hi and set(modal) >= {
+        "period_s",
+        "period_ci95",
+        "frequency_hz",
+        "damping_ratio",
+        "damping_ci95",
+    }
+    res = pidyn.identify(
+        measured, "linear", baselines="none", debug="smoke", init={"k": 900.0}, out_dir=tmp_path / "user"
+    )
     start = json.loads((tmp_path / "user" / "data_start.json").read_text())
     assert start["used_by_pidynnet"] and res.pidynnet["k"] != pytest.approx(start["values"]["k"], rel=0.01)
 
@@ -154,8 +172,15 @@ def test_a_two_support_sdof_is_recovered_with_its_influences(tmp_path):
     import pidyn
 
     rec, p = _two_support_record(noise=0.01)
-    res = pidyn.identify(rec, "linear", system__inputs=["a", "b"], model__start="data", baselines="none",
-                         out_dir=tmp_path, model__schedule__max_windows=1)
+    res = pidyn.identify(
+        rec,
+        "linear",
+        system__inputs=["a", "b"],
+        model__start="data",
+        baselines="none",
+        out_dir=tmp_path,
+        model__schedule__max_windows=1,
+    )
     # within three standard errors of the truth (1.5 half-widths of the 95 % interval): for eight
     # parameters from one noise draw, a 95 % interval alone misses one of them one time in three
     truth = {**p, "g_a": 0.0, "g_b": 0.0, "e_a": 0.0, "e_b": 0.0}
@@ -184,7 +209,9 @@ def test_classical_estimators_run_on_a_record_of_several_supports():
     assert transfer_function_estimate(rec).modes[0]["period_s"] == pytest.approx(2 * np.pi / 20.0, rel=0.03)
     from pidyn.data.sources import synthetic
 
-    one = synthetic(LinearSDOF(c=0.8, k=400.0), "el_centro", noise=0.01, channels=("a",), duration=20.0, dt=0.02)
+    one = synthetic(
+        LinearSDOF(c=0.8, k=400.0), "el_centro", noise=0.01, channels=("a",), duration=20.0, dt=0.02
+    )
     mode = transfer_function_estimate(one).modes[0]
     assert mode["period_ci95"][0] < 2 * np.pi / 20.0 < mode["period_ci95"][1]
     assert mode["damping_ci95"][0] < 0.8 / 40.0 < mode["damping_ci95"][1]
@@ -209,7 +236,9 @@ def test_the_running_period_sees_a_change_and_no_change_where_there_is_none():
     from pidyn.systems.terms import LinearStiffness, StiffnessLoss, ViscousDamping
 
     k, c = 400.0, 1.0
-    changed = SDOFSystem([ViscousDamping(c), LinearStiffness(k), StiffnessLoss(0.3, 10.0, t_min=0.0, t_max=20.0)])
+    changed = SDOFSystem(
+        [ViscousDamping(c), LinearStiffness(k), StiffnessLoss(0.3, 10.0, t_min=0.0, t_max=20.0)]
+    )
     nominal = LinearSDOF(c=c, k=k)
     values = {"m": 1.0, "c": c, "k": k}
     width = 2.0
@@ -225,12 +254,14 @@ def test_the_running_period_sees_a_change_and_no_change_where_there_is_none():
 
 @pytest.mark.slow
 def test_the_diagnosis_of_an_accelerometer_record_names_a_hidden_cubic_spring(tmp_path):
+    from pidyn.tasks.diagnose import diagnose
     from tests.conftest import make_cfg
 
-    from pidyn.tasks.diagnose import diagnose
-
-    cfg = make_cfg(["data.source.channels=[a]", "noise=0.02", "diagnosis.max_effects=1",
-                    "model.schedule.max_windows=3"], tmp_path, config_name="diagnose")
+    cfg = make_cfg(
+        ["data.source.channels=[a]", "noise=0.02", "diagnosis.max_effects=1", "model.schedule.max_windows=3"],
+        tmp_path,
+        config_name="diagnose",
+    )
     d = diagnose(cfg)
     assert d["verdict"] == "discrepancy" and d["causes"] == ["cubic_stiffness"], d["causes"]
     assert d["gain"]["metric"] == "heldout_nrmse_a" and d["gain"]["extended"] < 0.2 * d["gain"]["nominal"]

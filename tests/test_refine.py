@@ -12,7 +12,14 @@ sys.path.insert(0, str(Path(__file__).parent))
 from pidyn.autodiff import Dual  # noqa: E402
 from pidyn.baselines import cramer_rao  # noqa: E402
 from pidyn.data.sources import synthetic  # noqa: E402
-from pidyn.refine import RefineSettings, ShootingProblem, initial_states, record_channels, refine, segment_bounds  # noqa: E402
+from pidyn.refine import (  # noqa: E402
+    RefineSettings,
+    ShootingProblem,
+    initial_states,
+    record_channels,
+    refine,
+    segment_bounds,
+)
 from pidyn.refine.uncertainty import covariance  # noqa: E402
 from pidyn.systems import BoucWen, Duffing, LinearSDOF, ShearBuilding  # noqa: E402
 
@@ -20,14 +27,28 @@ from pidyn.systems import BoucWen, Duffing, LinearSDOF, ShearBuilding  # noqa: E
 def _problem(system, record, length, settings=None):
     settings = settings or RefineSettings(states="measured")
     bounds = segment_bounds(record.t, length)
-    p = ShootingProblem(system, record.t, record.f, record_channels(record, system.n_dof), bounds, settings.substeps)
+    p = ShootingProblem(
+        system, record.t, record.f, record_channels(record, system.n_dof), bounds, settings.substeps
+    )
     return p
 
 
-@pytest.mark.parametrize("system", [BoucWen(), Duffing(), ShearBuilding(), ShearBuilding(
-    n_storeys=5, storey_terms={1: [{"term": "hysteresis", "beta": 20.0, "gamma": 40.0, "n": 2.0, "shape_scale": 20.0}],
-                               2: [{"term": "cubic_stiffness", "k3": 5e3}]})],
-    ids=["bouc_wen", "duffing", "shear3", "shear5_bouc_wen_cubic"])
+@pytest.mark.parametrize(
+    "system",
+    [
+        BoucWen(),
+        Duffing(),
+        ShearBuilding(),
+        ShearBuilding(
+            n_storeys=5,
+            storey_terms={
+                1: [{"term": "hysteresis", "beta": 20.0, "gamma": 40.0, "n": 2.0, "shape_scale": 20.0}],
+                2: [{"term": "cubic_stiffness", "k3": 5e3}],
+            },
+        ),
+    ],
+    ids=["bouc_wen", "duffing", "shear3", "shear5_bouc_wen_cubic"],
+)
 def test_dual_state_rate_matches_finite_differences(system):
     rng = np.random.default_rng(0)
     ns = system.n_state
@@ -63,10 +84,13 @@ def test_shooting_jacobian_is_exact():
         np.testing.assert_allclose(C[:, k], (cp - cm) / (2 * h), rtol=1e-4, atol=1e-7)
 
 
-@pytest.mark.parametrize("system,record,start", [
-    (Duffing(), "kobe", {"c": 0.6, "k1": 13.0, "k3": 90.0}),
-    (BoucWen(), "el_centro", {"c": 0.36, "k": 10.0, "beta": 0.7, "gamma": 1.5, "n": 1.7}),
-])
+@pytest.mark.parametrize(
+    "system,record,start",
+    [
+        (Duffing(), "kobe", {"c": 0.6, "k1": 13.0, "k3": 90.0}),
+        (BoucWen(), "el_centro", {"c": 0.36, "k": 10.0, "beta": 0.7, "gamma": 1.5, "n": 1.7}),
+    ],
+)
 def test_refinement_recovers_truth_noise_free(system, record, start):
     scale = 3.0 if system.name == "bouc_wen" else 1.0
     r = synthetic(system, record, duration=15.0, eq_scale=scale)
@@ -102,8 +126,12 @@ def test_covariance_matches_finite_difference_hessian():
     Hessian of the single-shooting cost over (theta, y0) at the same solution."""
     s = LinearSDOF()
     r = synthetic(s, "kobe", duration=6.0, noise=0.05, data_seed=4)
-    res = refine(s, r, {"guess": {"c": 0.45, "k": 16.0}},
-                 RefineSettings(states="measured", reweight=False, initial_state="free"))
+    res = refine(
+        s,
+        r,
+        {"guess": {"c": 0.45, "k": 16.0}},
+        RefineSettings(states="measured", reweight=False, initial_state="free"),
+    )
     single = ShootingProblem(s, r.t, r.f, record_channels(r, 1), segment_bounds(r.t, None), 4)
     for ch in single.channels:
         ch.sigma = res.noise_std[ch.name]
@@ -121,7 +149,9 @@ def test_covariance_matches_finite_difference_hessian():
     for i in range(n):
         for j in range(n):
             ei, ej = np.eye(n)[i] * h, np.eye(n)[j] * h
-            H[i, j] = (cost(u + ei + ej) - cost(u + ei - ej) - cost(u - ei + ej) + cost(u - ei - ej)) / (4 * h * h)
+            H[i, j] = (cost(u + ei + ej) - cost(u + ei - ej) - cost(u - ei + ej) + cost(u - ei - ej)) / (
+                4 * h * h
+            )
     cov_fd = np.linalg.inv(H)[:2, :2]
     _, J, _, C = single.linearize(u)
     cov_gn, _ = covariance(single, J, C)
@@ -161,7 +191,9 @@ def _cut(record, t0: float, t1: float):
 
     i0, i1 = np.searchsorted(record.t, [t0, t1])
     i = int(i0 + np.argmax(np.abs(record.clean.x[i0:i1, 0])))
-    return replace(record, t=record.t[i:] - record.t[i], f=record.f[i:], x=record.x[i:], v=record.v[i:], clean=None)
+    return replace(
+        record, t=record.t[i:] - record.t[i], f=record.f[i:], x=record.x[i:], v=record.v[i:], clean=None
+    )
 
 
 def test_initial_state_is_held_at_rest_only_when_the_data_allow_it():
@@ -221,8 +253,8 @@ def test_a_start_where_single_shooting_fails_and_multiple_shooting_succeeds(tmp_
     multiple-shooting refinement from the same start, its segment states from the measured
     x and x', finds the truth."""
     import hydra
-
     from conftest import make_cfg
+
     from pidyn.baselines import output_error
     from pidyn.tasks.train import build_record
 
@@ -231,7 +263,9 @@ def test_a_start_where_single_shooting_fails_and_multiple_shooting_succeeds(tmp_
     system = hydra.utils.instantiate(cfg.system)
     r = build_record(cfg, system)
     truth = system.true_values()
-    oe = output_error(r, system, init=start, max_nfev=20)  # in its basin's end by then (60 give the same 3 digits)
+    oe = output_error(
+        r, system, init=start, max_nfev=20
+    )  # in its basin's end by then (60 give the same 3 digits)
     assert max(abs(oe.params[k] - truth[k]) / truth[k] for k in start) > 0.1, oe.params
     res = refine(system, r, {"start": start}, RefineSettings(states="measured"))
     assert max(abs(res.params[k] - truth[k]) / truth[k] for k in start) < 1e-4, res.params
@@ -260,8 +294,9 @@ def test_a_start_whose_simulation_blows_up_is_said_so():
     simulates is preferred to it."""
     system = LinearSDOF()
     r = synthetic(system, "el_centro", duration=4.0)
-    quick = RefineSettings(states="measured", segment_length=2.0, max_nfev=3, gn_steps=2, reweight=False,
-                           initial_state="free")
+    quick = RefineSettings(
+        states="measured", segment_length=2.0, max_nfev=3, gn_steps=2, reweight=False, initial_state="free"
+    )
     blown = {"c": 0.5, "k": 1e9}
     res = refine(system, r, {"pidynnet": blown}, quick)
     assert any("blowing up" in n for n in res.notes), res.notes

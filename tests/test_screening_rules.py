@@ -7,13 +7,28 @@ import numpy as np
 import pytest
 
 from pidyn.discrepancy.effects import EFFECTS, Signals
-from pidyn.discrepancy.screening import (Thresholds, _cv_rss, _folds, _mark_heldout_miss, _passes, _tie_break,
-                                         _verdict)
+from pidyn.discrepancy.screening import (
+    Thresholds,
+    _cv_rss,
+    _folds,
+    _mark_heldout_miss,
+    _passes,
+    _tie_break,
+    _verdict,
+)
 
 
 def _row(effect: str, score: float, cv: float, ho: float | None = 0.5, step: bool = False) -> dict:
-    return {"effect": effect, "score": score, "delta_bic": -score, "cv_gain": cv, "heldout_gain": ho,
-            "force_share": 0.01, "step_in_time": step, "parameters": {"t_d": 5.0}}
+    return {
+        "effect": effect,
+        "score": score,
+        "delta_bic": -score,
+        "cv_gain": cv,
+        "heldout_gain": ho,
+        "force_share": 0.01,
+        "step_in_time": step,
+        "parameters": {"t_d": 5.0},
+    }
 
 
 def _rank(rows: list[dict], structure: dict, th: Thresholds) -> list[dict]:
@@ -76,15 +91,24 @@ def test_an_effect_that_predicts_almost_none_of_the_held_out_structure_is_not_na
     assert rows[0]["passes"] and "heldout_small" not in rows[0]
     assert _verdict(rows, dict(structured), th) == ("discrepancy", "gap_contact")
     # no structure in the held-out part: nothing to share
-    rows = _rank([_row("quadratic_stiffness", 16.0, 0.63, ho=0.01)], {"cv_gain": 0.79, "heldout_gain": 0.2}, th)
+    rows = _rank(
+        [_row("quadratic_stiffness", 16.0, 0.63, ho=0.01)], {"cv_gain": 0.79, "heldout_gain": 0.2}, th
+    )
     assert rows[0]["passes"]
 
 
 def test_cross_validation_decides_between_effects_that_bic_does_not():
     th = Thresholds()
     structure = {"cv_gain": 0.7, "heldout_gain": 0.6}
-    rows = _rank([_row("cubic_stiffness", 38.8, 0.36), _row("gap_contact", 36.0, 0.63),
-                  _row("quadratic_stiffness", 24.8, 0.06)], structure, th)
+    rows = _rank(
+        [
+            _row("cubic_stiffness", 38.8, 0.36),
+            _row("gap_contact", 36.0, 0.63),
+            _row("quadratic_stiffness", 24.8, 0.06),
+        ],
+        structure,
+        th,
+    )
     st = dict(structure)
     assert _verdict(rows, st, th) == ("discrepancy", "gap_contact")
     assert "cross-validation" in st["tie_break"]
@@ -161,5 +185,7 @@ def test_the_held_out_check_says_so_when_the_held_out_part_holds_no_motion():
     lasting = np.sin(2 * t)
     judged = heldout_check(lasting + noise, 1.02 * lasting, fit, held, sigma)
     assert judged.ratio is not None and not judged.failed
-    assert heldout_check(lasting + noise, np.sin(2.2 * t), fit, held, sigma).failed is False  # wrong everywhere
+    assert (
+        heldout_check(lasting + noise, np.sin(2.2 * t), fit, held, sigma).failed is False
+    )  # wrong everywhere
     assert heldout_check(lasting + noise, np.where(fit, lasting, 0.3 * lasting), fit, held, sigma).failed

@@ -18,8 +18,11 @@ from pidyn.config import compose, group_options
 
 #: compositions in order of precedence: the first that sets a target's key is its reference
 #: (later options, e.g. data=silverbox's short windows, are the config's deliberate choices)
-COMPOSITIONS = ([("train", {})] + [("diagnose", {}), ("generalize", {})]
-                + [("train", {g: o}) for g in ("system", "data", "callbacks", "model/refine") for o in group_options(g)])
+COMPOSITIONS = (
+    [("train", {})]
+    + [("diagnose", {}), ("generalize", {})]
+    + [("train", {g: o}) for g in ("system", "data", "callbacks", "model/refine") for o in group_options(g)]
+)
 
 
 #: starting guesses of the identification live in the system configs only: the code's None
@@ -29,10 +32,12 @@ GUESSES = {"params", "guess"}
 
 def _same(a, b) -> bool:
     """Equal as settings: YAML has no tuples, and None and an empty mapping both mean none."""
+
     def norm(v):
         if isinstance(v, tuple):
             return list(v)
         return None if isinstance(v, dict) and not v else v
+
     return norm(a) == norm(b)
 
 
@@ -70,7 +75,9 @@ def test_every_target_default_agrees_with_its_config():
         if default is inspect.Parameter.empty or (isinstance(value, str) and "${" in value):
             continue  # required in code, or set by a sweep knob
         if not _same(default, value):
-            bad.append(f"{where}: {target}({key}=...) defaults to {default!r} in code, {value!r} in the config")
+            bad.append(
+                f"{where}: {target}({key}=...) defaults to {default!r} in code, {value!r} in the config"
+            )
     assert not bad, "\n".join(bad)
 
 
@@ -82,27 +89,49 @@ def _settings_classes():
     from pidyn.refine import RefineSettings
 
     # (dataclass, config, key, config keys the task itself reads beside the dataclass)
-    return [(Schedule, "train", "model.schedule", set()),
-            (RefineSettings, "train", "model.refine", {"method", "starts", "compare_states"}),
-            (PredictSettings, "generalize", "generalization",
-             {"duration", "own_scales", "own_stretches", "other_records", "other_scales", "match_pga", "align",
-              "lead", "max_cases"}),
-            (Thresholds, "diagnose", "diagnosis.thresholds", set()),
-            (DiagnosisSettings, "diagnose", "diagnosis", set())]
+    return [
+        (Schedule, "train", "model.schedule", set()),
+        (RefineSettings, "train", "model.refine", {"method", "starts", "compare_states"}),
+        (
+            PredictSettings,
+            "generalize",
+            "generalization",
+            {
+                "duration",
+                "own_scales",
+                "own_stretches",
+                "other_records",
+                "other_scales",
+                "match_pga",
+                "align",
+                "lead",
+                "max_cases",
+            },
+        ),
+        (Thresholds, "diagnose", "diagnosis.thresholds", set()),
+        (DiagnosisSettings, "diagnose", "diagnosis", set()),
+    ]
 
 
-@pytest.mark.parametrize("cls, config, key, task_keys", _settings_classes(), ids=lambda v: getattr(v, "__name__", ""))
+@pytest.mark.parametrize(
+    "cls, config, key, task_keys", _settings_classes(), ids=lambda v: getattr(v, "__name__", "")
+)
 def test_settings_dataclasses_mirror_their_config(cls, config, key, task_keys):
     node = OmegaConf.to_container(OmegaConf.select(compose(config), key), resolve=True)
     fields = {f.name: f for f in dataclasses.fields(cls)}
-    assert set(node) - set(fields) <= task_keys, f"{key}: keys {sorted(set(node) - set(fields) - task_keys)} " \
-                                                 f"are not fields of {cls.__name__}"
-    assert not set(fields) - set(node), f"{cls.__name__} fields {sorted(set(fields) - set(node))} missing in {key}"
+    assert set(node) - set(fields) <= task_keys, (
+        f"{key}: keys {sorted(set(node) - set(fields) - task_keys)} are not fields of {cls.__name__}"
+    )
+    assert not set(fields) - set(node), (
+        f"{cls.__name__} fields {sorted(set(fields) - set(node))} missing in {key}"
+    )
     for name, f in fields.items():
         default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc]
         if dataclasses.is_dataclass(default):  # a nested settings block: compared whole
             default = dataclasses.asdict(default)
-        assert _same(default, node[name]), f"{cls.__name__}.{name}: {default!r} in code, {node[name]!r} in {key}"
+        assert _same(default, node[name]), (
+            f"{cls.__name__}.{name}: {default!r} in code, {node[name]!r} in {key}"
+        )
 
 
 def test_task_read_settings_default_to_the_config():
@@ -117,27 +146,38 @@ def test_baseline_settings_agree_with_their_functions(method):
     import pidyn.baselines as B
     from pidyn.baselines import peers
 
-    fn = {"output_error": B.output_error, "sindy": B.weak_sindy, "ukf": B.unscented_kalman_filter,
-          "transfer_function": peers.transfer_function_estimate, "srim": peers.srim, "okid_era": peers.okid_era}[method]
+    fn = {
+        "output_error": B.output_error,
+        "sindy": B.weak_sindy,
+        "ukf": B.unscented_kalman_filter,
+        "transfer_function": peers.transfer_function_estimate,
+        "srim": peers.srim,
+        "okid_era": peers.okid_era,
+    }[method]
     node = OmegaConf.to_container(compose("train").baselines, resolve=True).get(method) or {}
     params = inspect.signature(fn).parameters
     for k, v in node.items():
         assert k in params, f"baselines.{method}.{k}: {fn.__name__} takes no such argument"
-        assert params[k].default is inspect.Parameter.empty or _same(params[k].default, v), \
+        assert params[k].default is inspect.Parameter.empty or _same(params[k].default, v), (
             f"baselines.{method}.{k}: {params[k].default!r} in code, {v!r} in the config"
+        )
 
 
-@pytest.mark.parametrize("override, message", [
-    ("baselines.run=[ukf,sindi]", "baselines.run: unknown method"),
-    ("model.refine.starts=[output_eror]", "model.refine.starts: unknown method"),
-    ("model.schedule.fusion=informaton", "model.schedule.fusion"),
-    ("model.refine.states=network", "refine.states must be one of"),
-])
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("baselines.run=[ukf,sindi]", "baselines.run: unknown method"),
+        ("model.refine.starts=[output_eror]", "model.refine.starts: unknown method"),
+        ("model.schedule.fusion=informaton", "model.schedule.fusion"),
+        ("model.refine.states=network", "refine.states must be one of"),
+    ],
+)
 def test_enumerated_options_are_checked_before_any_work(override, message, tmp_path):
     from pidyn.tasks.train import train
 
-    cfg = compose("train", overrides=[override, "logger=none"], output_dir=tmp_path,
-                  values={"raise_errors": True})
+    cfg = compose(
+        "train", overrides=[override, "logger=none"], output_dir=tmp_path, values={"raise_errors": True}
+    )
     with pytest.raises(ValueError, match=message):
         train(cfg)
     assert not (tmp_path / "subperiod_state.json").exists()

@@ -17,9 +17,15 @@ def residuals_of(system, gm, params=None):
     T = lambda a: torch.tensor(a, dtype=torch.float64)  # noqa: E731
     zd = None
     if tr.z is not None:
-        zd = np.array([system.rhs(t, np.r_[tr.x[i], tr.v[i], tr.z[i]], p, lambda _: 0.0)[2 * system.n_dof:]
-                       for i, t in enumerate(tr.t)])
-    k = Kinematics(T(tr.t), T(tr.x), T(tr.v), T(tr.a), None if tr.z is None else T(tr.z), None if zd is None else T(zd))
+        zd = np.array(
+            [
+                system.rhs(t, np.r_[tr.x[i], tr.v[i], tr.z[i]], p, lambda _: 0.0)[2 * system.n_dof :]
+                for i, t in enumerate(tr.t)
+            ]
+        )
+    k = Kinematics(
+        T(tr.t), T(tr.x), T(tr.v), T(tr.a), None if tr.z is None else T(tr.z), None if zd is None else T(zd)
+    )
     res = system.residual(k, T(tr.f), {n: torch.tensor(v, dtype=torch.float64) for n, v in p.items()})
     scale = np.abs(tr.f).max() * max(p.get("m", 1.0), 1.0)
     return {n: float(r.abs().max()) / scale for n, r in res.items()}, tr
@@ -52,7 +58,9 @@ def test_linear_sdof_matches_closed_form_free_vibration():
     m, c, k, x0 = 1.0, 0.5, 15.0, 0.1
     s = LinearSDOF(c=c, k=k)
     t = np.linspace(0, 10, 1001)
-    tr = simulate(s, s.true_values(), lambda tt: np.zeros_like(np.asarray(tt, float)), t, y0=np.array([x0, 0.0]))
+    tr = simulate(
+        s, s.true_values(), lambda tt: np.zeros_like(np.asarray(tt, float)), t, y0=np.array([x0, 0.0])
+    )
     wn = np.sqrt(k / m)
     zeta = c / (2 * np.sqrt(k * m))
     wd = wn * np.sqrt(1 - zeta**2)
@@ -93,9 +101,14 @@ def test_noise_level_and_seed():
 
 
 def test_param_transforms_round_trip_and_bounds():
-    for spec, v in [(ParamSpec("k", 15.0, scale=15.0), 120.0), (ParamSpec("n", 2.0, transform="box", lower=0.5, upper=6.0), 4.2),
-                    (ParamSpec("g", 2.0, transform="identity", scale=2.0), -3.0)]:
-        assert float(from_raw(spec, torch.tensor(to_raw(spec, v), dtype=torch.float64))) == pytest.approx(v, rel=1e-9)
+    for spec, v in [
+        (ParamSpec("k", 15.0, scale=15.0), 120.0),
+        (ParamSpec("n", 2.0, transform="box", lower=0.5, upper=6.0), 4.2),
+        (ParamSpec("g", 2.0, transform="identity", scale=2.0), -3.0),
+    ]:
+        assert float(from_raw(spec, torch.tensor(to_raw(spec, v), dtype=torch.float64))) == pytest.approx(
+            v, rel=1e-9
+        )
     p = PhysicalParameters([ParamSpec("n", 2.0, transform="box", lower=0.5, upper=6.0), ParamSpec("c", 0.5)])
     p.set_values({"n": 100.0, "c": -1.0})
     v = p.as_floats()
@@ -126,11 +139,18 @@ def test_least_squares_standard_errors_see_a_weak_column():
     v = 0.12 * torch.cos(4 * t)
     a = -0.48 * torch.sin(4 * t)
     g = torch.Generator().manual_seed(0)
-    f = -(a + 0.3 * v + 25 * x + 400 * x**3) + 0.05 * torch.randn(1000, generator=g)  # ag from the motion, noisy
+    f = -(a + 0.3 * v + 25 * x + 400 * x**3) + 0.05 * torch.randn(
+        1000, generator=g
+    )  # ag from the motion, noisy
     k = Kinematics(t=t[:, None], x=x[:, None], v=v[:, None], a=a[:, None])
     std: dict = {}
-    est = solve_linear_params(system, k, f, {"m": torch.tensor(1.0), "c": torch.tensor(0.5),
-                                                       "k1": torch.tensor(15.0), "k3": torch.tensor(120.0)},
-                              ["c", "k1", "k3"], std=std)
+    est = solve_linear_params(
+        system,
+        k,
+        f,
+        {"m": torch.tensor(1.0), "c": torch.tensor(0.5), "k1": torch.tensor(15.0), "k3": torch.tensor(120.0)},
+        ["c", "k1", "k3"],
+        std=std,
+    )
     assert abs(est["k1"] - 25) < 1.0
     assert std["k3"] > 0.5 * abs(est["k3"]) and std["k3"] > 100, (est, std)

@@ -22,8 +22,13 @@ SMOKE = ["debug=smoke", "logger=none", "baselines=none"]
 # determine (after 50 pretraining iterations k3 = 72 +- more than half of it: k3 keeps its start).
 BEFORE = {
     "duffing": {"c": 1.0588386058807373, "k1": 15.065049171447754, "k3": 45.12295913696289},
-    "bouc_wen": {"c": 2.133432388305664, "k": 1.5203810930252075, "beta": 0.4899733066558838,
-                 "gamma": 0.4072237014770508, "n": 1.671323537826538},
+    "bouc_wen": {
+        "c": 2.133432388305664,
+        "k": 1.5203810930252075,
+        "beta": 0.4899733066558838,
+        "gamma": 0.4072237014770508,
+        "n": 1.671323537826538,
+    },
 }
 
 
@@ -84,13 +89,21 @@ def test_compare_states_refines_from_the_start_the_stage_chose(tmp_path, monkeyp
 
     def fake_refine(system, record, starts, settings, network_states=None, **span):
         calls.append((dict(starts), settings.states))
-        return SimpleNamespace(start="output_error" if "output_error" in starts else "pidynnet", params={},
-                               cost=1.0, converged=True, max_defect=0.0, seconds=0.0)
+        return SimpleNamespace(
+            start="output_error" if "output_error" in starts else "pidynnet",
+            params={},
+            cost=1.0,
+            converged=True,
+            max_defect=0.0,
+            seconds=0.0,
+        )
 
     monkeypatch.setattr(pidyn.refine, "refine", fake_refine)
     # the fake refinement has no model to simulate: the divergence check is another test's
     monkeypatch.setattr(pidyn.tasks.train, "check_refined", lambda *a, **k: None)
-    cfg = make_cfg(SMOKE + ["model.refine.starts=[output_error]", "model.refine.compare_states=[integrated]"], tmp_path)
+    cfg = make_cfg(
+        SMOKE + ["model.refine.starts=[output_error]", "model.refine.compare_states=[integrated]"], tmp_path
+    )
     pidyn_values, oe = {"c": 9.0, "k1": 9.0, "k3": 9.0}, {"c": 0.5, "k1": 15.0, "k3": 120.0}
     record = SimpleNamespace(truth=None)
     out = run_refinement(cfg, None, record, pidyn_values, [{"method": "output_error", "params": oe}], [])

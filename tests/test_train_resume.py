@@ -8,21 +8,37 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 import torch
 import yaml
-
 from conftest import make_cfg
+
 from pidyn.tasks.train import train
 
-FAST = ["model.schedule.pretrain_iters=20", "model.schedule.pretrain_iters_window=10",
-        "model.schedule.max_iters=20", "excitation.duration=15", "baselines=none"]
+FAST = [
+    "model.schedule.pretrain_iters=20",
+    "model.schedule.pretrain_iters_window=10",
+    "model.schedule.max_iters=20",
+    "excitation.duration=15",
+    "baselines=none",
+]
 
 
 def test_run_folder_holds_everything(tmp_path):
-    cfg = make_cfg([o for o in FAST if o != "baselines=none"] + ["model.schedule.max_windows=2",
-                   "baselines.run=[equation_error,ukf]"], tmp_path)
+    cfg = make_cfg(
+        [o for o in FAST if o != "baselines=none"]
+        + ["model.schedule.max_windows=2", "baselines.run=[equation_error,ukf]"],
+        tmp_path,
+    )
     metrics = train(cfg)
-    for f in ["identified_params.yaml", "metrics.json", "windows.json", "subperiod_state.json",
-              "figures/param_convergence.png", "figures/response.png", "checkpoints/last.pt",
-              "baselines.json", "cramer_rao.json"]:
+    for f in [
+        "identified_params.yaml",
+        "metrics.json",
+        "windows.json",
+        "subperiod_state.json",
+        "figures/param_convergence.png",
+        "figures/response.png",
+        "checkpoints/last.pt",
+        "baselines.json",
+        "cramer_rao.json",
+    ]:
         assert (tmp_path / f).exists(), f
     assert list((tmp_path / "tensorboard").glob("events.out.tfevents.*"))
     table = yaml.safe_load((tmp_path / "identified_params.yaml").read_text())["params"]
@@ -75,7 +91,10 @@ def test_resume_continues_from_next_window(tmp_path):
 
 def test_resume_of_a_latent_system_carries_z_across(tmp_path):
     """A Bouc-Wen run resumes with the LNN's z at the end of the last finished window."""
-    over = FAST + ["system=bouc_wen", "model.refine=none"]  # the resume is PIDynNet's; the stage after it is not
+    over = FAST + [
+        "system=bouc_wen",
+        "model.refine=none",
+    ]  # the resume is PIDynNet's; the stage after it is not
     cfg = make_cfg(over + ["model.schedule.max_windows=1"], tmp_path)
     train(cfg)
     z_end = json.loads((tmp_path / "subperiod_state.json").read_text())["windows"][0]["z_end"]
@@ -91,8 +110,16 @@ def test_baselines_take_the_noise_a_data_source_drew(tmp_path):
     baselines and the bound read it from the record, not from the config."""
     from pidyn.tasks.train import BaselineJob, record_noise
 
-    cfg = make_cfg(["data=hidden", "noise=null", "baselines.run=[equation_error]", "baselines.parallel=false",
-                    "logger=none"], tmp_path)
+    cfg = make_cfg(
+        [
+            "data=hidden",
+            "noise=null",
+            "baselines.run=[equation_error]",
+            "baselines.parallel=false",
+            "logger=none",
+        ],
+        tmp_path,
+    )
     import hydra
 
     from pidyn.tasks.train import build_record

@@ -44,7 +44,9 @@ def test_excitation_transform_is_an_exact_change_of_variable():
     h = float(w.t_pool[1] - w.t_pool[0])
     qdd = (w.q_pool[2:] - 2 * w.q_pool[1:-1] + w.q_pool[:-2]) / h**2
     assert float((qdd - w.f_pool[1:-1]).abs().max()) < 0.05 * float(w.f_pool.abs().max())
-    assert float(w.q_pool[0]) == pytest.approx(0.0, abs=1e-12) and float(w.qd_pool[0]) == pytest.approx(0.0, abs=1e-12)
+    assert float(w.q_pool[0]) == pytest.approx(0.0, abs=1e-12) and float(w.qd_pool[0]) == pytest.approx(
+        0.0, abs=1e-12
+    )
 
 
 def test_without_the_transform_the_networks_represent_x_itself():

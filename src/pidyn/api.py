@@ -19,9 +19,10 @@ from __future__ import annotations
 import json
 import shutil
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -31,8 +32,14 @@ from pidyn.config import compose, group_options
 from pidyn.data.sources import Record
 
 #: short names for settings a notebook user sets often (any other key: ``model__schedule__max_windows=4``)
-ALIASES = {"refine": "model/refine", "baselines": "baselines", "logger": "logger", "debug": "debug",
-           "trainer": "trainer", "excitation": "excitation"}
+ALIASES = {
+    "refine": "model/refine",
+    "baselines": "baselines",
+    "logger": "logger",
+    "debug": "debug",
+    "trainer": "trainer",
+    "excitation": "excitation",
+}
 
 
 def _split_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -73,7 +80,7 @@ class Result:
     _objects: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @classmethod
-    def load(cls, run_dir: str | Path, objects: dict[str, Any] | None = None) -> "Result":
+    def load(cls, run_dir: str | Path, objects: dict[str, Any] | None = None) -> Result:
         """A run folder written by ``identify`` or ``pidyn-train``, read back."""
         run_dir = Path(run_dir)
         if not (run_dir / "metrics.json").exists():
@@ -83,21 +90,40 @@ class Result:
         state = run_dir / "subperiod_state.json"
         traj = json.loads(state.read_text()).get("trajectory", []) if state.exists() else []
         wins = run_dir / "windows.json"
-        return cls(system=m["system"], params=m["params"], ci95=m.get("ci95", {}), std=m.get("std", {}),
-                   truth=m.get("truth", {}), error_pct=m.get("error_pct", {}), pidynnet=m["pidynnet"]["params"],
-                   equation=ident["equation"], notes=list(m.get("notes", [])), metrics=m, run_dir=run_dir,
-                   history=pd.DataFrame(traj),
-                   windows=json.loads(wins.read_text())["windows"] if wins.exists() else [],
-                   _objects=objects or {})
+        return cls(
+            system=m["system"],
+            params=m["params"],
+            ci95=m.get("ci95", {}),
+            std=m.get("std", {}),
+            truth=m.get("truth", {}),
+            error_pct=m.get("error_pct", {}),
+            pidynnet=m["pidynnet"]["params"],
+            equation=ident["equation"],
+            notes=list(m.get("notes", [])),
+            metrics=m,
+            run_dir=run_dir,
+            history=pd.DataFrame(traj),
+            windows=json.loads(wins.read_text())["windows"] if wins.exists() else [],
+            _objects=objects or {},
+        )
 
     def to_frame(self) -> pd.DataFrame:
         """One row per parameter: value, ci95_lo, ci95_hi, std, truth, error_pct, pidynnet."""
         rows = []
         for n, v in self.params.items():
             lo, hi = self.ci95.get(n, (np.nan, np.nan))
-            rows.append({"param": n, "value": v, "ci95_lo": lo, "ci95_hi": hi, "std": self.std.get(n, np.nan),
-                         "truth": self.truth.get(n), "error_pct": self.error_pct.get(n, np.nan),
-                         "pidynnet": self.pidynnet.get(n, np.nan)})
+            rows.append(
+                {
+                    "param": n,
+                    "value": v,
+                    "ci95_lo": lo,
+                    "ci95_hi": hi,
+                    "std": self.std.get(n, np.nan),
+                    "truth": self.truth.get(n),
+                    "error_pct": self.error_pct.get(n, np.nan),
+                    "pidynnet": self.pidynnet.get(n, np.nan),
+                }
+            )
         return pd.DataFrame(rows).set_index("param")
 
     def plot(self, path: str | Path | None = None):
@@ -106,8 +132,14 @@ class Result:
         from pidyn.reporting import plot_convergence
 
         final = {n: {"value": v, "ci95": self.ci95[n]} for n, v in self.params.items() if n in self.ci95}
-        return plot_convergence(None if path is None else Path(path), self.history.to_dict("records"), self.truth,
-                                self.windows, title=f"{self.system}: {self.equation}", final=final or None)
+        return plot_convergence(
+            None if path is None else Path(path),
+            self.history.to_dict("records"),
+            self.truth,
+            self.windows,
+            title=f"{self.system}: {self.equation}",
+            final=final or None,
+        )
 
     def save(self, directory: str | Path) -> Path:
         """Copy the run folder to ``directory`` and add ``params.csv`` and ``history.csv``."""
@@ -119,8 +151,15 @@ class Result:
         return directory
 
 
-def identify(record: Record | None = None, system: str = "duffing", *, init: dict[str, float] | None = None,
-             out_dir: str | Path | None = None, overrides: Iterable[str] = (), **options: Any) -> Result:
+def identify(
+    record: Record | None = None,
+    system: str = "duffing",
+    *,
+    init: dict[str, float] | None = None,
+    out_dir: str | Path | None = None,
+    overrides: Iterable[str] = (),
+    **options: Any,
+) -> Result:
     """Identify ``system`` (a name from ``conf/system``) from ``record`` (default: the
     configured simulated record) with PIDynNet and the refinement stage.
 
@@ -135,8 +174,9 @@ def identify(record: Record | None = None, system: str = "duffing", *, init: dic
     values.setdefault("trainer.enable_progress_bar", False)
     values.setdefault("raise_errors", True)
     run_dir = _run_dir(out_dir, "train", system)
-    cfg = compose("train", groups={"system": system, **groups}, values=values, overrides=overrides,
-                  output_dir=run_dir)
+    cfg = compose(
+        "train", groups={"system": system, **groups}, values=values, overrides=overrides, output_dir=run_dir
+    )
     _, objects = run_identification(cfg, record=record)
     return Result.load(run_dir, objects)
 
@@ -161,9 +201,17 @@ class ResponsePrediction:
         return pd.DataFrame(cols)
 
 
-def predict(result: Result, excitation: str | Path, *, scale: float = 1.0, stretch: float = 1.0,
-            duration: float | None = 20.0, dt: float | None = 0.01, start: float = 0.0,
-            **settings: Any) -> ResponsePrediction:
+def predict(
+    result: Result,
+    excitation: str | Path,
+    *,
+    scale: float = 1.0,
+    stretch: float = 1.0,
+    duration: float | None = 20.0,
+    dt: float | None = 0.01,
+    start: float = 0.0,
+    **settings: Any,
+) -> ResponsePrediction:
     """Predict the response of the identified structure to ``excitation`` (a shipped record's
     name or an AT2 path), as in the paper's Eq. 14. ``settings``: fields of ``PredictSettings``
     (``iterations``, ``lbfgs_steps``, ``split_tol``, ``min_window``, ``start_from``)."""
@@ -173,8 +221,10 @@ def predict(result: Result, excitation: str | Path, *, scale: float = 1.0, stret
 
     obj = result._objects
     if not obj:
-        raise ValueError("predict needs the networks of an identification run in this session: "
-                         "a Result from pidyn.identify(), not one read back with Result.load()")
+        raise ValueError(
+            "predict needs the networks of an identification run in this session: "
+            "a Result from pidyn.identify(), not one read back with Result.load()"
+        )
     valid = set(PredictSettings.__dataclass_fields__)
     unknown = set(settings) - valid
     if unknown:
@@ -186,12 +236,14 @@ def predict(result: Result, excitation: str | Path, *, scale: float = 1.0, stret
     target = Record(name=gm.name, t=gm.t, f=gm.acc, x=np.zeros((len(gm.t), system.n_dof)))  # the shape only
     scale_x = float(np.nanstd(ident_record.x)) if ident_record.x is not None else float(np.nanstd(sim.x))
     scale_v = float(np.nanstd(ident_record.v)) if ident_record.v is not None else None
-    pred = predict_response(module, target, obj["trainer_factory"], PredictSettings(**settings),
-                            x_scale=scale_x, v_scale=scale_v)
+    pred = predict_response(
+        module, target, obj["trainer_factory"], PredictSettings(**settings), x_scale=scale_x, v_scale=scale_v
+    )
     x_pred = pred.x if pred.x.ndim == 2 else pred.x[:, None]
     x_sim = sim.x if sim.x.ndim == 2 else sim.x[:, None]
-    return ResponsePrediction(name=gm.name, t=gm.t, ag=gm.acc, x_pidynnet=x_pred, x_simulated=x_sim,
-                              seconds=pred.seconds)
+    return ResponsePrediction(
+        name=gm.name, t=gm.t, ag=gm.acc, x_pidynnet=x_pred, x_simulated=x_sim, seconds=pred.seconds
+    )
 
 
 @dataclass
@@ -213,8 +265,15 @@ class Diagnosis:
         return pd.DataFrame(self.details.get("ranking", []))
 
 
-def diagnose(record: Record | None = None, nominal: str = "linear", *, mass: float | None = 1.0,
-             out_dir: str | Path | None = None, overrides: Iterable[str] = (), **options: Any) -> Diagnosis:
+def diagnose(
+    record: Record | None = None,
+    nominal: str = "linear",
+    *,
+    mass: float | None = 1.0,
+    out_dir: str | Path | None = None,
+    overrides: Iterable[str] = (),
+    **options: Any,
+) -> Diagnosis:
     """Diagnose what ``nominal`` (a system name) misses on ``record`` (default: the configured
     record with a hidden effect). ``mass``: the known mass (None identifies it, force excitation
     only). ``options`` as for ``identify`` (``diagnosis__fit_share=0.6``)."""
@@ -226,11 +285,24 @@ def diagnose(record: Record | None = None, nominal: str = "linear", *, mass: flo
     values.setdefault("trainer.enable_progress_bar", False)
     values.setdefault("raise_errors", True)
     run_dir = _run_dir(out_dir, "diagnose", nominal)
-    cfg = compose("diagnose", groups={"system": nominal, **groups}, values=values, overrides=overrides,
-                  output_dir=run_dir)
+    cfg = compose(
+        "diagnose",
+        groups={"system": nominal, **groups},
+        values=values,
+        overrides=overrides,
+        output_dir=run_dir,
+    )
     d = run_diagnosis(cfg, record=record)
-    return Diagnosis(verdict=d["verdict"], causes=list(d["causes"]), nominal=d["nominal"], extended=d["extended"],
-                     gain=d["gain"], change=d["change"], report=run_dir / "report.md", details=d)
+    return Diagnosis(
+        verdict=d["verdict"],
+        causes=list(d["causes"]),
+        nominal=d["nominal"],
+        extended=d["extended"],
+        gain=d["gain"],
+        change=d["change"],
+        report=run_dir / "report.md",
+        details=d,
+    )
 
 
 def system_names() -> list[str]:

@@ -11,13 +11,44 @@ import numpy as np
 from pidyn.reporting import nrmse, write_json
 
 #: what a strong-motion record says of itself, kept in metrics.json
-RECORD_META = ("path", "station", "direction", "input_channels", "output_channels", "pga", "span", "t_offset", "dt",
-               "notes", "pre_event_rms", "band_hz")
-IMU_META = ("path", "run", "floors", "devices", "alignment", "align", "dt", "span", "pga", "notes", "pre_event_rms")
+RECORD_META = (
+    "path",
+    "station",
+    "direction",
+    "input_channels",
+    "output_channels",
+    "pga",
+    "span",
+    "t_offset",
+    "dt",
+    "notes",
+    "pre_event_rms",
+    "band_hz",
+)
+IMU_META = (
+    "path",
+    "run",
+    "floors",
+    "devices",
+    "alignment",
+    "align",
+    "dt",
+    "span",
+    "pga",
+    "notes",
+    "pre_event_rms",
+)
 
 
-def assess(system, record, final: dict[str, float], refined: Any, sim: dict[str, np.ndarray], hold_out: bool,
-           run_dir: Path) -> dict[str, Any]:
+def assess(
+    system,
+    record,
+    final: dict[str, float],
+    refined: Any,
+    sim: dict[str, np.ndarray],
+    hold_out: bool,
+    run_dir: Path,
+) -> dict[str, Any]:
     """modal.json, and the metrics to add: the modes, the held-out scores (a record identified on
     its fitting part only), what a strong-motion record says of itself."""
     import logging
@@ -35,8 +66,11 @@ def assess(system, record, final: dict[str, float], refined: Any, sim: dict[str,
     split = meta.get("split") if hold_out else None
     if split:
         out["heldout"] = heldout_scores(sim, record, split["heldout"], split["fit"])
-        logging.getLogger(__name__).info("held-out part %.4g-%.4g s: NRMSE %s", *split["heldout"], ", ".join(
-            f"{k} {v:.3g}" for k, v in out["heldout"]["nrmse"].items()))
+        logging.getLogger(__name__).info(
+            "held-out part %.4g-%.4g s: NRMSE %s",
+            *split["heldout"],
+            ", ".join(f"{k} {v:.3g}" for k, v in out["heldout"]["nrmse"].items()),
+        )
     return out
 
 
@@ -59,10 +93,15 @@ def write_modal(run_dir: Path, modes: list[dict] | None, extra: dict | None = No
         write_json(run_dir / "modal.json", {"modes": modes, **(extra or {})})
 
 
-def heldout_scores(sim: dict[str, np.ndarray], record, span: tuple[float, float] | list[float],
-                   fit: tuple[float, float] | list[float] | None = None) -> dict[str, Any]:
+def heldout_scores(
+    sim: dict[str, np.ndarray],
+    record,
+    span: tuple[float, float] | list[float],
+    fit: tuple[float, float] | list[float] | None = None,
+) -> dict[str, Any]:
     """NRMSE of the simulated response on the held-out ``span`` per measured channel (``a1``,
     ``x``...; accelerations as the sensors read them), their mean, and the same on ``fit``."""
+
     def scores(lo: float, hi: float) -> dict[str, float]:
         m = (record.t >= lo - 1e-9) & (record.t <= hi + 1e-9)
         out = {}
@@ -71,12 +110,17 @@ def heldout_scores(sim: dict[str, np.ndarray], record, span: tuple[float, float]
             for fl in floors:
                 pred = measured_convention(sim, record, kind)[:, fl - 1]
                 truth = meas[:, fl - 1] + (_ground(record) if kind == "a" else 0.0)
-                out[f"{kind}{fl}"] = nrmse(pred[m], truth[m]) if np.all(np.isfinite(pred[m])) else float("inf")
+                out[f"{kind}{fl}"] = (
+                    nrmse(pred[m], truth[m]) if np.all(np.isfinite(pred[m])) else float("inf")
+                )
         return out
 
     held = scores(*span)
-    out: dict[str, Any] = {"span": [float(span[0]), float(span[1])], "nrmse": held,
-                           "mean_nrmse_a": _mean([v for k, v in held.items() if k.startswith("a")])}
+    out: dict[str, Any] = {
+        "span": [float(span[0]), float(span[1])],
+        "nrmse": held,
+        "mean_nrmse_a": _mean([v for k, v in held.items() if k.startswith("a")]),
+    }
     if fit is not None:
         fitted = scores(*fit)
         out["fit_span"] = [float(fit[0]), float(fit[1])]

@@ -47,7 +47,7 @@ class Dual:
     def __repr__(self) -> str:
         return f"Dual(v={self.v!r}, d.shape={self.d.shape})"
 
-    def __getitem__(self, idx: Any) -> "Dual":
+    def __getitem__(self, idx: Any) -> Dual:
         # an integrator indexes at every step: a loop, not any() over a generator
         idx_t = idx if type(idx) is tuple else (idx,)
         for i in idx_t:
@@ -65,10 +65,10 @@ class Dual:
             self.v[idx] = value
             self.d[didx] = 0.0
 
-    def copy(self) -> "Dual":
+    def copy(self) -> Dual:
         return Dual(self.v.copy(), self.d.copy())
 
-    def clip(self, lo: float | None = None, hi: float | None = None) -> "Dual":
+    def clip(self, lo: float | None = None, hi: float | None = None) -> Dual:
         out = self
         if lo is not None:
             out = np.maximum(out, lo)
@@ -77,7 +77,7 @@ class Dual:
         return out  # type: ignore[return-value]
 
     # ------------------------------------------------------------------ arithmetic
-    def __add__(self, o: Any) -> "Dual":
+    def __add__(self, o: Any) -> Dual:
         if isinstance(o, Dual):
             return Dual(self.v + o.v, self.d + o.d)
         v = self.v + o
@@ -89,21 +89,21 @@ class Dual:
 
     __radd__ = __add__
 
-    def __neg__(self) -> "Dual":
+    def __neg__(self) -> Dual:
         return Dual(-self.v, -self.d)
 
-    def __pos__(self) -> "Dual":
+    def __pos__(self) -> Dual:
         return self
 
-    def __sub__(self, o: Any) -> "Dual":
+    def __sub__(self, o: Any) -> Dual:
         if isinstance(o, Dual):
             return Dual(self.v - o.v, self.d - o.d)
         return self + (-np.asarray(o))
 
-    def __rsub__(self, o: Any) -> "Dual":
+    def __rsub__(self, o: Any) -> Dual:
         return (-self) + o
 
-    def __mul__(self, o: Any) -> "Dual":
+    def __mul__(self, o: Any) -> Dual:
         if isinstance(o, Dual):
             return Dual(self.v * o.v, self.d * _e(o.v) + o.d * _e(self.v))
         o = np.asarray(o)
@@ -111,18 +111,18 @@ class Dual:
 
     __rmul__ = __mul__
 
-    def __truediv__(self, o: Any) -> "Dual":
+    def __truediv__(self, o: Any) -> Dual:
         if isinstance(o, Dual):
             v = self.v / o.v
             return Dual(v, (self.d - o.d * _e(v)) / _e(o.v))
         o = np.asarray(o)
         return Dual(self.v / o, self.d / _e(o))
 
-    def __rtruediv__(self, o: Any) -> "Dual":
+    def __rtruediv__(self, o: Any) -> Dual:
         v = np.asarray(o) / self.v
         return Dual(v, -self.d * _e(v / self.v))
 
-    def __pow__(self, o: Any) -> "Dual":
+    def __pow__(self, o: Any) -> Dual:
         if isinstance(o, Dual):  # a^b = exp(b ln a), a > 0 where b varies
             v = self.v**o.v
             base = np.maximum(self.v, 1e-300)
@@ -132,7 +132,7 @@ class Dual:
             return Dual(self.v * self.v, self.d * _e(2.0 * self.v))
         return Dual(self.v**o, self.d * _e(o * self.v ** (o - 1)))
 
-    def __rpow__(self, o: Any) -> "Dual":
+    def __rpow__(self, o: Any) -> Dual:
         v = np.asarray(o, dtype=float) ** self.v
         return Dual(v, self.d * _e(v * np.log(o)))
 
@@ -176,6 +176,7 @@ def _unary(f, df):
     def op(a: Any) -> Any:
         v = f(a.v)
         return Dual(v, a.d * _e(df(a.v, v)))
+
     return op
 
 
@@ -199,6 +200,7 @@ def _binary(name: str):
         if isinstance(a, Dual):
             return getattr(a, f"__{name}__")(b)
         return getattr(b, f"__r{name}__")(a)
+
     return op
 
 

@@ -52,7 +52,9 @@ def _write_failure(cfg: DictConfig, exc: BaseException) -> None:
 
     folder = Path(cfg.paths.output_dir)
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "failed.json").write_text(json.dumps({"error": type(exc).__name__, "message": str(exc)}, indent=2))
+    (folder / "failed.json").write_text(
+        json.dumps({"error": type(exc).__name__, "message": str(exc)}, indent=2)
+    )
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")

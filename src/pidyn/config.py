@@ -9,16 +9,28 @@ option names the valid ones instead of being silently ignored.
 from __future__ import annotations
 
 import difflib
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 from omegaconf import DictConfig, OmegaConf, open_dict
 
 CONF_DIR = Path(__file__).resolve().parent / "conf"
 
 #: config groups chosen by name (a file of the group), as ``system=bouc_wen`` on the command line
-GROUPS = ("system", "excitation", "data", "model", "model/refine", "trainer", "callbacks", "logger",
-          "baselines", "experiment", "debug")
+GROUPS = (
+    "system",
+    "excitation",
+    "data",
+    "model",
+    "model/refine",
+    "trainer",
+    "callbacks",
+    "logger",
+    "baselines",
+    "experiment",
+    "debug",
+)
 
 
 def group_options(group: str) -> list[str]:
@@ -49,9 +61,14 @@ def _check_key(cfg: DictConfig, key: str) -> None:
         walked.append(part)
 
 
-def compose(config_name: str = "train", groups: dict[str, Any] | None = None, values: dict[str, Any] | None = None,
-            overrides: Iterable[str] = (), output_dir: str | Path | None = None,
-            root_dir: str | Path | None = None) -> DictConfig:
+def compose(
+    config_name: str = "train",
+    groups: dict[str, Any] | None = None,
+    values: dict[str, Any] | None = None,
+    overrides: Iterable[str] = (),
+    output_dir: str | Path | None = None,
+    root_dir: str | Path | None = None,
+) -> DictConfig:
     """The config ``python <config_name>.py`` would run, with
 
     ``groups``: group choices (``{"system": "bouc_wen", "model/refine": "none"}``), checked;
@@ -79,7 +96,9 @@ def compose(config_name: str = "train", groups: dict[str, Any] | None = None, va
         OmegaConf.update(cfg, key, value, merge=False)
     with open_dict(cfg):
         # settings given as values count as the user's, as on the command line (``user_settings``)
-        cfg.hydra.overrides.task = list(cfg.hydra.overrides.task) + [f"{k}={v}" for k, v in (values or {}).items()]
+        cfg.hydra.overrides.task = list(cfg.hydra.overrides.task) + [
+            f"{k}={v}" for k, v in (values or {}).items()
+        ]
         if output_dir is not None:
             cfg.paths.output_dir = str(output_dir)
         cfg.paths.root_dir = str(root_dir if root_dir is not None else Path.cwd())

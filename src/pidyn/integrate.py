@@ -52,13 +52,18 @@ def rk4(
     shape = y.shape
     Yv = np.empty((N,) + shape)
     Yd = np.empty((N,) + shape + (D,)) if D else None
-    tt = np.asarray(t0, float) + (np.asarray(t, float) - float(t[0]))[:, None] if np.ndim(t0) else \
-        float(t0) + np.asarray(t, float) - float(t[0])
+    tt = (
+        np.asarray(t0, float) + (np.asarray(t, float) - float(t[0]))[:, None]
+        if np.ndim(t0)
+        else float(t0) + np.asarray(t, float) - float(t[0])
+    )
     ff = np.asarray(f, float)
     multi = system.n_inputs > 1
     if ff.ndim not in ((2, 3) if multi else (1, 2)) or (multi and ff.shape[-1] != system.excitation_width):
-        raise ValueError(f"{system.name}: excitation of shape {ff.shape} for {system.n_inputs} input(s) "
-                         f"({system.excitation_width} columns)")
+        raise ValueError(
+            f"{system.name}: excitation of shape {ff.shape} for {system.n_inputs} input(s) "
+            f"({system.excitation_width} columns)"
+        )
     per_trajectory = ff.ndim == (3 if multi else 2)
 
     def store(i: int, yi: Any) -> None:

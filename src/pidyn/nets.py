@@ -40,7 +40,9 @@ class TaylorMLP(nn.Module):
         in_features = 1 + 2 * n_fourier + int(use_excitation_input)
         dims = [in_features] + [width] * depth + [out_features]
         self.layers = nn.ModuleList(nn.Linear(a, b) for a, b in zip(dims[:-1], dims[1:]))
-        self.register_buffer("freqs", math.pi * torch.arange(1, n_fourier + 1, dtype=torch.get_default_dtype()))
+        self.register_buffer(
+            "freqs", math.pi * torch.arange(1, n_fourier + 1, dtype=torch.get_default_dtype())
+        )
         # output de-normalisation: y = out_scale * net + out_shift (set from the data)
         self.register_buffer("out_scale", torch.ones(out_features))
         self.register_buffer("out_shift", torch.zeros(out_features))
@@ -80,9 +82,7 @@ class TaylorMLP(nn.Module):
             ]
         return torch.stack(feats)
 
-    def taylor(
-        self, t: torch.Tensor, order: int = 2, f: torch.Tensor | None = None
-    ) -> list[torch.Tensor]:
+    def taylor(self, t: torch.Tensor, order: int = 2, f: torch.Tensor | None = None) -> list[torch.Tensor]:
         """[y, dy/dt, ..., d^order y/dt^order], each (N, out_features)."""
         tau = (t - self.t_mid) / self.t_half
         h = self._features(tau, order, f)  # (K, N, d)

@@ -190,5 +190,3 @@ def from_theta(specs: list[ParamSpec], theta: np.ndarray) -> dict[str, np.ndarra
 
 def fixed_values(system) -> dict[str, float]:
     return {s.name: s.init for s in system.param_specs() if not s.trainable}
-
-

@@ -12,8 +12,12 @@ import yaml
 from pidyn.errors import error_pct
 
 
-def param_table(values: dict[str, float], truths: dict[str, float | None], units: dict[str, str],
-                intervals: dict[str, dict] | None = None) -> dict:
+def param_table(
+    values: dict[str, float],
+    truths: dict[str, float | None],
+    units: dict[str, str],
+    intervals: dict[str, dict] | None = None,
+) -> dict:
     """Per parameter: value, unit, 95 % interval and std (when estimated), truth and error %."""
     out = {}
     for n, v in values.items():
@@ -94,9 +98,15 @@ def _finish_grid(fig, axes, title: str, path: Path | None, dpi: int, palette: bo
     plt.close(fig)
 
 
-def plot_convergence(path: Path | None, trajectory: list[dict], truths: dict[str, float | None], windows: list[dict],
-                     title: str = "", other: tuple[str, list[dict]] | None = None,
-                     final: dict[str, dict] | None = None):
+def plot_convergence(
+    path: Path | None,
+    trajectory: list[dict],
+    truths: dict[str, float | None],
+    windows: list[dict],
+    title: str = "",
+    other: tuple[str, list[dict]] | None = None,
+    final: dict[str, dict] | None = None,
+):
     """Parameter estimates over record time with window boundaries (cf. paper Figure 3);
     ``final``: the refined estimate with its 95 % interval, drawn at the record's end.
     ``path=None`` returns the open figure (notebooks) instead of writing a file."""
@@ -124,8 +134,9 @@ def plot_convergence(path: Path | None, trajectory: list[dict], truths: dict[str
             te = t[-1] if len(t) else 0.0
             if np.isfinite(val):  # an interval without bounds is drawn as the point alone
                 err = [[val - lo], [hi - val]] if np.isfinite(lo) and np.isfinite(hi) else None
-                ax.errorbar([te], [val], yerr=err, fmt="o", color="tab:green", ms=4, capsize=3,
-                            label="refined, 95 %")
+                ax.errorbar(
+                    [te], [val], yerr=err, fmt="o", color="tab:green", ms=4, capsize=3, label="refined, 95 %"
+                )
         ax.set_ylabel(n)
         for w in windows:
             ax.axvline(w["t1"], color="0.85", lw=0.6)
@@ -136,8 +147,13 @@ def plot_convergence(path: Path | None, trajectory: list[dict], truths: dict[str
     return fig if path is None else None
 
 
-def plot_convergence_seeds(path: Path, runs: dict[str, list[list[dict]]], truths: dict[str, float | None],
-                           bound_pct: dict[str, float] | None = None, title: str = "") -> bool:
+def plot_convergence_seeds(
+    path: Path,
+    runs: dict[str, list[list[dict]]],
+    truths: dict[str, float | None],
+    bound_pct: dict[str, float] | None = None,
+    title: str = "",
+) -> bool:
     """Figure 3 for a table cell: every seed's estimate over record time, per method.
 
     One seed's curve says little when the error is partly luck; the spread of all seeds beside
@@ -158,8 +174,7 @@ def plot_convergence_seeds(path: Path, runs: dict[str, list[list[dict]]], truths
                 v = plottable([p[n] for p in tr])
                 ax.plot(t, v, lw=0.7, alpha=0.6, color=colors[method], label=method if s_i == 0 else None)
                 if truths.get(n):
-                    axe.semilogy(t, error_pct(v, truths[n]) + 1e-6, lw=0.7, alpha=0.6,
-                                 color=colors[method])
+                    axe.semilogy(t, error_pct(v, truths[n]) + 1e-6, lw=0.7, alpha=0.6, color=colors[method])
         if truths.get(n) is not None:
             ax.axhline(truths[n], color="k", ls="--", lw=0.8, label="truth")
             axe.set_ylabel(f"|err| {n} (%)")
@@ -186,8 +201,9 @@ def _save_small(fig, path: Path, dpi: int) -> None:
     Image.open(buf).convert("RGB").quantize(colors=64).save(path, optimize=True)
 
 
-def plot_response(path: Path, t: np.ndarray, series: dict[str, np.ndarray], title: str = "",
-                  ylabel: str = "x (m)") -> None:
+def plot_response(
+    path: Path, t: np.ndarray, series: dict[str, np.ndarray], title: str = "", ylabel: str = "x (m)"
+) -> None:
     """Measured vs predicted time histories on one axis."""
     import matplotlib
 
@@ -196,8 +212,14 @@ def plot_response(path: Path, t: np.ndarray, series: dict[str, np.ndarray], titl
 
     fig, ax = plt.subplots(figsize=(10, 3.2))
     for i, (name, y) in enumerate(series.items()):
-        ax.plot(t, plottable(y), lw=0.9 if i == 0 else 0.8, ls="-" if i == 0 else "--", label=name,
-                color="0.3" if i == 0 else None)
+        ax.plot(
+            t,
+            plottable(y),
+            lw=0.9 if i == 0 else 0.8,
+            ls="-" if i == 0 else "--",
+            label=name,
+            color="0.3" if i == 0 else None,
+        )
     ax.set_xlabel("t (s)")
     ax.set_ylabel(ylabel)
     ax.legend(fontsize=8, loc="upper right")

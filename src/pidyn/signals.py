@@ -56,7 +56,9 @@ class TransferFunction:
     input_power: np.ndarray | None = None  # S_uu: where the input has no power, H is noise
 
 
-def transfer_function(u: np.ndarray, y: np.ndarray, dt: float, nperseg: int | None = None) -> TransferFunction:
+def transfer_function(
+    u: np.ndarray, y: np.ndarray, dt: float, nperseg: int | None = None
+) -> TransferFunction:
     """H1 = S_uy / S_uu and the coherence, by Welch averaging (Hann windows, half overlap; by
     default segments of about a quarter of the record: a resolution of 4 / duration)."""
     u, y = np.asarray(u, float), np.asarray(y, float)

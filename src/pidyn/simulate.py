@@ -3,8 +3,9 @@ identified model over a record (fixed-step RK4, bounded cost)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.integrate import odeint, solve_ivp
@@ -63,13 +64,30 @@ def simulate(
     else:
         f_scalar = lambda t: float(excitation(t))  # noqa: E731
     if method == "LSODA":
-        y, info = odeint(lambda t, y: system.rhs(t, y, params, f_scalar), y0, t_eval, tfirst=True, rtol=rtol,
-                         atol=atol, hmax=step, mxstep=1_000_000, full_output=True)
+        y, info = odeint(
+            lambda t, y: system.rhs(t, y, params, f_scalar),
+            y0,
+            t_eval,
+            tfirst=True,
+            rtol=rtol,
+            atol=atol,
+            hmax=step,
+            mxstep=1_000_000,
+            full_output=True,
+        )
         if info["message"] != "Integration successful.":
             raise RuntimeError(f"simulation of {system.name} failed: {info['message']}")
     else:
-        sol = solve_ivp(lambda t, y: system.rhs(t, y, params, f_scalar), (float(t_eval[0]), float(t_eval[-1])), y0,
-                        method=method, t_eval=t_eval, rtol=rtol, atol=atol, max_step=step)
+        sol = solve_ivp(
+            lambda t, y: system.rhs(t, y, params, f_scalar),
+            (float(t_eval[0]), float(t_eval[-1])),
+            y0,
+            method=method,
+            t_eval=t_eval,
+            rtol=rtol,
+            atol=atol,
+            max_step=step,
+        )
         if not sol.success:
             raise RuntimeError(f"simulation of {system.name} failed: {sol.message}")
         y = sol.y.T
@@ -102,8 +120,13 @@ def add_noise(
     return out
 
 
-def simulate_response(system: StructuralSystem, values: dict[str, float], record: Record, substeps: int = 4,
-                      state0: np.ndarray | None = None) -> dict[str, np.ndarray]:
+def simulate_response(
+    system: StructuralSystem,
+    values: dict[str, float],
+    record: Record,
+    substeps: int = 4,
+    state0: np.ndarray | None = None,
+) -> dict[str, np.ndarray]:
     """The identified model's response over the record: ``x, v`` (relative, (N, n_dof)) and
     ``a`` in the record's convention (relative to the one ground; absolute for several inputs)
     by the fixed-step batched RK4 (bounded cost: a model that blows up gives NaNs rather
@@ -112,18 +135,24 @@ def simulate_response(system: StructuralSystem, values: dict[str, float], record
     y0 = np.zeros(system.n_state) if state0 is None else np.asarray(state0, float)
     with np.errstate(all="ignore"):
         Y, R = rk4(system, dict(values), record.t, record.f, y0[None, :], substeps=substeps)
-        a = system.acceleration_output(R[:, 0, n:2 * n], np.asarray(record.f, float), dict(values))
-    return {"x": Y[:, 0, :n], "v": Y[:, 0, n:2 * n], "a": a}
+        a = system.acceleration_output(R[:, 0, n : 2 * n], np.asarray(record.f, float), dict(values))
+    return {"x": Y[:, 0, :n], "v": Y[:, 0, n : 2 * n], "a": a}
 
 
-def simulate_identified(system: StructuralSystem, values: dict[str, float], record: Record,
-                        x0: float = 0.0, v0: float = 0.0, substeps: int = 4,
-                        state0: np.ndarray | None = None) -> np.ndarray:
+def simulate_identified(
+    system: StructuralSystem,
+    values: dict[str, float],
+    record: Record,
+    x0: float = 0.0,
+    v0: float = 0.0,
+    substeps: int = 4,
+    state0: np.ndarray | None = None,
+) -> np.ndarray:
     """The identified model's displacement (N, n_dof) from ``state0``, else from (x0, v0), z = 0."""
     n = system.n_dof
     y0 = np.zeros(system.n_state)
     if state0 is not None:
         y0[:] = state0
     else:
-        y0[:n], y0[n:2 * n] = x0, v0
+        y0[:n], y0[n : 2 * n] = x0, v0
     return simulate_response(system, values, record, substeps, y0)["x"]

@@ -7,5 +7,12 @@ from pidyn.baselines.least_squares import equation_error, output_error
 from pidyn.baselines.sindy import weak_sindy
 from pidyn.baselines.ukf import unscented_kalman_filter
 
-__all__ = ["BaselineResult", "cramer_rao", "simulate_batch", "equation_error", "output_error",
-           "unscented_kalman_filter", "weak_sindy"]
+__all__ = [
+    "BaselineResult",
+    "cramer_rao",
+    "simulate_batch",
+    "equation_error",
+    "output_error",
+    "unscented_kalman_filter",
+    "weak_sindy",
+]

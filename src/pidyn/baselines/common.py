@@ -21,7 +21,9 @@ class BaselineResult:
     loglik: float = float("nan")  # innovation log-likelihood (filters)
 
 
-def starting_point(system, init: dict[str, float] | None) -> tuple[list[ParamSpec], dict[str, float], np.ndarray]:
+def starting_point(
+    system, init: dict[str, float] | None
+) -> tuple[list[ParamSpec], dict[str, float], np.ndarray]:
     """Trainable specs, fixed values and the unconstrained start (the specs' init, overridden by ``init``)."""
     specs = trainable_specs(system)
     start = {s.name: s.init for s in specs}

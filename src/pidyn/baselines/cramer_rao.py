@@ -42,17 +42,30 @@ def cramer_rao(
     n = system.n_dof
     layout = dict(channels) if isinstance(channels, dict) else {c: list(range(1, n + 1)) for c in channels}
     levels = dict(noise_level) if isinstance(noise_level, dict) else {c: float(noise_level) for c in layout}
-    probe = ShootingProblem(system, t, f, [Channel("x", 0, np.zeros(len(t)), 1.0)], segment_bounds(t, None),
-                            substeps, fixed_state0=np.zeros(system.n_state), fixed=params)
+    probe = ShootingProblem(
+        system,
+        t,
+        f,
+        [Channel("x", 0, np.zeros(len(t)), 1.0)],
+        segment_bounds(t, None),
+        substeps,
+        fixed_state0=np.zeros(system.n_state),
+        fixed=params,
+    )
     u = probe.pack({s.name: params[s.name] for s in probe.specs}, np.zeros((1, system.n_state)))
     Y, R, A = probe.simulate(u)
-    clean = {"x": Y[:, 0, :n], "v": Y[:, 0, n:2 * n], "a": A[:, 0]}
+    clean = {"x": Y[:, 0, :n], "v": Y[:, 0, n : 2 * n], "a": A[:, 0]}
     chans = [Channel(c, fl - 1, clean[c][:, fl - 1], 1.0) for c, floors in layout.items() for fl in floors]
     names = probe.names
     if max(levels.values(), default=0.0) <= 0:
-        return {"names": names, "std_pct": {k: 0.0 for k in names},
-                "std_pct_unknown_start": {k: 0.0 for k in names}, "correlation": np.eye(len(names)).tolist(),
-                "noise_level": noise_level, "channels": layout}
+        return {
+            "names": names,
+            "std_pct": {k: 0.0 for k in names},
+            "std_pct_unknown_start": {k: 0.0 for k in names},
+            "correlation": np.eye(len(names)).tolist(),
+            "noise_level": noise_level,
+            "channels": layout,
+        }
     # an accelerometer measures x'' + ag (several inputs: the model's reading is absolute already)
     ground = np.asarray(f, float) if system.excitation == "ground" and system.n_inputs == 1 else 0.0
     for ch in chans:
@@ -71,6 +84,11 @@ def cramer_rao(
     corr = cov / np.outer(std, std).clip(1e-300)
     cov_free = np.linalg.pinv(Jr.T @ Jr)[:nt, :nt]  # its initial state is unknown
     std_free = np.sqrt(np.clip(np.diag(cov_free), 0, None))
-    return {"names": names, "std_pct": {k: float(100 * s) for k, s in zip(names, std)},
-            "std_pct_unknown_start": {k: float(100 * s) for k, s in zip(names, std_free)},
-            "correlation": corr.tolist(), "noise_level": noise_level, "channels": layout}
+    return {
+        "names": names,
+        "std_pct": {k: float(100 * s) for k, s in zip(names, std)},
+        "std_pct_unknown_start": {k: float(100 * s) for k, s in zip(names, std_free)},
+        "correlation": corr.tolist(),
+        "noise_level": noise_level,
+        "channels": layout,
+    }

@@ -55,9 +55,16 @@ class DataStart:
         return None if not self.frequency_hz else 1.0 / self.frequency_hz
 
     def to_dict(self) -> dict:
-        return {"values": self.values, "method": self.method, "frequency_hz": self.frequency_hz,
-                "period_s": self.period_s, "damping_ratio": self.damping_ratio, "note": self.note,
-                "seconds": self.seconds, "rejected": self.rejected}
+        return {
+            "values": self.values,
+            "method": self.method,
+            "frequency_hz": self.frequency_hz,
+            "period_s": self.period_s,
+            "damping_ratio": self.damping_ratio,
+            "note": self.note,
+            "seconds": self.seconds,
+            "rejected": self.rejected,
+        }
 
 
 def start_from_data(record, system) -> DataStart | None:
@@ -77,7 +84,9 @@ def start_from_data(record, system) -> DataStart | None:
     if out is None:
         out = _from_peak(system, fn, zeta)
     out.seconds = time.perf_counter() - t0
-    log.info("start from the data (%s): %s", out.method, ", ".join(f"{k}={v:.5g}" for k, v in out.values.items()))
+    log.info(
+        "start from the data (%s): %s", out.method, ", ".join(f"{k}={v:.5g}" for k, v in out.values.items())
+    )
     return out
 
 
@@ -116,7 +125,7 @@ def _input_output(record) -> tuple[np.ndarray | None, np.ndarray | None]:
     displacement or velocity as measured (a receptance: its peak sits at the resonance too, and
     no noisy derivative is taken)."""
     f = np.asarray(record.f, float)
-    u = f[:, :record.n_inputs].mean(axis=1) if f.ndim == 2 else f  # several: the supports' mean acceleration
+    u = f[:, : record.n_inputs].mean(axis=1) if f.ndim == 2 else f  # several: the supports' mean acceleration
     sensors = record.sensors()
     if "a" in sensors and record.excitation == "ground":
         y = record.a[:, max(sensors["a"]) - 1]
@@ -131,7 +140,8 @@ def _equation_error_applies(record, system) -> bool:
     sensors = record.sensors()
     floors = set().union(*[set(v) for v in sensors.values()]) if sensors else set()
     return floors == set(range(1, system.n_dof + 1)) and not any(
-        np.isnan(getattr(record, k)[:, [j - 1 for j in v]]).any() for k, v in sensors.items())
+        np.isnan(getattr(record, k)[:, [j - 1 for j in v]]).any() for k, v in sensors.items()
+    )
 
 
 def _filtered_channels(record, corner: float) -> dict[str, np.ndarray]:
@@ -176,7 +186,9 @@ def _equation_error(record, system, corner: float, fn: float) -> DataStart | Non
     T = lambda a: torch.as_tensor(np.asarray(a, float)[keep], dtype=torch.float64)  # noqa: E731
     values = {s.name: torch.tensor(float(s.init), dtype=torch.float64) for s in system.param_specs()}
     names = list(system.linear_params())
-    r_names = [fn(i) for fn in (influence_name, support_damping_name, feedthrough_name) for i in system.inputs]
+    r_names = [
+        fn(i) for fn in (influence_name, support_damping_name, feedthrough_name) for i in system.inputs
+    ]
     t = T(record.t)
     if not r_names:
         k = Kinematics(t, T(ch["x"]), T(ch["v"]), T(ch["a"]))
@@ -216,8 +228,16 @@ def _equation_error(record, system, corner: float, fn: float) -> DataStart | Non
         fixed = _from_peak(system, fn, peak[1] if peak else UNRESOLVED_DAMPING).values
         held = {n: fixed[n] for n in _damping_names(system) if n in fixed and n in names}
         values.update({n: torch.tensor(v, dtype=torch.float64) for n, v in held.items()})
-        est = {**solve_linear_params(system, Kinematics(t, T(ch["x"]), T(ch["v"]), T(ch["a"])), T(F), values,
-                                     [n for n in names if n not in held]), **held}
+        est = {
+            **solve_linear_params(
+                system,
+                Kinematics(t, T(ch["x"]), T(ch["v"]), T(ch["a"])),
+                T(F),
+                values,
+                [n for n in names if n not in held],
+            ),
+            **held,
+        }
         note += f"; dampers {sorted(held)} came out {bad}: held at the transmissibility's damping"
         bad = _out_of_range(est, specs)
     if bad:
@@ -269,8 +289,11 @@ def _from_peak(system, fn: float, zeta: float) -> DataStart:
         for term in system.terms:  # stiffness-proportional: every mode's ratio grows with its frequency
             cp = term.damping_param
             if cp and specs[cp].trainable:
-                kp = next(t.initial_stiffness_param for t in system.terms
-                          if t.storey == term.storey and t.initial_stiffness_param)
+                kp = next(
+                    t.initial_stiffness_param
+                    for t in system.terms
+                    if t.storey == term.storey and t.initial_stiffness_param
+                )
                 values[cp] = 2 * zeta / w * values.get(kp, init[kp])
     else:
         from pidyn.systems.modal import damping_params, stiffness_params
@@ -284,8 +307,13 @@ def _from_peak(system, fn: float, zeta: float) -> DataStart:
             if specs[p].trainable:
                 values[p] = 2 * zeta * m * w / len(cs)
     values = {n: v for n, v in values.items() if np.isfinite(v) and in_range(specs[n], v)}
-    return DataStart(values, "transfer_function", fn, zeta,
-                     note=f"transmissibility peak {fn:.4g} Hz, half-power damping {100 * zeta:.2g} %")
+    return DataStart(
+        values,
+        "transfer_function",
+        fn,
+        zeta,
+        note=f"transmissibility peak {fn:.4g} Hz, half-power damping {100 * zeta:.2g} %",
+    )
 
 
 def with_start(system, values: dict[str, float], keep: set[str] | frozenset = frozenset()):
@@ -329,8 +357,10 @@ def start_from_run(folder: str, system) -> DataStart:
 
     path = Path(folder) / "metrics.json"
     if not path.is_file():
-        raise ValueError(f"model.start: '{folder}' is none of {', '.join(START_METHODS)} and not a run folder "
-                         f"(no metrics.json in it)")
+        raise ValueError(
+            f"model.start: '{folder}' is none of {', '.join(START_METHODS)} and not a run folder "
+            f"(no metrics.json in it)"
+        )
     params = json.loads(path.read_text()).get("params") or {}
     trainable = {s.name for s in system.param_specs() if s.trainable}
     values = {n: float(v) for n, v in params.items() if n in trainable}

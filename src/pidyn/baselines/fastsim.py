@@ -33,9 +33,9 @@ def simulate_batch(
     y0 = np.zeros((P, system.n_state))
     if state0 is not None:
         y0[:, :n] = np.asarray(state0[0], float).reshape(P, n)
-        y0[:, n:2 * n] = np.asarray(state0[1], float).reshape(P, n)
+        y0[:, n : 2 * n] = np.asarray(state0[1], float).reshape(P, n)
         if nz:
-            y0[:, 2 * n:] = np.asarray(state0[2], float).reshape(P, nz)
+            y0[:, 2 * n :] = np.asarray(state0[2], float).reshape(P, nz)
     Y, R = rk4(system, p, np.asarray(t, float), np.asarray(f, float), y0, substeps=substeps)
     sq = (lambda a: a[..., 0]) if n == 1 else (lambda a: a)
-    return {"x": sq(Y[..., :n]), "v": sq(Y[..., n:2 * n]), "a": sq(R[..., n:2 * n]), "z": Y[..., 2 * n:]}
+    return {"x": sq(Y[..., :n]), "v": sq(Y[..., n : 2 * n]), "a": sq(R[..., n : 2 * n]), "z": Y[..., 2 * n :]}

@@ -35,8 +35,9 @@ def equation_error(record: Record, system) -> BaselineResult:
 
         est = equation_error_integrated(record, system)
         if est is None:
-            return BaselineResult("equation_error", {}, 0.0,
-                                  note="not applicable: needs a sensor on every degree of freedom")
+            return BaselineResult(
+                "equation_error", {}, 0.0, note="not applicable: needs a sensor on every degree of freedom"
+            )
         return BaselineResult("equation_error", est.values, time.perf_counter() - t0, note=est.note)
     dt = record.dt
     x = record.x
@@ -62,8 +63,15 @@ def output_error(
     one batched simulation of the parameter set and all its perturbations."""
     t0 = time.perf_counter()
     specs, fixed, th0 = starting_point(system, init)
-    problem = ShootingProblem(system, record.t, record.f, record_channels(record, system.n_dof),
-                              segment_bounds(record.t, None), substeps, fixed_state0=np.zeros(system.n_state))
+    problem = ShootingProblem(
+        system,
+        record.t,
+        record.f,
+        record_channels(record, system.n_dof),
+        segment_bounds(record.t, None),
+        substeps,
+        fixed_state0=np.zeros(system.n_state),
+    )
     for ch in problem.channels:  # residuals relative to each channel's spread, as a practitioner scales them
         ch.sigma = max(float(np.std(ch.data)), 1e-300)
     cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
@@ -75,7 +83,17 @@ def output_error(
             cache[key] = problem.residuals_and_fd_jacobian(th)
         return cache[key]
 
-    sol = least_squares(lambda th: evaluate(th)[0], th0, jac=lambda th: evaluate(th)[1], method="trf",
-                        max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    sol = least_squares(
+        lambda th: evaluate(th)[0],
+        th0,
+        jac=lambda th: evaluate(th)[1],
+        method="trf",
+        max_nfev=max_nfev,
+        xtol=1e-12,
+        ftol=1e-12,
+        gtol=1e-12,
+    )
     est = problem.values(sol.x)
-    return BaselineResult("output_error", est, time.perf_counter() - t0, note=f"nfev={sol.nfev}, cost={sol.cost:.3g}")
+    return BaselineResult(
+        "output_error", est, time.perf_counter() - t0, note=f"nfev={sol.nfev}, cost={sol.cost:.3g}"
+    )

@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 
@@ -47,18 +47,31 @@ class PeerResult:
     fit_nrmse_a: float | None = None
     heldout_nrmse_a: float | None = None
     orders: list[dict] = field(default_factory=list)
-    realization: tuple | None = field(default=None, repr=False)  # (A, B, C, D) of the chosen order, to simulate other records
+    realization: tuple | None = field(
+        default=None, repr=False
+    )  # (A, B, C, D) of the chosen order, to simulate other records
 
     def to_row(self) -> dict:
-        return {"method": self.method, "params": {}, "seconds": self.seconds, "note": self.note,
-                "modes": self.modes, "order": self.order, "stable": self.stable, "fit_nrmse_a": self.fit_nrmse_a,
-                "heldout_nrmse_a": self.heldout_nrmse_a, "orders": self.orders}
+        return {
+            "method": self.method,
+            "params": {},
+            "seconds": self.seconds,
+            "note": self.note,
+            "modes": self.modes,
+            "order": self.order,
+            "stable": self.stable,
+            "fit_nrmse_a": self.fit_nrmse_a,
+            "heldout_nrmse_a": self.heldout_nrmse_a,
+            "orders": self.orders,
+        }
 
 
 def io_arrays(record) -> tuple[np.ndarray, np.ndarray]:
     """Inputs (q, N) and the outputs as the accelerometers read them, absolute (p, N)."""
     f = np.asarray(record.f, float)
-    U = f[:, :record.n_inputs].T if f.ndim == 2 else f[None, :]  # the supports' accelerations (not velocities)
+    U = (
+        f[:, : record.n_inputs].T if f.ndim == 2 else f[None, :]
+    )  # the supports' accelerations (not velocities)
     if record.a is None:
         raise ValueError(f"record '{record.name}': the peers need accelerometer outputs")
     cols = [j - 1 for j in record.sensors().get("a", [])]
@@ -90,12 +103,17 @@ def srim(record, orders: Sequence[int] = (2, 4, 6), horizon: int = 100) -> PeerR
     return _realize(record, "srim", orders, dict(horizon=int(horizon)))
 
 
-def okid_era(record, orders: Sequence[int] = (2, 4, 6), markov: int = 60, horizon: int = 20,
-             rcond: float = 1e-2) -> PeerResult:
+def okid_era(
+    record, orders: Sequence[int] = (2, 4, 6), markov: int = 60, horizon: int = 20, rcond: float = 1e-2
+) -> PeerResult:
     """mdof's OKID (``markov`` Markov parameters, pseudo-inverse ``rcond``) then ERA
     (``horizon`` x ``horizon`` Hankel blocks) on the fitting part."""
-    return _realize(record, "okid-era", orders, dict(m=int(markov), horizon=int(horizon), nc=int(horizon),
-                                                      rcond=float(rcond)))
+    return _realize(
+        record,
+        "okid-era",
+        orders,
+        dict(m=int(markov), horizon=int(horizon), nc=int(horizon), rcond=float(rcond)),
+    )
 
 
 def _realize(record, method: str, orders: Sequence[int], options: dict) -> PeerResult:
@@ -108,15 +126,24 @@ def _realize(record, method: str, orders: Sequence[int], options: dict) -> PeerR
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                real = mdof.system(U[:, fit], Y[:, fit], dt=record.dt, method=method, order=int(order), **options)
+                real = mdof.system(
+                    U[:, fit], Y[:, fit], dt=record.dt, method=method, order=int(order), **options
+                )
                 modes = _modes(real)
             A, B, C, D = real
             rho = float(np.max(np.abs(np.linalg.eigvals(A))))
             out = simulate_realization(A, B, C, D, U)
-            rows.append({"order": int(order), "spectral_radius": rho, "stable": bool(rho < 1.0), "modes": modes,
-                         "realization": (A, B, C, D),
-                         "fit_nrmse_a": _mean_nrmse(out, Y, fit),
-                         "heldout_nrmse_a": None if held is None else _mean_nrmse(out, Y, held)})
+            rows.append(
+                {
+                    "order": int(order),
+                    "spectral_radius": rho,
+                    "stable": bool(rho < 1.0),
+                    "modes": modes,
+                    "realization": (A, B, C, D),
+                    "fit_nrmse_a": _mean_nrmse(out, Y, fit),
+                    "heldout_nrmse_a": None if held is None else _mean_nrmse(out, Y, held),
+                }
+            )
         except Exception as exc:  # an order the method cannot realise on this record
             rows.append({"order": int(order), "error": f"{type(exc).__name__}: {exc}"})
     ok = [r for r in rows if r.get("stable") and r["modes"] and np.isfinite(r["fit_nrmse_a"])]
@@ -124,8 +151,14 @@ def _realize(record, method: str, orders: Sequence[int], options: dict) -> PeerR
     if not ok:
         for r in rows:
             r.pop("realization", None)
-        return PeerResult(name, [], time.perf_counter() - t0, note="no stable realization at orders "
-                          f"{list(orders)}: every one diverges when simulated from rest", orders=rows)
+        return PeerResult(
+            name,
+            [],
+            time.perf_counter() - t0,
+            note="no stable realization at orders "
+            f"{list(orders)}: every one diverges when simulated from rest",
+            orders=rows,
+        )
     best = min(ok, key=lambda r: r["fit_nrmse_a"])
     unstable = [r["order"] for r in rows if r.get("stable") is False]
     note = f"order {best['order']} (lowest fitting-part error of the stable orders)"
@@ -134,9 +167,18 @@ def _realize(record, method: str, orders: Sequence[int], options: dict) -> PeerR
     realization = best["realization"]
     for r in rows:
         r.pop("realization", None)
-    return PeerResult(name, best["modes"], time.perf_counter() - t0, note=note, order=best["order"], stable=True,
-                      fit_nrmse_a=best["fit_nrmse_a"], heldout_nrmse_a=best["heldout_nrmse_a"], orders=rows,
-                      realization=realization)
+    return PeerResult(
+        name,
+        best["modes"],
+        time.perf_counter() - t0,
+        note=note,
+        order=best["order"],
+        stable=True,
+        fit_nrmse_a=best["fit_nrmse_a"],
+        heldout_nrmse_a=best["heldout_nrmse_a"],
+        orders=rows,
+        realization=realization,
+    )
 
 
 def _modes(real) -> list[dict]:
@@ -145,12 +187,21 @@ def _modes(real) -> list[dict]:
     for m in real.modes().values():
         freq = float(m["freq"])
         if freq > 0:
-            rows.append({"period_s": 1.0 / freq, "period_ci95": [None, None], "frequency_hz": freq,
-                         "damping_ratio": float(m["damp"]), "damping_ci95": [None, None]})
+            rows.append(
+                {
+                    "period_s": 1.0 / freq,
+                    "period_ci95": [None, None],
+                    "frequency_hz": freq,
+                    "damping_ratio": float(m["damp"]),
+                    "damping_ci95": [None, None],
+                }
+            )
     return sorted(rows, key=lambda r: -r["period_s"])
 
 
-def simulate_realization(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, U: np.ndarray) -> np.ndarray:
+def simulate_realization(
+    A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, U: np.ndarray
+) -> np.ndarray:
     """y_k = C x_k + D u_k, x_{k+1} = A x_k + B u_k from rest: (p, N)."""
     x = np.zeros(A.shape[0])
     out = np.empty((C.shape[0], U.shape[1]))
@@ -179,28 +230,48 @@ def transfer_function_estimate(record, band_halfwidth: float = 0.35) -> PeerResu
     duration = float(record.t[fit][-1] - record.t[fit][0])
     fn0, z0 = dominant_peak(tf, (max(2.0 / duration, tf.freq[1]), 0.4 / record.dt))
     z0 = 0.05 if not np.isfinite(z0) else z0
-    sel = (tf.freq >= fn0 * (1 - band_halfwidth)) & (tf.freq <= fn0 * (1 + band_halfwidth)) & (tf.coherence > 0.05)
+    sel = (
+        (tf.freq >= fn0 * (1 - band_halfwidth))
+        & (tf.freq <= fn0 * (1 + band_halfwidth))
+        & (tf.coherence > 0.05)
+    )
     f_sel, h_sel = tf.freq[sel], tf.h[sel]
     gam = np.clip(tf.coherence[sel], 1e-6, 1 - 1e-6)
-    w = np.sqrt(2 * tf.segments * gam / (1 - gam)) / np.maximum(np.abs(h_sel), 1e-12)  # 1 / std of H1, relative
+    w = np.sqrt(2 * tf.segments * gam / (1 - gam)) / np.maximum(
+        np.abs(h_sel), 1e-12
+    )  # 1 / std of H1, relative
     if sel.sum() < 4:
-        return PeerResult("transfer_function", [], time.perf_counter() - t0,
-                          note=f"too few coherent frequencies around the peak at {fn0:.3g} Hz")
+        return PeerResult(
+            "transfer_function",
+            [],
+            time.perf_counter() - t0,
+            note=f"too few coherent frequencies around the peak at {fn0:.3g} Hz",
+        )
 
     def resid(p: np.ndarray) -> np.ndarray:
         g, (fn, zeta) = p[2] + 1j * p[3], (p[0], p[1])
         e = (g * transmissibility(f_sel, fn, zeta) - h_sel) * w
         return np.concatenate([e.real, e.imag])
 
-    sol = least_squares(resid, [fn0, z0, 1.0, 0.0], bounds=([0.5 * fn0, 1e-4, -10, -10], [2 * fn0, 0.9, 10, 10]))
+    sol = least_squares(
+        resid, [fn0, z0, 1.0, 0.0], bounds=([0.5 * fn0, 1e-4, -10, -10], [2 * fn0, 0.9, 10, 10])
+    )
     J = sol.jac
     dof = max(len(sol.fun) - 4, 1)
     cov = np.linalg.pinv(J.T @ J) * float(sol.fun @ sol.fun) / dof
     fn, zeta = float(sol.x[0]), float(sol.x[1])
     sf, sz = (float(np.sqrt(max(cov[i, i], 0.0))) for i in (0, 1))
-    mode = {"period_s": 1.0 / fn, "period_ci95": [1.0 / (fn + Z95 * sf), 1.0 / max(fn - Z95 * sf, 1e-12)],
-            "frequency_hz": fn, "damping_ratio": zeta,
-            "damping_ci95": [max(zeta - Z95 * sz, 0.0), zeta + Z95 * sz]}
-    return PeerResult("transfer_function", [mode], time.perf_counter() - t0,
-                      note=f"H1 of the top output from the mean input, {tf.segments} Welch segments, "
-                           f"{int(sel.sum())} frequencies around {fn0:.3g} Hz")
+    mode = {
+        "period_s": 1.0 / fn,
+        "period_ci95": [1.0 / (fn + Z95 * sf), 1.0 / max(fn - Z95 * sf, 1e-12)],
+        "frequency_hz": fn,
+        "damping_ratio": zeta,
+        "damping_ci95": [max(zeta - Z95 * sz, 0.0), zeta + Z95 * sz],
+    }
+    return PeerResult(
+        "transfer_function",
+        [mode],
+        time.perf_counter() - t0,
+        note=f"H1 of the top output from the mean input, {tf.segments} Welch segments, "
+        f"{int(sel.sum())} frequencies around {fn0:.3g} Hz",
+    )

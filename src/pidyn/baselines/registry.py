@@ -3,7 +3,8 @@
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from pidyn.baselines.common import BaselineResult
 
@@ -12,7 +13,13 @@ Estimator = Callable[[Any, Any, dict, float], dict]
 
 
 def _row(r: BaselineResult) -> dict:
-    return {"method": r.method, "params": r.params, "seconds": r.seconds, "note": r.note, "trajectory": r.trajectory}
+    return {
+        "method": r.method,
+        "params": r.params,
+        "seconds": r.seconds,
+        "note": r.note,
+        "trajectory": r.trajectory,
+    }
 
 
 def _equation_error(record, system, settings: dict, noise: float) -> dict:

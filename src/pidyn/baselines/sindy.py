@@ -21,10 +21,17 @@ from pidyn.discrepancy.weak_form import WeakForm, smooth_signals
 
 #: the library: name -> force per unit coefficient
 LIBRARY = {
-    "x": lambda x, v: x, "x'": lambda x, v: v,
-    "x^2": lambda x, v: x**2, "x x'": lambda x, v: x * v, "x'^2": lambda x, v: v**2,
-    "x^3": lambda x, v: x**3, "x^2 x'": lambda x, v: x**2 * v, "x x'^2": lambda x, v: x * v**2,
-    "x'^3": lambda x, v: v**3, "x'|x'|": lambda x, v: v * np.abs(v), "sign x'": lambda x, v: np.tanh(v / (0.02 * np.std(v))),
+    "x": lambda x, v: x,
+    "x'": lambda x, v: v,
+    "x^2": lambda x, v: x**2,
+    "x x'": lambda x, v: x * v,
+    "x'^2": lambda x, v: v**2,
+    "x^3": lambda x, v: x**3,
+    "x^2 x'": lambda x, v: x**2 * v,
+    "x x'^2": lambda x, v: x * v**2,
+    "x'^3": lambda x, v: v**3,
+    "x'|x'|": lambda x, v: v * np.abs(v),
+    "sign x'": lambda x, v: np.tanh(v / (0.02 * np.std(v))),
 }
 #: which system parameter multiplies which library term
 PARAM_TERMS = {"c": "x'", "k": "x", "k1": "x", "k3": "x^3", "k2": "x^2", "c2": "x'|x'|", "Fc": "sign x'"}
@@ -60,8 +67,13 @@ def weak_sindy(record: Record, system, threshold: float = 0.01) -> BaselineResul
     if getattr(system, "n_dof", 1) != 1:
         return BaselineResult("sindy", {}, 0.0, note="single-degree-of-freedom systems only")
     if record.n_inputs > 1:
-        return BaselineResult("sindy", {}, 0.0, note="not applicable: several inputs whose influence is unknown (the "
-                              "relative motion the library needs depends on it)")
+        return BaselineResult(
+            "sindy",
+            {},
+            0.0,
+            note="not applicable: several inputs whose influence is unknown (the "
+            "relative motion the library needs depends on it)",
+        )
     t = record.t
     excitation = np.asarray(record.f, float)
     if record.x is not None and not np.isnan(record.x[:, 0]).any():
@@ -75,10 +87,15 @@ def weak_sindy(record: Record, system, threshold: float = 0.01) -> BaselineResul
         if peak is None:
             return BaselineResult("sindy", {}, 0.0, note="not applicable: the record shows no resonance")
         corner = max(peak[0] / 5.0, 2.0 / float(t[-1] - t[0]))
-        x, v_meas = integrate(record.a[:, 0], record.dt, 2, corner), integrate(record.a[:, 0], record.dt, 1, corner)
+        x, v_meas = (
+            integrate(record.a[:, 0], record.dt, 2, corner),
+            integrate(record.a[:, 0], record.dt, 1, corner),
+        )
         excitation = integrate(excitation, record.dt, 0, corner)
     else:
-        return BaselineResult("sindy", {}, 0.0, note="not applicable: needs a displacement or acceleration channel")
+        return BaselineResult(
+            "sindy", {}, 0.0, note="not applicable: needs a displacement or acceleration channel"
+        )
     period = dominant_period(t, x)
     xs, vs = smooth_signals(t, x, v_meas, period)
     weak = WeakForm.for_record(t, period)

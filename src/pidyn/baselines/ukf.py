@@ -51,18 +51,34 @@ def unscented_kalman_filter(
     if q_param is None:
         if not len(tune):
             raise ValueError("ukf: q_param is None and the tuning grid is empty; give one of them")
-        kw = dict(noise_level=noise_level, init=init, init_param_std=init_param_std, q_state=q_state,
-                  r_floor=r_floor, alpha=alpha, beta=beta, kappa=kappa, substeps=substeps, thin=thin)
+        kw = dict(
+            noise_level=noise_level,
+            init=init,
+            init_param_std=init_param_std,
+            q_state=q_state,
+            r_floor=r_floor,
+            alpha=alpha,
+            beta=beta,
+            kappa=kappa,
+            substeps=substeps,
+            thin=thin,
+        )
         return _tuned(record, system, list(tune), kw)
     t0 = time.perf_counter()
     specs, fixed, theta0 = starting_point(system, init)
     nd, ns, npar = system.n_dof, system.n_state, len(specs)
     chans = record_channels(record, nd)
     levels = dict((record.meta or {}).get("noise_levels") or {})
-    R = np.diag([max(levels.get(c.kind, noise_level), r_floor) ** 2 * _sensor_rms(record, c) ** 2 for c in chans])
+    R = np.diag(
+        [max(levels.get(c.kind, noise_level), r_floor) ** 2 * _sensor_rms(record, c) ** 2 for c in chans]
+    )
     m, P, Q = _prior(record, system, theta0, init_param_std, q_state, q_param)
     lam, wm, wc = _weights(ns + npar, alpha, beta, kappa)
-    rows = {"x": lambda Yp, Ap, d: Yp[:, d], "v": lambda Yp, Ap, d: Yp[:, nd + d], "a": lambda Yp, Ap, d: Ap[:, d]}
+    rows = {
+        "x": lambda Yp, Ap, d: Yp[:, d],
+        "v": lambda Yp, Ap, d: Yp[:, nd + d],
+        "a": lambda Yp, Ap, d: Ap[:, d],
+    }
     traj: list[dict] = []
     loglik = 0.0
     t, f = record.t, record.f
@@ -72,12 +88,13 @@ def unscented_kalman_filter(
         p.update({k: np.full(X.shape[1], v) for k, v in fixed.items()})
         with np.errstate(all="ignore"):
             Ys, Rs = rk4(system, p, t[i : i + 2], f[i : i + 2], X[:ns].T.copy(), substeps=substeps)
-            A = system.acceleration_output(Rs[1][:, nd:2 * nd], f[i + 1], p)  # as the accelerometers read
+            A = system.acceleration_output(Rs[1][:, nd : 2 * nd], f[i + 1], p)  # as the accelerometers read
             # a filter that diverges says so by its likelihood (-inf), not by floating-point warnings
             m, P, D = _predicted_belief(X, Ys[1], ns, wm, wc, Q)
             # --- update with the measurement at t[i+1]
-            Y = np.nan_to_num(np.array([rows[c.kind](Ys[1], A, c.dof) for c in chans]), nan=0.0, posinf=1e6,
-                              neginf=-1e6)
+            Y = np.nan_to_num(
+                np.array([rows[c.kind](Ys[1], A, c.dof) for c in chans]), nan=0.0, posinf=1e6, neginf=-1e6
+            )
             m, P, ll = _update(m, P, D, Y, np.array([c.data[i + 1] for c in chans]), R, wm, wc)
         loglik += ll
         if i % thin == 0 or i == len(t) - 2:
@@ -89,8 +106,9 @@ def unscented_kalman_filter(
     return res
 
 
-def _prior(record: Record, system, theta0: np.ndarray, init_param_std: float, q_state: float,
-           q_param: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _prior(
+    record: Record, system, theta0: np.ndarray, init_param_std: float, q_state: float, q_param: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Mean, covariance and process noise of the augmented state [x, x', z, theta]: the
     structure at rest, the parameters at their start with ``init_param_std``; the states'
     process noise scaled by the record's displacement and velocity spreads."""
@@ -100,13 +118,18 @@ def _prior(record: Record, system, theta0: np.ndarray, init_param_std: float, q_
     m = np.zeros(ns + npar)
     m[ns:] = theta0
     P = np.diag([1e-12] * ns + [init_param_std**2] * npar)
-    Q = np.diag(list(q_state * xs**2) + list(q_state * vs**2) + [q_state * float(np.max(xs)) ** 2] * nz
-                + [q_param] * npar)
+    Q = np.diag(
+        list(q_state * xs**2)
+        + list(q_state * vs**2)
+        + [q_state * float(np.max(xs)) ** 2] * nz
+        + [q_param] * npar
+    )
     return m, P, Q
 
 
-def _predicted_belief(X: np.ndarray, Y_states: np.ndarray, ns: int, wm: np.ndarray, wc: np.ndarray,
-                      Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _predicted_belief(
+    X: np.ndarray, Y_states: np.ndarray, ns: int, wm: np.ndarray, wc: np.ndarray, Q: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Mean, covariance and sigma deviations after propagating the sigma points ``X`` (their
     states now ``Y_states``); a diverged point is clipped so one bad draw cannot poison the mean."""
     Xp = X.copy()
@@ -138,14 +161,24 @@ def _sigma_points(m: np.ndarray, P: np.ndarray, lam: float) -> np.ndarray:
     return np.concatenate([m[:, None], m[:, None] + S, m[:, None] - S], axis=1)
 
 
-def _update(m: np.ndarray, P: np.ndarray, D: np.ndarray, Y: np.ndarray, y: np.ndarray, R: np.ndarray,
-            wm: np.ndarray, wc: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+def _update(
+    m: np.ndarray,
+    P: np.ndarray,
+    D: np.ndarray,
+    Y: np.ndarray,
+    y: np.ndarray,
+    R: np.ndarray,
+    wm: np.ndarray,
+    wc: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Measurement update from the predicted sigma deviations ``D`` and their measurements
     ``Y``; returns the new mean, covariance and the innovation log-likelihood term."""
     y_mean = Y @ wm
     DY = Y - y_mean[:, None]
     Syy = (wc * DY) @ DY.T + R
-    if not (np.all(np.isfinite(Syy)) and np.all(np.isfinite(P))):  # the filter diverged: no update, no likelihood
+    if not (
+        np.all(np.isfinite(Syy)) and np.all(np.isfinite(P))
+    ):  # the filter diverged: no update, no likelihood
         return m, P, -np.inf
     Sinv = np.linalg.inv(Syy)
     K = ((wc * D) @ DY.T) @ Sinv
@@ -171,11 +204,15 @@ def _tuned(record: Record, system, grid: list[float], kw: dict) -> BaselineResul
     runs = [unscented_kalman_filter(record, system, q_param=float(q), **kw) for q in grid]
     finite = [i for i in range(len(runs)) if np.isfinite(runs[i].loglik)]
     if not finite:
-        raise RuntimeError(f"the filter diverged for every q_param of the grid {grid} (no finite innovation "
-                           "log-likelihood): start it nearer (system.params.<name>.init) or widen the grid")
+        raise RuntimeError(
+            f"the filter diverged for every q_param of the grid {grid} (no finite innovation "
+            "log-likelihood): start it nearer (system.params.<name>.init) or widen the grid"
+        )
     best = max(finite, key=lambda i: runs[i].loglik)
     out = runs[best]
     out.seconds = time.perf_counter() - t0
-    out.note = (f"q_param={grid[best]:.3g} chosen from {len(grid)} values by the innovation log-likelihood "
-                f"({out.loglik:.6g})")
+    out.note = (
+        f"q_param={grid[best]:.3g} chosen from {len(grid)} values by the innovation log-likelihood "
+        f"({out.loglik:.6g})"
+    )
     return out

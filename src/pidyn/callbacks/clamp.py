@@ -33,9 +33,14 @@ class ParameterClamp(L.Callback):
         self.bounds: dict[str, tuple[float, float]] = {}
         self.triggered = 0
 
-    def update_from_trajectory(self, names: list[str], traj: torch.Tensor, latest: dict[str, float],
-                               posterior_std_raw: dict[str, float] | None = None,
-                               specs: dict[str, ParamSpec] | None = None) -> None:
+    def update_from_trajectory(
+        self,
+        names: list[str],
+        traj: torch.Tensor,
+        latest: dict[str, float],
+        posterior_std_raw: dict[str, float] | None = None,
+        specs: dict[str, ParamSpec] | None = None,
+    ) -> None:
         """Set the next window's box from this window's trajectory (rows: iterations) and, where
         given, the window's posterior std of each parameter's unconstrained coordinate."""
         if traj.numel() == 0:

@@ -59,7 +59,9 @@ class ParameterEarlyStopping(L.Callback):
         if self.ref is None:
             self.ref = theta.clone()
             return False
-        rel = float(torch.linalg.vector_norm(theta - self.ref) / torch.linalg.vector_norm(self.ref).clamp_min(1e-12))
+        rel = float(
+            torch.linalg.vector_norm(theta - self.ref) / torch.linalg.vector_norm(self.ref).clamp_min(1e-12)
+        )
         if rel < self.eps:
             self.passed += 1
         else:

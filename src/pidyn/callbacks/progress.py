@@ -27,8 +27,9 @@ class LineProgress(L.Callback):
     def on_train_start(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
         self._last = time.monotonic()
 
-    def on_train_batch_end(self, trainer: L.Trainer, pl_module: L.LightningModule, outputs: Any, batch: Any,
-                           batch_idx: int) -> None:
+    def on_train_batch_end(
+        self, trainer: L.Trainer, pl_module: L.LightningModule, outputs: Any, batch: Any, batch_idx: int
+    ) -> None:
         if trainer.progress_bar_callback is not None:  # a bar already shows it
             return
         now = time.monotonic()
@@ -39,8 +40,12 @@ class LineProgress(L.Callback):
         losses = getattr(pl_module, "last_losses", {}) or {}
         net = getattr(pl_module, "net", None)
         params = net.params.as_floats() if net is not None and hasattr(net, "params") else {}
-        log.info("window %s %s: iteration %d/%d, loss %s; %s",
-                 getattr(window, "index", "?"), getattr(pl_module, "phase", ""),
-                 getattr(pl_module, "window_iteration", 0), getattr(pl_module, "budget", 0),
-                 ", ".join(f"{k} {v:.3g}" for k, v in losses.items()),
-                 ", ".join(f"{k}={v:.5g}" for k, v in params.items()))
+        log.info(
+            "window %s %s: iteration %d/%d, loss %s; %s",
+            getattr(window, "index", "?"),
+            getattr(pl_module, "phase", ""),
+            getattr(pl_module, "window_iteration", 0),
+            getattr(pl_module, "budget", 0),
+            ", ".join(f"{k} {v:.3g}" for k, v in losses.items()),
+            ", ".join(f"{k}={v:.5g}" for k, v in params.items()),
+        )

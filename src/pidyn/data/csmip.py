@@ -28,10 +28,21 @@ import numpy as np
 from pidyn.data.sources import DataError
 
 #: factors to SI of the units V2 files declare
-_UNITS = {"cm/sec2": 0.01, "cm/sec/sec": 0.01, "cm/s2": 0.01, "cm/s/s": 0.01, "cm/sec": 0.01, "cm/s": 0.01,
-          "cm": 0.01, "g": 9.80665}
-_BLOCK = re.compile(r"^\s*(\d+)\s+points\s+of\s+(accel|veloc|displ)\s+data\s+equally\s+spaced\s+at\s+"
-                    r"([0-9.Ee+-]+)\s*sec\.?\s*(.*)$", re.IGNORECASE)
+_UNITS = {
+    "cm/sec2": 0.01,
+    "cm/sec/sec": 0.01,
+    "cm/s2": 0.01,
+    "cm/s/s": 0.01,
+    "cm/sec": 0.01,
+    "cm/s": 0.01,
+    "cm": 0.01,
+    "g": 9.80665,
+}
+_BLOCK = re.compile(
+    r"^\s*(\d+)\s+points\s+of\s+(accel|veloc|displ)\s+data\s+equally\s+spaced\s+at\s+"
+    r"([0-9.Ee+-]+)\s*sec\.?\s*(.*)$",
+    re.IGNORECASE,
+)
 _FORMAT = re.compile(r"\(\s*(\d+)\s*[fe]\s*(\d+)\.(\d+)\s*\)", re.IGNORECASE)
 _UNIT_TEXT = re.compile(r"(?:units\s*:\s*|in\s+)([a-z/0-9]+)", re.IGNORECASE)
 _STA_CHN = re.compile(r"sta\s*chn\s*:\s*(\d+)", re.IGNORECASE)
@@ -81,7 +92,9 @@ def read_v2(text: str, source: str) -> V2Channel:
     blocks = [(i, m) for i, line in enumerate(lines) if (m := _BLOCK.match(line))]
     kinds = [m.group(2).lower() for _, m in blocks]
     if "accel" not in kinds:
-        raise CsmipFormatError(f"{source}: no acceleration block ('N points of accel data ...'): not a V2 file")
+        raise CsmipFormatError(
+            f"{source}: no acceleration block ('N points of accel data ...'): not a V2 file"
+        )
     data: dict[str, np.ndarray] = {}
     dts: dict[str, float] = {}
     factors: dict[str, float] = {}
@@ -99,7 +112,9 @@ def read_v2(text: str, source: str) -> V2Channel:
     dt = dts["accel"]
     for kind, d in dts.items():
         if abs(d - dt) > 1e-9 * dt:
-            raise CsmipFormatError(f"{source}: the {kind} block has step {d} s, the acceleration block {dt} s")
+            raise CsmipFormatError(
+                f"{source}: the {kind} block has step {d} s, the acceleration block {dt} s"
+            )
     lengths = {k: len(v) for k, v in data.items()}
     if len(set(lengths.values())) > 1:
         raise CsmipFormatError(f"{source}: blocks of different lengths {lengths}")
@@ -108,10 +123,18 @@ def read_v2(text: str, source: str) -> V2Channel:
     acc = data["accel"] * factors["accel"]
     _check_peak(head, data["accel"], source)
     return V2Channel(
-        station_channel=station, recorder_channel=recorder_chan, orientation=orientation, location=location, dt=dt,
-        acc=acc, vel=data["veloc"] * factors["veloc"] if "veloc" in data else None,
-        disp=data["displ"] * factors["displ"] if "displ" in data else None, source=source,
-        recorder=_recorder(head), band_hz=_band(head), header=head[:25],
+        station_channel=station,
+        recorder_channel=recorder_chan,
+        orientation=orientation,
+        location=location,
+        dt=dt,
+        acc=acc,
+        vel=data["veloc"] * factors["veloc"] if "veloc" in data else None,
+        disp=data["displ"] * factors["displ"] if "displ" in data else None,
+        source=source,
+        recorder=_recorder(head),
+        band_hz=_band(head),
+        header=head[:25],
     )
 
 
@@ -126,9 +149,14 @@ def _unit_factor(tail: str, kind: str, source: str) -> float:
         raise CsmipFormatError(f"{source}: the {kind} block does not state its units ('{tail.strip()}')")
     unit = m.group(1).lower().rstrip(".")
     if unit not in _UNITS:
-        raise CsmipFormatError(f"{source}: unknown units '{m.group(1)}' of the {kind} block; known: {sorted(_UNITS)}")
-    expected = {"accel": ("cm/sec2", "cm/sec/sec", "cm/s2", "cm/s/s", "g"), "veloc": ("cm/sec", "cm/s"),
-                "displ": ("cm",)}[kind]
+        raise CsmipFormatError(
+            f"{source}: unknown units '{m.group(1)}' of the {kind} block; known: {sorted(_UNITS)}"
+        )
+    expected = {
+        "accel": ("cm/sec2", "cm/sec/sec", "cm/s2", "cm/s/s", "g"),
+        "veloc": ("cm/sec", "cm/s"),
+        "displ": ("cm",),
+    }[kind]
     if unit not in expected:
         raise CsmipFormatError(f"{source}: the {kind} block is in '{unit}', which is not a {kind} unit")
     return _UNITS[unit]
@@ -140,10 +168,12 @@ def _samples(lines: list[str], start: int, n: int, width: int, where: str) -> np
     i = start
     while len(out) < n:
         if i >= len(lines) or _BLOCK.match(lines[i]) or lines[i].lstrip().startswith("/&"):
-            raise CsmipFormatError(f"{where}: {len(out)} values where the header states {n} (file truncated?)")
+            raise CsmipFormatError(
+                f"{where}: {len(out)} values where the header states {n} (file truncated?)"
+            )
         line = lines[i].rstrip()
         for j in range(0, len(line), width):
-            cell = line[j:j + width].strip()
+            cell = line[j : j + width].strip()
             if not cell:
                 continue
             try:
@@ -174,7 +204,9 @@ def _channel_identity(head: list[str], source: str) -> tuple[int, int, str, str]
     if sta is not None:
         station = int(sta.group(1))
         if from_int is not None and from_int != station:
-            raise CsmipFormatError(f"{source}: the text names station channel {station}, the integer header {from_int}")
+            raise CsmipFormatError(
+                f"{source}: the text names station channel {station}, the integer header {from_int}"
+            )
     else:
         station = from_int if from_int is not None else recorder_chan
     loc = next((m.group(1).strip() for line in head[:25] if (m := _LOCATION.search(line))), "")
@@ -185,7 +217,7 @@ def _int_header_station(head: list[str]) -> int | None:
     """The third value of the integer header (16I5): the station channel number."""
     for i in range(20, min(len(head), 32)):
         line = head[i].rstrip()
-        cells = [line[j:j + 5].strip() for j in range(0, 80, 5)]
+        cells = [line[j : j + 5].strip() for j in range(0, 80, 5)]
         if len(line) >= 70 and all(re.fullmatch(r"-?\d+", c or "0") for c in cells):
             try:
                 return int(cells[2])
@@ -205,7 +237,9 @@ def _band(head: list[str]) -> tuple[float, float] | None:
     m = re.search(r"3\s*dB\s*pts\s*at\s*([0-9.]+)\s*and\s*([0-9.]+)", text, re.IGNORECASE)
     if m:
         return float(m.group(1)), float(m.group(2))
-    m = re.search(r"ramps\s*at\s*([0-9.]+)\s*-\s*([0-9.]+)\s*and\s*([0-9.]+)\s*-\s*([0-9.]+)", text, re.IGNORECASE)
+    m = re.search(
+        r"ramps\s*at\s*([0-9.]+)\s*-\s*([0-9.]+)\s*and\s*([0-9.]+)\s*-\s*([0-9.]+)", text, re.IGNORECASE
+    )
     if m:
         return float(m.group(2)), float(m.group(3))
     return None
@@ -219,7 +253,9 @@ def _check_peak(head: list[str], acc_raw: np.ndarray, source: str) -> None:
     stated = abs(float(m.group(1)))
     found = float(np.max(np.abs(acc_raw)))
     if abs(stated - found) > 1e-5 * stated + 1.5e-3:  # the header prints three decimals
-        raise CsmipFormatError(f"{source}: peak acceleration {found:.6g} in the samples, {stated:.6g} in the header")
+        raise CsmipFormatError(
+            f"{source}: peak acceleration {found:.6g} in the samples, {stated:.6g} in the header"
+        )
 
 
 @dataclass
@@ -236,7 +272,8 @@ class Archive:
             raise MissingChannelError(
                 f"{self.path.name}: {what} channel(s) {missing} not in this archive (it holds "
                 f"{sorted(self.channels)}); choose others with data.inputs=[...] data.outputs=[...], or "
-                f"data.on_missing=drop to go on without them")
+                f"data.on_missing=drop to go on without them"
+            )
         return [self.channels[n] for n in numbers]
 
 
@@ -254,8 +291,10 @@ def read_archive(path: str | Path) -> Archive:
             continue
         ch = read_v2(text, f"{path.name}/{name}")
         if ch.station_channel in channels:
-            raise CsmipFormatError(f"{path.name}: station channel {ch.station_channel} in both "
-                                   f"{channels[ch.station_channel].source} and {ch.source}")
+            raise CsmipFormatError(
+                f"{path.name}: station channel {ch.station_channel} in both "
+                f"{channels[ch.station_channel].source} and {ch.source}"
+            )
         channels[ch.station_channel] = ch
     if not channels:
         raise CsmipFormatError(f"{path}: no V2 file (*.v2) in it; found {[n for n, _ in files][:10]}")

@@ -9,7 +9,7 @@ window index, so a resumed run sees the same points.
 
 from __future__ import annotations
 
-from typing import Iterator
+from collections.abc import Iterator
 
 import lightning as L
 import torch
@@ -20,8 +20,9 @@ from pidyn.data.windows import Window, make_windows
 
 
 class _CollocationStream(IterableDataset):
-    def __init__(self, window: Window, batch_size: int, inner_steps: int, n_batches: int, seed: int,
-                 physics: bool) -> None:
+    def __init__(
+        self, window: Window, batch_size: int, inner_steps: int, n_batches: int, seed: int, physics: bool
+    ) -> None:
         self.window, self.batch_size, self.inner_steps = window, batch_size, inner_steps
         self.n_batches, self.seed, self.physics = n_batches, seed, physics
 
@@ -71,8 +72,16 @@ class SubperiodDataModule(L.LightningDataModule):
         self.window_length, self.pool_size, self.batch_size = window_length, pool_size, batch_size
         self.data_seed = data_seed
         self.windows = make_windows(
-            record.t, record.f, record.x, record.v, record.a, window_length, pool_size,
-            min_peak_fraction, t_start, t_end,
+            record.t,
+            record.f,
+            record.x,
+            record.v,
+            record.a,
+            window_length,
+            pool_size,
+            min_peak_fraction,
+            t_start,
+            t_end,
             accel_signal=accel_signal,
             cover_tail=cover_tail,
         )
@@ -87,5 +96,7 @@ class SubperiodDataModule(L.LightningDataModule):
 
     def train_dataloader(self) -> DataLoader:
         seed = 1_000_003 * self.data_seed + 7919 * self.active.index + int(self.physics)
-        ds = _CollocationStream(self.active, self.batch_size, self.inner_steps, self.n_batches, seed, self.physics)
+        ds = _CollocationStream(
+            self.active, self.batch_size, self.inner_steps, self.n_batches, seed, self.physics
+        )
         return DataLoader(ds, batch_size=None, num_workers=0)

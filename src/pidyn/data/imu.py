@@ -37,8 +37,19 @@ import pandas as pd
 from pidyn.data.sources import DataError, Record
 
 NOMINAL_STEP_US = 1e6 / 120.0
-COLUMNS = ("PacketCounter", "SampleTimeFine", "Euler_X", "Euler_Y", "Euler_Z", "Acc_X", "Acc_Y", "Acc_Z",
-           "Gyr_X", "Gyr_Y", "Gyr_Z")
+COLUMNS = (
+    "PacketCounter",
+    "SampleTimeFine",
+    "Euler_X",
+    "Euler_Y",
+    "Euler_Z",
+    "Acc_X",
+    "Acc_Y",
+    "Acc_Z",
+    "Gyr_X",
+    "Gyr_Y",
+    "Gyr_Z",
+)
 _ORDINAL = re.compile(r"^(\d+)(st|nd|rd|th)\s+floor", re.IGNORECASE)
 
 
@@ -73,7 +84,11 @@ def read_xsens(path: str | Path) -> ImuFile:
     head = next((i for i, ln in enumerate(lines[:20]) if ln.startswith("PacketCounter")), None)
     if head is None:
         raise ImuFormatError(f"{path}: no 'PacketCounter,SampleTimeFine,...' header in its first 20 lines")
-    meta = {ln.split(",")[0].strip().rstrip(":"): ",".join(ln.split(",")[1:]).strip() for ln in lines[:head] if "," in ln}
+    meta = {
+        ln.split(",")[0].strip().rstrip(":"): ",".join(ln.split(",")[1:]).strip()
+        for ln in lines[:head]
+        if "," in ln
+    }
     try:
         df = pd.read_csv(io.StringIO("\n".join(lines[head:])))
     except Exception as exc:  # pandas raises many types for a malformed table
@@ -81,7 +96,9 @@ def read_xsens(path: str | Path) -> ImuFile:
     missing = [c for c in ("SampleTimeFine", "Acc_X", "Acc_Y", "Acc_Z") if c not in df.columns]
     if missing:
         raise ImuFormatError(f"{path}: missing column(s) {missing} (columns: {list(df.columns)})")
-    num = df[["SampleTimeFine", "Acc_X", "Acc_Y", "Acc_Z"]].apply(pd.to_numeric, errors="coerce")  # text: NaN, named below
+    num = df[["SampleTimeFine", "Acc_X", "Acc_Y", "Acc_Z"]].apply(
+        pd.to_numeric, errors="coerce"
+    )  # text: NaN, named below
     acc = num[["Acc_X", "Acc_Y", "Acc_Z"]].to_numpy(float)
     clock = num["SampleTimeFine"].to_numpy(float)
     first = 1 if len(acc) and not np.any(acc[0]) else 0  # the first row: counters only
@@ -90,23 +107,36 @@ def read_xsens(path: str | Path) -> ImuFile:
         raise ImuFormatError(f"{path}: only {len(acc)} samples (two seconds at 120 Hz at least)")
     bad = ~np.all(np.isfinite(acc), axis=1) | ~np.isfinite(clock)
     if bad.any():
-        raise ImuFormatError(f"{path}: {int(bad.sum())} row(s) with missing or non-numeric accelerations or times, first at "
-                             f"data row {int(np.flatnonzero(bad)[0]) + first + 1}")
+        raise ImuFormatError(
+            f"{path}: {int(bad.sum())} row(s) with missing or non-numeric accelerations or times, first at "
+            f"data row {int(np.flatnonzero(bad)[0]) + first + 1}"
+        )
     clock = np.unwrap(clock, period=2.0**32)  # SampleTimeFine wraps at 2^32 us
     step = np.diff(clock)
     if np.any(step <= 0):
-        raise ImuFormatError(f"{path}: SampleTimeFine does not increase at data row {int(np.flatnonzero(step <= 0)[0]) + first + 2}")
+        raise ImuFormatError(
+            f"{path}: SampleTimeFine does not increase at data row {int(np.flatnonzero(step <= 0)[0]) + first + 2}"
+        )
     nominal = float(np.median(step))
     if abs(nominal - NOMINAL_STEP_US) > 0.02 * NOMINAL_STEP_US:
-        raise ImuFormatError(f"{path}: a step of {nominal:.0f} us; an Xsens DOT records at 120 Hz ({NOMINAL_STEP_US:.0f} us)")
+        raise ImuFormatError(
+            f"{path}: a step of {nominal:.0f} us; an Xsens DOT records at 120 Hz ({NOMINAL_STEP_US:.0f} us)"
+        )
     gaps = int(np.sum(np.round(step / nominal) - 1))
     t = (clock - clock[0]) * 1e-6
     if gaps:  # dropped packets: onto the uniform grid
         grid = np.arange(0.0, t[-1] + 0.5 * nominal * 1e-6, nominal * 1e-6)
         acc = np.stack([np.interp(grid, t, acc[:, j]) for j in range(3)], axis=1)
         t = grid
-    return ImuFile(path=path, device=meta.get("DeviceTag", ""), start_time=meta.get("StartTime", ""), t=t,
-                   clock0_us=float(clock[0]), acc=acc, gaps_filled=max(gaps, 0))
+    return ImuFile(
+        path=path,
+        device=meta.get("DeviceTag", ""),
+        start_time=meta.get("StartTime", ""),
+        t=t,
+        clock0_us=float(clock[0]),
+        acc=acc,
+        gaps_filled=max(gaps, 0),
+    )
 
 
 def floor_folders(folder: str | Path) -> list[tuple[int, Path]]:
@@ -130,11 +160,15 @@ def floor_folders(folder: str | Path) -> list[tuple[int, Path]]:
         out.append((max((n for n, _ in out), default=0) + 1, top))
     floors = sorted(out)
     if not floors or floors[0][0] != 0:
-        raise ImuFormatError(f"{folder}: no 'Ground Floor' subfolder (the table's sensor); found "
-                             f"{[p.name for p in folder.iterdir() if p.is_dir()]}")
+        raise ImuFormatError(
+            f"{folder}: no 'Ground Floor' subfolder (the table's sensor); found "
+            f"{[p.name for p in folder.iterdir() if p.is_dir()]}"
+        )
     numbers = [n for n, _ in floors]
     if numbers != list(range(len(numbers))):
-        raise ImuFormatError(f"{folder}: floors {numbers}: a floor between the table and the top has no folder")
+        raise ImuFormatError(
+            f"{folder}: floors {numbers}: a floor between the table and the top has no folder"
+        )
     return floors
 
 
@@ -215,8 +249,9 @@ def band(sig: np.ndarray, dt: float, lo: float, hi: float) -> np.ndarray:
     return sosfiltfilt(sos, sig, axis=0)
 
 
-def low_band_lag(ref: np.ndarray, sig: np.ndarray, dt: float, max_lag_s: float,
-                 band_hz: tuple[float, float] = (0.2, 2.0)) -> tuple[float, float, float]:
+def low_band_lag(
+    ref: np.ndarray, sig: np.ndarray, dt: float, max_lag_s: float, band_hz: tuple[float, float] = (0.2, 2.0)
+) -> tuple[float, float, float]:
     """(lag s, sign, correlation) of ``sig`` against ``ref`` where a floor moves with its table:
     well below the fundamental frequency a floor's acceleration is the table's, in phase (its phase
     there is about 2 zeta r^3 at r = f / f_n: a delay of a fraction of a millisecond below a quarter
@@ -228,7 +263,7 @@ def low_band_lag(ref: np.ndarray, sig: np.ndarray, dt: float, max_lag_s: float,
     m = int(round(max_lag_s / dt))
     size = 1 << int(np.ceil(np.log2(2 * n)))
     cc_full = np.fft.irfft(np.conj(np.fft.rfft(a, size)) * np.fft.rfft(b, size), size)
-    cc = np.concatenate([cc_full[-m:], cc_full[:m + 1]]) if m else cc_full[:1]
+    cc = np.concatenate([cc_full[-m:], cc_full[: m + 1]]) if m else cc_full[:1]
     i = int(np.argmax(np.abs(cc)))
     sign = float(np.sign(cc[i])) or 1.0
     c = sign * cc
@@ -269,11 +304,18 @@ def shared_clock(imus: list[ImuFile]) -> bool:
     starts = [start_seconds(m.start_time) for m in imus]
     if any(s is None for s in starts):
         return True  # nothing to check against
-    return all(abs((m.clock0_us - imus[0].clock0_us) * 1e-6 - (s - starts[0])) < 1.5 for m, s in zip(imus, starts))
+    return all(
+        abs((m.clock0_us - imus[0].clock0_us) * 1e-6 - (s - starts[0])) < 1.5 for m, s in zip(imus, starts)
+    )
 
 
-def align_floors(imus: list[ImuFile], axes: list[Axis], align: str = "clock", max_lag_s: float = 1.5,
-                 band_hz: tuple[float, float] = (0.2, 2.0)) -> tuple[np.ndarray, np.ndarray, Alignment]:
+def align_floors(
+    imus: list[ImuFile],
+    axes: list[Axis],
+    align: str = "clock",
+    max_lag_s: float = 1.5,
+    band_hz: tuple[float, float] = (0.2, 2.0),
+) -> tuple[np.ndarray, np.ndarray, Alignment]:
     """Every sensor's acceleration along its axis on the table's time grid, (t, (N, floors)), and
     what was done. The coarse offset: the shared clock, else StartTime (to the second). Then each
     floor's low-band lag against the table (``low_band_lag``, within ``max_lag_s``) is measured;
@@ -293,13 +335,20 @@ def align_floors(imus: list[ImuFile], axes: list[Axis], align: str = "clock", ma
             coarse = np.interp(grid, m.t + offset, s, left=0.0, right=0.0)
             # a shared clock is off by milliseconds if at all: a narrow search keeps a sine's
             # periodic correlation from choosing another period
-            lag, sign, corr = low_band_lag(ref, coarse, step, max_lag_s if report.coarse == "start_time" else
-                                           min(max_lag_s, SHARED_CLOCK_SEARCH_S), band_hz)
+            lag, sign, corr = low_band_lag(
+                ref,
+                coarse,
+                step,
+                max_lag_s if report.coarse == "start_time" else min(max_lag_s, SHARED_CLOCK_SEARCH_S),
+                band_hz,
+            )
         trusted = corr >= MIN_LAG_CORRELATION
         moved = lag if trusted and (align == "lag" or report.coarse == "start_time") else 0.0
         if k and not trusted:
-            report.notes.append(f"floor {k}: low-band correlation with the table {corr:.2f} < {MIN_LAG_CORRELATION}: "
-                                f"its lag ({1e3 * lag:.1f} ms) is not used")
+            report.notes.append(
+                f"floor {k}: low-band correlation with the table {corr:.2f} < {MIN_LAG_CORRELATION}: "
+                f"its lag ({1e3 * lag:.1f} ms) is not used"
+            )
         cols.append(sign * np.interp(grid, m.t + offset - moved, s, left=np.nan, right=np.nan))
         report.clock_ms.append(1e3 * offset)
         report.lag_ms.append(1e3 * lag)
@@ -317,10 +366,20 @@ def align_floors(imus: list[ImuFile], axes: list[Axis], align: str = "clock", ma
     return grid[i0:i1] - grid[i0], data[i0:i1], report
 
 
-def xsens_record(path: str | Path, run: str, n_storeys: int | None = None, dt: float | None = None,
-                 align: str = "lag", max_lag_s: float = 1.5, lag_band_hz: tuple[float, float] = (0.2, 2.0),
-                 span: list[float] | None = None,
-                 pre: float = 2.0, post: float = 3.0, fit_share: float | None = None, system=None) -> Record:
+def xsens_record(
+    path: str | Path,
+    run: str,
+    n_storeys: int | None = None,
+    dt: float | None = None,
+    align: str = "lag",
+    max_lag_s: float = 1.5,
+    lag_band_hz: tuple[float, float] = (0.2, 2.0),
+    span: list[float] | None = None,
+    pre: float = 2.0,
+    post: float = 3.0,
+    fit_share: float | None = None,
+    system=None,
+) -> Record:
     """The run ``run`` of the model in ``path`` as a building record: the table's acceleration along
     the shaking axis as ``ag`` and each floor's acceleration (relative to the table, as every
     one-input record keeps it). ``align``: ``clock`` (the sensors' shared clock; each floor's
@@ -335,8 +394,10 @@ def xsens_record(path: str | Path, run: str, n_storeys: int | None = None, dt: f
     files = run_files(path, run)
     want = n_storeys if n_storeys is not None else (None if system is None else system.n_dof)
     if want is not None and int(want) != len(files) - 1:
-        raise ImuFormatError(f"{path}: {len(files) - 1} floor(s) above the table, the model has {want} storey(s): set "
-                             f"system.n_storeys={len(files) - 1}")
+        raise ImuFormatError(
+            f"{path}: {len(files) - 1} floor(s) above the table, the model has {want} storey(s): set "
+            f"system.n_storeys={len(files) - 1}"
+        )
     imus = [read_xsens(f) for _, f in files]
     axes = [shaking_axis(m.acc) for m in imus]
     t, data, report = align_floors(imus, axes, align, max_lag_s, tuple(lag_band_hz))
@@ -352,11 +413,29 @@ def xsens_record(path: str | Path, run: str, n_storeys: int | None = None, dt: f
     data = data[i0:i1]
     t = np.arange(len(data)) * step
     ag = data[:, 0]
-    meta = {"path": str(path), "run": run, "floors": [f.parent.name for _, f in files], "files": [f.name for _, f in files],
-            "alignment": report.__dict__, "align": align, "dt": step, "units": {"a": "m/s^2", "ag": "m/s^2"},
-            "span": [i0 * step, (i1 - 1) * step], "pre_event_rms": pre_rms, "notes": notes,
-            "pga": float(np.max(np.abs(ag))), "devices": [m.device for m in imus]}
+    meta = {
+        "path": str(path),
+        "run": run,
+        "floors": [f.parent.name for _, f in files],
+        "files": [f.name for _, f in files],
+        "alignment": report.__dict__,
+        "align": align,
+        "dt": step,
+        "units": {"a": "m/s^2", "ag": "m/s^2"},
+        "span": [i0 * step, (i1 - 1) * step],
+        "pre_event_rms": pre_rms,
+        "notes": notes,
+        "pga": float(np.max(np.abs(ag))),
+        "devices": [m.device for m in imus],
+    }
     if fit_share is not None:
         cut = float(t[-1]) * fit_share
         meta["split"] = {"fit": [0.0, cut], "heldout": [cut, float(t[-1])]}
-    return Record(name=f"{Path(path).name}:{run}", t=t, f=ag, a=data[:, 1:] - ag[:, None], excitation="ground", meta=meta)
+    return Record(
+        name=f"{Path(path).name}:{run}",
+        t=t,
+        f=ag,
+        a=data[:, 1:] - ag[:, None],
+        excitation="ground",
+        meta=meta,
+    )

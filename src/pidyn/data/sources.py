@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 import pandas as pd
@@ -62,17 +62,25 @@ class Record:
         if self.f.ndim == 2 and self.f.shape[1] == 1:
             self.f = self.f[:, 0]
         names = (self.meta or {}).get("inputs")
-        if self.f.ndim == 2 and (self.f.shape[1] % 2 or (names is not None and 2 * len(names) != self.f.shape[1])):
-            raise DataError(f"record '{self.name}': {self.f.shape[1]} excitation columns; several inputs need their "
-                            f"accelerations and velocities ({len(names or [])} names)")
+        if self.f.ndim == 2 and (
+            self.f.shape[1] % 2 or (names is not None and 2 * len(names) != self.f.shape[1])
+        ):
+            raise DataError(
+                f"record '{self.name}': {self.f.shape[1]} excitation columns; several inputs need their "
+                f"accelerations and velocities ({len(names or [])} names)"
+            )
         for kind, arr in measured.items():
             if len(arr) != len(self.t) or len(self.f) != len(self.t):
-                raise DataError(f"record '{self.name}': {len(self.t)} times, {len(arr)} samples of '{kind}', "
-                                f"{len(self.f)} excitation samples; they must match")
+                raise DataError(
+                    f"record '{self.name}': {len(self.t)} times, {len(arr)} samples of '{kind}', "
+                    f"{len(self.f)} excitation samples; they must match"
+                )
         widths = {arr.shape[1] for arr in measured.values()}
         if len(widths) > 1:
-            raise DataError(f"record '{self.name}': channels cover different numbers of floors "
-                            f"({ {k: a.shape[1] for k, a in measured.items()} }); pad missing floors with NaN")
+            raise DataError(
+                f"record '{self.name}': channels cover different numbers of floors "
+                f"({ {k: a.shape[1] for k, a in measured.items()} }); pad missing floors with NaN"
+            )
 
     @property
     def dt(self) -> float:
@@ -120,15 +128,26 @@ class Record:
         return spread(0), spread(1)
 
     @classmethod
-    def from_csv(cls, path: str | Path, **kwargs) -> "Record":
+    def from_csv(cls, path: str | Path, **kwargs) -> Record:
         """A measured record from a CSV file (see ``from_csv`` for the columns and options)."""
         return from_csv(path, **kwargs)
 
     @classmethod
-    def simulate(cls, system: "StructuralSystem | str", excitation: str | Path = "kobe", *, scale: float = 1.0,
-                 stretch: float = 1.0, duration: float | None = 40.0, dt: float | None = 0.01,
-                 noise: float | dict[str, float] = 0.0, seed: int = 0, channels: Sequence[str] = ("x", "v"),
-                 sensors: Sequence[int] | None = None, **system_values) -> "Record":
+    def simulate(
+        cls,
+        system: StructuralSystem | str,
+        excitation: str | Path = "kobe",
+        *,
+        scale: float = 1.0,
+        stretch: float = 1.0,
+        duration: float | None = 40.0,
+        dt: float | None = 0.01,
+        noise: float | dict[str, float] = 0.0,
+        seed: int = 0,
+        channels: Sequence[str] = ("x", "v"),
+        sensors: Sequence[int] | None = None,
+        **system_values,
+    ) -> Record:
         """``system`` (a system object, or a name from the package's configs with
         ``system_values`` setting its keys, e.g. ``n_storeys=5``) at its true parameters under
         ``excitation`` (a shipped record's name or an AT2 path), measured with noise of std
@@ -139,12 +158,21 @@ class Record:
             system = make_system(system, **system_values)
         elif system_values:
             raise ValueError(f"settings {sorted(system_values)} need a system name, not a system object")
-        return synthetic(system, record=str(excitation), eq_scale=scale, stretch=stretch, duration=duration, dt=dt,
-                         noise=noise, data_seed=seed, channels=tuple(channels),
-                         sensors=None if sensors is None else list(sensors))
+        return synthetic(
+            system,
+            record=str(excitation),
+            eq_scale=scale,
+            stretch=stretch,
+            duration=duration,
+            dt=dt,
+            noise=noise,
+            data_seed=seed,
+            channels=tuple(channels),
+            sensors=None if sensors is None else list(sensors),
+        )
 
     @classmethod
-    def from_at2(cls, path: str | Path, system: "StructuralSystem | str", **kwargs) -> "Record":
+    def from_at2(cls, path: str | Path, system: StructuralSystem | str, **kwargs) -> Record:
         """The response of ``system`` to the ground motion of a PEER AT2 file, simulated and
         measured as in ``simulate`` (to pair an AT2 file with measured responses, use
         ``from_csv(path, at2=...)``)."""
@@ -152,7 +180,7 @@ class Record:
             raise FileNotFoundError(f"{path}: no such AT2 file")
         return cls.simulate(system, excitation=path, **kwargs)
 
-    def segment(self, t0: float | None, t1: float | None) -> "Record":
+    def segment(self, t0: float | None, t1: float | None) -> Record:
         """The samples with t0 <= t <= t1 (times kept absolute; the truth travels along)."""
         from dataclasses import replace
 
@@ -162,8 +190,16 @@ class Record:
         if keep.sum() < 10:
             raise ValueError(f"record '{self.name}': only {int(keep.sum())} samples in [{t0}, {t1}] s")
         cut = lambda a: None if a is None else a[keep]  # noqa: E731
-        return replace(self, t=self.t[keep], f=self.f[keep], x=cut(self.x), v=cut(self.v), a=cut(self.a),
-                       clean=None, meta={**self.meta, "segment": [t0, t1]})
+        return replace(
+            self,
+            t=self.t[keep],
+            f=self.f[keep],
+            x=cut(self.x),
+            v=cut(self.v),
+            a=cut(self.a),
+            clean=None,
+            meta={**self.meta, "segment": [t0, t1]},
+        )
 
 
 CHANNEL_KINDS = ("x", "v", "a")
@@ -188,7 +224,9 @@ def synthetic(
     ``sensors``: the floors (1-based) that carry the sensors, default every floor.
     """
     gm = prepare(record, scale=eq_scale, stretch=stretch, duration=duration, dt=dt)
-    return synthetic_from_motion(system, gm, noise=noise, data_seed=data_seed, channels=channels, sensors=sensors)
+    return synthetic_from_motion(
+        system, gm, noise=noise, data_seed=data_seed, channels=channels, sensors=sensors
+    )
 
 
 def synthetic_from_motion(
@@ -215,8 +253,11 @@ def synthetic_from_motion(
     if system.excitation != "ground":
         ground = 0.0
     else:  # the ground acceleration each floor feels (several supports: weighted by their influence)
-        ground = (system.acceleration_output(np.zeros((len(clean.t), system.n_dof)), clean.f, truth) if several
-                  else clean.f[:, None])
+        ground = (
+            system.acceleration_output(np.zeros((len(clean.t), system.n_dof)), clean.f, truth)
+            if several
+            else clean.f[:, None]
+        )
     if several:
         ground = ground[:, [s - 1 for s in floors]]
     sensed = {c: getattr(clean, c)[:, [s - 1 for s in floors]] for c in channels}
@@ -240,9 +281,17 @@ def synthetic_from_motion(
         excitation=system.excitation,
         truth=dict(truth),
         clean=clean,
-        meta={"record": gm.name, "pga": gm.pga, "dt": gm.dt, "noise": max(levels.values()), "noise_levels": levels,
-              "data_seed": data_seed, "sensors": floors, "channels": list(channels),
-              **({"inputs": list(system.inputs)} if several else {})},
+        meta={
+            "record": gm.name,
+            "pga": gm.pga,
+            "dt": gm.dt,
+            "noise": max(levels.values()),
+            "noise_levels": levels,
+            "data_seed": data_seed,
+            "sensors": floors,
+            "channels": list(channels),
+            **({"inputs": list(system.inputs)} if several else {}),
+        },
     )
 
 
@@ -254,7 +303,9 @@ def _noise_levels(noise: float | dict[str, float] | None, channels: Sequence[str
     levels = {str(k): float(v) for k, v in dict(noise).items()}
     missing, extra = set(channels) - set(levels), set(levels) - set(channels)
     if missing or extra:
-        raise ValueError(f"noise levels given for {sorted(levels)}; the measured channels are {list(channels)}")
+        raise ValueError(
+            f"noise levels given for {sorted(levels)}; the measured channels are {list(channels)}"
+        )
     return levels
 
 
@@ -303,8 +354,12 @@ def from_csv(
         v=arrays.get("v"),
         a=arrays.get("a"),
         excitation="ground" if col == "ag" else "force",
-        meta={"path": str(path), "dt": float(np.mean(np.diff(t))), "acceleration": acceleration,
-              "sensors": {k: sorted(c) for k, c in layout.items()}},
+        meta={
+            "path": str(path),
+            "dt": float(np.mean(np.diff(t))),
+            "acceleration": acceleration,
+            "sensors": {k: sorted(c) for k, c in layout.items()},
+        },
     )
 
 
@@ -336,8 +391,10 @@ def _ground_from_at2(path: Path, df: pd.DataFrame, time_col: str, at2: str | Pat
     gm = load_record(at2)
     t_csv = df[time_col].to_numpy(float)
     if t_csv[-1] - t_csv[0] > gm.duration + 1e-9:
-        raise DataError(f"{path}: spans {t_csv[-1] - t_csv[0]:.4g} s, longer than the AT2 record {at2} "
-                        f"({gm.duration:.4g} s)")
+        raise DataError(
+            f"{path}: spans {t_csv[-1] - t_csv[0]:.4g} s, longer than the AT2 record {at2} "
+            f"({gm.duration:.4g} s)"
+        )
     df["ag"] = gm(t_csv - t_csv[0])
 
 
@@ -345,7 +402,9 @@ def _excitation_column(path: Path, df: pd.DataFrame, excitation: str | None) -> 
     has = [c for c in ("ag", "u") if c in df.columns]
     if excitation is None:
         if len(has) != 1:
-            raise DataError(f"{path}: need exactly one excitation column 'ag' (ground) or 'u' (force); found {has}")
+            raise DataError(
+                f"{path}: need exactly one excitation column 'ag' (ground) or 'u' (force); found {has}"
+            )
         return has[0]
     col = {"ground": "ag", "force": "u"}[excitation]
     if col not in df.columns:
@@ -360,8 +419,10 @@ def _check_values(path: Path, df: pd.DataFrame) -> None:
             raise DataError(f"{path}: column '{c}' is not numeric")
         bad = ~np.isfinite(df[c].to_numpy(float))
         if bad.any():
-            raise DataError(f"{path}: column '{c}' has {int(bad.sum())} NaN/infinite value(s), first at row "
-                            f"{int(np.flatnonzero(bad)[0]) + 2}")
+            raise DataError(
+                f"{path}: column '{c}' has {int(bad.sum())} NaN/infinite value(s), first at row "
+                f"{int(np.flatnonzero(bad)[0]) + 2}"
+            )
 
 
 def _uniform_time(path: Path, t: np.ndarray, time_col: str) -> np.ndarray:
@@ -369,7 +430,9 @@ def _uniform_time(path: Path, t: np.ndarray, time_col: str) -> np.ndarray:
         raise DataError(f"{path}: only {t.size} rows")
     dt = np.diff(t)
     if np.any(dt <= 0):
-        raise DataError(f"{path}: time column '{time_col}' is not strictly increasing (row {int(np.flatnonzero(dt <= 0)[0]) + 3})")
+        raise DataError(
+            f"{path}: time column '{time_col}' is not strictly increasing (row {int(np.flatnonzero(dt <= 0)[0]) + 3})"
+        )
     if np.max(np.abs(dt - dt.mean())) > 1e-6 * max(dt.mean(), 1e-12) + 1e-9:
         raise DataError(
             f"{path}: non-uniform time step (from {dt.min():.6g} to {dt.max():.6g} s); resample to a uniform grid first"
@@ -377,8 +440,9 @@ def _uniform_time(path: Path, t: np.ndarray, time_col: str) -> np.ndarray:
     return t
 
 
-def _floor_arrays(df: pd.DataFrame, layout: dict[str, dict[int, str]], n_rows: int,
-                  ground: np.ndarray | None) -> dict[str, np.ndarray]:
+def _floor_arrays(
+    df: pd.DataFrame, layout: dict[str, dict[int, str]], n_rows: int, ground: np.ndarray | None
+) -> dict[str, np.ndarray]:
     """(N, n_floors) arrays per kind, NaN for floors without the sensor; ``ground`` (ag) is
     subtracted from absolute accelerations so that ``a`` is relative like x and v."""
     n = max(j for cols in layout.values() for j in cols)
@@ -401,8 +465,10 @@ def _channel_columns(path: Path, columns) -> dict[str, dict[int, str]]:
     out: dict[str, dict[int, str]] = {}
     unknown = [c for c in columns if c not in ("t", "ag", "u") and not re.fullmatch(r"[xva]\d*", c)]
     if unknown:
-        raise DataError(f"{path}: unknown column(s) {unknown}; a record holds t, ag or u, and x, v, a (one degree "
-                        f"of freedom) or x1.., v1.., a1.. per floor")
+        raise DataError(
+            f"{path}: unknown column(s) {unknown}; a record holds t, ag or u, and x, v, a (one degree "
+            f"of freedom) or x1.., v1.., a1.. per floor"
+        )
     for c in columns:
         m = re.fullmatch(r"([xva])(\d*)", c)
         if not m:
@@ -412,9 +478,13 @@ def _channel_columns(path: Path, columns) -> dict[str, dict[int, str]]:
         if num and floor < 1:
             raise DataError(f"{path}: column '{c}': floors are numbered from 1")
         if floor in out.setdefault(kind, {}):
-            raise DataError(f"{path}: columns '{out[kind][floor]}' and '{c}' both give {kind} of floor {floor}")
+            raise DataError(
+                f"{path}: columns '{out[kind][floor]}' and '{c}' both give {kind} of floor {floor}"
+            )
         out[kind][floor] = c
     if not out:
-        raise DataError(f"{path}: no response column; give x, v or a (one degree of freedom) or x1.., v1.., a1.. "
-                        f"per floor (columns: {list(columns)})")
+        raise DataError(
+            f"{path}: no response column; give x, v or a (one degree of freedom) or x1.., v1.., a1.. "
+            f"per floor (columns: {list(columns)})"
+        )
     return out

@@ -25,9 +25,9 @@ subtract); with one, the convention of every record: relative to it.
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 import yaml
@@ -48,8 +48,13 @@ def stations() -> dict:
         return dict(yaml.safe_load(fh) or {})
 
 
-def channel_sets(station: str | None, direction: str, inputs: Sequence[int] | None,
-                 outputs: Sequence[int] | None, archive: Archive) -> tuple[str, list[int], list[int]]:
+def channel_sets(
+    station: str | None,
+    direction: str,
+    inputs: Sequence[int] | None,
+    outputs: Sequence[int] | None,
+    archive: Archive,
+) -> tuple[str, list[int], list[int]]:
     """(station, inputs, outputs): the given channels, else the station's set for ``direction``."""
     if station is None:
         station = _station_of(archive)
@@ -57,12 +62,16 @@ def channel_sets(station: str | None, direction: str, inputs: Sequence[int] | No
         return station or "", [int(c) for c in inputs], [int(c) for c in outputs]
     known = stations()
     if station not in known:
-        raise DataError(f"{archive.path.name}: station '{station}' has no channel sets in {STATIONS_FILE} (known: "
-                        f"{sorted(known)}); give data.inputs=[...] and data.outputs=[...]")
+        raise DataError(
+            f"{archive.path.name}: station '{station}' has no channel sets in {STATIONS_FILE} (known: "
+            f"{sorted(known)}); give data.inputs=[...] and data.outputs=[...]"
+        )
     sets = known[station].get("directions", {})
     if direction not in sets:
-        raise DataError(f"{archive.path.name}: station {station} has no direction '{direction}'; choose from "
-                        f"{sorted(sets)}")
+        raise DataError(
+            f"{archive.path.name}: station {station} has no direction '{direction}'; choose from "
+            f"{sorted(sets)}"
+        )
     ins = [int(c) for c in (inputs if inputs is not None else sets[direction]["inputs"])]
     outs = [int(c) for c in (outputs if outputs is not None else sets[direction]["outputs"])]
     return station, ins, outs
@@ -80,11 +89,21 @@ def _station_of(archive: Archive) -> str | None:
     return None
 
 
-def csmip_record(path: str | Path, station: str | None = None, direction: str = "transverse",
-                 inputs: Sequence[int] | None = None, outputs: Sequence[int] | None = None,
-                 on_missing: str = "error", dt: float | None = 0.02, span: Sequence[float] | None = None,
-                 pre: float = 2.0, post: float = 5.0, max_outputs: int | None = None, fit_share: float = 0.65,
-                 system=None) -> Record:
+def csmip_record(
+    path: str | Path,
+    station: str | None = None,
+    direction: str = "transverse",
+    inputs: Sequence[int] | None = None,
+    outputs: Sequence[int] | None = None,
+    on_missing: str = "error",
+    dt: float | None = 0.02,
+    span: Sequence[float] | None = None,
+    pre: float = 2.0,
+    post: float = 5.0,
+    max_outputs: int | None = None,
+    fit_share: float = 0.65,
+    system=None,
+) -> Record:
     """The record of one event at one station (see the module's docstring).
 
     ``max_outputs``: keep the first this many outputs (default: the model's degrees of
@@ -111,40 +130,59 @@ def csmip_record(path: str | Path, station: str | None = None, direction: str = 
     n = min(c.n for c in chans)
     if any(c.n != n for c in chans):
         lengths = {c.station_channel: c.n for c in chans}
-        notes.append(f"channels of different lengths {lengths} (two recorders): cut to the shortest, {n} samples "
-                     f"({(n - 1) * step:.3g} s)")
+        notes.append(
+            f"channels of different lengths {lengths} (two recorders): cut to the shortest, {n} samples "
+            f"({(n - 1) * step:.3g} s)"
+        )
     acc_in = np.stack([archive.channels[c].acc[:n] for c in ins], axis=1)
     acc_out = np.stack([archive.channels[c].acc[:n] for c in outs], axis=1)
     vel_in = _velocities(archive, ins, n, step, acc_in, notes)
     acc_in, acc_out, step = _resample(np.concatenate([acc_in, vel_in], axis=1), acc_out, step, dt, notes)
-    acc_in, vel_in = acc_in[:, :len(ins)], acc_in[:, len(ins):]
+    acc_in, vel_in = acc_in[:, : len(ins)], acc_in[:, len(ins) :]
     i0, i1, pre_rms = shaking_span(acc_in, acc_out, step, span, pre, post)
     t = np.arange(i1 - i0) * step
     a = acc_out[i0:i1]
     names = [f"ch{c}" for c in ins]
     several = len(ins) > 1
-    if several:  # the supports' accelerations, then their velocities (a support's dashpot acts on its velocity)
+    if (
+        several
+    ):  # the supports' accelerations, then their velocities (a support's dashpot acts on its velocity)
         f = np.concatenate([acc_in[i0:i1], vel_in[i0:i1]], axis=1)
     else:
         f = acc_in[i0:i1, 0]
         a = a - f[:, None]  # one ground: accelerations relative to it, as every record keeps them
     for note in notes:
         log.info("%s: %s", archive.path.name, note)
-    meta = {"path": str(path), "station": station, "direction": direction, "inputs": names if several else [],
-            "excitation_columns": ([f"ag_{c}" for c in names] + [f"vg_{c}" for c in names]) if several else ["ag"],
-            "input_channels": ins, "output_channels": outs, "dt": step, "t_offset": i0 * step,
-            "span": [i0 * step, (i1 - 1) * step], "pre_event_rms": pre_rms, "notes": notes,
-            "acceleration": "absolute" if several else "relative", "units": {"a": "m/s^2", "ag": "m/s^2"},
-            "pga": float(np.max(np.abs(acc_in[i0:i1]))), "band_hz": archive.channels[outs[0]].band_hz,
-            "locations": {c: archive.channels[c].location for c in ins + outs}}
+    meta = {
+        "path": str(path),
+        "station": station,
+        "direction": direction,
+        "inputs": names if several else [],
+        "excitation_columns": ([f"ag_{c}" for c in names] + [f"vg_{c}" for c in names])
+        if several
+        else ["ag"],
+        "input_channels": ins,
+        "output_channels": outs,
+        "dt": step,
+        "t_offset": i0 * step,
+        "span": [i0 * step, (i1 - 1) * step],
+        "pre_event_rms": pre_rms,
+        "notes": notes,
+        "acceleration": "absolute" if several else "relative",
+        "units": {"a": "m/s^2", "ag": "m/s^2"},
+        "pga": float(np.max(np.abs(acc_in[i0:i1]))),
+        "band_hz": archive.channels[outs[0]].band_hz,
+        "locations": {c: archive.channels[c].location for c in ins + outs},
+    }
     cut = float(t[-1]) * fit_share
     meta["split"] = {"fit": [0.0, cut], "heldout": [cut, float(t[-1])]}
     name = Path(path).name.split(".")[0]
     return Record(name=name, t=t, f=f, a=a, excitation="ground", meta=meta)
 
 
-def _velocities(archive: Archive, ins: list[int], n: int, step: float, acc: np.ndarray,
-                notes: list[str]) -> np.ndarray:
+def _velocities(
+    archive: Archive, ins: list[int], n: int, step: float, acc: np.ndarray, notes: list[str]
+) -> np.ndarray:
     """The supports' velocities as the V2 files give them (integrated and band-passed with the
     accelerations by the processing); integrated here (spectrally, above 0.05 Hz) where a file has none."""
     from pidyn.signals import integrate
@@ -165,15 +203,18 @@ def _present(archive: Archive, chans: list[int], what: str, on_missing: str, not
         archive.require(chans, what)
     kept = [c for c in chans if c in archive.channels]
     if not kept:
-        raise MissingChannelError(f"{archive.path.name}: none of the {what} channels {chans} is in this archive "
-                                  f"(it holds {sorted(archive.channels)})")
+        raise MissingChannelError(
+            f"{archive.path.name}: none of the {what} channels {chans} is in this archive "
+            f"(it holds {sorted(archive.channels)})"
+        )
     if missing:
         notes.append(f"{what} channel(s) {missing} missing in this event: left out (data.on_missing=drop)")
     return kept
 
 
-def _resample(acc_in: np.ndarray, acc_out: np.ndarray, step: float, dt: float | None,
-              notes: list[str]) -> tuple[np.ndarray, np.ndarray, float]:
+def _resample(
+    acc_in: np.ndarray, acc_out: np.ndarray, step: float, dt: float | None, notes: list[str]
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Down to ``dt`` by zero-phase polyphase filtering (an integer or simple rational ratio)."""
     if dt is None or dt <= step * (1 + 1e-9):
         return acc_in, acc_out, step
@@ -187,8 +228,14 @@ def _resample(acc_in: np.ndarray, acc_out: np.ndarray, step: float, dt: float | 
     return (resample_poly(acc_in, up, down, axis=0), resample_poly(acc_out, up, down, axis=0), float(dt))
 
 
-def shaking_span(acc_in: np.ndarray, acc_out: np.ndarray, step: float, span: Sequence[float] | None, pre: float,
-          post: float) -> tuple[int, int, dict[str, float]]:
+def shaking_span(
+    acc_in: np.ndarray,
+    acc_out: np.ndarray,
+    step: float,
+    span: Sequence[float] | None,
+    pre: float,
+    post: float,
+) -> tuple[int, int, dict[str, float]]:
     """Sample range [i0, i1) of the shaking, and the RMS of what comes before it per channel."""
     n = acc_in.shape[0]
     if span is not None:
@@ -206,7 +253,9 @@ def shaking_span(acc_in: np.ndarray, acc_out: np.ndarray, step: float, span: Seq
     pre_rms = {}
     if i0 >= int(round(1.0 / step)):  # at least a second before the shaking: the sensors' noise
         both = np.concatenate([acc_in, acc_out], axis=1)
-        pre_rms = {"inputs": np.sqrt(np.mean(acc_in[:i0] ** 2, axis=0)).tolist(),
-                   "outputs": np.sqrt(np.mean(acc_out[:i0] ** 2, axis=0)).tolist(),
-                   "share_of_peak": float(np.sqrt(np.mean(both[:i0] ** 2)) / max(np.max(np.abs(both)), 1e-300))}
+        pre_rms = {
+            "inputs": np.sqrt(np.mean(acc_in[:i0] ** 2, axis=0)).tolist(),
+            "outputs": np.sqrt(np.mean(acc_out[:i0] ** 2, axis=0)).tolist(),
+            "share_of_peak": float(np.sqrt(np.mean(both[:i0] ** 2)) / max(np.max(np.abs(both)), 1e-300)),
+        }
     return i0, i1, pre_rms

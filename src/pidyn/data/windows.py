@@ -44,12 +44,19 @@ class Window:
             if arr is not None and kind not in self.complete:
                 self.complete[kind] = not bool(torch.isnan(arr).any())
 
-    def to(self, device: torch.device | str) -> "Window":
+    def to(self, device: torch.device | str) -> Window:
         """A copy with every tensor on ``device`` (the window itself stays where it is)."""
-        moved = {f.name: getattr(self, f.name).to(device) for f in fields(self)
-                 if isinstance(getattr(self, f.name), torch.Tensor)}
-        return replace(self, **moved, complete=dict(self.complete),
-                       _filled={k: (v.to(device), c) for k, (v, c) in self._filled.items()})
+        moved = {
+            f.name: getattr(self, f.name).to(device)
+            for f in fields(self)
+            if isinstance(getattr(self, f.name), torch.Tensor)
+        }
+        return replace(
+            self,
+            **moved,
+            complete=dict(self.complete),
+            _filled={k: (v.to(device), c) for k, (v, c) in self._filled.items()},
+        )
 
     def scales(self) -> dict[str, torch.Tensor]:
         """Per-window scales that make every loss term O(1) (x, v, a per degree of freedom; f
@@ -63,7 +70,9 @@ class Window:
             s["x"] = torch.as_tensor(self.displacement_scale(), dtype=self.t_data.dtype).clamp_min(1e-12)
         w = 2 * np.pi / (self.t1 - self.t0)
         s["v"] = _fill(_nanstd(self.v), s["x"] * w) if self.v is not None else s["x"] * w
-        s["a"] = _fill(_nanstd(self.a), s["v"] * w) if self.a is not None else s["f"] * torch.ones_like(s["x"])
+        s["a"] = (
+            _fill(_nanstd(self.a), s["v"] * w) if self.a is not None else s["f"] * torch.ones_like(s["x"])
+        )
         return s
 
     def filled(self, kind: str) -> tuple[torch.Tensor | None, bool]:
@@ -83,16 +92,24 @@ class Window:
             have = torch.nonzero(seen)[:, 0].numpy()
             a = host.double().numpy()
             out = np.stack([np.interp(np.arange(a.shape[1]), have, a[i, have]) for i in range(a.shape[0])])
-            self._filled[kind] = (torch.as_tensor(out, dtype=arr.dtype, device=arr.device), not np.isnan(out).any())
+            self._filled[kind] = (
+                torch.as_tensor(out, dtype=arr.dtype, device=arr.device),
+                not np.isnan(out).any(),
+            )
         return self._filled[kind]
 
     def displacement_scale(self) -> np.ndarray:
         """Spread of the displacement per degree of freedom, measured or estimated."""
-        chans = [(k, None if c is None else c.double().numpy()) for k, c in (("x", self.x), ("v", self.v), ("a", self.a))]
+        chans = [
+            (k, None if c is None else c.double().numpy())
+            for k, c in (("x", self.x), ("v", self.v), ("a", self.a))
+        ]
         return spread_by_integration(self.t_data.double().numpy(), chans, 0)
 
 
-def spread_by_integration(t: np.ndarray, channels: list[tuple[str, np.ndarray | None]], order: int) -> np.ndarray:
+def spread_by_integration(
+    t: np.ndarray, channels: list[tuple[str, np.ndarray | None]], order: int
+) -> np.ndarray:
     """Spread of the ``order``-th derivative (0: displacement, 1: velocity) per degree of
     freedom from the channels (kind, (N, n_dof) with NaN columns where a floor has no
     sensor): the channel of that order where measured, else a higher one integrated and
@@ -209,11 +226,23 @@ def make_windows(
         tp = np.linspace(t0, t1, pool_size)
         peak = float(np.nanmax(np.abs(ref[m])))
         q = _transform(t, accel_signal, m, tp, t0)
-        out.append(Window(index=i, t0=t0, t1=t1, t_data=T(t[m]), f_data=T(np.asarray(f, float)[m]),
-                          x=None if x is None else T(x[m]), v=None if v is None else T(v[m]),
-                          a=None if a is None else T(a[m]), t_pool=T(tp), f_pool=T(_interp(tp, t, f)),
-                          peak_x=peak, informative=peak >= min_peak_fraction * record_peak,
-                          **{k: T(val) for k, val in q.items()}))
+        out.append(
+            Window(
+                index=i,
+                t0=t0,
+                t1=t1,
+                t_data=T(t[m]),
+                f_data=T(np.asarray(f, float)[m]),
+                x=None if x is None else T(x[m]),
+                v=None if v is None else T(v[m]),
+                a=None if a is None else T(a[m]),
+                t_pool=T(tp),
+                f_pool=T(_interp(tp, t, f)),
+                peak_x=peak,
+                informative=peak >= min_peak_fraction * record_peak,
+                **{k: T(val) for k, val in q.items()},
+            )
+        )
     return out
 
 
@@ -225,8 +254,9 @@ def _interp(tq: np.ndarray, t: np.ndarray, f: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(tq, t, f[:, j]) for j in range(f.shape[1])], axis=-1)
 
 
-def window_bounds(t: np.ndarray, length: float, t_start: float, t_end: float,
-                  cover_tail: bool = False) -> list[tuple[float, float]]:
+def window_bounds(
+    t: np.ndarray, length: float, t_start: float, t_end: float, cover_tail: bool = False
+) -> list[tuple[float, float]]:
     """Equal windows of ``length`` s over [t_start, t_end]; with ``cover_tail`` a shorter last
     window so that every sample is covered."""
     n_win = max(1, int(np.floor((t_end - t_start) / length + 1e-9)))
@@ -236,8 +266,9 @@ def window_bounds(t: np.ndarray, length: float, t_start: float, t_end: float,
     return bounds
 
 
-def _transform(t: np.ndarray, accel_signal: np.ndarray | None, m: np.ndarray, tp: np.ndarray,
-               t0: float) -> dict[str, np.ndarray | None]:
+def _transform(
+    t: np.ndarray, accel_signal: np.ndarray | None, m: np.ndarray, tp: np.ndarray, t0: float
+) -> dict[str, np.ndarray | None]:
     """The excitation transform's q, q' on the window's samples and collocation pool (None: off)."""
     if accel_signal is None:
         return {"q_data": None, "qd_data": None, "q_pool": None, "qd_pool": None}

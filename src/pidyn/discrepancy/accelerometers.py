@@ -60,8 +60,13 @@ def motion_view(record: Record, system, fit: tuple[float, float], corner_share: 
         note = f"start from the data ({start.method})"
     if system.n_inputs > 1:
         seg = record.segment(*fit)
-        res = output_error(seg, system, init={k: v for k, v in values.items() if k in {
-            s.name for s in system.param_specs() if s.trainable}})
+        res = output_error(
+            seg,
+            system,
+            init={
+                k: v for k, v in values.items() if k in {s.name for s in system.param_specs() if s.trainable}
+            },
+        )
         values.update(res.params)
         note += f", then output error on the accelerations of {fit[0]:.4g}-{fit[1]:.4g} s ({res.note})"
     f = np.asarray(record.f, float)
@@ -79,12 +84,27 @@ def motion_view(record: Record, system, fit: tuple[float, float], corner_share: 
     x, v = (integrate(relative, dt, k, corner) for k in (2, 1))
     g = integrate(drive, dt, 0, corner)  # the weak form's excitation, filtered as x and v are
     influence = {k: v for k, v in values.items() if k.startswith(("r_", "g_", "e_"))}
-    meta = {**(record.meta or {}), "inputs": [], "sensor_ground": ground, "motion": {"x": x, "v": v, "f": g},
-            "accelerometers": {"influence": influence, "highpass_hz": corner, "resonance_hz": fn, "note": note,
-                               "inputs": list(record.inputs), "derived": "x, v integrated from a"}}
+    meta = {
+        **(record.meta or {}),
+        "inputs": [],
+        "sensor_ground": ground,
+        "motion": {"x": x, "v": v, "f": g},
+        "accelerometers": {
+            "influence": influence,
+            "highpass_hz": corner,
+            "resonance_hz": fn,
+            "note": note,
+            "inputs": list(record.inputs),
+            "derived": "x, v integrated from a",
+        },
+    }
     if influence:
-        log.info("accelerometer record: the supports combined by %s (%s); relative motion high-passed at %.3g Hz",
-                 ", ".join(f"{k}={val:.4g}" for k, val in influence.items()), note, corner)
+        log.info(
+            "accelerometer record: the supports combined by %s (%s); relative motion high-passed at %.3g Hz",
+            ", ".join(f"{k}={val:.4g}" for k, val in influence.items()),
+            note,
+            corner,
+        )
     else:
         log.info("accelerometer record: relative motion integrated, high-passed at %.3g Hz", corner)
     # the noise-free truth is no reference for filtered signals: left out (the parameters' truth stays)
@@ -99,7 +119,9 @@ def acceleration_gain(record: Record, sims: dict[str, dict | None], held: np.nda
     absolute acceleration (relative + ground, as the accelerometer reads it) on ``held``."""
     from pidyn.reporting import nrmse
 
-    ground = np.asarray((record.meta or {}).get("sensor_ground", record.f), float)  # what the sensor adds to x''
+    ground = np.asarray(
+        (record.meta or {}).get("sensor_ground", record.f), float
+    )  # what the sensor adds to x''
     measured = record.a[:, 0] + ground
     out: dict = {"metric": "heldout_nrmse_a"}
     for key, sim in sims.items():

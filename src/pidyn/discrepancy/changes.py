@@ -42,17 +42,28 @@ class HeldoutCheck:
     def sentence(self) -> str:
         if self.ratio is None:
             part = "held-out" if self.nrmse_heldout is None else "fitting"
-            return (f"the held-out check cannot judge the nominal model: the {part} part holds no motion above "
-                    "the noise")
+            return (
+                f"the held-out check cannot judge the nominal model: the {part} part holds no motion above "
+                "the noise"
+            )
         verb = "fails" if self.failed else "holds"
         fmt = lambda e: f"{e:.3g} of the signal" if e > 0 else "within the noise"  # noqa: E731
-        return (f"the nominal model {verb} on the held-out part: simulation error above the noise "
-                f"{fmt(self.nrmse_heldout)} there against {fmt(self.nrmse_fit)} on the fitting part "
-                f"(ratio {self.ratio:.3g}, threshold {self.threshold:g})")
+        return (
+            f"the nominal model {verb} on the held-out part: simulation error above the noise "
+            f"{fmt(self.nrmse_heldout)} there against {fmt(self.nrmse_fit)} on the fitting part "
+            f"(ratio {self.ratio:.3g}, threshold {self.threshold:g})"
+        )
 
 
-def heldout_check(x_meas: np.ndarray, x_sim: np.ndarray, fit: np.ndarray, held: np.ndarray, noise_std: float,
-                  threshold: float = 3.0, floor: float = 0.02) -> HeldoutCheck:
+def heldout_check(
+    x_meas: np.ndarray,
+    x_sim: np.ndarray,
+    fit: np.ndarray,
+    held: np.ndarray,
+    noise_std: float,
+    threshold: float = 3.0,
+    floor: float = 0.02,
+) -> HeldoutCheck:
     """Ratio of the held-out to the fitting part's simulation error, each with the noise
     variance removed and divided by the part's RMS; ``floor`` keeps a near-perfect fit from
     turning a tiny held-out error into a large ratio. A part whose motion is not above the
@@ -90,9 +101,16 @@ class Change:
     heldout_gain: float | None = None
 
     def to_dict(self) -> dict:
-        return {"effect": self.effect, "parameter": self.parameter, "t_change": self.t_change,
-                "t_change_ci95": list(self.ci95), "fraction": self.fraction, "delta_bic": self.delta_bic,
-                "explained": self.explained, "heldout_gain": self.heldout_gain}
+        return {
+            "effect": self.effect,
+            "parameter": self.parameter,
+            "t_change": self.t_change,
+            "t_change_ci95": list(self.ci95),
+            "fraction": self.fraction,
+            "delta_bic": self.delta_bic,
+            "explained": self.explained,
+            "heldout_gain": self.heldout_gain,
+        }
 
     def effect_parameters(self) -> dict[str, float]:
         """The library effect's parameters (what the extension starts from)."""
@@ -103,14 +121,29 @@ class Change:
     def sentence(self, unit: str = "s") -> str:
         what = "stiffness" if self.effect == "stiffness_loss" else "damping"
         how = "fell" if self.fraction < 0 else "rose"
-        return (f"the structure changed at t = {self.t_change:.2f} {unit} (95 % interval {self.ci95[0]:.2f}-"
-                f"{self.ci95[1]:.2f} {unit}): its {what} {how} by {100 * abs(self.fraction):.0f} %")
+        return (
+            f"the structure changed at t = {self.t_change:.2f} {unit} (95 % interval {self.ci95[0]:.2f}-"
+            f"{self.ci95[1]:.2f} {unit}): its {what} {how} by {100 * abs(self.fraction):.0f} %"
+        )
 
 
-def locate_change(names: list[str], A0: np.ndarray, y: np.ndarray, t_first: np.ndarray, t_last: np.ndarray,
-                  rows: np.ndarray, x: np.ndarray, v: np.ndarray, t: np.ndarray, weak, n_eff: float,
-                  params: dict[str, str], nominal: dict[str, float], n_grid: int = 1500,
-                  heldout: np.ndarray | None = None) -> Change | None:
+def locate_change(
+    names: list[str],
+    A0: np.ndarray,
+    y: np.ndarray,
+    t_first: np.ndarray,
+    t_last: np.ndarray,
+    rows: np.ndarray,
+    x: np.ndarray,
+    v: np.ndarray,
+    t: np.ndarray,
+    weak,
+    n_eff: float,
+    params: dict[str, str],
+    nominal: dict[str, float],
+    n_grid: int = 1500,
+    heldout: np.ndarray | None = None,
+) -> Change | None:
     """The best single step in a nominal parameter over the rows ``rows``.
 
     ``params`` maps each candidate effect to the nominal parameter it steps (``stiffness_loss``:
@@ -155,16 +188,30 @@ def locate_change(names: list[str], A0: np.ndarray, y: np.ndarray, t_first: np.n
         ci = (float(grid[max(inside.min() - 1, 0)]), float(grid[min(inside.max() + 1, len(grid) - 1)]))
         delta_bic = n_eff * np.log(max(rss[j], 1e-300) / max(rss0, 1e-300)) + 2 * np.log(n_eff)
         base = nominal.get(pname, 1.0)
-        cand = Change(effect, pname, float(grid[j]), ci, float(coefs[j] / base), float(delta_bic),
-                      float(1 - rss[j] / max(rss0, 1e-300)), {"t": grid.tolist(), "profile": prof.tolist()},
-                      gain_ho)
+        cand = Change(
+            effect,
+            pname,
+            float(grid[j]),
+            ci,
+            float(coefs[j] / base),
+            float(delta_bic),
+            float(1 - rss[j] / max(rss0, 1e-300)),
+            {"t": grid.tolist(), "profile": prof.tolist()},
+            gain_ho,
+        )
         if best is None or cand.delta_bic < best.delta_bic:
             best = cand
     return best
 
 
-def running_estimate(names: list[str], A0: np.ndarray, y: np.ndarray, centers: np.ndarray, width: float,
-                     step: float | None = None) -> dict[str, np.ndarray]:
+def running_estimate(
+    names: list[str],
+    A0: np.ndarray,
+    y: np.ndarray,
+    centers: np.ndarray,
+    width: float,
+    step: float | None = None,
+) -> dict[str, np.ndarray]:
     """The nominal parameters refitted in sliding windows of ``width`` seconds (weak-form rows
     whose centres fall inside), every ``step`` seconds: how the structure's stiffness and
     damping move over the record."""
@@ -180,9 +227,20 @@ def running_estimate(names: list[str], A0: np.ndarray, y: np.ndarray, centers: n
     return out
 
 
-def locate_step(nominal, values: dict[str, float], s, f: np.ndarray, x_raw: np.ndarray, weak, fit: tuple[float, float],
-                held: tuple[float, float], mass_known: bool, candidates: dict[str, str], th,
-                whole_record: bool) -> tuple[Change | None, tuple[float, float], tuple[float, float]]:
+def locate_step(
+    nominal,
+    values: dict[str, float],
+    s,
+    f: np.ndarray,
+    x_raw: np.ndarray,
+    weak,
+    fit: tuple[float, float],
+    held: tuple[float, float],
+    mass_known: bool,
+    candidates: dict[str, str],
+    th,
+    whole_record: bool,
+) -> tuple[Change | None, tuple[float, float], tuple[float, float]]:
     """A step in stiffness or damping: its time, interval and size, and the split to measure it on.
 
     ``whole_record`` (the nominal model failed on the held-out part): search every row of the
@@ -206,38 +264,72 @@ def locate_step(nominal, values: dict[str, float], s, f: np.ndarray, x_raw: np.n
     def search(end: float):
         rows = t_last <= end + 1e-9
         n_eff = max(rows.sum() / weak.rows_per_independent, 2.0)
-        return locate_change(names, A0, y, t_first, t_last, rows, s.x, s.v, s.t, weak, n_eff, candidates, values,
-                             heldout=t_first >= end - 1e-9)
+        return locate_change(
+            names,
+            A0,
+            y,
+            t_first,
+            t_last,
+            rows,
+            s.x,
+            s.v,
+            s.t,
+            weak,
+            n_eff,
+            candidates,
+            values,
+            heldout=t_first >= end - 1e-9,
+        )
 
     fit0, held0 = fit, held
     change = search(t_end if whole_record else fit[1])
     if change is not None and not EFFECTS[change.effect].admissible(change.effect_parameters(), values):
-        log.info("the best step in time, %s, is not one the library can name (outside its range)", change.sentence())
+        log.info(
+            "the best step in time, %s, is not one the library can name (outside its range)",
+            change.sentence(),
+        )
         return None, fit, held
     if change is not None and is_stiffening(change):
         return None, fit, held
     if change is None or change.delta_bic > -th.min_delta_bic or change.explained < th.min_cv_gain:
-        log.info("no step in %s explains the residual%s", " or ".join(sorted(set(candidates.values()))),
-                 "" if change is None else f" (best: {change.sentence()}, dBIC {change.delta_bic:.1f})")
+        log.info(
+            "no step in %s explains the residual%s",
+            " or ".join(sorted(set(candidates.values()))),
+            "" if change is None else f" (best: {change.sentence()}, dBIC {change.delta_bic:.1f})",
+        )
         return None, fit, held
     if whole_record:
         cut = max(fit[1], change.t_change + 0.5 * (t_end - change.t_change))
         if cut > fit[1]:
-            log.info("the change lies at %.4g s, late in or beyond the fitting part: fitting now %.4g-%.4g s, "
-                     "held out %.4g-%.4g s", change.t_change, fit[0], cut, cut, held[1])
+            log.info(
+                "the change lies at %.4g s, late in or beyond the fitting part: fitting now %.4g-%.4g s, "
+                "held out %.4g-%.4g s",
+                change.t_change,
+                fit[0],
+                cut,
+                cut,
+                held[1],
+            )
             fit, held = (fit[0], cut), (cut, held[1])
         again = search(fit[1])
         if again is not None and is_stiffening(again):
             return None, fit0, held0
         change = again if again is not None else change
         if not EFFECTS[change.effect].admissible(change.effect_parameters(), values):
-            log.info("re-estimated on the new fitting part, %s is outside the library's range; none is named",
-                     change.sentence())
+            log.info(
+                "re-estimated on the new fitting part, %s is outside the library's range; none is named",
+                change.sentence(),
+            )
             return None, fit0, held0
     if not th.step_persists(change.heldout_gain):
-        log.info("%s, but the step does not persist: fitted up to %.4g s it fits the rest worse than no step "
-                 "(held-out gain %.2f); a change in time lasts, a stiffness or damping that differs only in the "
-                 "strong motion depends on the amplitude; none is named", change.sentence(), fit[1], change.heldout_gain)
+        log.info(
+            "%s, but the step does not persist: fitted up to %.4g s it fits the rest worse than no step "
+            "(held-out gain %.2f); a change in time lasts, a stiffness or damping that differs only in the "
+            "strong motion depends on the amplitude; none is named",
+            change.sentence(),
+            fit[1],
+            change.heldout_gain,
+        )
         return None, fit0, held0
     return change, fit, held
 
@@ -249,6 +341,9 @@ def is_stiffening(change: Change) -> bool:
     nothing."""
     if change.effect != "stiffness_loss" or change.fraction <= 0:
         return False
-    log.info("the best step in time is a stiffness rise (%s): that is an amplitude-dependent stiffness, not damage; "
-             "no change in time is named", change.sentence())
+    log.info(
+        "the best step in time is a stiffness rise (%s): that is an amplitude-dependent stiffness, not damage; "
+        "no change in time is named",
+        change.sentence(),
+    )
     return True

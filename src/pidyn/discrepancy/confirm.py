@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -65,9 +65,16 @@ def independent_samples(r: np.ndarray) -> float:
 def channel_residuals(system, values: dict[str, float], record: Record, substeps: int) -> np.ndarray:
     """Simulated minus measured, every measured channel over the whole record from rest, in
     units of each channel's spread: (n_channels, N)."""
-    problem = ShootingProblem(system, record.t, record.f, record_channels(record, system.n_dof),
-                              segment_bounds(record.t, None), substeps, fixed_state0=np.zeros(system.n_state),
-                              fixed=values)
+    problem = ShootingProblem(
+        system,
+        record.t,
+        record.f,
+        record_channels(record, system.n_dof),
+        segment_bounds(record.t, None),
+        substeps,
+        fixed_state0=np.zeros(system.n_state),
+        fixed=values,
+    )
     u = problem.pack(values, np.zeros((1, system.n_state)))
     res, _ = problem.residuals(u)
     return res.reshape(len(problem.channels), -1)
@@ -84,15 +91,32 @@ class Confirmation:
 def undecided(ranking: list[dict], th: Thresholds, limit: int) -> list[dict]:
     """The screening's rows the weak form leans towards without deciding (0 < score <
     min_delta_bic), best first: no step in time, none a screening rule refused."""
-    out = [r for r in ranking if r.get("score") is not None and np.isfinite(r["score"])
-           and 0.0 < r["score"] < th.min_delta_bic and not r.get("step_in_time")
-           and r.get("persists") is not False and not r.get("heldout_miss")]
+    out = [
+        r
+        for r in ranking
+        if r.get("score") is not None
+        and np.isfinite(r["score"])
+        and 0.0 < r["score"] < th.min_delta_bic
+        and not r.get("step_in_time")
+        and r.get("persists") is not False
+        and not r.get("heldout_miss")
+    ]
     return out[:limit]
 
 
-def confirm(record: Record, system, values: dict[str, float], candidates: list[dict],
-            build: Callable[[dict], object], fit: tuple[float, float], held: tuple[float, float],
-            th: Thresholds, substeps: int = 4, max_nfev: int = 30, polish_seconds: float | None = None) -> Confirmation:
+def confirm(
+    record: Record,
+    system,
+    values: dict[str, float],
+    candidates: list[dict],
+    build: Callable[[dict], object],
+    fit: tuple[float, float],
+    held: tuple[float, float],
+    th: Thresholds,
+    substeps: int = 4,
+    max_nfev: int = 30,
+    polish_seconds: float | None = None,
+) -> Confirmation:
     """Fit ``system`` + each candidate effect by output error and name the best that the
     simulated channels decide for (see the module's notes). ``build(row)`` returns the
     extended system started at ``values`` and the row's estimate."""
@@ -113,8 +137,13 @@ def confirm(record: Record, system, values: dict[str, float], candidates: list[d
         ext = build(row)
         specs = [s for s in ext.param_specs() if s.trainable]
         try:
-            res = output_error(seg, ext, init={s.name: values.get(s.name, s.init) for s in specs},
-                               substeps=substeps, max_nfev=max_nfev)
+            res = output_error(
+                seg,
+                ext,
+                init={s.name: values.get(s.name, s.init) for s in specs},
+                substeps=substeps,
+                max_nfev=max_nfev,
+            )
         except (ValueError, FloatingPointError) as err:  # a start the effect's bounds refuse
             out.tested.append({"effect": row["effect"], "weak_form_score": row["score"], "error": str(err)})
             continue
@@ -129,15 +158,31 @@ def confirm(record: Record, system, values: dict[str, float], candidates: list[d
         effect_params = {n: float(v) for n, v in res.params.items() if n not in trainable0}
         nominal_refit = {n: float(v) for n, v in res.params.items() if n in trainable0}
         passes = bool(delta_bic <= -th.min_delta_bic and (ho is None or ho >= th.min_heldout_gain))
-        tested = {"effect": row["effect"], "weak_form_score": float(row["score"]), "score": float(-delta_bic),
-                  "delta_bic": float(delta_bic), "explained": float(1 - rss1 / rss0) if ok else None,
-                  "heldout_gain": ho, "independent_samples": n_eff, "parameters": effect_params,
-                  "nominal_refit": nominal_refit, "passes": passes, "seconds": time.perf_counter() - t0,
-                  "source": "output_error"}
+        tested = {
+            "effect": row["effect"],
+            "weak_form_score": float(row["score"]),
+            "score": float(-delta_bic),
+            "delta_bic": float(delta_bic),
+            "explained": float(1 - rss1 / rss0) if ok else None,
+            "heldout_gain": ho,
+            "independent_samples": n_eff,
+            "parameters": effect_params,
+            "nominal_refit": nominal_refit,
+            "passes": passes,
+            "seconds": time.perf_counter() - t0,
+            "source": "output_error",
+        }
         out.tested.append(tested)
-        log.info("output-error check of %s (weak-form score %.1f): dBIC %.1f over %.0f independent samples, "
-                 "held-out gain %s%s", row["effect"], row["score"], delta_bic, n_eff,
-                 "n/a" if ho is None else f"{ho:.2f}", ": named" if passes else "")
+        log.info(
+            "output-error check of %s (weak-form score %.1f): dBIC %.1f over %.0f independent samples, "
+            "held-out gain %s%s",
+            row["effect"],
+            row["score"],
+            delta_bic,
+            n_eff,
+            "n/a" if ho is None else f"{ho:.2f}",
+            ": named" if passes else "",
+        )
     passing = [r for r in out.tested if r.get("passes")]
     if passing:
         out.row = max(passing, key=lambda r: r["score"])

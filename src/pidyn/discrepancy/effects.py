@@ -16,8 +16,8 @@ it in ``EFFECTS``.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Iterator
 
 import numpy as np
 
@@ -67,9 +67,16 @@ class Signals:
 
     def context(self) -> dict:
         """What a force term needs to know about the record (plain numbers, for configs)."""
-        return {"friction_eps": self.friction_eps, "t_min": float(self.t[0]), "t_max": float(self.t[-1]),
-                "stiffness": self.stiffness, "damping": self.damping, "x_scale": self.x_peak,
-                "v_scale": float(np.max(np.abs(self.v))), "f_scale": self.k_nominal * self.x_peak}
+        return {
+            "friction_eps": self.friction_eps,
+            "t_min": float(self.t[0]),
+            "t_max": float(self.t[-1]),
+            "stiffness": self.stiffness,
+            "damping": self.damping,
+            "x_scale": self.x_peak,
+            "v_scale": float(np.max(np.abs(self.v))),
+            "f_scale": self.k_nominal * self.x_peak,
+        }
 
 
 @dataclass
@@ -94,7 +101,9 @@ class Effect:
     def candidates(self, s: Signals) -> Iterator[Candidate]:
         raise NotImplementedError
 
-    def parameters(self, coef: dict[str, float], fixed: dict[str, float], nominal: dict[str, float]) -> dict[str, float]:
+    def parameters(
+        self, coef: dict[str, float], fixed: dict[str, float], nominal: dict[str, float]
+    ) -> dict[str, float]:
         """The effect's physical parameters from regression coefficients (what is reported)."""
         return {**coef, **fixed}
 
@@ -168,7 +177,9 @@ class Coulomb(Effect):
     def candidates(self, s):
         # near rest, noise flips the sign of the measured velocity: a column no sharper than
         # the noise (the term's own rule, so a screening of the extended model sees the same)
-        col = CoulombFriction(1.0, eps=s.friction_eps).measured_force(s.t, s.x, s.v, None, {"Fc": 1.0}, s.v_noise)
+        col = CoulombFriction(1.0, eps=s.friction_eps).measured_force(
+            s.t, s.x, s.v, None, {"Fc": 1.0}, s.v_noise
+        )
         yield Candidate(self.name, col[:, None], ("Fc",), positive=(True,))
 
     def term(self, p, s):
@@ -192,7 +203,9 @@ class QuadDamping(Effect):
         return {"c2": self._size(rng, s, 0.08, 0.2) / v_peak**2}
 
 
-def bouc_wen_z(x: np.ndarray, beta: np.ndarray, gamma: np.ndarray, n: np.ndarray, substeps: int = 4) -> np.ndarray:
+def bouc_wen_z(
+    x: np.ndarray, beta: np.ndarray, gamma: np.ndarray, n: np.ndarray, substeps: int = 4
+) -> np.ndarray:
     """Bouc-Wen z along a displacement path, for P parameter sets at once: (N,) -> (N, P).
 
     z' = x' (1 - (beta + gamma sgn(x' z)) |z|^n) is rate independent, so z follows from the
@@ -232,8 +245,13 @@ class Hysteresis(Effect):
         grid = self._grid(s)
         z = bouc_wen_z(s.x, grid[:, 0], grid[:, 1], grid[:, 2])
         for j, (beta, gamma, n) in enumerate(grid):
-            yield Candidate(self.name, z[:, j : j + 1], ("kh",), fixed={"beta": beta, "gamma": gamma, "n": n},
-                            positive=(True,))
+            yield Candidate(
+                self.name,
+                z[:, j : j + 1],
+                ("kh",),
+                fixed={"beta": beta, "gamma": gamma, "n": n},
+                positive=(True,),
+            )
 
     def parameters(self, coef, fixed, nominal):
         out = {**coef, **fixed}
@@ -243,8 +261,16 @@ class Hysteresis(Effect):
     def term(self, p, s):
         # beta and gamma with either sign: which loop shape (softening, hardening) is a finding
         S = max(abs(p["beta"]) + abs(p["gamma"]), 1e-12) / 2
-        return BoucWenHysteresis(p["kh"], p["beta"], p["gamma"], p["n"], param="kh", shape_scale=S,
-                                 gamma_lower=-10.0 * S, beta_lower=-10.0 * S)
+        return BoucWenHysteresis(
+            p["kh"],
+            p["beta"],
+            p["gamma"],
+            p["n"],
+            param="kh",
+            shape_scale=S,
+            gamma_lower=-10.0 * S,
+            beta_lower=-10.0 * S,
+        )
 
     def sample(self, rng, s, sign=None):
         n = float(rng.choice([1.0, 2.0]))
@@ -278,8 +304,9 @@ class Damage(Effect):
         sig = getattr(s, self.signal)
         for t_d in np.linspace(lo, hi, self.n_times + 2)[1:-1]:
             col = self.column_sign * sig * (s.t >= t_d)
-            yield Candidate(self.name, col[:, None], (self.coef,), fixed={"t_d": float(t_d)},
-                            positive=(self.positive,))
+            yield Candidate(
+                self.name, col[:, None], (self.coef,), fixed={"t_d": float(t_d)}, positive=(self.positive,)
+            )
 
     def parameters(self, coef, fixed, nominal):
         k = nominal.get("k", nominal.get("k1", 1.0))
@@ -303,7 +330,10 @@ class Damage(Effect):
         return float(np.interp(share * cum[-1], cum, t))
 
     def sample(self, rng, s, sign=None):
-        return {"drop": float(rng.uniform(0.15, 0.4)), "t_d": self._time_of_share(s, float(rng.uniform(0.2, 0.7)))}
+        return {
+            "drop": float(rng.uniform(0.15, 0.4)),
+            "t_d": self._time_of_share(s, float(rng.uniform(0.2, 0.7))),
+        }
 
 
 #: the largest relative damping change the library names (the damping ten times its value)
@@ -330,11 +360,16 @@ class DampChange(Damage):
 
     def term(self, p, s):
         change = min(max(p["change"], -0.9), MAX_DAMPING_CHANGE)
-        return DampingChange(change, p["t_d"], t_min=s["t_min"], t_max=s["t_max"], damping=s.get("damping", "c"))
+        return DampingChange(
+            change, p["t_d"], t_min=s["t_min"], t_max=s["t_max"], damping=s.get("damping", "c")
+        )
 
     def sample(self, rng, s, sign=None):
         # damage raises the dissipation: the damping doubles to triples
-        return {"change": float(rng.uniform(1.0, 2.0)), "t_d": self._time_of_share(s, float(rng.uniform(0.2, 0.6)))}
+        return {
+            "change": float(rng.uniform(1.0, 2.0)),
+            "t_d": self._time_of_share(s, float(rng.uniform(0.2, 0.6))),
+        }
 
 
 class Gap(Effect):
@@ -359,8 +394,10 @@ class Gap(Effect):
         return {"kg": kg, "gap": share * s.x_peak}
 
 
-EFFECTS: dict[str, Effect] = {e.name: e for e in (Cubic(), Quadratic(), Coulomb(), QuadDamping(), Hysteresis(), Damage(),
-                                                  DampChange(), Gap())}
+EFFECTS: dict[str, Effect] = {
+    e.name: e
+    for e in (Cubic(), Quadratic(), Coulomb(), QuadDamping(), Hysteresis(), Damage(), DampChange(), Gap())
+}
 """Every candidate effect by name; ``none`` is the verdict when none of them is needed."""
 
 

@@ -12,8 +12,13 @@ from pidyn.discrepancy.effects import get_effect
 from pidyn.systems.sdof import SDOFSystem
 
 
-def extended_system(nominal: SDOFSystem, effect: str, effect_params: dict, context: dict,
-                    held: list[str] | tuple[str, ...] = ()) -> SDOFSystem:
+def extended_system(
+    nominal: SDOFSystem,
+    effect: str,
+    effect_params: dict,
+    context: dict,
+    held: list[str] | tuple[str, ...] = (),
+) -> SDOFSystem:
     """``nominal`` + the ``effect`` term initialised at ``effect_params``; ``learned_force``
     adds a network f(x, x'), started from the force saved at ``effect_params.init_from``.
 
@@ -22,13 +27,21 @@ def extended_system(nominal: SDOFSystem, effect: str, effect_params: dict, conte
     gradient or local search from it only drifts, because the response depends on t_d
     through the sharp step alone and the fit has a local minimum at every half cycle."""
     if not isinstance(nominal, SDOFSystem):
-        raise TypeError(f"the discrepancy library extends single-degree-of-freedom models, not {type(nominal).__name__}")
-    if effect == "learned_force":  # outside the library: a network f(x, x') (a universal differential equation)
+        raise TypeError(
+            f"the discrepancy library extends single-degree-of-freedom models, not {type(nominal).__name__}"
+        )
+    if (
+        effect == "learned_force"
+    ):  # outside the library: a network f(x, x') (a universal differential equation)
         from pidyn.systems.terms import LearnedForce
 
         ctx = dict(context)
-        term = LearnedForce(ctx.get("x_scale", 1.0), ctx.get("v_scale", 1.0), ctx.get("f_scale", 1.0),
-                            **{k: int(v) for k, v in dict(effect_params).items() if k in ("hidden", "depth", "seed")})
+        term = LearnedForce(
+            ctx.get("x_scale", 1.0),
+            ctx.get("v_scale", 1.0),
+            ctx.get("f_scale", 1.0),
+            **{k: int(v) for k, v in dict(effect_params).items() if k in ("hidden", "depth", "seed")},
+        )
         start = dict(effect_params).get("init_from")
         if start:  # the force the model could not explain, saved in the run folder: the network's start
             import numpy as np
@@ -40,7 +53,9 @@ def extended_system(nominal: SDOFSystem, effect: str, effect_params: dict, conte
     names = {sp.name for sp in term.specs()}
     unknown = set(held) - names
     if unknown:
-        raise ValueError(f"effect '{effect}': cannot hold {sorted(unknown)}; its parameters are {sorted(names)}")
+        raise ValueError(
+            f"effect '{effect}': cannot hold {sorted(unknown)}; its parameters are {sorted(names)}"
+        )
     return nominal.with_term(term, params={n: {"trainable": False} for n in held} or None)
 
 
@@ -66,8 +81,9 @@ def system_node(node: Any, inits: dict[str, float], mass: float, identify_mass: 
     return out
 
 
-def extension_node(node: dict, values: dict[str, float], cause: str, row: dict, context: dict, k: int,
-                   mass_known: bool) -> dict:
+def extension_node(
+    node: dict, values: dict[str, float], cause: str, row: dict, context: dict, k: int, mass_known: bool
+) -> dict:
     """The node of step ``k``'s model: the current model (its values; at the first step the
     screening's refit of the nominal parameters) extended with ``cause`` started at the
     screening's estimate (``row``); ``context`` is ``Signals.context()``."""
@@ -75,9 +91,13 @@ def extension_node(node: dict, values: dict[str, float], cause: str, row: dict, 
     inner = node_with_values(node, {**values, **refit})
     if k == 1:
         inner = system_node(inner, refit, refit.get("m", values["m"]), not mass_known)
-    out = {"_target_": EXTENSION, "nominal": inner, "effect": cause,
-           "effect_params": {n: (v if isinstance(v, str) else float(v)) for n, v in row["parameters"].items()},
-           "context": context}
+    out = {
+        "_target_": EXTENSION,
+        "nominal": inner,
+        "effect": cause,
+        "effect_params": {n: (v if isinstance(v, str) else float(v)) for n, v in row["parameters"].items()},
+        "context": context,
+    }
     if row.get("change") is not None:  # located over the record, with an interval: held (see extended_system)
         out["held"] = ["t_d"]
     return out

@@ -7,8 +7,7 @@ and measures it. The nominal model does not know the effect; the diagnosis has t
 
 from __future__ import annotations
 
-from typing import Sequence
-
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,8 +19,17 @@ from pidyn.simulate import simulate
 from pidyn.systems.sdof import LinearSDOF, SDOFSystem
 
 #: records whose strong motion lies in their first 25 s
-RECORDS = ("el_centro", "el_centro_peer2000", "kobe", "kobe_090", "taft", "san_fernando", "loma_prieta",
-           "landers", "northridge")
+RECORDS = (
+    "el_centro",
+    "el_centro_peer2000",
+    "kobe",
+    "kobe_090",
+    "taft",
+    "san_fernando",
+    "loma_prieta",
+    "landers",
+    "northridge",
+)
 
 
 def _trilinear(rng: np.random.Generator, s: Signals) -> dict[str, float]:
@@ -46,7 +54,10 @@ OUTSIDE = {"trilinear_spring": _trilinear, "stribeck_friction": _stribeck}
 #: benchmark accepts beside ``unexplained``): a trilinear spring softens beyond x1 and hardens
 #: beyond x2, a stop beyond a displacement with a (softening) cubic spring for the branch
 #: before it; Stribeck friction is dry friction with a drop at low speed
-EQUIVALENT = {"trilinear_spring": {"gap_contact", "cubic_stiffness"}, "stribeck_friction": {"coulomb_friction"}}
+EQUIVALENT = {
+    "trilinear_spring": {"gap_contact", "cubic_stiffness"},
+    "stribeck_friction": {"coulomb_friction"},
+}
 
 
 def _outside_term(name: str, p: dict[str, float]):
@@ -61,8 +72,16 @@ def _outside_term(name: str, p: dict[str, float]):
 _FIXED_POINT_PASSES = 3
 
 
-def _draw(name: str, n_effects: int, rng: np.random.Generator, s: Signals, sign: float | None,
-          params: dict[str, float] | None, hidden: dict[str, float], terms: list) -> tuple[dict, list]:
+def _draw(
+    name: str,
+    n_effects: int,
+    rng: np.random.Generator,
+    s: Signals,
+    sign: float | None,
+    params: dict[str, float] | None,
+    hidden: dict[str, float],
+    terms: list,
+) -> tuple[dict, list]:
     """One hidden effect's parameters, sized against ``s``, added to ``hidden`` and ``terms``."""
     hidden, terms = dict(hidden), list(terms)
     if name in OUTSIDE:  # an effect the library does not hold
@@ -72,8 +91,10 @@ def _draw(name: str, n_effects: int, rng: np.random.Generator, s: Signals, sign:
         return hidden, terms
     eff = get_effect(name)
     if sign is not None and not eff.signed and n_effects == 1:
-        raise ValueError(f"hidden effect '{name}': its sign is fixed by physics; sign={sign} applies only to "
-                         "cubic_stiffness and quadratic_stiffness")
+        raise ValueError(
+            f"hidden effect '{name}': its sign is fixed by physics; sign={sign} applies only to "
+            "cubic_stiffness and quadratic_stiffness"
+        )
     drawn = eff.sample(rng, s, sign=sign if eff.signed else None)
     if set(drawn) & set(hidden):
         raise ValueError(f"hidden effects share parameters {sorted(set(drawn) & set(hidden))}")
@@ -83,9 +104,19 @@ def _draw(name: str, n_effects: int, rng: np.random.Generator, s: Signals, sign:
     return hidden, terms
 
 
-def _size_jointly(names: list[str], states: list, terms: list, rng: np.random.Generator, nominal: SDOFSystem,
-                  truth_nom: dict[str, float], gm, fit_end: float, sign: float | None,
-                  params: dict[str, float] | None, seed: int) -> tuple[dict[str, float], list]:
+def _size_jointly(
+    names: list[str],
+    states: list,
+    terms: list,
+    rng: np.random.Generator,
+    nominal: SDOFSystem,
+    truth_nom: dict[str, float],
+    gm,
+    fit_end: float,
+    sign: float | None,
+    params: dict[str, float] | None,
+    seed: int,
+) -> tuple[dict[str, float], list]:
     """Several hidden effects, each sized against the response of the structure that holds
     them all: a fixed point from ``terms`` (sized against the nominal response), each effect's
     random shares redrawn identically from its generator state ``states``. Friction shrinks
@@ -95,7 +126,10 @@ def _size_jointly(names: list[str], states: list, terms: list, rng: np.random.Ge
     hidden: dict[str, float] = {}
     for _ in range(_FIXED_POINT_PASSES):
         combined = SDOFSystem(terms, mass=mass, name="combined")
-        truth_now = {**truth_nom, **{k_: v for k_, v in combined.true_values().items() if k_ not in truth_nom}}
+        truth_now = {
+            **truth_nom,
+            **{k_: v for k_, v in combined.true_values().items() if k_ not in truth_nom},
+        }
         sim = simulate(combined, truth_now, gm, gm.t, rtol=1e-7, atol=1e-10)  # sizes, not data
         if not np.all(np.isfinite(sim.x)):
             raise RuntimeError(f"hidden effects {names} (seed {seed}): the structure holding them diverges")
@@ -159,27 +193,49 @@ def hidden_case(
         states.append(rng.bit_generator.state)
         hidden, terms = _draw(name, len(names), rng, s, sign, params, hidden, terms)
     if len(names) > 1:
-        hidden, terms = _size_jointly(names, states, terms, rng, nominal, truth_nom, gm, fit_end, sign, params, seed)
+        hidden, terms = _size_jointly(
+            names, states, terms, rng, nominal, truth_nom, gm, fit_end, sign, params, seed
+        )
     unknown = set(params or {}) - set(hidden)
     if unknown:
-        raise ValueError(f"hidden effect '{effect}' has no parameter(s) {sorted(unknown)}; it has {sorted(hidden)}")
+        raise ValueError(
+            f"hidden effect '{effect}' has no parameter(s) {sorted(unknown)}; it has {sorted(hidden)}"
+        )
     system = SDOFSystem(terms, mass=mass, name=f"linear_sdof+{effect or 'none'}")
     truth = {**truth_nom, **{k_: v for k_, v in system.true_values().items() if k_ not in truth_nom}}
     truth.update(hidden)
-    rec = synthetic_from_motion(system, gm, noise=level, data_seed=seed, channels=tuple(channels), params=truth)
+    rec = synthetic_from_motion(
+        system, gm, noise=level, data_seed=seed, channels=tuple(channels), params=truth
+    )
     rec.name = f"{motion}+{effect or 'none'}"
     rec.meta.update({"hidden_effect": effect, "hidden_params": hidden, "seed": seed})
     return HiddenCase(rec, effect, hidden, truth_nom, level, motion, fit_end)
 
 
-def hidden_record(effect: str | None = "cubic_stiffness", seed: int = 0, noise: float | None = None,
-                  duration: float = 25.0, fit_end: float = 16.0, dt: float = 0.01,
-                  sign: float | None = None, params: dict[str, float] | None = None,
-                  channels: Sequence[str] = ("x", "v")) -> Record:
+def hidden_record(
+    effect: str | None = "cubic_stiffness",
+    seed: int = 0,
+    noise: float | None = None,
+    duration: float = 25.0,
+    fit_end: float = 16.0,
+    dt: float = 0.01,
+    sign: float | None = None,
+    params: dict[str, float] | None = None,
+    channels: Sequence[str] = ("x", "v"),
+) -> Record:
     """A hidden-effect case as a data source (``data=hidden``); ``effect: null`` hides nothing."""
     if effect in ("none", "null", ""):
         effect = None
-    case = hidden_case(effect, seed, noise=noise, duration=duration, fit_end=fit_end, dt=dt, sign=sign,
-                       params=None if params is None else dict(params), channels=tuple(channels))
+    case = hidden_case(
+        effect,
+        seed,
+        noise=noise,
+        duration=duration,
+        fit_end=fit_end,
+        dt=dt,
+        sign=sign,
+        params=None if params is None else dict(params),
+        channels=tuple(channels),
+    )
     case.record.meta["split"] = {"fit": [0.0, fit_end], "heldout": [fit_end, float(case.record.t[-1])]}
     return case.record

@@ -54,9 +54,11 @@ class LearnedFit:
 
     @property
     def note(self) -> str:
-        return (f"learned force trained on the simulated response ({self.segments} segments of "
-                f"{self.segment_seconds:.3g} s, {self.evaluations} evaluations, {self.seconds:.1f} s): "
-                f"loss {self.loss_before:.3g} -> {self.loss_after:.3g}")
+        return (
+            f"learned force trained on the simulated response ({self.segments} segments of "
+            f"{self.segment_seconds:.3g} s, {self.evaluations} evaluations, {self.seconds:.1f} s): "
+            f"loss {self.loss_before:.3g} -> {self.loss_after:.3g}"
+        )
 
 
 def _free_spec(spec: ParamSpec, value: float) -> ParamSpec:
@@ -99,8 +101,14 @@ def _learned_terms(system: StructuralSystem) -> list[LearnedForce]:
     return [t for t in terms if isinstance(t, LearnedForce)]
 
 
-def _starts(record: Record, system: StructuralSystem, values: dict[str, float], idx: np.ndarray, period: float,
-            smoothed: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+def _starts(
+    record: Record,
+    system: StructuralSystem,
+    values: dict[str, float],
+    idx: np.ndarray,
+    period: float,
+    smoothed: tuple[np.ndarray, np.ndarray] | None,
+) -> np.ndarray:
     """Initial states (B, n_state) of the segments starting at samples ``idx``: x and x' from
     ``smoothed`` ((N,) or (N, n_dof), the caller's smoothed motion), else from the measured
     displacement smoothed over a tenth of the period, else from the model's simulation; latent
@@ -118,10 +126,10 @@ def _starts(record: Record, system: StructuralSystem, values: dict[str, float], 
         y0 = np.array(Y[idx, 0, :])
     if smoothed is not None:
         y0[:, :n] = np.reshape(smoothed[0], (len(record.t), -1))[idx]
-        y0[:, n:2 * n] = np.reshape(smoothed[1], (len(record.t), -1))[idx]
+        y0[:, n : 2 * n] = np.reshape(smoothed[1], (len(record.t), -1))[idx]
     elif measured:
         y0[:, :n] = savgol_filter(record.x, width, 3, axis=0)[idx]
-        y0[:, n:2 * n] = savgol_filter(record.x, width, 3, deriv=1, delta=record.dt, axis=0)[idx]
+        y0[:, n : 2 * n] = savgol_filter(record.x, width, 3, deriv=1, delta=record.dt, axis=0)[idx]
     return np.where(np.isfinite(y0), y0, 0.0)
 
 
@@ -142,8 +150,9 @@ class _Grid:
     f_b: torch.Tensor
 
 
-def _grid(record: Record, span: tuple[int, int], period: float, periods_per_segment: float,
-          substeps: int) -> _Grid | None:
+def _grid(
+    record: Record, span: tuple[int, int], period: float, periods_per_segment: float, substeps: int
+) -> _Grid | None:
     """Segments of ``periods_per_segment`` natural periods covering the samples ``span`` (they
     overlap where the length does not divide it). One RK4 step over 2 m samples where the period
     allows 40 steps of that length (the forcing moment-matched, see _step_forcing), else
@@ -170,8 +179,11 @@ def _grid(record: Record, span: tuple[int, int], period: float, periods_per_segm
         def steps(v: np.ndarray) -> np.ndarray:  # (substeps, K-1, B) -> (S, B), in time order
             return v.transpose(1, 0, 2).reshape(-1, len(idx))
 
-        f_a, f_m, f_b = steps(f0 + frac * (f1 - f0)), steps(f0 + frac * (f1 - f0) + 0.5 * df), \
-            steps(f0 + frac * (f1 - f0) + df)
+        f_a, f_m, f_b = (
+            steps(f0 + frac * (f1 - f0)),
+            steps(f0 + frac * (f1 - f0) + 0.5 * df),
+            steps(f0 + frac * (f1 - f0) + df),
+        )
         t_a = steps(t[rows[:-1]][None] + frac * record.dt)
     as_t = lambda v: torch.tensor(v, dtype=torch.float64)  # noqa: E731
     return _Grid(idx, rows, length, h, per_sample, as_t(t_a), as_t(f_a), as_t(f_m), as_t(f_b))
@@ -186,10 +198,16 @@ def _targets(record: Record, rows: np.ndarray, span: tuple[int, int]) -> list[tu
         if arr is None:
             continue
         seg = arr[rows]
-        var = np.nanvar(arr[span[0]:span[1] + 1], axis=0)
+        var = np.nanvar(arr[span[0] : span[1] + 1], axis=0)
         var = np.where(np.isfinite(var) & (var > 0), var, 1.0)
-        out.append((kind, torch.tensor(np.nan_to_num(seg), dtype=torch.float64),
-                    torch.tensor(np.isfinite(seg), dtype=torch.float64), torch.tensor(var, dtype=torch.float64)))
+        out.append(
+            (
+                kind,
+                torch.tensor(np.nan_to_num(seg), dtype=torch.float64),
+                torch.tensor(np.isfinite(seg), dtype=torch.float64),
+                torch.tensor(var, dtype=torch.float64),
+            )
+        )
     return out
 
 
@@ -212,9 +230,16 @@ def _simulate(rate, y: torch.Tensor, p: dict, g: _Grid) -> torch.Tensor:
 def _lbfgs_best(loss_fn, params: list[torch.Tensor], keep, max_evaluations: int) -> tuple[float, int, dict]:
     """L-BFGS on ``loss_fn``; the loss at the start, the evaluations made, and ``keep()`` at the
     lowest loss seen (with ``loss``; empty if none was finite)."""
-    opt = torch.optim.LBFGS(params, lr=1.0, max_iter=max_evaluations, max_eval=max_evaluations,
-                            line_search_fn="strong_wolfe", tolerance_grad=1e-10, tolerance_change=1e-12,
-                            history_size=20)
+    opt = torch.optim.LBFGS(
+        params,
+        lr=1.0,
+        max_iter=max_evaluations,
+        max_eval=max_evaluations,
+        line_search_fn="strong_wolfe",
+        tolerance_grad=1e-10,
+        tolerance_change=1e-12,
+        history_size=20,
+    )
     evaluations, best = 0, {}
 
     def closure() -> torch.Tensor:
@@ -222,7 +247,9 @@ def _lbfgs_best(loss_fn, params: list[torch.Tensor], keep, max_evaluations: int)
         opt.zero_grad()
         loss = loss_fn()
         evaluations += 1
-        if not torch.isfinite(loss):  # a step into a blow-up: a large loss, no slope; the line search backs off
+        if not torch.isfinite(
+            loss
+        ):  # a step into a blow-up: a large loss, no slope; the line search backs off
             return torch.tensor(1e30, dtype=torch.float64)
         loss.backward()
         value = float(loss.detach())
@@ -236,15 +263,26 @@ def _lbfgs_best(loss_fn, params: list[torch.Tensor], keep, max_evaluations: int)
     return before, evaluations, best
 
 
-def fit_learned_force(system: StructuralSystem, values: dict[str, float], record: Record, span: tuple[float, float],
-                      period: float, smoothed: tuple[np.ndarray, np.ndarray] | None = None, substeps: int = 2,
-                      periods_per_segment: float = 3.0, max_evaluations: int = 60) -> LearnedFit | None:
+def fit_learned_force(
+    system: StructuralSystem,
+    values: dict[str, float],
+    record: Record,
+    span: tuple[float, float],
+    period: float,
+    smoothed: tuple[np.ndarray, np.ndarray] | None = None,
+    substeps: int = 2,
+    periods_per_segment: float = 3.0,
+    max_evaluations: int = 60,
+) -> LearnedFit | None:
     """Train ``system``'s learned force(s) and its trainable physical parameters on the
     simulated response over ``span`` (s). The weights are set in place only when the segment
     loss goes down; returns None when the system holds no learned force or the span is too
     short for one segment."""
     terms = _learned_terms(system)
-    samples = (int(np.searchsorted(record.t, span[0])), int(np.searchsorted(record.t, span[1], side="right")) - 1)
+    samples = (
+        int(np.searchsorted(record.t, span[0])),
+        int(np.searchsorted(record.t, span[1], side="right")) - 1,
+    )
     g = None if not terms else _grid(record, samples, period, periods_per_segment, substeps)
     if g is None:
         return None
@@ -252,7 +290,9 @@ def fit_learned_force(system: StructuralSystem, values: dict[str, float], record
     specs = {s.name: s for s in system.param_specs()}
     free = [name for name, s in specs.items() if s.trainable and name in values]
     fspecs = {name: _free_spec(specs[name], float(values[name])) for name in free}
-    raw = torch.tensor([to_raw(fspecs[name], float(values[name])) for name in free], dtype=dtype, requires_grad=True)
+    raw = torch.tensor(
+        [to_raw(fspecs[name], float(values[name])) for name in free], dtype=dtype, requires_grad=True
+    )
     y0 = _starts(record, system, values, g.idx, period, smoothed)
     y_scale = torch.tensor(np.maximum(np.abs(y0).max(0), 1e-12), dtype=dtype)
     y_raw = torch.tensor(y0, dtype=dtype).div(y_scale).requires_grad_(True)
@@ -264,9 +304,9 @@ def fit_learned_force(system: StructuralSystem, values: dict[str, float], record
     def loss_fn() -> torch.Tensor:
         p = {**fixed, **{name: from_raw(fspecs[name], raw[i]) for i, name in enumerate(free)}}
         Y = _simulate(system.state_rate, y_raw * y_scale, p, g)  # torch states in, torch rates out
-        sim = {"x": Y[..., :nd], "v": Y[..., nd:2 * nd]}
+        sim = {"x": Y[..., :nd], "v": Y[..., nd : 2 * nd]}
         if any(kind == "a" for kind, *_ in targets):
-            sim["a"] = system.state_rate(t_rows, Y, p, f_rows)[..., nd:2 * nd]
+            sim["a"] = system.state_rate(t_rows, Y, p, f_rows)[..., nd : 2 * nd]
         total = torch.zeros((), dtype=dtype)
         for kind, target, mask, var in targets:
             total = total + (((sim[kind] - target) ** 2) * mask / var).sum() / mask.sum().clamp_min(1.0)
@@ -292,8 +332,15 @@ def fit_learned_force(system: StructuralSystem, values: dict[str, float], record
             for o, state in zip(originals, best["nets"]):
                 for w, (_, trained) in zip(o.parameters(), state.items()):
                     w.copy_(trained.to(w.dtype))
-    result = LearnedFit(out_values, before, min(after, before), evaluations, len(g.idx), g.length * record.dt,
-                        time.perf_counter() - start)
+    result = LearnedFit(
+        out_values,
+        before,
+        min(after, before),
+        evaluations,
+        len(g.idx),
+        g.length * record.dt,
+        time.perf_counter() - start,
+    )
     log.info("%s", result.note)
     return result
 
@@ -309,13 +356,27 @@ LEARNED = "learned_force"
 def learned_row(structure: dict | None) -> dict:
     """The extension row of a learned force: its evidence is the generic f(x, x')'s."""
     st = structure or {}
-    return {"effect": LEARNED, "parameters": {}, "nominal_refit": {}, "score": -st.get("delta_bic", 0.0),
-            "delta_bic": st.get("delta_bic"), "explained": st.get("explained"), "cv_gain": st.get("cv_gain"),
-            "heldout_gain": st.get("heldout_gain")}
+    return {
+        "effect": LEARNED,
+        "parameters": {},
+        "nominal_refit": {},
+        "score": -st.get("delta_bic", 0.0),
+        "delta_bic": st.get("delta_bic"),
+        "explained": st.get("explained"),
+        "cv_gain": st.get("cv_gain"),
+        "heldout_gain": st.get("heldout_gain"),
+    }
 
 
-def save_unexplained(path, record: Record, system, values: dict[str, float], x_raw: np.ndarray,
-                     fit: tuple[float, float], f: np.ndarray | None = None):
+def save_unexplained(
+    path,
+    record: Record,
+    system,
+    values: dict[str, float],
+    x_raw: np.ndarray,
+    fit: tuple[float, float],
+    f: np.ndarray | None = None,
+):
     """The force ``system`` cannot explain on the fitting part (band-limited, the ringing ends
     left out), with x and x' beside it: what a learned force term starts from. ``f``: the
     excitation paired with ``x_raw`` (default the record's)."""
@@ -332,29 +393,51 @@ def save_unexplained(path, record: Record, system, values: dict[str, float], x_r
     return path
 
 
-def train_learned_force(record: Record, system, values: dict[str, float], s, fit: tuple[float, float], settings,
-                        folder) -> tuple[dict[str, float], dict | None]:
+def train_learned_force(
+    record: Record, system, values: dict[str, float], s, fit: tuple[float, float], settings, folder
+) -> tuple[dict[str, float], dict | None]:
     """The learned force (weights set in place) and the physical parameters trained further on
     the simulated response of the fitting part (``fit_learned_force``); the weights are written
     to ``folder/learned_force.pt`` (the PIDynNet checkpoint there holds the ones before this
     training). ``s``: the screening's signals; ``settings``: ``LearnedSettings``."""
     period = 2 * np.pi * np.sqrt(values["m"] / max(values.get(s.stiffness, s.k_nominal), 1e-300))
-    res = fit_learned_force(system, values, record, fit, period, smoothed=(s.x, s.v),
-                            periods_per_segment=float(settings.periods_per_segment),
-                            max_evaluations=int(settings.max_evaluations))
+    res = fit_learned_force(
+        system,
+        values,
+        record,
+        fit,
+        period,
+        smoothed=(s.x, s.v),
+        periods_per_segment=float(settings.periods_per_segment),
+        max_evaluations=int(settings.max_evaluations),
+    )
     if res is None:
         return values, None
     nets = [t.net.state_dict() for t in system.terms if isinstance(t, LearnedForce)]
     torch.save({"values": res.values, "networks": nets}, folder / "learned_force.pt")
-    return res.values, {"note": res.note, "loss_before": res.loss_before, "loss_after": res.loss_after,
-                        "evaluations": res.evaluations, "segments": res.segments,
-                        "segment_seconds": res.segment_seconds, "seconds": res.seconds,
-                        "file": f"{folder.name}/learned_force.pt"}
+    return res.values, {
+        "note": res.note,
+        "loss_before": res.loss_before,
+        "loss_after": res.loss_after,
+        "evaluations": res.evaluations,
+        "segments": res.segments,
+        "segment_seconds": res.segment_seconds,
+        "seconds": res.seconds,
+        "file": f"{folder.name}/learned_force.pt",
+    }
 
 
-def learned_predicts(record: Record, before, before_values: dict[str, float], after, after_values: dict[str, float],
-                     x_raw: np.ndarray, v0: float, held: tuple[float, float],
-                     substeps: int) -> tuple[bool, dict[str, float]]:
+def learned_predicts(
+    record: Record,
+    before,
+    before_values: dict[str, float],
+    after,
+    after_values: dict[str, float],
+    x_raw: np.ndarray,
+    v0: float,
+    held: tuple[float, float],
+    substeps: int,
+) -> tuple[bool, dict[str, float]]:
     """Does the model with a learned force predict the held-out part better than the model it
     extends? A network trained on the fitting part can fit it and still extrapolate wrongly
     (a trilinear spring reached further in the held-out part): kept only if it predicts better.
@@ -374,15 +457,28 @@ def learned_predicts(record: Record, before, before_values: dict[str, float], af
     return bool(mask.any() and errors["with"] < errors["without"]), errors
 
 
-def refuse_learned(record: Record, before, before_values: dict[str, float], after, after_values: dict[str, float],
-                   x_raw: np.ndarray, v0: float, held: tuple[float, float], substeps: int,
-                   folder) -> tuple[dict | None, dict[str, float]]:
+def refuse_learned(
+    record: Record,
+    before,
+    before_values: dict[str, float],
+    after,
+    after_values: dict[str, float],
+    x_raw: np.ndarray,
+    v0: float,
+    held: tuple[float, float],
+    substeps: int,
+    folder,
+) -> tuple[dict | None, dict[str, float]]:
     """Why the learned force of the run in ``folder`` is not kept (None: it is), and both
     held-out errors."""
-    kept, errors = learned_predicts(record, before, before_values, after, after_values, x_raw, v0, held, substeps)
+    kept, errors = learned_predicts(
+        record, before, before_values, after, after_values, x_raw, v0, held, substeps
+    )
     if kept:
         return None, errors
-    note = (f"the learned force predicts the held-out part worse (NRMSE {errors['with']:.3g}) than the model "
-            f"it extends ({errors['without']:.3g}): not kept")
+    note = (
+        f"the learned force predicts the held-out part worse (NRMSE {errors['with']:.3g}) than the model "
+        f"it extends ({errors['without']:.3g}): not kept"
+    )
     log.info("%s: %s", folder.name, note)
     return {"effect": LEARNED, "folder": folder.name, "heldout_nrmse": errors, "note": note}, errors

@@ -21,9 +21,10 @@ it in, so this package never imports the task layer.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -32,9 +33,14 @@ from pidyn.data.sources import Record
 from pidyn.discrepancy.changes import HeldoutCheck, heldout_check, locate_step
 from pidyn.discrepancy.confirm import Confirmation, confirm, undecided
 from pidyn.discrepancy.effects import EFFECTS, Signals
-from pidyn.discrepancy.extend import (EXTENSION, build_system, extension_node, release_held,  # noqa: F401
-                                      system_node)
-from pidyn.discrepancy.learned_fit import LEARNED, learned_row, refuse_learned, save_unexplained, train_learned_force
+from pidyn.discrepancy.extend import EXTENSION, build_system, extension_node, release_held, system_node  # noqa: F401
+from pidyn.discrepancy.learned_fit import (
+    LEARNED,
+    learned_row,
+    refuse_learned,
+    save_unexplained,
+    train_learned_force,
+)
 from pidyn.discrepancy.residual import dominant_period
 from pidyn.discrepancy.screening import EXCLUSIVE, Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
@@ -49,8 +55,22 @@ IdentifyFn = Callable[[dict, Path, tuple[float, float]], tuple[dict, SDOFSystem,
 #: what each step keeps of the row that named its effect
 ROW_EVIDENCE = ("score", "delta_bic", "explained", "cv_gain", "heldout_gain", "force_share", "source")
 #: what each step keeps of the next screening's rows: the evidence behind the next name
-STEP_EVIDENCE = ("effect", "score", "delta_bic", "explained", "cv_gain", "heldout_gain", "force_share", "passes",
-                 "persists", "heldout_miss", "heldout_small", "note", "parameters", "source")
+STEP_EVIDENCE = (
+    "effect",
+    "score",
+    "delta_bic",
+    "explained",
+    "cv_gain",
+    "heldout_gain",
+    "force_share",
+    "passes",
+    "persists",
+    "heldout_miss",
+    "heldout_small",
+    "note",
+    "parameters",
+    "source",
+)
 
 
 def split_spans(record: Record, fit_share: float) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -130,19 +150,46 @@ class Case:
         r = self.record
         v_raw = self.v_raw
         xs, vs = smooth_signals(r.t, self.x_raw, v_raw, period)
-        return (Signals(r.t, xs, vs, mass, k_nom, self.stiff, t_fit_end=self.fit[1],
-                        v_noise=velocity_noise(r.t, self.x_raw, v_raw, period)),
-                WeakForm.for_record(r.t, period))
+        return (
+            Signals(
+                r.t,
+                xs,
+                vs,
+                mass,
+                k_nom,
+                self.stiff,
+                t_fit_end=self.fit[1],
+                v_noise=velocity_noise(r.t, self.x_raw, v_raw, period),
+            ),
+            WeakForm.for_record(r.t, period),
+        )
 
-    def screen(self, system: SDOFSystem, values: dict[str, float], s: Signals, weak: WeakForm,
-               effects: dict | None = None) -> Screening:
-        return screen(system, values, s, self.weak_f, self.x_raw, weak, self.fit[1], self.mass_known,
-                      effects=self.effects if effects is None else effects, thresholds=self.thresholds)
+    def screen(
+        self,
+        system: SDOFSystem,
+        values: dict[str, float],
+        s: Signals,
+        weak: WeakForm,
+        effects: dict | None = None,
+    ) -> Screening:
+        return screen(
+            system,
+            values,
+            s,
+            self.weak_f,
+            self.x_raw,
+            weak,
+            self.fit[1],
+            self.mass_known,
+            effects=self.effects if effects is None else effects,
+            thresholds=self.thresholds,
+        )
 
     def free_run(self, system: SDOFSystem, values: dict[str, float], v0: float) -> np.ndarray:
         """The model from the measured initial state over the whole record."""
-        return simulate_identified(system, values, self.record, x0=float(self.x_raw[0]), v0=v0,
-                                   substeps=int(self.settings.substeps))[:, 0]
+        return simulate_identified(
+            system, values, self.record, x0=float(self.x_raw[0]), v0=v0, substeps=int(self.settings.substeps)
+        )[:, 0]
 
     def free_response(self, system: SDOFSystem, values: dict[str, float], v0: float) -> dict[str, np.ndarray]:
         """``free_run``'s x, v and a (relative) over the whole record."""
@@ -171,13 +218,22 @@ class Case:
         return "accelerometers" in (self.record.meta or {})
 
 
-def prepare(record: Record, base: SDOFSystem, base_node: dict, settings: DiagnosisSettings, mass: float | None,
-            run_dir: Path, identify: IdentifyFn) -> Case:
+def prepare(
+    record: Record,
+    base: SDOFSystem,
+    base_node: dict,
+    settings: DiagnosisSettings,
+    mass: float | None,
+    run_dir: Path,
+    identify: IdentifyFn,
+) -> Case:
     """The settings checked against the library and the nominal system, the fit / held-out split."""
     wanted = list(settings.effects) if settings.effects else list(EFFECTS)
     unknown = set(wanted) - set(EFFECTS)
     if unknown:
-        raise ValueError(f"diagnosis.effects: unknown effect(s) {sorted(unknown)}; the library has {sorted(EFFECTS)}")
+        raise ValueError(
+            f"diagnosis.effects: unknown effect(s) {sorted(unknown)}; the library has {sorted(EFFECTS)}"
+        )
     effects = {n: EFFECTS[n] for n in wanted}
     if not isinstance(base, SDOFSystem):
         raise ValueError(f"diagnosis needs a single-degree-of-freedom nominal system, got '{base.name}'")
@@ -186,11 +242,18 @@ def prepare(record: Record, base: SDOFSystem, base_node: dict, settings: Diagnos
         log.info("not screening %s: already in the nominal model", sorted(already))
         effects = {n: e for n, e in effects.items() if n not in already}
     if mass is None and record.excitation == "ground":
-        raise ValueError("data.mass is null, but a ground-excited record cannot reveal the mass "
-                         "(m x'' + ... = -m ag is homogeneous in m): give the mass")
+        raise ValueError(
+            "data.mass is null, but a ground-excited record cannot reveal the mass "
+            "(m x'' + ... = -m ag is homogeneous in m): give the mass"
+        )
     fit, held = split_spans(record, float(settings.fit_share))
-    log.info("diagnosing '%s' with nominal '%s': fit %.4g-%.4g s, held out %.4g-%.4g s",
-             record.name, base.name, *fit, *held)
+    log.info(
+        "diagnosing '%s' with nominal '%s': fit %.4g-%.4g s, held out %.4g-%.4g s",
+        record.name,
+        base.name,
+        *fit,
+        *held,
+    )
     run_dir.mkdir(parents=True, exist_ok=True)
     return Case(record, base, base_node, effects, settings, mass, fit, held, run_dir, identify)
 
@@ -223,7 +286,9 @@ class Outcome:
     pointwise: dict
     x_nom: np.ndarray
     x_ext: np.ndarray | None
-    sims: dict = field(default_factory=dict)  # nominal / extended: x, v, a over the record (accelerometer records)
+    sims: dict = field(
+        default_factory=dict
+    )  # nominal / extended: x, v, a over the record (accelerometer records)
     modal: list[dict] | None = None  # the nominal model's modes with 95 % intervals
     running: dict | None = None  # period and damping window by window (accelerometer records)
 
@@ -246,7 +311,9 @@ def run(case: Case) -> Outcome:
     if case.from_accelerometers and change_row is None and not forced:
         # integrated accelerations are a poor measurement of the motion: the weak form proposes, output
         # error on the accelerations decides among every effect it could fit
-        confirmation = confirm_undecided(case, nom.system, nom.values, nom.node, sc, nom.s, 1, everything=True)
+        confirmation = confirm_undecided(
+            case, nom.system, nom.values, nom.node, sc, nom.s, 1, everything=True
+        )
         cause = None if confirmation.row is None else confirmation.row["effect"]
     elif cause is None and not forced and sc.verdict == "none":
         # an effect the weak form leans towards without deciding: the simulated response decides
@@ -254,25 +321,59 @@ def run(case: Case) -> Outcome:
         if confirmation.row is not None:
             cause = confirmation.row["effect"]
     running = running_period(case, nom)
-    if case.from_accelerometers:  # the period that moves beyond its windows' intervals refutes one linear model
+    if (
+        case.from_accelerometers
+    ):  # the period that moves beyond its windows' intervals refutes one linear model
         structured = check.failed or bool(running and running.get("variation", {}).get("varies"))
     else:
         structured = sc.verdict == "unexplained" or check.failed
     if cause is None and case.settings.learn_unexplained and not forced and structured:
         cause = LEARNED  # structured, but nothing in the library explains it: learn the force
-    row = None if cause is None else (learned_row(sc.structure) if cause == LEARNED else
-                                      change_row or (confirmation.row if confirmation and confirmation.row else
-                                                     next(r for r in sc.ranking if r["effect"] == cause)))
+    row = (
+        None
+        if cause is None
+        else (
+            learned_row(sc.structure)
+            if cause == LEARNED
+            else change_row
+            or (
+                confirmation.row
+                if confirmation and confirmation.row
+                else next(r for r in sc.ranking if r["effect"] == cause)
+            )
+        )
+    )
     ext = extend_until_explained(case, nom, cause, row, bool(forced))
     causes = ext["causes"] if case.settings.extend else ([] if cause is None else [cause])
-    x_ext = case.free_run(ext["system"], ext["values"], float(nom.s.v[0])) if ext["system"] is not None else None
+    x_ext = (
+        case.free_run(ext["system"], ext["values"], float(nom.s.v[0])) if ext["system"] is not None else None
+    )
     sims = {}
     if case.from_accelerometers:  # the gain is measured on the accelerations, as the sensors read them
         v0 = float(nom.s.v[0])
-        sims = {"nominal": case.free_response(nom.system, nom.values, v0),
-                "extended": None if ext["system"] is None else case.free_response(ext["system"], ext["values"], v0)}
-    return Outcome(nom, sc, check, change_row, ext, causes, cause, bool(forced), confirmation, pointwise, x_nom, x_ext,
-                   sims, nominal_modes(case, nom), running)
+        sims = {
+            "nominal": case.free_response(nom.system, nom.values, v0),
+            "extended": None
+            if ext["system"] is None
+            else case.free_response(ext["system"], ext["values"], v0),
+        }
+    return Outcome(
+        nom,
+        sc,
+        check,
+        change_row,
+        ext,
+        causes,
+        cause,
+        bool(forced),
+        confirmation,
+        pointwise,
+        x_nom,
+        x_ext,
+        sims,
+        nominal_modes(case, nom),
+        running,
+    )
 
 
 def running_period(case: Case, nom: Nominal) -> dict | None:
@@ -284,17 +385,28 @@ def running_period(case: Case, nom: Nominal) -> dict | None:
 
     width = max(12.0 * nom.period, 2.0)
     try:
-        out = running_modes(case.record, nom.system, nom.values, width=width, step=width / 4,
-                            substeps=int(case.settings.substeps))
+        out = running_modes(
+            case.record,
+            nom.system,
+            nom.values,
+            width=width,
+            step=width / 4,
+            substeps=int(case.settings.substeps),
+        )
     except ValueError as exc:
         log.info("no running period (%s)", exc)
         return None
     out["variation"] = period_varies(out, width)
     v = out["variation"]
     if v.get("varies"):
-        log.info("the period moves through the record beyond its windows' intervals: %.3g s at %.3g s against "
-                 "%.3g s at %.3g s", v["longest"]["period"], v["longest"]["t"], v["shortest"]["period"],
-                 v["shortest"]["t"])
+        log.info(
+            "the period moves through the record beyond its windows' intervals: %.3g s at %.3g s against "
+            "%.3g s at %.3g s",
+            v["longest"]["period"],
+            v["longest"]["t"],
+            v["shortest"]["period"],
+            v["shortest"]["t"],
+        )
     return out
 
 
@@ -306,8 +418,12 @@ def nominal_modes(case: Case, nom: Nominal) -> list[dict] | None:
 
     try:
         seg = case.record.segment(*case.fit)
-        res = refine(nom.system, seg, {"nominal": nom.values}, RefineSettings(states="measured", initial_state="free"))
-        return modes_with_intervals(nom.system, {**nom.values, **res.params}, res.names, np.asarray(res.covariance))
+        res = refine(
+            nom.system, seg, {"nominal": nom.values}, RefineSettings(states="measured", initial_state="free")
+        )
+        return modes_with_intervals(
+            nom.system, {**nom.values, **res.params}, res.names, np.asarray(res.covariance)
+        )
     except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
         log.info("no intervals for the nominal model's modes (%s)", exc)
         try:
@@ -339,8 +455,13 @@ def polish(case: Case, system: SDOFSystem, values: dict[str, float]) -> tuple[di
     seg_end = fit[1] if st.polish_seconds is None else min(fit[1], fit[0] + float(st.polish_seconds))
     seg = case.record.segment(fit[0], seg_end)
     trainable = {s.name for s in system.param_specs() if s.trainable}
-    res = output_error(seg, system, init={k: v for k, v in values.items() if k in trainable},
-                       substeps=int(st.substeps), max_nfev=int(st.polish_max_nfev))
+    res = output_error(
+        seg,
+        system,
+        init={k: v for k, v in values.items() if k in trainable},
+        substeps=int(st.substeps),
+        max_nfev=int(st.polish_max_nfev),
+    )
     out = dict(values)
     out.update(res.params)
     return out, f"output error on {seg.t[0]:.4g}-{seg.t[-1]:.4g} s: {res.note}, {res.seconds:.1f} s"
@@ -349,8 +470,12 @@ def polish(case: Case, system: SDOFSystem, values: dict[str, float]) -> tuple[di
 def identify_nominal(case: Case, values0: dict[str, float], period: float) -> Nominal:
     """The nominal model on the fitting part: PIDynNet, then the output-error polish."""
     record = case.record
-    node = system_node(case.base_node, {k: v for k, v in values0.items() if v > 0},
-                       values0["m"] if "m" in values0 else 1.0, not case.mass_known)
+    node = system_node(
+        case.base_node,
+        {k: v for k, v in values0.items() if v > 0},
+        values0["m"] if "m" in values0 else 1.0,
+        not case.mass_known,
+    )
     if record.excitation != case.base_node.get("excitation", record.excitation):
         node["excitation"] = record.excitation
     metrics, system, values = case.identify(node, case.run_dir / "nominal", case.fit)
@@ -362,8 +487,9 @@ def identify_nominal(case: Case, values0: dict[str, float], period: float) -> No
     return Nominal(node, system, values, metrics, polish_note, s, weak, period)
 
 
-def check_heldout(case: Case, nom: Nominal, sc: Screening, x_nom: np.ndarray,
-                  forced: bool) -> tuple[HeldoutCheck, dict | None]:
+def check_heldout(
+    case: Case, nom: Nominal, sc: Screening, x_nom: np.ndarray, forced: bool
+) -> tuple[HeldoutCheck, dict | None]:
     """The held-out failure check, and where the structure changed when the data say it did
     (a located change moves ``case.fit`` / ``case.held`` to the change point). On an
     accelerometer record the check compares accelerations, as the sensors read them."""
@@ -372,33 +498,66 @@ def check_heldout(case: Case, nom: Nominal, sc: Screening, x_nom: np.ndarray,
         sim = case.free_response(nom.system, nom.values, float(nom.s.v[0]))["a"][:, 0]
     else:
         meas, sim = case.x_raw, x_nom
-    check = heldout_check(meas, sim, case.mask(case.fit), case.mask(case.held), case.noise_std(meas, nom.period),
-                          threshold=float(case.settings.changes.heldout_ratio))
+    check = heldout_check(
+        meas,
+        sim,
+        case.mask(case.fit),
+        case.mask(case.held),
+        case.noise_std(meas, nom.period),
+        threshold=float(case.settings.changes.heldout_ratio),
+    )
     log.info("%s", check.sentence())
-    time_effects = {n: p_ for n, p_ in {"stiffness_loss": case.stiff, "damping_change": "c"}.items()
-                    if n in case.effects and p_ in nom.values}
+    time_effects = {
+        n: p_
+        for n, p_ in {"stiffness_loss": case.stiff, "damping_change": "c"}.items()
+        if n in case.effects and p_ in nom.values
+    }
     if forced or not time_effects or not ((check.failed and sc.cause is None) or sc.cause in time_effects):
         return check, None
     change, case.fit, case.held = locate_step(
-        nom.system, nom.values, nom.s, case.weak_f, case.x_raw, nom.weak, case.fit, case.held, case.mass_known,
-        {n: p_ for n, p_ in time_effects.items() if sc.cause in (None, n)}, case.thresholds,
-        bool(check.failed and sc.cause is None))
+        nom.system,
+        nom.values,
+        nom.s,
+        case.weak_f,
+        case.x_raw,
+        nom.weak,
+        case.fit,
+        case.held,
+        case.mass_known,
+        {n: p_ for n, p_ in time_effects.items() if sc.cause in (None, n)},
+        case.thresholds,
+        bool(check.failed and sc.cause is None),
+    )
     if change is None:
         return check, None
     log.info("%s", change.sentence())
-    return check, {"effect": change.effect, "parameters": change.effect_parameters(), "nominal_refit": {},
-                   "score": -change.delta_bic, "change": change}
+    return check, {
+        "effect": change.effect,
+        "parameters": change.effect_parameters(),
+        "nominal_refit": {},
+        "score": -change.delta_bic,
+        "change": change,
+    }
 
 
-def extend_until_explained(case: Case, nom: Nominal, cause: str | None, row: dict | None,
-                           forced: bool) -> dict[str, Any]:
+def extend_until_explained(
+    case: Case, nom: Nominal, cause: str | None, row: dict | None, forced: bool
+) -> dict[str, Any]:
     """Extend the model with ``cause``, identify it (PIDynNet, polish), screen the extended
     model against the effects not yet in it, and repeat while one passes the thresholds, up to
     ``diagnosis.max_effects``. Each step's evidence is kept; the last model carries every
     named effect. Step k's run is in ``extended/`` (k = 1) or ``extended_<k>/``."""
     st = case.settings
-    out: dict[str, Any] = {"system": None, "values": None, "metrics": None, "causes": [], "steps": [], "note": None,
-                           "refused": None, "learned_fit": None}
+    out: dict[str, Any] = {
+        "system": None,
+        "values": None,
+        "metrics": None,
+        "causes": [],
+        "steps": [],
+        "note": None,
+        "refused": None,
+        "learned_fit": None,
+    }
     node, values = nom.node, nom.values
     limit = 1 if forced else int(st.max_effects)
     while cause is not None and row is not None and st.extend:
@@ -424,8 +583,9 @@ def extend_until_explained(case: Case, nom: Nominal, cause: str | None, row: dic
     return out
 
 
-def _extension_step(case: Case, nom: Nominal, node: dict, values: dict[str, float], cause: str, row: dict,
-                    out: dict[str, Any]) -> tuple[dict, dict[str, float], SDOFSystem] | None:
+def _extension_step(
+    case: Case, nom: Nominal, node: dict, values: dict[str, float], cause: str, row: dict, out: dict[str, Any]
+) -> tuple[dict, dict[str, float], SDOFSystem] | None:
     """Step k: the current model extended with ``cause``, identified, polished (and a learned
     force trained on the response); recorded in ``out``. None when a learned force is refused."""
     st, record, s = case.settings, case.record, nom.s
@@ -433,8 +593,15 @@ def _extension_step(case: Case, nom: Nominal, node: dict, values: dict[str, floa
         raise ValueError(f"effect '{cause}' has no physical fit to this record ({row.get('note')})")
     k = len(out["causes"]) + 1
     if cause == LEARNED:  # start the network at the force the current model cannot explain
-        path = save_unexplained(case.run_dir / f"unexplained_{k}.npz", record, build_system(node), values,
-                                case.x_raw, case.fit, f=case.weak_f)
+        path = save_unexplained(
+            case.run_dir / f"unexplained_{k}.npz",
+            record,
+            build_system(node),
+            values,
+            case.x_raw,
+            case.fit,
+            f=case.weak_f,
+        )
         row = {**row, "parameters": {"init_from": str(path)}}
     ext_node = extension_node(node, values, cause, row, s.context(), k, case.mass_known)
     folder = case.run_dir / ("extended" if k == 1 else f"extended_{k}")
@@ -442,37 +609,77 @@ def _extension_step(case: Case, nom: Nominal, node: dict, values: dict[str, floa
     if st.polish:  # a held change time is refined here, from where the search put it
         ext_values, out["note"] = polish(case, build_system(release_held(ext_node)), ext_values)
     if cause == LEARNED and st.learned.output_error:
-        ext_values, out["learned_fit"] = train_learned_force(record, system, ext_values, s, case.fit, st.learned,
-                                                             folder)
+        ext_values, out["learned_fit"] = train_learned_force(
+            record, system, ext_values, s, case.fit, st.learned, folder
+        )
     errors = None
     if cause == LEARNED:
-        out["refused"], errors = refuse_learned(record, build_system(node), values, system, ext_values, case.x_raw,
-                                                float(s.v[0]), case.held, int(st.substeps), folder)
+        out["refused"], errors = refuse_learned(
+            record,
+            build_system(node),
+            values,
+            system,
+            ext_values,
+            case.x_raw,
+            float(s.v[0]),
+            case.held,
+            int(st.substeps),
+            folder,
+        )
         if out["refused"] is not None:  # a network that fits the fitting part but predicts worse
             return None
     out["causes"].append(cause)
-    out["steps"].append({"step": k, "effect": cause, "folder": folder.name, "equation": system.describe(ext_values),
-                         "evidence": {**{key: row.get(key) for key in ROW_EVIDENCE},
-                                      **({"heldout_nrmse": errors} if cause == LEARNED else {})}})
+    out["steps"].append(
+        {
+            "step": k,
+            "effect": cause,
+            "folder": folder.name,
+            "equation": system.describe(ext_values),
+            "evidence": {
+                **{key: row.get(key) for key in ROW_EVIDENCE},
+                **({"heldout_nrmse": errors} if cause == LEARNED else {}),
+            },
+        }
+    )
     out.update(system=system, values=ext_values, metrics=metrics)
     log.info("step %d: extended with %s: %s", k, cause, system.describe(ext_values))
     return ext_node, ext_values, system
 
 
-def next_cause(case: Case, system: SDOFSystem, values: dict[str, float], node: dict, remaining: dict,
-               out: dict[str, Any], s: Signals, weak: WeakForm) -> tuple[str | None, dict | None]:
+def next_cause(
+    case: Case,
+    system: SDOFSystem,
+    values: dict[str, float],
+    node: dict,
+    remaining: dict,
+    out: dict[str, Any],
+    s: Signals,
+    weak: WeakForm,
+) -> tuple[str | None, dict | None]:
     """Screen the model just extended against the effects not yet in it; what the weak form
     leaves undecided goes to the output-error check, and a structured remainder no library
     effect explains to the learned force. The evidence lands on the last step of ``out``."""
     k = len(out["causes"])
-    sc = screen(system, values, s, case.weak_f, case.x_raw, weak, case.fit[1], case.mass_known, remaining,
-                case.thresholds)
+    sc = screen(
+        system,
+        values,
+        s,
+        case.weak_f,
+        case.x_raw,
+        weak,
+        case.fit[1],
+        case.mass_known,
+        remaining,
+        case.thresholds,
+    )
     step = out["steps"][-1]
     step["next_ranking"] = [{k_: r.get(k_) for k_ in STEP_EVIDENCE if k_ in r} for r in sc.ranking]
     step["next_structure"] = dict(sc.structure)
     step["next_verdict"] = sc.verdict
-    log.info("screening the extended model: %s", ", ".join(f"{r['effect']} {r['score']:.1f}"
-                                                           for r in sc.ranking[:4] if r.get("score") is not None))
+    log.info(
+        "screening the extended model: %s",
+        ", ".join(f"{r['effect']} {r['score']:.1f}" for r in sc.ranking[:4] if r.get("score") is not None),
+    )
     if case.from_accelerometers:  # output error on the accelerations decides (see ``run``)
         confirmation = confirm_undecided(case, system, values, node, sc, s, k + 1, everything=True)
         step["next_confirmation"] = confirmation.tested
@@ -485,30 +692,57 @@ def next_cause(case: Case, system: SDOFSystem, values: dict[str, float], node: d
         if confirmation.row is not None:
             return confirmation.row["effect"], confirmation.row
     if sc.verdict == "unexplained" and LEARNED not in out["causes"] and case.settings.learn_unexplained:
-        return LEARNED, learned_row(sc.structure)  # what remains is structured but no library effect: learn it
+        return LEARNED, learned_row(
+            sc.structure
+        )  # what remains is structured but no library effect: learn it
     return None, None
 
 
-def confirm_undecided(case: Case, system: SDOFSystem, values: dict[str, float], node: dict, sc: Screening,
-                      s: Signals, k: int, everything: bool = False) -> Confirmation:
+def confirm_undecided(
+    case: Case,
+    system: SDOFSystem,
+    values: dict[str, float],
+    node: dict,
+    sc: Screening,
+    s: Signals,
+    k: int,
+    everything: bool = False,
+) -> Confirmation:
     """The output-error check of the effects screening ``sc`` leaves undecided
     (``pidyn.discrepancy.confirm``); ``diagnosis.confirm.max_candidates`` = 0 turns it off.
     ``everything``: every effect the weak form could fit at all (an accelerometer record)."""
     st = case.settings
     if everything:
-        candidates = [r for r in sc.ranking if r.get("score") is not None and np.isfinite(r["score"])
-                      and not r.get("step_in_time")]
+        candidates = [
+            r
+            for r in sc.ranking
+            if r.get("score") is not None and np.isfinite(r["score"]) and not r.get("step_in_time")
+        ]
     else:
         candidates = undecided(sc.ranking, case.thresholds, int(st.confirm.max_candidates))
     if not candidates:
         return Confirmation()
     node = release_held(node)  # as in the polish: a located change time is refined with the rest
     ctx = s.context()
-    build = lambda row: build_system(extension_node(node, values, row["effect"], row, ctx, k, case.mass_known))  # noqa: E731
+
+    def build(row: dict) -> Any:
+        return build_system(extension_node(node, values, row["effect"], row, ctx, k, case.mass_known))
+
     # deciding, not confirming (an accelerometer record): each fit run to its end
     nfev = max(int(st.polish_max_nfev), 100) if everything else int(st.polish_max_nfev)
-    return confirm(case.record, build_system(node), values, candidates, build, case.fit, case.held, case.thresholds,
-                   substeps=int(st.substeps), max_nfev=nfev, polish_seconds=st.polish_seconds)
+    return confirm(
+        case.record,
+        build_system(node),
+        values,
+        candidates,
+        build,
+        case.fit,
+        case.held,
+        case.thresholds,
+        substeps=int(st.substeps),
+        max_nfev=nfev,
+        polish_seconds=st.polish_seconds,
+    )
 
 
 def _fmt(values: dict[str, float]) -> str:

@@ -20,7 +20,9 @@ def _shade(ax, fit, held) -> None:
     ax.axvspan(*held, color="0.92", zorder=0, label="held out")
 
 
-def plot_response(path: Path, t, x, x_nom, x_ext, fit, held, unit: str = "m", period: float | None = None) -> None:
+def plot_response(
+    path: Path, t, x, x_nom, x_ext, fit, held, unit: str = "m", period: float | None = None
+) -> None:
     """Measured vs simulated displacement (nominal, extended) and the simulation errors; for a
     record of many periods, a third panel zooms into 30 periods at the start of the held-out part."""
     plt = _plt()
@@ -86,8 +88,15 @@ def plot_residual(path: Path, t, r_raw, x, v, fit, cause, fitted, units: dict, p
     for a, s, lab in ((ax[0, 1], x, f"x [{ux}]"), (ax[1, 0], v, f"x' [{ux}/s]")):
         a.scatter(s[::step], r[::step], s=1, c=t[::step], cmap="viridis", alpha=0.5, rasterized=True)
         if fitted is not None:
-            a.scatter(s[::step], fitted[::step], s=0.5, color="tab:red", alpha=0.5, rasterized=True,
-                      label=f"explained by {cause}")
+            a.scatter(
+                s[::step],
+                fitted[::step],
+                s=0.5,
+                color="tab:red",
+                alpha=0.5,
+                rasterized=True,
+                label=f"explained by {cause}",
+            )
             a.legend(fontsize=8, markerscale=8)
         a.set(xlabel=lab, ylabel=f"force [{uf}]", title=f"against {lab.split()[0]} (colour: time)")
     nper = int(min(len(r), 2048))
@@ -112,7 +121,9 @@ def plot_ranking(path: Path, ranking: list[dict], min_delta_bic: float) -> None:
     scores = [r["score"] for r in rows][::-1]
     colors = ["tab:blue" if r.get("passes") else "0.6" for r in rows][::-1]
     ax.barh(names, scores, color=colors)
-    ax.axvline(min_delta_bic, color="k", ls=":", lw=0.8, label=f"evidence threshold (-dBIC = {min_delta_bic:g})")
+    ax.axvline(
+        min_delta_bic, color="k", ls=":", lw=0.8, label=f"evidence threshold (-dBIC = {min_delta_bic:g})"
+    )
     ax.set_xscale("symlog")
     ax.set_xlabel("score = -dBIC (symlog)")
     ax.legend(fontsize=8)
@@ -121,8 +132,16 @@ def plot_ranking(path: Path, ranking: list[dict], min_delta_bic: float) -> None:
     plt.close(fig)
 
 
-def plot_running_estimate(path: Path, running: dict, nominal: dict, fit, held, change=None,
-                          stiffness: str | None = None, signal: tuple | None = None) -> None:
+def plot_running_estimate(
+    path: Path,
+    running: dict,
+    nominal: dict,
+    fit,
+    held,
+    change=None,
+    stiffness: str | None = None,
+    signal: tuple | None = None,
+) -> None:
     """The nominal parameters refitted in sliding windows over the record, relative to the
     nominal fit: a change in time shows as a step, located with its interval when found. With
     the ``stiffness`` parameter named, a second panel gives the running natural period
@@ -133,19 +152,31 @@ def plot_running_estimate(path: Path, running: dict, nominal: dict, fit, held, c
     plt = _plt()
     names = [n for n in running if n != "t" and n in nominal and n != "m"]
     with_period = stiffness is not None and stiffness in running and nominal.get(stiffness, 0) > 0
-    fig, axes = plt.subplots(2 if with_period else 1, 1, figsize=(10, 6.8 if with_period else 3.8), squeeze=False)
+    fig, axes = plt.subplots(
+        2 if with_period else 1, 1, figsize=(10, 6.8 if with_period else 3.8), squeeze=False
+    )
     ax = axes[0, 0]
     _shade(ax, fit, held)
     for n in names:
-        ax.plot(running["t"], np.asarray(running[n]) / nominal[n], marker=".", lw=1, label=f"{n} / nominal {n}")
+        ax.plot(
+            running["t"], np.asarray(running[n]) / nominal[n], marker=".", lw=1, label=f"{n} / nominal {n}"
+        )
     ax.axhline(1.0, color="k", lw=0.6)
     if change is not None:
         ax.axvspan(*change.ci95, color="tab:orange", alpha=0.25, label="change, 95 % interval")
         ax.axvline(change.t_change, color="tab:orange", lw=1.2)
-        ax.axhline(1.0 + change.fraction, color="tab:orange", lw=0.8, ls="--",
-                   label=f"{change.parameter} after the change ({100 * change.fraction:+.0f} %)")
-    ax.set(xlabel="t [s] (window centre)", ylabel="running estimate / nominal",
-           title="Running estimate over the record (sliding weak-form fit)")
+        ax.axhline(
+            1.0 + change.fraction,
+            color="tab:orange",
+            lw=0.8,
+            ls="--",
+            label=f"{change.parameter} after the change ({100 * change.fraction:+.0f} %)",
+        )
+    ax.set(
+        xlabel="t [s] (window centre)",
+        ylabel="running estimate / nominal",
+        title="Running estimate over the record (sliding weak-form fit)",
+    )
     ax.legend(fontsize=8, loc="best")
     if with_period:
         m = float(nominal.get("m", 1.0))
@@ -154,8 +185,13 @@ def plot_running_estimate(path: Path, running: dict, nominal: dict, fit, held, c
         a2 = axes[1, 0]
         _shade(a2, fit, held)
         a2.plot(running["t"], period, marker=".", lw=1.2, color="tab:blue", label="running period")
-        a2.axhline(2 * np.pi * np.sqrt(m / nominal[stiffness]), color="tab:blue", lw=0.7, ls="--",
-                   label="nominal model's period")
+        a2.axhline(
+            2 * np.pi * np.sqrt(m / nominal[stiffness]),
+            color="tab:blue",
+            lw=0.7,
+            ls="--",
+            label="nominal model's period",
+        )
         a2.set(xlabel="t [s] (window centre)", ylabel="period [s]", title="Natural period through the record")
         if signal is not None:
             b = a2.twinx()
@@ -185,8 +221,24 @@ def plot_learned_force(path: Path, x, v, residual, learned, surface: dict, units
     fig, ax = plt.subplots(1, 3, figsize=(14, 4.2))
     step = max(1, len(x) // 20000)
     for a, sig, lab in ((ax[0], x, f"x [{ux}]"), (ax[1], v, f"x' [{ux}/s]")):
-        a.scatter(sig[::step], residual[::step], s=1, color="0.6", alpha=0.5, rasterized=True, label="unexplained force")
-        a.scatter(sig[::step], learned[::step], s=1, color="tab:blue", alpha=0.6, rasterized=True, label="learned force")
+        a.scatter(
+            sig[::step],
+            residual[::step],
+            s=1,
+            color="0.6",
+            alpha=0.5,
+            rasterized=True,
+            label="unexplained force",
+        )
+        a.scatter(
+            sig[::step],
+            learned[::step],
+            s=1,
+            color="tab:blue",
+            alpha=0.6,
+            rasterized=True,
+            label="learned force",
+        )
         a.set(xlabel=lab, ylabel=f"force [{uf}]")
         a.legend(fontsize=8, markerscale=8)
     cs = ax[2].contourf(surface["x"], surface["v"], surface["f"], levels=20, cmap="RdBu_r")
@@ -206,9 +258,17 @@ def _num(v) -> str:
 
 def write_report(path: Path, d: dict, figures: list[str]) -> None:
     """report.md: the verdict, the steps, the models' held-out errors, the evidence, the ranking."""
-    lines = (_verdict_lines(d) + _accelerometer_lines(d) + _steps_lines(d) + _model_lines(d) + _evidence_lines(d)
-             + _confirmation_lines(d) + _ranking_lines(d)
-             + ["## Figures", ""] + [f"![{f}](figures/{f})" for f in figures])
+    lines = (
+        _verdict_lines(d)
+        + _accelerometer_lines(d)
+        + _steps_lines(d)
+        + _model_lines(d)
+        + _evidence_lines(d)
+        + _confirmation_lines(d)
+        + _ranking_lines(d)
+        + ["## Figures", ""]
+        + [f"![{f}](figures/{f})" for f in figures]
+    )
     path.write_text("\n".join(lines) + "\n")
 
 
@@ -216,17 +276,27 @@ def _verdict_lines(d: dict) -> list[str]:
     """The title and the verdict in words."""
     lines = [f"# Diagnosis of `{d['record']}`", ""]
     if d["verdict"] == "none":
-        lines += ["**Verdict: none.** No candidate effect explains more of the residual than noise and the "
-                  "model's own error would (thresholds below). The nominal model is adequate for these data.", ""]
+        lines += [
+            "**Verdict: none.** No candidate effect explains more of the residual than noise and the "
+            "model's own error would (thresholds below). The nominal model is adequate for these data.",
+            "",
+        ]
     elif d["verdict"] == "unexplained":
-        lines += ["**Verdict: unexplained.** The nominal model is clearly wrong on these data, but no effect of the "
-                  "library (nor a change of stiffness or damping in time) explains what it misses. Look at the "
-                  "residual force below before trusting this model.", ""]
+        lines += [
+            "**Verdict: unexplained.** The nominal model is clearly wrong on these data, but no effect of the "
+            "library (nor a change of stiffness or damping in time) explains what it misses. Look at the "
+            "residual force below before trusting this model.",
+            "",
+        ]
     else:
         causes = d.get("causes") or [d["cause"]]
-        lines += [f"**Verdict: discrepancy. Cause{'s' if len(causes) > 1 else ''}: "
-                  + ", ".join(f"`{c}`" for c in causes) + "**"
-                  + (" (named by the user, not by the screening)" if d.get("forced") else ""), ""]
+        lines += [
+            f"**Verdict: discrepancy. Cause{'s' if len(causes) > 1 else ''}: "
+            + ", ".join(f"`{c}`" for c in causes)
+            + "**"
+            + (" (named by the user, not by the screening)" if d.get("forced") else ""),
+            "",
+        ]
     return lines
 
 
@@ -236,27 +306,39 @@ def _accelerometer_lines(d: dict) -> list[str]:
     acc = d.get("accelerometers")
     if not acc:
         return []
-    lines = ["## From accelerometers", "",
-             f"The relative motion is the measured acceleration minus what the sensor reads of the supports "
-             f"({acc.get('note')}); the weak-form screening below ran on it integrated (high-passed at "
-             f"{acc.get('highpass_hz', 0):.3g} Hz) and only proposes: each candidate was fitted by output error "
-             f"to the accelerations, and that fit decides.", ""]
+    lines = [
+        "## From accelerometers",
+        "",
+        f"The relative motion is the measured acceleration minus what the sensor reads of the supports "
+        f"({acc.get('note')}); the weak-form screening below ran on it integrated (high-passed at "
+        f"{acc.get('highpass_hz', 0):.3g} Hz) and only proposes: each candidate was fitted by output error "
+        f"to the accelerations, and that fit decides.",
+        "",
+    ]
     run = d.get("running") or {}
     var = run.get("variation") or {}
     if var.get("varies"):
         lo, hi = var["longest"], var["shortest"]
-        lines += [f"**The period is not one.** It is {lo['period']:.3f} s (95 % {lo['ci95'][0]:.3f}-{lo['ci95'][1]:.3f}) "
-                  f"in the window at {lo['t']:.1f} s and {hi['period']:.3f} s ({hi['ci95'][0]:.3f}-{hi['ci95'][1]:.3f}) "
-                  f"in the one at {hi['t']:.1f} s, windows that share no sample: no one linear, time-invariant model "
-                  "holds through the record.", ""]
+        lines += [
+            f"**The period is not one.** It is {lo['period']:.3f} s (95 % {lo['ci95'][0]:.3f}-{lo['ci95'][1]:.3f}) "
+            f"in the window at {lo['t']:.1f} s and {hi['period']:.3f} s ({hi['ci95'][0]:.3f}-{hi['ci95'][1]:.3f}) "
+            f"in the one at {hi['t']:.1f} s, windows that share no sample: no one linear, time-invariant model "
+            "holds through the record.",
+            "",
+        ]
     if "period_longest" in run:
-        lines += [f"Window by window (figure `running_period.png`) the period is {run['period_strongest_window']:.3f} s "
-                  f"in the strongest window (t = {run['t_strongest_window']:.1f} s), longest {run['period_longest']:.3f} s "
-                  f"(t = {run['t_period_longest']:.1f} s), {run['period_quietest_window']:.3f} s in the quietest and "
-                  f"{run['period_last_window']:.3f} s in the last; the damping ratio "
-                  f"{100 * run['damping_strongest_window']:.0f} % in the strongest window and "
-                  f"{100 * run['damping_last_window']:.0f} % in the last.", ""]
-    lines += decision_lines(d.get("confirmation") or [], (d.get("thresholds") or {}).get("tie_delta_bic", 6.0))
+        lines += [
+            f"Window by window (figure `running_period.png`) the period is {run['period_strongest_window']:.3f} s "
+            f"in the strongest window (t = {run['t_strongest_window']:.1f} s), longest {run['period_longest']:.3f} s "
+            f"(t = {run['t_period_longest']:.1f} s), {run['period_quietest_window']:.3f} s in the quietest and "
+            f"{run['period_last_window']:.3f} s in the last; the damping ratio "
+            f"{100 * run['damping_strongest_window']:.0f} % in the strongest window and "
+            f"{100 * run['damping_last_window']:.0f} % in the last.",
+            "",
+        ]
+    lines += decision_lines(
+        d.get("confirmation") or [], (d.get("thresholds") or {}).get("tie_delta_bic", 6.0)
+    )
     return lines
 
 
@@ -268,16 +350,24 @@ def decision_lines(tested: list[dict], tie: float) -> list[str]:
     best = max(rows, key=lambda r: r["score"])
     passing = [r["effect"] for r in rows if r.get("passes")]
     close = [r["effect"] for r in rows if r is not best and best["score"] - r["score"] < tie]
-    helps = [f"{r['effect']} ({r['heldout_gain']:+.2f})" for r in rows
-             if r.get("heldout_gain") is not None and r["heldout_gain"] > 0.02]
+    helps = [
+        f"{r['effect']} ({r['heldout_gain']:+.2f})"
+        for r in rows
+        if r.get("heldout_gain") is not None and r["heldout_gain"] > 0.02
+    ]
     out = []
     if passing:
-        out.append(f"The accelerations decide for `{best['effect']}` (BIC {best['delta_bic']:.1f} against the nominal "
-                   f"model" + (f"; `{'`, `'.join(close)}` within {tie:g} of it: not told apart" if close else "")
-                   + ").")
+        out.append(
+            f"The accelerations decide for `{best['effect']}` (BIC {best['delta_bic']:.1f} against the nominal "
+            f"model"
+            + (f"; `{'`, `'.join(close)}` within {tie:g} of it: not told apart" if close else "")
+            + ")."
+        )
     else:
-        out.append("No candidate passes the evidence threshold on the fitting part: the data do not decide for any "
-                   f"(best `{best['effect']}`, BIC {best['delta_bic']:.1f}).")
+        out.append(
+            "No candidate passes the evidence threshold on the fitting part: the data do not decide for any "
+            f"(best `{best['effect']}`, BIC {best['delta_bic']:.1f})."
+        )
     if helps:
         out.append("Held-out gain of each candidate fitted alone: " + ", ".join(helps) + ".")
     return out + [""]
@@ -287,20 +377,33 @@ def _steps_lines(d: dict) -> list[str]:
     """Each extension step with its evidence (when there was more than one)."""
     lines: list[str] = []
     if len(d.get("steps") or []) > 1 or any(st.get("next_ranking") for st in d.get("steps") or []):
-        lines += ["## Steps: extend, screen the extended model again", "",
-                  "| step | effect added | score (-dBIC) | CV gain | model after the step | next candidate |",
-                  "|---|---|---|---|---|---|"]
+        lines += [
+            "## Steps: extend, screen the extended model again",
+            "",
+            "| step | effect added | score (-dBIC) | CV gain | model after the step | next candidate |",
+            "|---|---|---|---|---|---|",
+        ]
         steps = d["steps"]
         for i, st in enumerate(steps):
             ev = st["evidence"]
             ranking = st.get("next_ranking") or [{}]
             named = steps[i + 1]["effect"] if i + 1 < len(steps) else None  # a tie-break may name the second
             nxt = next((r for r in ranking if r.get("effect") == named), ranking[0])
-            by_oe = i + 1 < len(steps) and (steps[i + 1].get("evidence") or {}).get("source") == "output_error"
-            nxt_s = "-" if not nxt else (f"{nxt.get('effect')} {_num(nxt.get('score'))} "
-                                         f"({'named by the output-error check' if by_oe else 'passes' if nxt.get('passes') else 'below the thresholds: stop'})")
-            lines.append(f"| {st['step']} | {st['effect']} | {_num(ev.get('score'))} | {_num(ev.get('cv_gain'))} | "
-                         f"`{st['equation']}` | {nxt_s} |")
+            by_oe = (
+                i + 1 < len(steps) and (steps[i + 1].get("evidence") or {}).get("source") == "output_error"
+            )
+            nxt_s = (
+                "-"
+                if not nxt
+                else (
+                    f"{nxt.get('effect')} {_num(nxt.get('score'))} "
+                    f"({'named by the output-error check' if by_oe else 'passes' if nxt.get('passes') else 'below the thresholds: stop'})"
+                )
+            )
+            lines.append(
+                f"| {st['step']} | {st['effect']} | {_num(ev.get('score'))} | {_num(ev.get('cv_gain'))} | "
+                f"`{st['equation']}` | {nxt_s} |"
+            )
         lines.append("")
     return lines
 
@@ -308,12 +411,19 @@ def _steps_lines(d: dict) -> list[str]:
 def _model_lines(d: dict) -> list[str]:
     """Nominal and extended equations with their held-out errors, and the split."""
     g = d["gain"]
-    lines = ["| model | equation | held-out NRMSE of x |", "|---|---|---|",
-             f"| nominal | `{d['nominal']}` | {_num(g['nominal'])} |"]
+    lines = [
+        "| model | equation | held-out NRMSE of x |",
+        "|---|---|---|",
+        f"| nominal | `{d['nominal']}` | {_num(g['nominal'])} |",
+    ]
     if d.get("extended"):
         lines.append(f"| extended | `{d['extended']}` | {_num(g['extended'])} |")
-    lines += ["", f"Fitting part {d['split']['fit'][0]:.4g}-{d['split']['fit'][1]:.4g} s; held-out part "
-              f"{d['split']['heldout'][0]:.4g}-{d['split']['heldout'][1]:.4g} s (not used for fitting).", ""]
+    lines += [
+        "",
+        f"Fitting part {d['split']['fit'][0]:.4g}-{d['split']['fit'][1]:.4g} s; held-out part "
+        f"{d['split']['heldout'][0]:.4g}-{d['split']['heldout'][1]:.4g} s (not used for fitting).",
+        "",
+    ]
     return lines
 
 
@@ -322,27 +432,42 @@ def _evidence_lines(d: dict) -> list[str]:
     lines: list[str] = []
     if d.get("learned_force"):
         st = d.get("structure") or {}
-        lines += ["A learned force f(x, x') (a small network in the equation of motion, trained in PIDynNet's physics "
-                  "loss from the force the model could not explain) was added"
-                  + (f"; a generic f(x, x') removes {st['cv_gain']:.2f} of the residual in cross-validation"
-                     if st.get("cv_gain") is not None else "")
-                  + ". Compare it with the unexplained force in `figures/learned_force.png` before naming a cause.", ""]
+        lines += [
+            "A learned force f(x, x') (a small network in the equation of motion, trained in PIDynNet's physics "
+            "loss from the force the model could not explain) was added"
+            + (
+                f"; a generic f(x, x') removes {st['cv_gain']:.2f} of the residual in cross-validation"
+                if st.get("cv_gain") is not None
+                else ""
+            )
+            + ". Compare it with the unexplained force in `figures/learned_force.png` before naming a cause.",
+            "",
+        ]
         lf = d.get("learned_fit")
         if lf:
-            lines += ["After PIDynNet, the network and the physical parameters were trained further on the simulated "
-                      "response of the fitting part (a free simulation is what the held-out comparison measures): "
-                      f"{lf['segments']} segments of {lf['segment_seconds']:.3g} s, {lf['evaluations']} evaluations, "
-                      f"{lf['seconds']:.1f} s; segment loss {lf['loss_before']:.3g} -> {lf['loss_after']:.3g} "
-                      "(mean squared error over the response's variance).", ""]
+            lines += [
+                "After PIDynNet, the network and the physical parameters were trained further on the simulated "
+                "response of the fitting part (a free simulation is what the held-out comparison measures): "
+                f"{lf['segments']} segments of {lf['segment_seconds']:.3g} s, {lf['evaluations']} evaluations, "
+                f"{lf['seconds']:.1f} s; segment loss {lf['loss_before']:.3g} -> {lf['loss_after']:.3g} "
+                "(mean squared error over the response's variance).",
+                "",
+            ]
     refused = d.get("learned_force_refused")
     if refused:
-        lines += [f"A learned force f(x, x') was tried ({refused['folder']}/) and not kept: {refused['note']}. What "
-                  "the model misses is structured, but neither the library nor a network of x and x' trained on the "
-                  "fitting part predicts it; the model below is the one it would have extended.", ""]
+        lines += [
+            f"A learned force f(x, x') was tried ({refused['folder']}/) and not kept: {refused['note']}. What "
+            "the model misses is structured, but neither the library nor a network of x and x' trained on the "
+            "fitting part predicts it; the model below is the one it would have extended.",
+            "",
+        ]
     pair = (d.get("structure") or {}).get("pair")
     if pair:
-        lines += [f"Two effects at once: {pair['why']}. {pair['lead']} was named first; the screening of the model "
-                  "extended with it had to find the other on its own.", ""]
+        lines += [
+            f"Two effects at once: {pair['why']}. {pair['lead']} was named first; the screening of the model "
+            "extended with it had to find the other on its own.",
+            "",
+        ]
     hc = d.get("heldout_check")
     if hc and hc.get("ratio") is None:  # not judged: the check's own sentence says why
         from pidyn.discrepancy.changes import HeldoutCheck
@@ -350,25 +475,41 @@ def _evidence_lines(d: dict) -> list[str]:
         why = HeldoutCheck(**hc).sentence()
         lines += [f"{why[0].upper()}{why[1:]}.", ""]
     elif hc:
-        lines += [f"Held-out check: simulation error above the noise {hc['nrmse_heldout']:.3g} of the signal on the "
-                  f"held-out part against {hc['nrmse_fit']:.3g} on the fitting part (ratio {hc['ratio']:.3g}; "
-                  f"{'beyond' if hc['failed'] else 'within'} the threshold {hc['threshold']:g}).", ""]
+        lines += [
+            f"Held-out check: simulation error above the noise {hc['nrmse_heldout']:.3g} of the signal on the "
+            f"held-out part against {hc['nrmse_fit']:.3g} on the fitting part (ratio {hc['ratio']:.3g}; "
+            f"{'beyond' if hc['failed'] else 'within'} the threshold {hc['threshold']:g}).",
+            "",
+        ]
     ch = d.get("change")
     if ch:
         what = "stiffness" if ch["effect"] == "stiffness_loss" else "damping"
-        lines += ["## Change in time", "",
-                  f"The model held until t = {ch['t_change']:.2f} s (95 % interval {ch['t_change_ci95'][0]:.2f}-"
-                  f"{ch['t_change_ci95'][1]:.2f} s, from the profile of the weak-form residual over the change time); "
-                  f"then the {what} `{ch['parameter']}` changed by {100 * ch['fraction']:+.1f} % (screening estimate; "
-                  "the extended model's estimate is below).", ""]
+        lines += [
+            "## Change in time",
+            "",
+            f"The model held until t = {ch['t_change']:.2f} s (95 % interval {ch['t_change_ci95'][0]:.2f}-"
+            f"{ch['t_change_ci95'][1]:.2f} s, from the profile of the weak-form residual over the change time); "
+            f"then the {what} `{ch['parameter']}` changed by {100 * ch['fraction']:+.1f} % (screening estimate; "
+            "the extended model's estimate is below).",
+            "",
+        ]
     if d.get("parameters"):
-        lines += ["Estimated effect parameters: " + ", ".join(f"{k} = {_num(v) if not isinstance(v, list) else '[' + ', '.join(_num(u) for u in v) + ']'}"
-                                                          for k, v in d["parameters"].items()), ""]
+        lines += [
+            "Estimated effect parameters: "
+            + ", ".join(
+                f"{k} = {_num(v) if not isinstance(v, list) else '[' + ', '.join(_num(u) for u in v) + ']'}"
+                for k, v in d["parameters"].items()
+            ),
+            "",
+        ]
     if d.get("hidden"):
         h = d["hidden"]
         if h.get("effect"):
-            lines += [f"Hidden in the data (simulated): `{h['effect']}` "
-                      + ", ".join(f"{k} = {v:.5g}" for k, v in (h["parameters"] or {}).items()), ""]
+            lines += [
+                f"Hidden in the data (simulated): `{h['effect']}` "
+                + ", ".join(f"{k} = {v:.5g}" for k, v in (h["parameters"] or {}).items()),
+                "",
+            ]
         else:
             lines += ["Hidden in the data (simulated): nothing; the nominal model is the truth.", ""]
     return lines
@@ -377,45 +518,66 @@ def _evidence_lines(d: dict) -> list[str]:
 def _confirmation_lines(d: dict) -> list[str]:
     """The output-error check of the effects a screening leaned to without deciding."""
     checks = [("nominal model", d.get("confirmation"))]
-    checks += [(f"after step {st['step']} ({st['effect']})", st.get("next_confirmation")) for st in d.get("steps") or []]
+    checks += [
+        (f"after step {st['step']} ({st['effect']})", st.get("next_confirmation"))
+        for st in d.get("steps") or []
+    ]
     checks = [(where, rows) for where, rows in checks if rows]
     if not checks:
         return []
-    lines = ["## Output-error check", "",
-             "Effects the weak-form screening leaned to (0 < score < threshold) without deciding, fitted by output error "
-             "with the model and compared on the simulated response: -dBIC over the residual's independent samples, "
-             "held-out gain = share of the held-out simulation error removed; of those that pass, the best is named.", "",
-             "| model | effect | weak-form score | -dBIC (output error) | independent samples | held-out gain | passes | estimate |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "## Output-error check",
+        "",
+        "Effects the weak-form screening leaned to (0 < score < threshold) without deciding, fitted by output error "
+        "with the model and compared on the simulated response: -dBIC over the residual's independent samples, "
+        "held-out gain = share of the held-out simulation error removed; of those that pass, the best is named.",
+        "",
+        "| model | effect | weak-form score | -dBIC (output error) | independent samples | held-out gain | passes | estimate |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for where, rows in checks:
         for r in rows:
             est = ", ".join(f"{k}={v:.4g}" for k, v in (r.get("parameters") or {}).items())
-            lines.append(f"| {where} | {r['effect']} | {_num(r.get('weak_form_score'))} | {_num(r.get('score'))} | "
-                         f"{_num(r.get('independent_samples'))} | {_num(r.get('heldout_gain'))} | "
-                         f"{'yes' if r.get('passes') else 'no'} | {est or r.get('error', '')} |")
+            lines.append(
+                f"| {where} | {r['effect']} | {_num(r.get('weak_form_score'))} | {_num(r.get('score'))} | "
+                f"{_num(r.get('independent_samples'))} | {_num(r.get('heldout_gain'))} | "
+                f"{'yes' if r.get('passes') else 'no'} | {est or r.get('error', '')} |"
+            )
     return lines + [""]
 
 
 def _ranking_lines(d: dict) -> list[str]:
     """The ranking of the library effects and the thresholds they are held to."""
     lines: list[str] = []
-    lines += ["## Ranking of the candidate effects", "",
-              "score = -dBIC (weak-form equation error, fitting part); explained = share of the nominal residual "
-              "removed; CV gain = share removed in blocked cross-validation over the fitting part; held-out gain = share "
-              "removed on the held-out rows with coefficients from the fitting part.", "",
-              "| effect | score | explained | CV gain | held-out gain | passes | estimate |", "|---|---|---|---|---|---|---|"]
+    lines += [
+        "## Ranking of the candidate effects",
+        "",
+        "score = -dBIC (weak-form equation error, fitting part); explained = share of the nominal residual "
+        "removed; CV gain = share removed in blocked cross-validation over the fitting part; held-out gain = share "
+        "removed on the held-out rows with coefficients from the fitting part.",
+        "",
+        "| effect | score | explained | CV gain | held-out gain | passes | estimate |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for r in d["ranking"]:
         est = ", ".join(f"{k}={v:.4g}" for k, v in (r.get("parameters") or {}).items())
-        lines.append(f"| {r['effect']} | {_num(r.get('score'))} | {_num(r.get('explained'))} | "
-                     f"{_num(r.get('cv_gain'))} | {_num(r.get('heldout_gain'))} | {'yes' if r.get('passes') else 'no'} | {est or r.get('note', '')} |")
+        lines.append(
+            f"| {r['effect']} | {_num(r.get('score'))} | {_num(r.get('explained'))} | "
+            f"{_num(r.get('cv_gain'))} | {_num(r.get('heldout_gain'))} | {'yes' if r.get('passes') else 'no'} | {est or r.get('note', '')} |"
+        )
     th = d["thresholds"]
-    lines += ["", f"An effect counts when -dBIC >= {th['min_delta_bic']:g}, CV gain >= "
-              f"{th['min_cv_gain']:g} and it removes at least {th['min_force_share']:g} of the force variance.", ""]
+    lines += [
+        "",
+        f"An effect counts when -dBIC >= {th['min_delta_bic']:g}, CV gain >= "
+        f"{th['min_cv_gain']:g} and it removes at least {th['min_force_share']:g} of the force variance.",
+        "",
+    ]
     return lines
 
 
-def plot_running_period(path: Path, running: dict, fit, held, signal: tuple | None = None,
-                        nominal_period: float | None = None) -> None:
+def plot_running_period(
+    path: Path, running: dict, fit, held, signal: tuple | None = None, nominal_period: float | None = None
+) -> None:
     """Period and damping ratio window by window (output error on the sensors' readings), each with
     its 95 % interval, over the motion's envelope."""
     import numpy as np
@@ -423,12 +585,22 @@ def plot_running_period(path: Path, running: dict, fit, held, signal: tuple | No
     plt = _plt()
     t = np.asarray(running["t"])
     fig, axes = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True)
-    for ax, key, label, scale in ((axes[0], "period", "period [s]", 1.0),
-                                  (axes[1], "damping", "damping ratio [%]", 100.0)):
+    for ax, key, label, scale in (
+        (axes[0], "period", "period [s]", 1.0),
+        (axes[1], "damping", "damping ratio [%]", 100.0),
+    ):
         _shade(ax, fit, held)
-        ax.fill_between(t, scale * np.asarray(running[f"{key}_lo"]), scale * np.asarray(running[f"{key}_hi"]),
-                        color="tab:blue", alpha=0.25, label="95 % interval")
-        ax.plot(t, scale * np.asarray(running[key]), marker=".", color="tab:blue", lw=1.2, label=f"running {key}")
+        ax.fill_between(
+            t,
+            scale * np.asarray(running[f"{key}_lo"]),
+            scale * np.asarray(running[f"{key}_hi"]),
+            color="tab:blue",
+            alpha=0.25,
+            label="95 % interval",
+        )
+        ax.plot(
+            t, scale * np.asarray(running[key]), marker=".", color="tab:blue", lw=1.2, label=f"running {key}"
+        )
         ax.set_ylabel(label)
         if signal is not None:
             b = ax.twinx()

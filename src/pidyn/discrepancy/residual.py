@@ -36,7 +36,12 @@ def band_limited(y: np.ndarray, dt: float, f_cut: float) -> tuple[np.ndarray, np
 
 
 def unexplained_force(
-    system: SDOFSystem, values: dict[str, float], t: np.ndarray, x: np.ndarray, f: np.ndarray, period: float,
+    system: SDOFSystem,
+    values: dict[str, float],
+    t: np.ndarray,
+    x: np.ndarray,
+    f: np.ndarray,
+    period: float,
 ) -> dict[str, np.ndarray]:
     """r(t) = excitation force - m x'' - nominal restoring force(x, x'), sample by sample.
 

@@ -28,8 +28,9 @@ log = logging.getLogger(__name__)
 Z95 = 1.959963984540054
 
 
-def running_modes(record, system, values: dict[str, float], width: float, step: float | None = None,
-                  substeps: int = 4) -> dict[str, np.ndarray]:
+def running_modes(
+    record, system, values: dict[str, float], width: float, step: float | None = None, substeps: int = 4
+) -> dict[str, np.ndarray]:
     """Windows of ``width`` s every ``step`` s (default a quarter width): their centre ``t``,
     ``period`` and ``damping`` with ``period_lo/hi`` and ``damping_lo/hi`` (95 %), and the peak
     of the first measured channel there (``peak``). A window whose fit fails gives NaN."""
@@ -38,23 +39,29 @@ def running_modes(record, system, values: dict[str, float], width: float, step: 
         raise ValueError(f"{system.name}: a running period needs one stiffness and one damping parameter")
     k_name, c_name = ks[0], cs[0]
     local = copy.copy(system)
-    local._specs = merge_specs(system.param_specs(), {n: {"trainable": n in (k_name, c_name),
-                                                          **({"init": float(values[n])} if n in values else {})}
-                                                      for n in (s.name for s in system.param_specs())})
+    local._specs = merge_specs(
+        system.param_specs(),
+        {
+            n: {"trainable": n in (k_name, c_name), **({"init": float(values[n])} if n in values else {})}
+            for n in (s.name for s in system.param_specs())
+        },
+    )
     step = width / 4 if step is None else step
     t = record.t
     dt = float(t[1] - t[0])
     n_win = max(2, int(round(width / dt)))
     starts = np.arange(0, len(t) - n_win, max(1, int(round(step / dt))))
     channels = record_channels(record, system.n_dof)
-    rows = {key: np.full(len(starts), np.nan) for key in
-            ("t", "period", "period_lo", "period_hi", "damping", "damping_lo", "damping_hi", "peak")}
+    rows = {
+        key: np.full(len(starts), np.nan)
+        for key in ("t", "period", "period_lo", "period_hi", "damping", "damping_lo", "damping_hi", "peak")
+    }
     m = float(values.get("m", 1.0))
     theta = to_theta([s for s in local.param_specs() if s.trainable], values)
     for i, i0 in enumerate(starts):
         i1 = i0 + n_win
         rows["t"][i] = 0.5 * (t[i0] + t[i1])
-        rows["peak"][i] = float(np.nanmax(np.abs(channels[0].data[i0:i1 + 1])))
+        rows["peak"][i] = float(np.nanmax(np.abs(channels[0].data[i0 : i1 + 1])))
         try:
             res = _window_fit(local, t, record.f, channels, i0, i1, theta, substeps)
         except (ValueError, np.linalg.LinAlgError, FloatingPointError):
@@ -69,20 +76,29 @@ def running_modes(record, system, values: dict[str, float], width: float, step: 
         rho = cov[0, 1] / max(sk * sc, 1e-300)
         period = 2 * np.pi * np.sqrt(m / k)
         rows["period"][i] = period
-        rows["period_lo"][i], rows["period_hi"][i] = period * np.exp(-0.5 * Z95 * sk), period * np.exp(0.5 * Z95 * sk)
+        rows["period_lo"][i], rows["period_hi"][i] = (
+            period * np.exp(-0.5 * Z95 * sk),
+            period * np.exp(0.5 * Z95 * sk),
+        )
         zeta = c / (2 * np.sqrt(k * m))
         s_log_zeta = np.sqrt(max(sc**2 + 0.25 * sk**2 - rho * sc * sk, 0.0))
         rows["damping"][i] = zeta
-        rows["damping_lo"][i], rows["damping_hi"][i] = zeta * np.exp(-Z95 * s_log_zeta), zeta * np.exp(Z95 * s_log_zeta)
+        rows["damping_lo"][i], rows["damping_hi"][i] = (
+            zeta * np.exp(-Z95 * s_log_zeta),
+            zeta * np.exp(Z95 * s_log_zeta),
+        )
     return rows
 
 
 def _window_fit(system, t, f, channels, i0: int, i1: int, theta0: np.ndarray, substeps: int):
     """(k, c) and their covariance in log coordinates on samples i0..i1, the window's initial state free."""
-    seg_channels = [type(ch)(ch.kind, ch.dof, ch.data[i0:i1 + 1], max(float(np.nanstd(ch.data[i0:i1 + 1])), 1e-300))
-                    for ch in channels]
-    problem = ShootingProblem(system, t[i0:i1 + 1], np.asarray(f)[i0:i1 + 1], seg_channels, np.array([0, i1 - i0]),
-                              substeps)
+    seg_channels = [
+        type(ch)(ch.kind, ch.dof, ch.data[i0 : i1 + 1], max(float(np.nanstd(ch.data[i0 : i1 + 1])), 1e-300))
+        for ch in channels
+    ]
+    problem = ShootingProblem(
+        system, t[i0 : i1 + 1], np.asarray(f)[i0 : i1 + 1], seg_channels, np.array([0, i1 - i0]), substeps
+    )
     u0 = np.concatenate([theta0, np.zeros(problem.ns)])
 
     def fun(u):
@@ -96,7 +112,7 @@ def _window_fit(system, t, f, channels, i0: int, i1: int, theta0: np.ndarray, su
     dof = max(len(r) - len(sol.x), 1)
     cov = np.linalg.pinv(J.T @ J) * float(r @ r) / dof
     names = problem.names
-    vals = problem.values(sol.x[:problem.n_theta])
+    vals = problem.values(sol.x[: problem.n_theta])
     ik, ic = names.index(_name(system, "k")), names.index(_name(system, "c"))
     cov_kc = cov[np.ix_([ik, ic], [ik, ic])]
     return (vals[names[ik]], vals[names[ic]]), cov_kc
@@ -121,13 +137,27 @@ def period_varies(running: dict, width: float, margin: float = 0.03, min_peak_sh
             chosen.append(i)
             last = t[i]
     if len(chosen) < 3:
-        return {"varies": False, "windows": len(chosen), "reason": "fewer than 3 independent windows with motion"}
+        return {
+            "varies": False,
+            "windows": len(chosen),
+            "reason": "fewer than 3 independent windows with motion",
+        }
     lo, hi = np.asarray(running["period_lo"])[chosen], np.asarray(running["period_hi"])[chosen]
     i_long, i_short = chosen[int(np.argmax(lo))], chosen[int(np.argmin(hi))]
     gap = float(np.max(lo) - np.min(hi))
     varies = bool(gap > margin * float(np.median(np.asarray(running["period"])[chosen])))
-    return {"varies": varies, "windows": len(chosen), "gap_s": gap,
-            "longest": {"t": float(t[i_long]), "period": float(running["period"][i_long]),
-                        "ci95": [float(running["period_lo"][i_long]), float(running["period_hi"][i_long])]},
-            "shortest": {"t": float(t[i_short]), "period": float(running["period"][i_short]),
-                         "ci95": [float(running["period_lo"][i_short]), float(running["period_hi"][i_short])]}}
+    return {
+        "varies": varies,
+        "windows": len(chosen),
+        "gap_s": gap,
+        "longest": {
+            "t": float(t[i_long]),
+            "period": float(running["period"][i_long]),
+            "ci95": [float(running["period_lo"][i_long]), float(running["period_hi"][i_long])],
+        },
+        "shortest": {
+            "t": float(t[i_short]),
+            "period": float(running["period"][i_short]),
+            "ci95": [float(running["period_lo"][i_short]), float(running["period_hi"][i_short])],
+        },
+    }

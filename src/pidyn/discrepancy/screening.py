@@ -52,9 +52,13 @@ class Thresholds:
     min_delta_bic: float = 10.0  # "very strong" evidence on Kass & Raftery's scale
     min_cv_gain: float = 0.05
     min_force_share: float = 1e-6
-    min_structure_gain: float = 0.3  # a generic f(x, x') removing this share (CV) marks the residual as structured
+    min_structure_gain: float = (
+        0.3  # a generic f(x, x') removing this share (CV) marks the residual as structured
+    )
     min_library_share: float = 0.5  # the named effect must explain this share of what the generic one does
-    pair_margin: float = 2.0  # BIC by which a pair must beat the pairs holding the best single effect ("positive")
+    pair_margin: float = (
+        2.0  # BIC by which a pair must beat the pairs holding the best single effect ("positive")
+    )
     #: a step in time found in the fitting part must persist: its held-out gain may not fall below this
     min_step_heldout_gain: float = -0.1
     #: an effect that makes the held-out prediction worse than this, where a generic f(x, x')
@@ -93,7 +97,9 @@ class Screening:
     structure: dict = field(default_factory=dict)  # how much a generic f(x, x') explains
 
 
-def nominal_columns(system: SDOFSystem, s: Signals, values: dict[str, float]) -> tuple[list[str], np.ndarray, np.ndarray]:
+def nominal_columns(
+    system: SDOFSystem, s: Signals, values: dict[str, float]
+) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Columns for the nominal parameters the force is linear in, and the remaining fixed force."""
     names, cols = [], []
     remainder = np.zeros_like(s.x)
@@ -101,8 +107,9 @@ def nominal_columns(system: SDOFSystem, s: Signals, values: dict[str, float]) ->
         # along the measured signals: a friction found in an earlier step is no sharper than the
         # velocity noise, as in its screening (sharper, noise near rest reads as a damping change)
         if term.n_latent:  # e.g. a hysteresis found in an earlier step: its z along the measured motion
-            remainder = remainder + term.measured_force(s.t, s.x, s.v, latent_path(term, s, values), values,
-                                                        s.v_noise)
+            remainder = remainder + term.measured_force(
+                s.t, s.x, s.v, latent_path(term, s, values), values, s.v_noise
+            )
             continue
         # a stop's kg is refitted too (its gap held): held at the value fitted without the next
         # effect, it keeps what it soaked up of that effect (friction, seen by a gap alone)
@@ -128,14 +135,23 @@ def latent_path(term, s: Signals, values: dict[str, float], substeps: int = 4) -
             x0, v0 = s.x[i] + a * (s.x[i + 1] - s.x[i]), s.v[i] + a * (s.v[i + 1] - s.v[i])
             x1, v1 = s.x[i] + b * (s.x[i + 1] - s.x[i]), s.v[i] + b * (s.v[i + 1] - s.v[i])
             k1 = np.asarray(term.latent_rate(s.t[i], x0, v0, zi, values), float).reshape(term.n_latent)
-            k2 = np.asarray(term.latent_rate(s.t[i], x1, v1, zi + h * k1, values), float).reshape(term.n_latent)
+            k2 = np.asarray(term.latent_rate(s.t[i], x1, v1, zi + h * k1, values), float).reshape(
+                term.n_latent
+            )
             zi = zi + 0.5 * h * (k1 + k2)
         z[i + 1] = zi
     return z
 
 
-def weak_system(system: SDOFSystem, values: dict[str, float], s: Signals, f: np.ndarray, x_raw: np.ndarray,
-                weak: WeakForm, mass_known: bool = True) -> tuple[list[str], np.ndarray, np.ndarray]:
+def weak_system(
+    system: SDOFSystem,
+    values: dict[str, float],
+    s: Signals,
+    f: np.ndarray,
+    x_raw: np.ndarray,
+    weak: WeakForm,
+    mass_known: bool = True,
+) -> tuple[list[str], np.ndarray, np.ndarray]:
     """The nominal model's weak-form regression: parameter names, columns A0 and target y
     (one row per window), so that A0 theta = y holds where the nominal model is right."""
     m = values["m"]
@@ -156,7 +172,9 @@ def _is_linear_only(term) -> bool:
     return {sp.name for sp in term.specs()} == set(term.linear)
 
 
-def lstsq(A: np.ndarray, y: np.ndarray, ridge: np.ndarray | None = None, scale: np.ndarray | None = None) -> np.ndarray:
+def lstsq(
+    A: np.ndarray, y: np.ndarray, ridge: np.ndarray | None = None, scale: np.ndarray | None = None
+) -> np.ndarray:
     """Least squares on unit-norm columns; ``ridge`` (per column, on that scale) damps the
     columns of a flexible basis so that near-collinear ones cannot take huge opposite values.
     ``scale``: fixed column scales (the whole record's), so that a column nearly silent in a
@@ -199,8 +217,19 @@ def screen(
     # every candidate's columns projected once: the single and the pair fits use them all
     projected = {n: [(c, weak.project(c.columns)) for c in e.candidates(s)] for n, e in effects.items()}
     ranking = [_score_effect(eff, projected[n], base, values) for n, eff in effects.items()]
-    structure = _structure(s, weak, base.A0, base.y, base.fit, base.ho, base.folds, base.rss0, base.rss0_cv,
-                           base.rss0_ho, base.n_eff)
+    structure = _structure(
+        s,
+        weak,
+        base.A0,
+        base.y,
+        base.fit,
+        base.ho,
+        base.folds,
+        base.rss0,
+        base.rss0_cv,
+        base.rss0_ho,
+        base.n_eff,
+    )
     ranking.sort(key=lambda r: -np.inf if r["score"] is None else r["score"], reverse=True)
     for r in ranking:
         _mark_fleeting_step(r, th)
@@ -217,8 +246,12 @@ def screen(
         rss_nominal_fit=base.rss0,
         rss_nominal_heldout=base.rss0_ho,
         n_independent=float(base.n_eff),
-        residual_rows={"t": weak.centers, "residual": base.y - base.A0 @ base.theta0, "fit": base.fit,
-                       "heldout": base.ho},
+        residual_rows={
+            "t": weak.centers,
+            "residual": base.y - base.A0 @ base.theta0,
+            "fit": base.fit,
+            "heldout": base.ho,
+        },
         structure=structure,
     )
 
@@ -241,8 +274,16 @@ class _NominalFit:
     n_eff: float  # independent rows
 
 
-def _nominal_fit(system: SDOFSystem, values: dict[str, float], s: Signals, f: np.ndarray, x_raw: np.ndarray,
-                 weak: WeakForm, fit_end: float, mass_known: bool) -> _NominalFit:
+def _nominal_fit(
+    system: SDOFSystem,
+    values: dict[str, float],
+    s: Signals,
+    f: np.ndarray,
+    x_raw: np.ndarray,
+    weak: WeakForm,
+    fit_end: float,
+    mass_known: bool,
+) -> _NominalFit:
     names, A0, y = weak_system(system, values, s, f, x_raw, weak, mass_known)
     starts = weak.starts
     w = 2 * weak.half + 1
@@ -250,26 +291,40 @@ def _nominal_fit(system: SDOFSystem, values: dict[str, float], s: Signals, f: np
     fit = t_last <= fit_end + 1e-9
     ho = t_first >= fit_end - 1e-9
     if fit.sum() < 4:
-        raise ValueError(f"only {int(fit.sum())} weak-form windows fit in the fitting part (0-{fit_end:g} s); "
-                         "use a longer record or a shorter fitting split")
+        raise ValueError(
+            f"only {int(fit.sum())} weak-form windows fit in the fitting part (0-{fit_end:g} s); "
+            "use a longer record or a shorter fitting split"
+        )
     folds = _folds(fit, 5)
     theta0 = lstsq(A0[fit], y[fit])
     r0 = y - A0 @ theta0
-    return _NominalFit(names=names, A0=A0, y=y, fit=fit, ho=ho, folds=folds, theta0=theta0,
-                       rss0=float(np.sum(r0[fit] ** 2)),
-                       rss0_ho=float(np.sum(r0[ho] ** 2)) if ho.any() else None,
-                       rss0_cv=_cv_rss(A0, y, folds), ss_total=float(np.sum(y[fit] ** 2)),
-                       n_eff=max(fit.sum() / weak.rows_per_independent, 2.0))
+    return _NominalFit(
+        names=names,
+        A0=A0,
+        y=y,
+        fit=fit,
+        ho=ho,
+        folds=folds,
+        theta0=theta0,
+        rss0=float(np.sum(r0[fit] ** 2)),
+        rss0_ho=float(np.sum(r0[ho] ** 2)) if ho.any() else None,
+        rss0_cv=_cv_rss(A0, y, folds),
+        ss_total=float(np.sum(y[fit] ** 2)),
+        n_eff=max(fit.sum() / weak.rows_per_independent, 2.0),
+    )
 
 
-def _score_effect(eff: Effect, projected: list[tuple[Candidate, np.ndarray]], base: _NominalFit,
-                  values: dict[str, float]) -> dict:
+def _score_effect(
+    eff: Effect, projected: list[tuple[Candidate, np.ndarray]], base: _NominalFit, values: dict[str, float]
+) -> dict:
     """The effect's best candidate added to the nominal regression: its BIC score, shares of the
     force it explains (in sample, cross-validated, held out) and its parameters."""
     best = None
     for cand, B in projected:
         row = _fit_candidate(cand, base.A0, B, base.y, base.fit, base.ho)
-        if row is not None and not _admissible(eff, cand, list(row["coef"].values()), row["theta"], base, values):
+        if row is not None and not _admissible(
+            eff, cand, list(row["coef"].values()), row["theta"], base, values
+        ):
             row = None
         if row is not None:
             row["B"] = B
@@ -303,15 +358,22 @@ def _score_effect(eff: Effect, projected: list[tuple[Candidate, np.ndarray]], ba
 PAIR_FULL_GRID = 600
 
 
-def _admissible(eff: Effect, cand: Candidate, coef, theta, base: _NominalFit, values: dict[str, float]) -> bool:
+def _admissible(
+    eff: Effect, cand: Candidate, coef, theta, base: _NominalFit, values: dict[str, float]
+) -> bool:
     """The effect's own test of a fit (``Effect.admissible``), on its physical parameters."""
     nominal = {**values, **{n: float(theta[i]) for i, n in enumerate(base.names)}}
     params = eff.parameters(dict(zip(cand.coef_names, map(float, coef))), cand.fixed, nominal)
     return eff.admissible(params, nominal)
 
 
-def _score_pairs(effects: dict[str, Effect], projected: dict[str, list[tuple[Candidate, np.ndarray]]],
-                 ranking: list[dict], base: _NominalFit, values: dict[str, float]) -> list[dict]:
+def _score_pairs(
+    effects: dict[str, Effect],
+    projected: dict[str, list[tuple[Candidate, np.ndarray]]],
+    ranking: list[dict],
+    base: _NominalFit,
+    values: dict[str, float],
+) -> list[dict]:
     """Every pair of effects fitted jointly with the nominal parameters, best first."""
     fitted = {r["effect"] for r in ranking if r.get("score") is not None}
     cols = {n: c for n, c in projected.items() if n in fitted}
@@ -319,14 +381,20 @@ def _score_pairs(effects: dict[str, Effect], projected: dict[str, list[tuple[Can
     def rss(a: str, b: str, i: int, j: int) -> float:
         (ca, Ba), (cb, Bb) = cols[a][i], cols[b][j]
         names = tuple(f"{a}.{n}" for n in ca.coef_names) + tuple(f"{b}.{n}" for n in cb.coef_names)
-        both = Candidate(f"{a}+{b}", np.empty((0, 0)), names,
-                         positive=(ca.positive or (False,) * Ba.shape[1]) + (cb.positive or (False,) * Bb.shape[1]))
+        both = Candidate(
+            f"{a}+{b}",
+            np.empty((0, 0)),
+            names,
+            positive=(ca.positive or (False,) * Ba.shape[1]) + (cb.positive or (False,) * Bb.shape[1]),
+        )
         row = _fit_candidate(both, base.A0, np.column_stack([Ba, Bb]), base.y, base.fit, base.ho)
         if row is None:  # a coefficient of the wrong sign
             return np.inf
         coef, theta = list(row["coef"].values()), row["theta"]
-        if not (_admissible(effects[a], ca, coef[:Ba.shape[1]], theta, base, values)
-                and _admissible(effects[b], cb, coef[Ba.shape[1]:], theta, base, values)):
+        if not (
+            _admissible(effects[a], ca, coef[: Ba.shape[1]], theta, base, values)
+            and _admissible(effects[b], cb, coef[Ba.shape[1] :], theta, base, values)
+        ):
             return np.inf
         return row["rss_fit"]
 
@@ -348,10 +416,17 @@ def _score_pairs(effects: dict[str, Effect], projected: dict[str, list[tuple[Can
         k = sum(len(cols[e][q][0].coef_names) + effects[e].n_grid for e, q in ((a, i), (b, j)))
         delta_bic = base.n_eff * np.log(max(best, 1e-300) / max(base.rss0, 1e-300)) + k * np.log(base.n_eff)
         A = np.column_stack([base.A0, cols[a][i][1], cols[b][j][1]])
-        out.append({"effects": [a, b], "score": float(-delta_bic), "delta_bic": float(delta_bic),
-                    "explained": float(1 - best / max(base.rss0, 1e-300)),
-                    "cv_gain": float(1 - _cv_rss(A, base.y, base.folds, n_fixed=base.A0.shape[1])
-                                                  / max(base.rss0_cv, 1e-300))})
+        out.append(
+            {
+                "effects": [a, b],
+                "score": float(-delta_bic),
+                "delta_bic": float(delta_bic),
+                "explained": float(1 - best / max(base.rss0, 1e-300)),
+                "cv_gain": float(
+                    1 - _cv_rss(A, base.y, base.folds, n_fixed=base.A0.shape[1]) / max(base.rss0_cv, 1e-300)
+                ),
+            }
+        )
     out.sort(key=lambda p: p["score"], reverse=True)
     return out
 
@@ -373,19 +448,24 @@ def _pair_lead(ranking: list[dict], pairs: list[dict], structure: dict, th: Thre
     a, b = best["effects"]
     if best["delta_bic"] > -th.min_delta_bic or best["cv_gain"] < th.min_cv_gain:
         return None
-    if structure.get("cv_gain") is not None and structure["cv_gain"] >= th.min_structure_gain \
-            and best["cv_gain"] < th.min_library_share * structure["cv_gain"]:
+    if (
+        structure.get("cv_gain") is not None
+        and structure["cv_gain"] >= th.min_structure_gain
+        and best["cv_gain"] < th.min_library_share * structure["cv_gain"]
+    ):
         return None  # the pair, too, explains only a small part of a clearly structured residual
     with_top = [p["score"] for p in pairs if top in p["effects"]]
     if top not in (a, b):
         rival = max(with_top) if with_top else -np.inf
         if best["score"] - rival < th.pair_margin or best["score"] - s_top < th.pair_margin:
             return None
-        why = (f"{a} and {b} together score {best['score']:.1f}, more than {top} with any partner "
-               f"({rival:.1f}) or alone ({s_top:.1f}): {top} stood in for them")
+        why = (
+            f"{a} and {b} together score {best['score']:.1f}, more than {top} with any partner "
+            f"({rival:.1f}) or alone ({s_top:.1f}): {top} stood in for them"
+        )
     elif not ranking[0]["passes"] and best["score"] - s_top >= th.min_delta_bic:
         other = b if a == top else a
-        why = (f"{top} alone scores {s_top:.1f}, with {other} {best['score']:.1f}: the two are needed together")
+        why = f"{top} alone scores {s_top:.1f}, with {other} {best['score']:.1f}: the two are needed together"
     else:
         return None
     lead = max((a, b), key=lambda e: singles[e])
@@ -406,16 +486,20 @@ def _verdict(ranking: list[dict], structure: dict, th: Thresholds) -> tuple[str,
     if found and structured and top["cv_gain"] < th.min_library_share * structure["cv_gain"]:
         # the best library effect explains only a small part of a clearly structured residual:
         # naming it would be naming the wrong thing
-        structure["note"] = (f"{top['effect']} passes but explains {top['cv_gain']:.2f} of the residual in "
-                             f"cross-validation against {structure['cv_gain']:.2f} for a generic f(x, x')")
+        structure["note"] = (
+            f"{top['effect']} passes but explains {top['cv_gain']:.2f} of the residual in "
+            f"cross-validation against {structure['cv_gain']:.2f} for a generic f(x, x')"
+        )
         found = False
     if found:
         rival = _tie_break(ranking, th)
         if rival is not None:
-            structure["tie_break"] = (f"{rival['effect']} (score {rival['score']:.1f}, cross-validation gain "
-                                      f"{rival['cv_gain']:.2f}) named before {top['effect']} ({top['score']:.1f}, "
-                                      f"{top['cv_gain']:.2f}): BIC does not decide between them, "
-                                      "cross-validation does")
+            structure["tie_break"] = (
+                f"{rival['effect']} (score {rival['score']:.1f}, cross-validation gain "
+                f"{rival['cv_gain']:.2f}) named before {top['effect']} ({top['score']:.1f}, "
+                f"{top['cv_gain']:.2f}): BIC does not decide between them, "
+                "cross-validation does"
+            )
             return "discrepancy", rival["effect"]
         return "discrepancy", top["effect"]
     return ("unexplained" if structured else "none"), None
@@ -445,11 +529,13 @@ def _structure(s: Signals, weak: WeakForm, A0, y, fit, ho, folds, rss0, rss0_cv,
     theta = lstsq(A[fit], y[fit], ridge)
     r = y - A @ theta
     rss = max(float(np.sum(r[fit] ** 2)), 1e-300)
-    return {"cv_gain": float(1 - _cv_rss(A, y, folds, ridge) / max(rss0_cv, 1e-300)),
-            "explained": float(1 - rss / max(rss0, 1e-300)),
-            "delta_bic": float(n_eff * np.log(rss / max(rss0, 1e-300)) + G.shape[1] * np.log(n_eff)),
-            "heldout_gain": None if rss0_ho is None else float(1 - np.sum(r[ho] ** 2) / max(rss0_ho, 1e-300)),
-            "columns": int(G.shape[1])}
+    return {
+        "cv_gain": float(1 - _cv_rss(A, y, folds, ridge) / max(rss0_cv, 1e-300)),
+        "explained": float(1 - rss / max(rss0, 1e-300)),
+        "delta_bic": float(n_eff * np.log(rss / max(rss0, 1e-300)) + G.shape[1] * np.log(n_eff)),
+        "heldout_gain": None if rss0_ho is None else float(1 - np.sum(r[ho] ** 2) / max(rss0_ho, 1e-300)),
+        "columns": int(G.shape[1]),
+    }
 
 
 def _mark_fleeting_step(r: dict, th: Thresholds) -> None:
@@ -457,8 +543,10 @@ def _mark_fleeting_step(r: dict, th: Thresholds) -> None:
     lower only in the strong motion is one that depends on the amplitude (softening), not damage."""
     if r.get("step_in_time") and not th.step_persists(r.get("heldout_gain")):
         r["persists"] = False
-        r["note"] = (f"a step at t = {r['parameters'].get('t_d', float('nan')):.2f} s that does not persist: "
-                     f"held-out gain {r['heldout_gain']:.2f}")
+        r["note"] = (
+            f"a step at t = {r['parameters'].get('t_d', float('nan')):.2f} s that does not persist: "
+            f"held-out gain {r['heldout_gain']:.2f}"
+        )
 
 
 def _mark_heldout_miss(r: dict, structure: dict, th: Thresholds) -> None:
@@ -476,12 +564,16 @@ def _mark_heldout_miss(r: dict, structure: dict, th: Thresholds) -> None:
         return
     if ho < th.min_heldout_gain:
         r["heldout_miss"] = True
-        r["note"] = (f"held-out gain {ho:.2f} against {generic:.2f} for a generic f(x, x'): "
-                     "it does not predict the rows no fit used")
+        r["note"] = (
+            f"held-out gain {ho:.2f} against {generic:.2f} for a generic f(x, x'): "
+            "it does not predict the rows no fit used"
+        )
     elif ho < th.min_heldout_share * generic:
         r["heldout_small"] = True
-        r["note"] = (f"held-out gain {ho:.2f} against {generic:.2f} for a generic f(x, x'): "
-                     "it explains almost none of the structure in the rows no fit used")
+        r["note"] = (
+            f"held-out gain {ho:.2f} against {generic:.2f} for a generic f(x, x'): "
+            "it explains almost none of the structure in the rows no fit used"
+        )
 
 
 def _tie_break(ranking: list[dict], th: Thresholds) -> dict | None:
@@ -491,16 +583,27 @@ def _tie_break(ranking: list[dict], th: Thresholds) -> dict | None:
     if len(passing) < 2 or passing[0] is not ranking[0]:
         return None
     top = passing[0]
-    rivals = [r for r in passing[1:] if top["score"] - r["score"] < th.tie_delta_bic
-              and r["cv_gain"] - top["cv_gain"] >= th.tie_cv_margin]
+    rivals = [
+        r
+        for r in passing[1:]
+        if top["score"] - r["score"] < th.tie_delta_bic and r["cv_gain"] - top["cv_gain"] >= th.tie_cv_margin
+    ]
     return max(rivals, key=lambda r: r["cv_gain"]) if rivals else None
 
 
 def _passes(r: dict, th: Thresholds) -> bool:
-    if r.get("score") is None or r.get("persists") is False or r.get("heldout_miss") or r.get("heldout_small"):
+    if (
+        r.get("score") is None
+        or r.get("persists") is False
+        or r.get("heldout_miss")
+        or r.get("heldout_small")
+    ):
         return False
-    return (r["delta_bic"] <= -th.min_delta_bic and r["force_share"] >= th.min_force_share
-            and r["cv_gain"] >= th.min_cv_gain)
+    return (
+        r["delta_bic"] <= -th.min_delta_bic
+        and r["force_share"] >= th.min_force_share
+        and r["cv_gain"] >= th.min_cv_gain
+    )
 
 
 def _folds(fit: np.ndarray, k: int) -> list[np.ndarray]:
@@ -519,8 +622,13 @@ def _folds(fit: np.ndarray, k: int) -> list[np.ndarray]:
 CV_MIN_TRAIN_SHARE = 1e-3
 
 
-def _cv_rss(A: np.ndarray, y: np.ndarray, folds: list[np.ndarray], ridge: np.ndarray | None = None,
-            n_fixed: int | None = None) -> float:
+def _cv_rss(
+    A: np.ndarray,
+    y: np.ndarray,
+    folds: list[np.ndarray],
+    ridge: np.ndarray | None = None,
+    n_fixed: int | None = None,
+) -> float:
     """Residual sum of squares of each block predicted from the others.
 
     Without a ridge, a column after the first ``n_fixed`` (the nominal ones, always kept;
@@ -538,8 +646,12 @@ def _cv_rss(A: np.ndarray, y: np.ndarray, folds: list[np.ndarray], ridge: np.nda
         if ridge is None and n_fixed is not None:
             share = (A[train] ** 2).sum(0) / np.where(energy > 0, energy, 1.0)
             cols = cols[(cols < n_fixed) | (share >= CV_MIN_TRAIN_SHARE)]
-        theta = lstsq(A[train][:, cols], y[train], None if ridge is None else ridge[cols],
-                      None if scale is None else scale[cols])
+        theta = lstsq(
+            A[train][:, cols],
+            y[train],
+            None if ridge is None else ridge[cols],
+            None if scale is None else scale[cols],
+        )
         total += float(np.sum((y[test] - A[test][:, cols] @ theta) ** 2))
     return total
 
@@ -547,7 +659,7 @@ def _cv_rss(A: np.ndarray, y: np.ndarray, folds: list[np.ndarray], ridge: np.nda
 def _fit_candidate(cand: Candidate, A0, B, y, fit, ho) -> dict | None:
     A = np.column_stack([A0, B])
     theta = lstsq(A[fit], y[fit])
-    coef = theta[A0.shape[1]:]
+    coef = theta[A0.shape[1] :]
     pos = cand.positive or (False,) * len(coef)
     if any(p and c <= 0 for p, c in zip(pos, coef)):
         return None

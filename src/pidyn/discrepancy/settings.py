@@ -4,8 +4,9 @@ mirrors them; ``tests/test_settings_source.py`` checks that the two agree)."""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 from pidyn.discrepancy.screening import Thresholds
 
@@ -60,11 +61,15 @@ class DiagnosisSettings:
             raise ValueError(f"diagnosis.max_effects must be >= 1, got {self.max_effects}")
 
     @classmethod
-    def from_mapping(cls, node: Mapping[str, Any] | None) -> "DiagnosisSettings":
+    def from_mapping(cls, node: Mapping[str, Any] | None) -> DiagnosisSettings:
         """From the config's ``diagnosis`` node (a plain mapping); an unknown key fails, naming the known ones."""
         node = dict(node or {})
-        nested = {"learned": LearnedSettings, "confirm": ConfirmSettings, "changes": ChangeSettings,
-                  "thresholds": Thresholds}
+        nested = {
+            "learned": LearnedSettings,
+            "confirm": ConfirmSettings,
+            "changes": ChangeSettings,
+            "thresholds": Thresholds,
+        }
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = set(node) - known
         if unknown:
@@ -77,7 +82,9 @@ class DiagnosisSettings:
             sub_known = {f.name for f in dataclasses.fields(sub)}
             bad = set(value) - sub_known
             if bad:
-                raise ValueError(f"diagnosis.{key}: unknown setting(s) {sorted(bad)}; known: {sorted(sub_known)}")
+                raise ValueError(
+                    f"diagnosis.{key}: unknown setting(s) {sorted(bad)}; known: {sorted(sub_known)}"
+                )
             node[key] = sub(**dict(value))
         if node.get("effects") is not None:
             node["effects"] = list(node["effects"])

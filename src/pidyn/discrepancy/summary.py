@@ -12,8 +12,14 @@ from pidyn.discrepancy.changes import running_estimate
 from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.learned_fit import LEARNED
 from pidyn.discrepancy.pipeline import Case, Outcome
-from pidyn.discrepancy.report import (plot_learned_force, plot_ranking, plot_residual, plot_response,
-                                      plot_running_estimate, write_report)
+from pidyn.discrepancy.report import (
+    plot_learned_force,
+    plot_ranking,
+    plot_residual,
+    plot_response,
+    plot_running_estimate,
+    write_report,
+)
 from pidyn.discrepancy.residual import band_limited
 from pidyn.discrepancy.screening import weak_system
 from pidyn.reporting import nrmse
@@ -23,8 +29,11 @@ from pidyn.systems.sdof import SDOFSystem
 def summarize(case: Case, o: Outcome) -> dict[str, Any]:
     """The content of diagnosis.json: verdict, causes, evidence, parameters, held-out gain."""
     record, held_mask, nom, ext = case.record, case.mask(case.held), o.nominal, o.extension
-    gain = {"metric": "heldout_nrmse_x", "nominal": nrmse(o.x_nom[held_mask], case.x_raw[held_mask]),
-            "extended": None if o.x_ext is None else nrmse(o.x_ext[held_mask], case.x_raw[held_mask])}
+    gain = {
+        "metric": "heldout_nrmse_x",
+        "nominal": nrmse(o.x_nom[held_mask], case.x_raw[held_mask]),
+        "extended": None if o.x_ext is None else nrmse(o.x_ext[held_mask], case.x_raw[held_mask]),
+    }
     if record.clean is not None:
         xc = record.clean.x[:, 0]
         gain["nominal_vs_clean"] = nrmse(o.x_nom[held_mask], xc[held_mask])
@@ -46,9 +55,18 @@ def summarize(case: Case, o: Outcome) -> dict[str, Any]:
         effect_params["t_change_ci95"] = list(ch.ci95)
     sc, check = o.screening, o.check
     varies = bool(((o.running or {}).get("variation") or {}).get("varies"))
-    structured = (check.failed or varies) if case.from_accelerometers else (check.failed or sc.verdict == "unexplained")
-    verdict = ("discrepancy" if causes or (o.cause is not None and o.cause != LEARNED) else
-               "unexplained" if learned or structured else "none")
+    structured = (
+        (check.failed or varies)
+        if case.from_accelerometers
+        else (check.failed or sc.verdict == "unexplained")
+    )
+    verdict = (
+        "discrepancy"
+        if causes or (o.cause is not None and o.cause != LEARNED)
+        else "unexplained"
+        if learned or structured
+        else "none"
+    )
     truth = dict(record.meta.get("hidden_params") or {}) if "hidden_effect" in record.meta else None
     return {
         "nominal": nom.system.describe(nom.values),
@@ -74,10 +92,16 @@ def summarize(case: Case, o: Outcome) -> dict[str, Any]:
         "thresholds": dataclasses.asdict(case.thresholds),
         "polish": {"nominal": nom.polish_note, "extended": ext["note"]},
         "learned_fit": ext.get("learned_fit"),
-        "pidynnet": {"nominal_errors_pct": nom.metrics.get("error_pct"),
-                     "extended_errors_pct": None if ext_metrics is None else ext_metrics.get("error_pct")},
-        "hidden": None if truth is None else {"effect": record.meta.get("hidden_effect"), "parameters": truth},
-        "modal": None if o.modal is None else [{k: v for k, v in m.items() if not k.startswith("mode_shape")} for m in o.modal],
+        "pidynnet": {
+            "nominal_errors_pct": nom.metrics.get("error_pct"),
+            "extended_errors_pct": None if ext_metrics is None else ext_metrics.get("error_pct"),
+        },
+        "hidden": None
+        if truth is None
+        else {"effect": record.meta.get("hidden_effect"), "parameters": truth},
+        "modal": None
+        if o.modal is None
+        else [{k: v for k, v in m.items() if not k.startswith("mode_shape")} for m in o.modal],
         "running": None if o.running is None else running_summary(o.running, case),
         "accelerometers": (record.meta or {}).get("accelerometers"),
         "confirmation": None if o.confirmation is None else o.confirmation.tested,
@@ -92,53 +116,105 @@ def write_figures(case: Case, o: Outcome, d: dict) -> None:
     fig = case.run_dir / "figures"
     fig.mkdir(exist_ok=True)
     units = (record.meta or {}).get("units", {})
-    plot_response(fig / "simulation_vs_measured.png", record.t, case.x_raw, o.x_nom, o.x_ext, fit, held,
-                  units.get("x", "m"), period)
+    plot_response(
+        fig / "simulation_vs_measured.png",
+        record.t,
+        case.x_raw,
+        o.x_nom,
+        o.x_ext,
+        fit,
+        held,
+        units.get("x", "m"),
+        period,
+    )
     explained = None
     if cause is not None:
-        explained = explained_force(nom.system, nom.values,
-                                    o.change_row or next(r for r in sc.ranking if r["effect"] == cause), nom.s,
-                                    o.pointwise)
+        explained = explained_force(
+            nom.system,
+            nom.values,
+            o.change_row or next(r for r in sc.ranking if r["effect"] == cause),
+            nom.s,
+            o.pointwise,
+        )
     pw = o.pointwise
-    plot_residual(fig / "residual.png", record.t, pw["r"], pw["x"], pw["v"], fit, cause, explained, units, period)
+    plot_residual(
+        fig / "residual.png", record.t, pw["r"], pw["x"], pw["v"], fit, cause, explained, units, period
+    )
     plot_ranking(fig / "ranking.png", sc.ranking, case.thresholds.min_delta_bic)
-    names, A0, y = weak_system(nom.system, nom.values, nom.s, case.weak_f, case.x_raw, nom.weak, case.mass_known)
-    running = running_estimate(names, A0, y, nom.weak.centers,
-                               max(4 * period, 3 * nom.weak.dt * (2 * nom.weak.half + 1)))
-    plot_running_estimate(fig / "running_estimate.png", running, nom.values, fit, held,
-                          None if o.change_row is None else o.change_row["change"], stiffness=case.stiff,
-                          signal=(record.t, case.x_raw))
+    names, A0, y = weak_system(
+        nom.system, nom.values, nom.s, case.weak_f, case.x_raw, nom.weak, case.mass_known
+    )
+    running = running_estimate(
+        names, A0, y, nom.weak.centers, max(4 * period, 3 * nom.weak.dt * (2 * nom.weak.half + 1))
+    )
+    plot_running_estimate(
+        fig / "running_estimate.png",
+        running,
+        nom.values,
+        fit,
+        held,
+        None if o.change_row is None else o.change_row["change"],
+        stiffness=case.stiff,
+        signal=(record.t, case.x_raw),
+    )
     if o.running is not None:
         from pidyn.discrepancy.report import plot_running_period
 
         meas = record.a[:, 0] + np.asarray(record.meta.get("sensor_ground", 0.0))
-        plot_running_period(fig / "running_period.png", o.running, fit, held, signal=(record.t, meas),
-                            nominal_period=(o.modal or [{}])[0].get("period_s"))
+        plot_running_period(
+            fig / "running_period.png",
+            o.running,
+            fit,
+            held,
+            signal=(record.t, meas),
+            nominal_period=(o.modal or [{}])[0].get("period_s"),
+        )
     ext = o.extension
     if d["learned_force"] and ext["system"] is not None and ext["system"].n_latent == 0:
-        plot_learned(fig / "learned_force.png", record.t, nom.system, nom.values, ext["system"], ext["values"],
-                     pw, units)
+        plot_learned(
+            fig / "learned_force.png",
+            record.t,
+            nom.system,
+            nom.values,
+            ext["system"],
+            ext["values"],
+            pw,
+            units,
+        )
     write_report(case.run_dir / "report.md", d, [p.name for p in sorted(fig.glob("*.png"))])
 
 
-def plot_learned(path: Path, t: np.ndarray, nominal: SDOFSystem, nominal_values: dict[str, float], ext: SDOFSystem,
-                 ext_values: dict[str, float], pw: dict[str, np.ndarray], units: dict) -> None:
+def plot_learned(
+    path: Path,
+    t: np.ndarray,
+    nominal: SDOFSystem,
+    nominal_values: dict[str, float],
+    ext: SDOFSystem,
+    ext_values: dict[str, float],
+    pw: dict[str, np.ndarray],
+    units: dict,
+) -> None:
     """The extended model's restoring force minus the nominal one (the learned force plus the
     shift of the nominal parameters that came with it) on the residual's band-limited signals."""
     x, v = pw["x"], pw["v"]  # on the record's samples: a time-dependent term (a change) evaluates right
-    dev = ext.restoring_force(t, x, v, None, ext_values) - nominal.restoring_force(t, x, v, None, nominal_values)
+    dev = ext.restoring_force(t, x, v, None, ext_values) - nominal.restoring_force(
+        t, x, v, None, nominal_values
+    )
     gx = np.linspace(x.min(), x.max(), 60)
     gv = np.linspace(v.min(), v.max(), 60)
     X, V = np.meshgrid(gx, gv)
     t_end = float(t[-1])  # the surface: the model as it stands at the end of the record
-    F = (ext.restoring_force(t_end, X, V, None, ext_values) - nominal.restoring_force(t_end, X, V, None, nominal_values))
+    F = ext.restoring_force(t_end, X, V, None, ext_values) - nominal.restoring_force(
+        t_end, X, V, None, nominal_values
+    )
     edge = max(1, len(x) // 50)
     inner = slice(edge, len(x) - edge)  # the band-limited ends ring
     plot_learned_force(path, x[inner], v[inner], pw["r"][inner], dev[inner], {"x": X, "v": V, "f": F}, units)
 
 
-def explained_force(nominal: SDOFSystem, values: dict[str, float], row: dict, s: Signals,
-                    pw: dict[str, np.ndarray]) -> np.ndarray:
+def explained_force(
+    nominal: SDOFSystem, values: dict[str, float], row: dict, s: Signals, pw: dict[str, np.ndarray]
+) -> np.ndarray:
     """What the screening's fit says the residual is: the effect's force plus the change it
     brings to the nominal parameters (which had absorbed part of the effect), on the same
     band-limited signals as the residual."""
@@ -159,19 +235,30 @@ def running_summary(running: dict, case: Case) -> dict:
     quietest and the strongest windows (what the figure shows, for a table)."""
     t = np.asarray(running["t"])
     ok = np.isfinite(np.asarray(running["period"]))
-    rows = {k: [None if not np.isfinite(v) else float(v) for v in np.asarray(running[k])] for k in running
-            if k != "variation"}
+    rows = {
+        k: [None if not np.isfinite(v) else float(v) for v in np.asarray(running[k])]
+        for k in running
+        if k != "variation"
+    }
     out: dict = {"windows": rows, "variation": running.get("variation")}
     if ok.sum() >= 2:
         peak = np.asarray(running["peak"])
-        strong, quiet = int(np.nanargmax(np.where(ok, peak, -np.inf))), int(np.nanargmin(np.where(ok, peak, np.inf)))
+        strong, quiet = (
+            int(np.nanargmax(np.where(ok, peak, -np.inf))),
+            int(np.nanargmin(np.where(ok, peak, np.inf))),
+        )
         longest = int(np.nanargmax(np.where(ok, running["period"], -np.inf)))
-        out.update({
-            "period_strongest_window": float(running["period"][strong]), "t_strongest_window": float(t[strong]),
-            "period_quietest_window": float(running["period"][quiet]), "t_quietest_window": float(t[quiet]),
-            "period_longest": float(running["period"][longest]), "t_period_longest": float(t[longest]),
-            "period_last_window": float(np.asarray(running["period"])[ok][-1]),
-            "damping_strongest_window": float(running["damping"][strong]),
-            "damping_last_window": float(np.asarray(running["damping"])[ok][-1]),
-        })
+        out.update(
+            {
+                "period_strongest_window": float(running["period"][strong]),
+                "t_strongest_window": float(t[strong]),
+                "period_quietest_window": float(running["period"][quiet]),
+                "t_quietest_window": float(t[quiet]),
+                "period_longest": float(running["period"][longest]),
+                "t_period_longest": float(t[longest]),
+                "period_last_window": float(np.asarray(running["period"])[ok][-1]),
+                "damping_strongest_window": float(running["damping"][strong]),
+                "damping_last_window": float(np.asarray(running["damping"])[ok][-1]),
+            }
+        )
     return out

@@ -33,7 +33,6 @@ def bump(half: int, dt: float, power: int = 4) -> tuple[np.ndarray, np.ndarray]:
 def _window_integrals(y: np.ndarray, kernel: np.ndarray, dt: float, starts: np.ndarray) -> np.ndarray:
     """Trapezoid-free Riemann sums of y * kernel over windows starting at ``starts`` (the kernel
     vanishes at both ends, so the rectangle and trapezoid rules agree)."""
-    w = len(kernel)
     y = np.asarray(y, float)
     if y.ndim == 1:
         y = y[:, None]
@@ -50,7 +49,7 @@ class WeakForm:
     stride: int
 
     @classmethod
-    def for_record(cls, t: np.ndarray, period: float, windows_per_period: float = 1.0) -> "WeakForm":
+    def for_record(cls, t: np.ndarray, period: float, windows_per_period: float = 1.0) -> WeakForm:
         """Windows one natural period wide (at least 7 samples), four rows per window width."""
         dt = float(t[1] - t[0])
         half = max(3, int(round(0.5 * period / windows_per_period / dt)))
@@ -94,7 +93,9 @@ class WeakForm:
         return mass * _window_integrals(x, d2, self.dt, self.starts)[:, 0]
 
 
-def smooth_signals(t: np.ndarray, x: np.ndarray, v: np.ndarray | None, period: float) -> tuple[np.ndarray, np.ndarray]:
+def smooth_signals(
+    t: np.ndarray, x: np.ndarray, v: np.ndarray | None, period: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Savitzky-Golay smoothed x and x' (x' from the measured velocity when there is one).
 
     The window is a sixth of the natural period (at least 5 samples): it removes

@@ -104,9 +104,7 @@ def _read_samples(path: Path, lines: list[str], header_idx: int, npts: int) -> n
         acc = np.array([float(tok) for tok in tokens], dtype=np.float64)
     except ValueError:
         bad = next(tok for tok in tokens if not _is_float(tok))
-        line_no = next(
-            i + 1 for i, line in enumerate(lines) if i > header_idx and bad in line.split()
-        )
+        line_no = next(i + 1 for i, line in enumerate(lines) if i > header_idx and bad in line.split())
         raise AT2FormatError(f"{path}: line {line_no}: '{bad}' is not a number") from None
     if acc.size != npts:
         raise AT2FormatError(

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-from pidyn.excitation.at2 import G, AT2FormatError, read_at2
+from pidyn.excitation.at2 import AT2FormatError, G, read_at2
 
 RECORDS_PACKAGE = "pidyn.excitation.records"
 
@@ -91,7 +91,9 @@ class GroundMotion:
             return self
         k = int(round(t0 / self.dt))
         if k >= self.acc.size - 1:
-            raise ValueError(f"ground motion '{self.name}': start {t0} s is past its end ({self.duration:g} s)")
+            raise ValueError(
+                f"ground motion '{self.name}': start {t0} s is past its end ({self.duration:g} s)"
+            )
         return replace(self, acc=self.acc[k:], name=_tag(self.name, f"from{k * self.dt:g}s"))
 
     def arias_time(self, fraction: float) -> float:
@@ -197,14 +199,18 @@ class SupportMotions:
     def __post_init__(self) -> None:
         acc = np.asarray(self.acc, dtype=np.float64)
         if acc.ndim != 2 or acc.shape[0] < 2 or acc.shape[1] != len(self.inputs):
-            raise ValueError(f"support motions '{self.name}': need (N, {len(self.inputs)}) samples, got {acc.shape}")
+            raise ValueError(
+                f"support motions '{self.name}': need (N, {len(self.inputs)}) samples, got {acc.shape}"
+            )
         if not np.all(np.isfinite(acc)):
             raise ValueError(f"support motions '{self.name}': non-finite samples")
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"support motions '{self.name}': dt={self.dt} must be positive")
         object.__setattr__(self, "acc", acc)
         object.__setattr__(self, "_grid", np.arange(acc.shape[0]) * self.dt)
-        vel = np.concatenate([np.zeros((1, acc.shape[1])), np.cumsum(0.5 * (acc[1:] + acc[:-1]) * self.dt, axis=0)])
+        vel = np.concatenate(
+            [np.zeros((1, acc.shape[1])), np.cumsum(0.5 * (acc[1:] + acc[:-1]) * self.dt, axis=0)]
+        )
         object.__setattr__(self, "vel", vel)
 
     @property
@@ -213,7 +219,7 @@ class SupportMotions:
         return np.concatenate([self.acc, self.vel], axis=1)
 
     @classmethod
-    def from_motions(cls, motions: dict[str, GroundMotion], name: str = "supports") -> "SupportMotions":
+    def from_motions(cls, motions: dict[str, GroundMotion], name: str = "supports") -> SupportMotions:
         """One motion per support (same step; cut to the shortest)."""
         dts = {m.dt for m in motions.values()}
         if len(dts) != 1:
@@ -236,6 +242,8 @@ class SupportMotions:
     def __call__(self, t: np.ndarray | float) -> np.ndarray:
         """Linear interpolation of every column (accelerations, velocities), zero before the record
         and the last velocity held after it: (2 n_inputs,) or (N, 2 n_inputs)."""
-        cols = [np.interp(t, self._grid, self.acc[:, j], left=0.0, right=0.0) for j in range(self.acc.shape[1])]
+        cols = [
+            np.interp(t, self._grid, self.acc[:, j], left=0.0, right=0.0) for j in range(self.acc.shape[1])
+        ]
         cols += [np.interp(t, self._grid, self.vel[:, j], left=0.0) for j in range(self.vel.shape[1])]
         return np.stack(cols, axis=-1)

@@ -86,7 +86,7 @@ class InformationFusion:
         eigenvalue; round-off leaves small negative ones), with the eigenvectors and the floor."""
         w, V = torch.linalg.eigh(info)
         tiny = torch.finfo(info.dtype).tiny
-        floor = (self.ridge * w.clamp_min(0).sum() / w.numel()).clamp_min(tiny ** 0.5)
+        floor = (self.ridge * w.clamp_min(0).sum() / w.numel()).clamp_min(tiny**0.5)
         return w.clamp_min(floor), V, floor
 
     def _solve(self, info: torch.Tensor, rhs: torch.Tensor, prior: torch.Tensor) -> torch.Tensor:

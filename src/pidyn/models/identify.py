@@ -21,11 +21,13 @@ from __future__ import annotations
 import json
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import lightning as L
+import numpy as np
 import torch
 
 from pidyn.callbacks.clamp import ParameterClamp
@@ -34,8 +36,12 @@ from pidyn.data.datamodule import SubperiodDataModule
 from pidyn.data.windows import Window
 from pidyn.errors import error_pct
 from pidyn.models.fusion import InformationFusion, residual_information
-from pidyn.models.latent_start import (latent_least_squares_start, latent_shape_params, motion_on_samples,
-                                      teach_current_path)
+from pidyn.models.latent_start import (
+    latent_least_squares_start,
+    latent_shape_params,
+    motion_on_samples,
+    teach_current_path,
+)
 from pidyn.models.lit_module import PIDynNetModule
 
 log = logging.getLogger(__name__)
@@ -53,7 +59,9 @@ class Schedule:
     fusion: str = "information"  # information | last (paper: carry the last window's values)
     max_windows: int | None = None
     transfer_lnn: bool = True  # LNN <- RPN after pretraining (paper's transfer-learning init)
-    latent_init: bool = False  # with ls_init: start latent shape parameters (beta, gamma, n) by variable projection
+    latent_init: bool = (
+        False  # with ls_init: start latent shape parameters (beta, gamma, n) by variable projection
+    )
 
     def __post_init__(self) -> None:
         """A misspelled option fails here, naming the valid ones, instead of silently changing behaviour."""
@@ -81,7 +89,9 @@ class WindowResult:
     stopped_early: bool
     clamp_bounds: dict[str, list[float]] = field(default_factory=dict)
     z_end: list[float] | None = None  # latent state at the window's end (the next window starts from it)
-    states: list[list[float]] | None = None  # [t, x, x', z] from the networks every 10th sample (refinement starts)
+    states: list[list[float]] | None = (
+        None  # [t, x, x', z] from the networks every 10th sample (refinement starts)
+    )
     notes: list[str] = field(default_factory=list)  # what the data decided that a user should know
 
 
@@ -144,8 +154,10 @@ class SubperiodIdentifier:
         """What a saved state must match to be resumed: the model's parameters with their starts,
         and the windows of the record."""
         specs = self.module.net.params.specs
-        return {"params": {sp.name: round(float(sp.init), 12) for sp in specs},
-                "windows": [[round(w.t0, 9), round(w.t1, 9)] for w in self.dm.windows]}
+        return {
+            "params": {sp.name: round(float(sp.init), 12) for sp in specs},
+            "windows": [[round(w.t0, 9), round(w.t1, 9)] for w in self.dm.windows],
+        }
 
     def try_resume(self) -> int:
         """Restore from ``subperiod_state.json`` if present; returns the next window index. A state
@@ -156,15 +168,21 @@ class SubperiodIdentifier:
         state = json.loads(self.state_path.read_text())
         saved = state.get("fingerprint")
         if saved is not None and saved != self.fingerprint():
-            log.warning("%s holds the state of another run (its model or windows differ): not resumed, starting "
-                        "afresh", self.state_path)
+            log.warning(
+                "%s holds the state of another run (its model or windows differ): not resumed, starting "
+                "afresh",
+                self.state_path,
+            )
             return 0
         blob = torch.load(self.run_dir / state["checkpoint"], weights_only=False)
         try:
             self.module.load_state_dict(blob["module"])
         except RuntimeError as exc:  # a state saved before fingerprints, of another model
-            log.warning("%s holds the state of another model (%s): not resumed, starting afresh", self.state_path,
-                        str(exc).splitlines()[0])
+            log.warning(
+                "%s holds the state of another model (%s): not resumed, starting afresh",
+                self.state_path,
+                str(exc).splitlines()[0],
+            )
             return 0
         self.fusion.load_state_dict(blob["fusion"])
         if self.clamp and blob.get("clamp"):
@@ -173,7 +191,12 @@ class SubperiodIdentifier:
         self.motions = list(blob.get("motions") or [])
         self.trajectory = state.get("trajectory", [])
         self.ls_pending = list(state.get("ls_pending", []))
-        log.info("resuming at window %d of %d (iteration %d)", state["next_window"], state["n_windows"], state["iteration"])
+        log.info(
+            "resuming at window %d of %d (iteration %d)",
+            state["next_window"],
+            state["n_windows"],
+            state["iteration"],
+        )
         return int(state["next_window"])
 
     # ------------------------------------------------------------------ phases
@@ -213,7 +236,9 @@ class SubperiodIdentifier:
                 if self._latent_names():
                     self.motions.append(motion_on_samples(net, w))
             res = WindowResult(
-                index=w.index, t0=w.t0, t1=w.t1,
+                index=w.index,
+                t0=w.t0,
+                t1=w.t1,
                 iterations=int(self.module.iteration) - it0,
                 seconds=time.perf_counter() - t_start,
                 estimate={n: estimate[n] for n in names},
@@ -271,12 +296,17 @@ class SubperiodIdentifier:
         sch, net = self.schedule, self.module.net
         notes: list[str] = []
         latent = self._latent_names()
-        ls_now = sch.ls_init == "every" or (sch.ls_init == "first" and (not first_done or bool(self.ls_pending)))
+        ls_now = sch.ls_init == "every" or (
+            sch.ls_init == "first" and (not first_done or bool(self.ls_pending))
+        )
         pending_before = set(self.ls_pending) if first_done else set()
         if latent and first_done and z_end is not None and not set(self.ls_pending) & set(latent):
             misfit = teach_current_path(net, w, z_end)
-            log.info("window %d: LNN started on the latent path of the held shape parameters (relative misfit %.2g)",
-                     w.index, misfit)
+            log.info(
+                "window %d: LNN started on the latent path of the held shape parameters (relative misfit %.2g)",
+                w.index,
+                misfit,
+            )
         if net.use_drift:  # displacement not measured: the physics pins the networks' drift
             notes += self._drift_start(w, ls_now)
         elif ls_now:
@@ -307,39 +337,52 @@ class SubperiodIdentifier:
                 net.params.raw[n].requires_grad_(True)
         return held
 
-    def _combine(self, w: Window, it0: int, names: list[str], estimate: dict[str, float],
-                 held: dict[str, float]) -> None:
+    def _combine(
+        self, w: Window, it0: int, names: list[str], estimate: dict[str, float], held: dict[str, float]
+    ) -> None:
         """The next window's clamp box, the convergence trajectory, and the fusion of this
         window's estimate with the earlier ones (the held latent shape stays as it is)."""
         sch, net = self.schedule, self.module.net
         traj = self.module.trajectory_values()
-        info = residual_information(net, w) if (sch.fusion == "information" or self.clamp is not None) else None
+        info = (
+            residual_information(net, w) if (sch.fusion == "information" or self.clamp is not None) else None
+        )
         if self.clamp is not None:
             # what the windows so far know: the fused information where it is kept (a quiet
             # window alone knows little, and must not open the box of a parameter that
             # earlier windows pinned), this window's otherwise
             known = self.fusion.info + info if (self.fusion.info is not None and info is not None) else info
-            self.clamp.update_from_trajectory(names, traj, estimate, posterior_std(known, names),
-                                              {n: net.params.spec(n) for n in names})
+            self.clamp.update_from_trajectory(
+                names, traj, estimate, posterior_std(known, names), {n: net.params.spec(n) for n in names}
+            )
         # per-iteration trajectory (thinned) for the convergence figure
         dt_it = (w.t1 - w.t0) / max(len(traj), 1)
         for j in range(0, len(traj), max(1, len(traj) // 50)):
             self.trajectory.append(
-                {"iteration": it0 + j, "t": w.t0 + j * dt_it, **{n: float(traj[j, i]) for i, n in enumerate(names)}}
+                {
+                    "iteration": it0 + j,
+                    "t": w.t0 + j * dt_it,
+                    **{n: float(traj[j, i]) for i, n in enumerate(names)},
+                }
             )
         if sch.fusion == "information":
             assert info is not None
             theta = self.fusion.add(net.params.raw_vector(names).detach(), info)
             if self.fusion.fallback:
-                log.info("window %d: the joint information product fell outside the windows' estimates "
-                         "(ill-conditioned parameters); fused by each window's marginal precision", w.index)
+                log.info(
+                    "window %d: the joint information product fell outside the windows' estimates "
+                    "(ill-conditioned parameters); fused by each window's marginal precision",
+                    w.index,
+                )
             with torch.no_grad():
                 for i, n in enumerate(names):
                     net.params.raw[n].copy_(theta[i])
         if held:
             net.params.set_values(held)
         fused = net.params.as_floats()
-        self.trajectory.append({"iteration": int(self.module.iteration), "t": w.t1, **{n: fused[n] for n in names}})
+        self.trajectory.append(
+            {"iteration": int(self.module.iteration), "t": w.t1, **{n: fused[n] for n in names}}
+        )
 
     def _least_squares_start(self, w: Window) -> list[str]:
         """Least-squares values of the linear parameters; a value outside a parameter's range is
@@ -350,9 +393,11 @@ class SubperiodIdentifier:
         self.ls_pending = sorted(rejected)
         notes = []
         for n, v in rejected.items():
-            notes.append(f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range or not "
-                         f"determined by this window (standard error above half the value); {n} keeps "
-                         f"{net.params.as_floats()[n]:.4g}")
+            notes.append(
+                f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range or not "
+                f"determined by this window (standard error above half the value); {n} keeps "
+                f"{net.params.as_floats()[n]:.4g}"
+            )
             log.warning(notes[-1])
         return notes
 
@@ -361,7 +406,9 @@ class SubperiodIdentifier:
         projection on the networks' motion, and teach the LNN their path (see ``latent_start``)."""
         t0 = time.perf_counter()
         at_rest = (self.motions[0]["t"][0] if self.motions else w.t0) <= self.dm.windows[0].t0 + 1e-9
-        accepted, rejected, line = latent_least_squares_start(self.module.net, w, self.motions, at_rest=at_rest)
+        accepted, rejected, line = latent_least_squares_start(
+            self.module.net, w, self.motions, at_rest=at_rest
+        )
         log.info("%s (%.1f s)", line, time.perf_counter() - t0)
         self.ls_pending = sorted(set(self.ls_pending) - set(accepted) | set(rejected))
         if accepted and self.fusion.thetas:
@@ -369,8 +416,10 @@ class SubperiodIdentifier:
             # (measured: their beta, gamma, n pulled a determined start back by 20-30 %)
             self.fusion = InformationFusion()
         if rejected:
-            msg = (f"window {w.index}: the latent least-squares start does not determine "
-                   f"{', '.join(sorted(rejected))} from this window; they keep their values and the next window tries again")
+            msg = (
+                f"window {w.index}: the latent least-squares start does not determine "
+                f"{', '.join(sorted(rejected))} from this window; they keep their values and the next window tries again"
+            )
             log.info(msg)
             return [msg]
         return []
@@ -379,14 +428,19 @@ class SubperiodIdentifier:
         net = self.module.net
         est, rejected = net.solve_drift(w, net.system.linear_params() if with_params else [])
         if est:
-            log.info("window %d: least-squares init with the displacement drift %s", w.index,
-                     {k: f"{v:.5g}" for k, v in est.items()})
+            log.info(
+                "window %d: least-squares init with the displacement drift %s",
+                w.index,
+                {k: f"{v:.5g}" for k, v in est.items()},
+            )
         if with_params:
             self.ls_pending = sorted(rejected)
         notes = []
         for n, v in rejected.items():
-            notes.append(f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range or not "
-                         f"determined by this window; {n} keeps {net.params.as_floats()[n]:.4g}")
+            notes.append(
+                f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range or not "
+                f"determined by this window; {n} keeps {net.params.as_floats()[n]:.4g}"
+            )
             log.warning(notes[-1])
         return notes
 
@@ -399,8 +453,10 @@ class SubperiodIdentifier:
             for n in determined:
                 self.clamp.bounds.pop(n, None)
         vals = self.module.net.params.as_floats()
-        msg = (f"window {index}: the least-squares start determined {', '.join(sorted(determined))} "
-               f"({', '.join(f'{n}={vals[n]:.4g}' for n in sorted(determined))}), which earlier windows did not")
+        msg = (
+            f"window {index}: the least-squares start determined {', '.join(sorted(determined))} "
+            f"({', '.join(f'{n}={vals[n]:.4g}' for n in sorted(determined))}), which earlier windows did not"
+        )
         log.info(msg)
         notes.append(msg)
 
@@ -427,7 +483,13 @@ class SubperiodIdentifier:
             parts.append(f"{n}={v:.5g}{e}")
         log.info(
             "window %d [%.1f-%.1f s] %d it, %.1f s%s: %s",
-            r.index, r.t0, r.t1, r.iterations, r.seconds, " (early stop)" if r.stopped_early else "", ", ".join(parts),
+            r.index,
+            r.t0,
+            r.t1,
+            r.iterations,
+            r.seconds,
+            " (early stop)" if r.stopped_early else "",
+            ", ".join(parts),
         )
 
     def _log_window(self, r: WindowResult) -> None:
@@ -455,11 +517,9 @@ def posterior_std(info: torch.Tensor | None, names: list[str]) -> dict[str, floa
     return {nm: float(d[i]) for i, nm in enumerate(names)}
 
 
-def network_states(results: list[WindowResult]) -> "np.ndarray | None":
+def network_states(results: list[WindowResult]) -> np.ndarray | None:
     """All windows' network states, (K, 1 + n_state) rows [t, x, x', z], in time order; a
     later window's value wins where two windows share a time (its networks start there)."""
-    import numpy as np
-
     rows: dict[float, list[float]] = {}
     for r in results:
         for row in r.states or []:

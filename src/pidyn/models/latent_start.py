@@ -24,6 +24,7 @@ from pidyn.data.windows import Window
 from pidyn.params import ParamSpec, PhysicalParameters, dvalue_draw, from_raw, in_range, to_raw
 from pidyn.systems.base import Kinematics
 
+
 def latent_shape_params(system) -> list[str]:
     """Trainable parameters of latent-state terms that the motion residual is not linear in."""
     trainable = {s.name for s in system.param_specs() if s.trainable}
@@ -34,8 +35,9 @@ def latent_shape_params(system) -> list[str]:
     return out
 
 
-def integrate_latent(system, t: np.ndarray, x: np.ndarray, v: np.ndarray, z0: np.ndarray,
-                     p: dict, substeps: int = 2) -> tuple[np.ndarray, np.ndarray]:
+def integrate_latent(
+    system, t: np.ndarray, x: np.ndarray, v: np.ndarray, z0: np.ndarray, p: dict, substeps: int = 2
+) -> tuple[np.ndarray, np.ndarray]:
     """z and z' along a prescribed motion for B parameter sets at once (Heun's rule, x and x'
     linear between samples). ``z0``: (B, n_latent); ``p``: floats or (B,) arrays.
     Returns (B, N, n_latent) twice; a path that blows up is NaN from there on."""
@@ -46,7 +48,7 @@ def integrate_latent(system, t: np.ndarray, x: np.ndarray, v: np.ndarray, z0: np
 
     def rate(ti, xi, vi, zi):
         y = np.concatenate([np.broadcast_to(xi, (B, nd)), np.broadcast_to(vi, (B, nd)), zi], axis=1)
-        return system.state_rate(ti, y, p, 0.0)[:, 2 * nd:]
+        return system.state_rate(ti, y, p, 0.0)[:, 2 * nd :]
 
     zi = np.array(z0, dtype=float)
     z[:, 0], zd[:, 0] = zi, rate(t[0], x[0], v[0], zi)
@@ -82,8 +84,16 @@ class LatentStart:
     Hence one start, on the first span that determines them, and no later updates.
     """
 
-    def __init__(self, system, params: PhysicalParameters, t: torch.Tensor, x: torch.Tensor, v: torch.Tensor,
-                 f: torch.Tensor, z0: np.ndarray | None) -> None:
+    def __init__(
+        self,
+        system,
+        params: PhysicalParameters,
+        t: torch.Tensor,
+        x: torch.Tensor,
+        v: torch.Tensor,
+        f: torch.Tensor,
+        z0: np.ndarray | None,
+    ) -> None:
         """The motion (t, x, x', excitation), from the networks or measured; ``z0``: the latent
         state at t[0] when known (at rest at a record's start), None to estimate it. The
         parameters' current values are the first start."""
@@ -109,7 +119,7 @@ class LatentStart:
         p: dict = dict(self.values)
         for i, s in enumerate(self.specs):
             p[s.name] = from_raw(s, torch.from_numpy(U[:, i].copy())).numpy()
-        z0 = (np.tile(self.z0_guess, (len(U), 1)) if self.at_rest else U[:, len(self.specs):] * self.z_scale)
+        z0 = np.tile(self.z0_guess, (len(U), 1)) if self.at_rest else U[:, len(self.specs) :] * self.z_scale
         return p, z0
 
     def start_vector(self) -> np.ndarray:
@@ -175,7 +185,7 @@ class LatentStart:
             rows = self.residuals(np.vstack([U[i] + np.diag(H[j]) for j, i in enumerate(idx)]))
             trials, keep = [], []
             for j, i in enumerate(idx):
-                cols = rows[j * nu:(j + 1) * nu]
+                cols = rows[j * nu : (j + 1) * nu]
                 if any(c is None for c in cols):
                     active[i] = False
                     continue
@@ -206,9 +216,9 @@ class LatentStart:
         rng = np.random.default_rng(seed)
         u0 = self.start_vector()
         U = np.tile(u0, (n_screen + 1, 1))
-        U[1:, :len(self.specs)] += rng.uniform(-1.1, 1.1, (n_screen, len(self.specs)))
+        U[1:, : len(self.specs)] += rng.uniform(-1.1, 1.1, (n_screen, len(self.specs)))
         if not self.at_rest:  # z0 over its plausible range (|z| of the order of the motion)
-            U[1:, len(self.specs):] = rng.uniform(-1.0, 1.0, (n_screen, self.nz))
+            U[1:, len(self.specs) :] = rng.uniform(-1.0, 1.0, (n_screen, self.nz))
         rs = self.residuals(U)
         costs = np.array([np.inf if r is None else float(r @ r) for r in rs])
         cost0 = float(costs[0])
@@ -255,8 +265,14 @@ def teach_current_path(net, w: Window, z0: torch.Tensor) -> float:
     parameters to. Returns the LNN's relative misfit (NaN where the path blew up)."""
     m = motion_on_samples(net, w)
     p = net.params.as_floats()
-    z, _ = integrate_latent(net.system, m["t"].double().numpy(), m["x"].double().numpy(), m["v"].double().numpy(),
-                            z0.detach().double().numpy().reshape(1, -1), p)
+    z, _ = integrate_latent(
+        net.system,
+        m["t"].double().numpy(),
+        m["x"].double().numpy(),
+        m["v"].double().numpy(),
+        z0.detach().double().numpy().reshape(1, -1),
+        p,
+    )
     if not np.all(np.isfinite(z)):
         return float("nan")
     return fit_latent_network(net, w, z[0])
@@ -266,8 +282,12 @@ def motion_on_samples(net, w: Window) -> dict[str, torch.Tensor]:
     """The networks' x and x' at the window's data samples, with the excitation there."""
     with torch.no_grad():
         k = net.kinematics(w.t_data, w.f_data, w.q_data, w.qd_data, order=1, latent=False)
-    return {"t": w.t_data.detach().clone(), "x": k.x.detach().clone(), "v": k.v.detach().clone(),
-            "f": w.f_data.detach().clone()}
+    return {
+        "t": w.t_data.detach().clone(),
+        "x": k.x.detach().clone(),
+        "v": k.v.detach().clone(),
+        "f": w.f_data.detach().clone(),
+    }
 
 
 def join_motions(parts: list[dict[str, torch.Tensor]]) -> dict[str, torch.Tensor]:
@@ -283,8 +303,9 @@ def join_motions(parts: list[dict[str, torch.Tensor]]) -> dict[str, torch.Tensor
     return {k: torch.cat(v) for k, v in out.items()}
 
 
-def latent_least_squares_start(net, w: Window, history: list[dict[str, torch.Tensor]], at_rest: bool,
-                               max_rel_std: float = 0.5) -> tuple[dict[str, float], dict[str, float], str]:
+def latent_least_squares_start(
+    net, w: Window, history: list[dict[str, torch.Tensor]], at_rest: bool, max_rel_std: float = 0.5
+) -> tuple[dict[str, float], dict[str, float], str]:
     """Solve the variable-projection problem on the motion so far (earlier windows' ``history``
     and this window's networks): one window alone does not pin beta, gamma, n down (measured:
     beta 0.49 +- 1.5 from 3 s of El Centro), the record so far does. Set the parameters when
@@ -293,23 +314,36 @@ def latent_least_squares_start(net, w: Window, history: list[dict[str, torch.Ten
     a line for the log)."""
     now = motion_on_samples(net, w)
     m = join_motions([*history, now])
-    prob = LatentStart(net.system, net.params, m["t"], m["x"], m["v"], m["f"], np.zeros(net.system.n_latent) if at_rest else None)
+    prob = LatentStart(
+        net.system,
+        net.params,
+        m["t"],
+        m["x"],
+        m["v"],
+        m["f"],
+        np.zeros(net.system.n_latent) if at_rest else None,
+    )
     if not prob.names:
         return {}, {}, ""
     out = prob.solve()
     p, std = out["params"], out["std"]
     names = prob.names + prob.linear
-    bad = {n: p[n] for n in names
-           if not np.isfinite(p[n]) or std.get(n, 0.0) > max_rel_std * max(abs(p[n]), 1e-300)}
+    bad = {
+        n: p[n]
+        for n in names
+        if not np.isfinite(p[n]) or std.get(n, 0.0) > max_rel_std * max(abs(p[n]), 1e-300)
+    }
     bad.update({n: p[n] for n in names if not in_range(net.params.spec(n), p[n])})
     bad.update({n: p[n] for n in out["at_edge"]})
-    line = (f"window {w.index}: latent least-squares start over {m['t'][0]:.1f}-{m['t'][-1]:.1f} s "
-            f"(integrated motion misfit {out['cost_start']:.3g} -> {out['cost']:.3g}): "
-            + ", ".join(f"{n}={p[n]:.4g} +- {std.get(n, 0.0):.2g}" for n in names))
+    line = (
+        f"window {w.index}: latent least-squares start over {m['t'][0]:.1f}-{m['t'][-1]:.1f} s "
+        f"(integrated motion misfit {out['cost_start']:.3g} -> {out['cost']:.3g}): "
+        + ", ".join(f"{n}={p[n]:.4g} +- {std.get(n, 0.0):.2g}" for n in names)
+    )
     if bad or out["cost"] > out["cost_start"]:
         return {}, {n: p[n] for n in prob.names}, line
     accepted = {n: p[n] for n in names}
     net.params.set_values(accepted)
-    tail = out["z"][-len(now["t"]):]
+    tail = out["z"][-len(now["t"]) :]
     misfit = fit_latent_network(net, w, tail)
     return accepted, {}, line + f"; LNN taught the path (relative misfit {misfit:.2g})"

@@ -81,8 +81,15 @@ class PIDynNetModule(L.LightningModule):
 
     def configure_optimizers(self) -> Any:
         if self.phase == "finetune_lbfgs":
-            return torch.optim.LBFGS(self.net.net_parameters(), lr=1.0, max_iter=self.lbfgs_max_iter, history_size=50,
-                                     line_search_fn="strong_wolfe", tolerance_grad=1e-10, tolerance_change=1e-14)
+            return torch.optim.LBFGS(
+                self.net.net_parameters(),
+                lr=1.0,
+                max_iter=self.lbfgs_max_iter,
+                history_size=50,
+                line_search_fn="strong_wolfe",
+                tolerance_grad=1e-10,
+                tolerance_change=1e-14,
+            )
         if self.phase == "pretrain":
             opt = torch.optim.Adam(self.net.net_parameters(), lr=self.lr_pretrain)
         elif self.phase == "finetune":
@@ -99,8 +106,13 @@ class PIDynNetModule(L.LightningModule):
         return [opt], [sched]
 
     # ------------------------------------------------------------ training
-    def losses(self, t_c: torch.Tensor | None, f_c: torch.Tensor | None, q_c: torch.Tensor | None = None,
-               qd_c: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+    def losses(
+        self,
+        t_c: torch.Tensor | None,
+        f_c: torch.Tensor | None,
+        q_c: torch.Tensor | None = None,
+        qd_c: torch.Tensor | None = None,
+    ) -> dict[str, torch.Tensor]:
         assert self.window is not None
         out: dict[str, torch.Tensor] = {}
         if self.phase != "finetune":
@@ -181,7 +193,11 @@ class PIDynNetModule(L.LightningModule):
         self.last_losses = {k: float(v) for k, v in losses.items()}
         self.last_losses["total"] = float(self.total(losses))
         now = self.last_losses["total"]
-        if not math.isfinite(now) or now < self.lbfgs_tol or (math.isfinite(before) and before - now < 1e-3 * abs(now)):
+        if (
+            not math.isfinite(now)
+            or now < self.lbfgs_tol
+            or (math.isfinite(before) and before - now < 1e-3 * abs(now))
+        ):
             self.trainer.should_stop = True
 
     def _tb_scalars(self) -> None:
@@ -190,7 +206,13 @@ class PIDynNetModule(L.LightningModule):
             return
         step = int(self.iteration)
         for k, v in self.last_losses.items():
-            tb.add_scalar(f"{self.phase}/loss_{k}".replace("/loss_physics/", "/physics_").replace("/loss_data/", "/data_"), v, step)
+            tb.add_scalar(
+                f"{self.phase}/loss_{k}".replace("/loss_physics/", "/physics_").replace(
+                    "/loss_data/", "/data_"
+                ),
+                v,
+                step,
+            )
         if self.phase == "identify":
             truths = self.net.params.truths()
             for name, v in self.net.params.as_floats().items():

@@ -43,7 +43,9 @@ class PIDynNet(nn.Module):
         self.lnn = lnn if system.n_latent else None
         self.normalize_losses = normalize_losses
         # networks inside the equations (a learned force term): trained with the networks, saved in checkpoints
-        self.learned = nn.ModuleList([t.net for t in getattr(system, "terms", []) if isinstance(getattr(t, "net", None), nn.Module)])
+        self.learned = nn.ModuleList(
+            [t.net for t in getattr(system, "terms", []) if isinstance(getattr(t, "net", None), nn.Module)]
+        )
         nd, nz = system.n_dof, system.n_latent
         self.register_buffer("z_offset", torch.zeros(max(nz, 1)))
         self.register_buffer("scale_x", torch.ones(nd))
@@ -87,8 +89,9 @@ class PIDynNet(nn.Module):
             y = w.x + q
             self.rpn.set_output_scale(y.std(0).clamp_min(1e-12), y.mean(0))
         else:  # displacement not measured everywhere: its estimated spread beside the ground's
-            self.rpn.set_output_scale(torch.sqrt(s["x"] ** 2 + q.std() ** 2).clamp_min(1e-12),
-                                      q.mean() * torch.ones_like(s["x"]))
+            self.rpn.set_output_scale(
+                torch.sqrt(s["x"] ** 2 + q.std() ** 2).clamp_min(1e-12), q.mean() * torch.ones_like(s["x"])
+            )
         if self.lnn is not None and transfer_lnn:
             self.transfer_rpn_to_lnn()
 
@@ -105,8 +108,10 @@ class PIDynNet(nn.Module):
             last_l.bias.copy_(last_r.bias[:1].expand_as(last_l.bias))
         else:
             self.lnn.load_state_dict(copy.deepcopy(self.rpn.state_dict()))
-        self.lnn.set_output_scale(self.rpn.out_scale[:1].expand_as(self.lnn.out_scale),
-                                  self.rpn.out_shift[:1].expand_as(self.lnn.out_shift))
+        self.lnn.set_output_scale(
+            self.rpn.out_scale[:1].expand_as(self.lnn.out_scale),
+            self.rpn.out_shift[:1].expand_as(self.lnn.out_shift),
+        )
         self.lnn.t_mid.copy_(self.rpn.t_mid)
         self.lnn.t_half.copy_(self.rpn.t_half)
 
@@ -155,7 +160,12 @@ class PIDynNet(nn.Module):
             zs = self.lnn.taylor(t, order=1, f=fin)
             if self.anchor is not None and self.anchor[3] is not None:
                 t0 = self.anchor[0].reshape(1)
-                zs = [zs[0] - self.lnn.taylor(t0, order=0, f=None if fin is None else fin[:1])[0] + self.anchor[3], zs[1]]
+                zs = [
+                    zs[0]
+                    - self.lnn.taylor(t0, order=0, f=None if fin is None else fin[:1])[0]
+                    + self.anchor[3],
+                    zs[1],
+                ]
                 z, zd = zs[0], zs[1]
             else:
                 z, zd = zs[0] + self.z_offset, zs[1]
@@ -198,8 +208,11 @@ class PIDynNet(nn.Module):
         if a is not None and self.system.n_inputs > 1:  # several supports: the record's a is absolute
             a = self.system.acceleration_output(a, w.f_data, self.params.values())
         out = {}
-        for name, pred, meas, scale in (("x", k.x, w.x, self.scale_x), ("v", k.v, w.v, self.scale_v),
-                                        ("a", a, w.a, self.scale_a)):
+        for name, pred, meas, scale in (
+            ("x", k.x, w.x, self.scale_x),
+            ("v", k.v, w.v, self.scale_v),
+            ("a", a, w.a, self.scale_a),
+        ):
             complete = w.complete.get(name, False)
             if fill and meas is not None:
                 meas, complete = w.filled(name)
@@ -208,8 +221,9 @@ class PIDynNet(nn.Module):
         return out
 
     @torch.no_grad()
-    def enter_prediction_window(self, w: Window, x_scale: torch.Tensor, v_scale: torch.Tensor,
-                                f_scale: torch.Tensor) -> None:
+    def enter_prediction_window(
+        self, w: Window, x_scale: torch.Tensor, v_scale: torch.Tensor, f_scale: torch.Tensor
+    ) -> None:
         """Like ``enter_window`` for a window without measurements (scales given).
 
         The force scale is the whole record's, so a loss value means the same in every
@@ -224,16 +238,25 @@ class PIDynNet(nn.Module):
         for net in (self.rpn, self.lnn):
             if net is not None:
                 net.set_window(w.t0, w.t1)
-        y_scale = torch.maximum(x_scale, (w.q_pool.std() if w.q_pool is not None else x_scale[0]) * torch.ones_like(x_scale))
+        y_scale = torch.maximum(
+            x_scale, (w.q_pool.std() if w.q_pool is not None else x_scale[0]) * torch.ones_like(x_scale)
+        )
         self.rpn.set_output_scale(y_scale, torch.zeros_like(x_scale))
         if self.lnn is not None:
-            self.lnn.set_output_scale(y_scale[:1].expand_as(self.lnn.out_scale), torch.zeros_like(self.lnn.out_shift))
+            self.lnn.set_output_scale(
+                y_scale[:1].expand_as(self.lnn.out_scale), torch.zeros_like(self.lnn.out_shift)
+            )
 
     @torch.no_grad()
     def state_at_end(self, w: Window) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
         sl = slice(-1, None)
-        k = self.kinematics(w.t_pool[sl], w.f_pool[sl], None if w.q_pool is None else w.q_pool[sl],
-                            None if w.qd_pool is None else w.qd_pool[sl], order=1)
+        k = self.kinematics(
+            w.t_pool[sl],
+            w.f_pool[sl],
+            None if w.q_pool is None else w.q_pool[sl],
+            None if w.qd_pool is None else w.qd_pool[sl],
+            order=1,
+        )
         return k.x[0], k.v[0], None if k.z is None else k.z[0]
 
     # ----------------------------------------------------------------- helpers
@@ -270,12 +293,19 @@ class PIDynNet(nn.Module):
 
     @torch.no_grad()
     def response_at_start(self, w: Window) -> torch.Tensor:
-        k = self.kinematics(w.t_pool[:1], w.f_pool[:1], None if w.q_pool is None else w.q_pool[:1],
-                            None if w.qd_pool is None else w.qd_pool[:1], order=0, latent=False)
+        k = self.kinematics(
+            w.t_pool[:1],
+            w.f_pool[:1],
+            None if w.q_pool is None else w.q_pool[:1],
+            None if w.qd_pool is None else w.qd_pool[:1],
+            order=0,
+            latent=False,
+        )
         return k.x[0]
 
-    def solve_drift(self, w: Window, names: list[str] | None = None,
-                    max_rel_std: float = 0.5) -> tuple[dict[str, float], dict[str, float]]:
+    def solve_drift(
+        self, w: Window, names: list[str] | None = None, max_rel_std: float = 0.5
+    ) -> tuple[dict[str, float], dict[str, float]]:
         """The window's displacement drift, and the linear parameters ``names`` with it, from the
         physics residuals (Gauss-Newton: the residual is bilinear in stiffness and drift).
 
@@ -285,11 +315,13 @@ class PIDynNet(nn.Module):
         physics pins the drift, so the two are solved together. A value outside its range or
         not determined by the window is rejected as in ``least_squares_init``. Returns
         (accepted, rejected)."""
-        return self._accept_determined(lambda ns, std: _drift_solve(self, w, ns, std=std), list(names or []),
-                                       max_rel_std, always=True)
+        return self._accept_determined(
+            lambda ns, std: _drift_solve(self, w, ns, std=std), list(names or []), max_rel_std, always=True
+        )
 
-    def least_squares_init(self, w: Window, names: list[str] | None = None,
-                           max_rel_std: float = 0.5) -> tuple[dict[str, float], dict[str, float]]:
+    def least_squares_init(
+        self, w: Window, names: list[str] | None = None, max_rel_std: float = 0.5
+    ) -> tuple[dict[str, float], dict[str, float]]:
         """Solve for the parameters the motion residual is linear in, with the current networks.
 
         r(p) = r(0) + J p exactly for those parameters, so one linear least-squares solve
@@ -308,10 +340,13 @@ class PIDynNet(nn.Module):
             k = self.kinematics(w.t_pool, w.f_pool, w.q_pool, w.qd_pool)
         return self._accept_determined(
             lambda ns, std: solve_linear_params(self.system, k, w.f_pool, self.params.values(), ns, std=std),
-            names, max_rel_std)
+            names,
+            max_rel_std,
+        )
 
-    def _accept_determined(self, solve, names: list[str], max_rel_std: float,
-                           always: bool = False) -> tuple[dict[str, float], dict[str, float]]:
+    def _accept_determined(
+        self, solve, names: list[str], max_rel_std: float, always: bool = False
+    ) -> tuple[dict[str, float], dict[str, float]]:
         """Solve for ``names`` (``solve(names, std) -> values``, filling standard errors), drop the
         values out of range or with a standard error above ``max_rel_std`` of them, solve again
         without them; set and return the accepted values and the rejected ones. ``always``: solve
@@ -320,8 +355,11 @@ class PIDynNet(nn.Module):
         while names or always:
             std: dict[str, float] = {}
             est = solve(names, std)
-            bad = {n: v for n, v in est.items() if not in_range(self.params.spec(n), v)
-                   or std.get(n, 0.0) > max_rel_std * abs(v)}
+            bad = {
+                n: v
+                for n, v in est.items()
+                if not in_range(self.params.spec(n), v) or std.get(n, 0.0) > max_rel_std * abs(v)
+            }
             if not bad:
                 self.params.set_values(est)
                 return est, rejected
@@ -330,8 +368,9 @@ class PIDynNet(nn.Module):
         return {}, rejected
 
 
-def _drift_solve(net: "PIDynNet", w: Window, names: list[str], iters: int = 10,
-                 std: dict[str, float] | None = None) -> dict[str, float]:
+def _drift_solve(
+    net: PIDynNet, w: Window, names: list[str], iters: int = 10, std: dict[str, float] | None = None
+) -> dict[str, float]:
     """Gauss-Newton on all physics residuals over the window's pool for the drift (2 n_dof
     numbers) and the parameters ``names``; sets the drift, returns the parameter values
     (``std``: filled with their standard errors, residual variance times (J^T J)^-1)."""
@@ -349,7 +388,7 @@ def _drift_solve(net: "PIDynNet", w: Window, names: list[str], iters: int = 10,
     sf, sv = float(net.scale_f), float(net.scale_v[0])
 
     def residual(u: torch.Tensor) -> torch.Tensor:
-        d0, d1 = u[:nd], u[nd:2 * nd]
+        d0, d1 = u[:nd], u[nd : 2 * nd]
         p = dict(vals)
         p.update({n: u[2 * nd + i] for i, n in enumerate(names)})
         kk = Kinematics(t=k.t.double(), x=x0 + sx * (d0 + d1 * tau), v=v0 + sx * d1 / th, a=a0, z=z0, zd=zd0)
@@ -357,9 +396,13 @@ def _drift_solve(net: "PIDynNet", w: Window, names: list[str], iters: int = 10,
         parts = [res.pop("motion").reshape(-1) / sf] + [r.reshape(-1) / sv for r in res.values()]
         return torch.cat(parts)
 
-    u = torch.cat([torch.zeros(2 * nd, dtype=torch.float64), torch.stack([vals[n] for n in names]) if names
-                   else torch.zeros(0, dtype=torch.float64)])
-    scale = torch.cat([torch.ones(2 * nd, dtype=torch.float64), u[2 * nd:].abs().clamp_min(1e-12)])
+    u = torch.cat(
+        [
+            torch.zeros(2 * nd, dtype=torch.float64),
+            torch.stack([vals[n] for n in names]) if names else torch.zeros(0, dtype=torch.float64),
+        ]
+    )
+    scale = torch.cat([torch.ones(2 * nd, dtype=torch.float64), u[2 * nd :].abs().clamp_min(1e-12)])
     for _ in range(iters):
         r = residual(u)
         J = forward_jacobian(residual, u) * scale
@@ -372,10 +415,10 @@ def _drift_solve(net: "PIDynNet", w: Window, names: list[str], iters: int = 10,
         J = forward_jacobian(residual, u) * scale
         dof = max(J.shape[0] - J.shape[1], 1)
         cov = torch.linalg.pinv(J.T @ J, hermitian=True) * float(r @ r) / dof
-        var = torch.diagonal(cov)[2 * nd:] * scale[2 * nd:] ** 2
+        var = torch.diagonal(cov)[2 * nd :] * scale[2 * nd :] ** 2
         std.update({n: float(var[i].clamp_min(0).sqrt()) for i, n in enumerate(names)})
     with torch.no_grad():
-        net.drift.copy_(torch.stack([u[:nd], u[nd:2 * nd]]).to(net.drift.dtype))
+        net.drift.copy_(torch.stack([u[:nd], u[nd : 2 * nd]]).to(net.drift.dtype))
     return {n: float(u[2 * nd + i]) for i, n in enumerate(names)}
 
 

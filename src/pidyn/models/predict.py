@@ -12,8 +12,8 @@ import copy
 import logging
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import lightning as L
 import numpy as np
@@ -69,7 +69,9 @@ class PredictSettings:
 
     def __post_init__(self) -> None:
         if self.start_from not in ("fresh", "identified"):
-            raise ValueError(f"generalization.start_from: '{self.start_from}' is not one of fresh, identified")
+            raise ValueError(
+                f"generalization.start_from: '{self.start_from}' is not one of fresh, identified"
+            )
         if int(self.iterations) < 0 or int(self.lbfgs_steps) < 0:
             raise ValueError("generalization.iterations and lbfgs_steps must be >= 0")
         if not self.min_window > 0:
@@ -111,18 +113,42 @@ def predict_response(
         p.requires_grad_(False)
     accel = net.system.excitation_as_acceleration(record.f)
     # the DataModule needs response columns for its windows: zeros (never used in fine-tuning)
-    blank = Record(name=record.name, t=record.t, f=record.f, x=np.zeros((len(record.t), net.system.n_dof)),
-                   excitation=record.excitation)
-    dm = SubperiodDataModule(blank, window_length=window_length, pool_size=pool_size, batch_size=batch_size,
-                             min_peak_fraction=0.0, data_seed=data_seed, accel_signal=accel, cover_tail=True)
+    blank = Record(
+        name=record.name,
+        t=record.t,
+        f=record.f,
+        x=np.zeros((len(record.t), net.system.n_dof)),
+        excitation=record.excitation,
+    )
+    dm = SubperiodDataModule(
+        blank,
+        window_length=window_length,
+        pool_size=pool_size,
+        batch_size=batch_size,
+        min_peak_fraction=0.0,
+        data_seed=data_seed,
+        accel_signal=accel,
+        cover_tail=True,
+    )
     scales = _prediction_scales(net, record, x_scale, v_scale)
     x_pred = np.zeros((len(record.t), net.system.n_dof))
     saved = _nets_state(net)
     if cfg.start_from == "fresh":
         _reset_networks(net, seed)
     try:
-        done = _march(module, blank, deque((w.t0, w.t1) for w in dm.windows), accel, scales, trainer_factory, cfg,
-                      x_pred, pool_size, batch_size, data_seed)
+        done = _march(
+            module,
+            blank,
+            deque((w.t0, w.t1) for w in dm.windows),
+            accel,
+            scales,
+            trainer_factory,
+            cfg,
+            x_pred,
+            pool_size,
+            batch_size,
+            data_seed,
+        )
         log.info("predicted %s: %d windows, %.1f s", record.name, len(done), time.perf_counter() - t_start)
     finally:
         net.anchor = None
@@ -136,33 +162,62 @@ def _prediction_scales(net, record: Record, x_scale: float | None, v_scale: floa
     """The response scales of the identification (the new response is not measured) and the
     new excitation's own scale."""
     dt = net.scale_x.dtype
-    return _Scales(x=torch.full_like(net.scale_x, float(x_scale)) if x_scale else net.scale_x.clone(),
-                   v=torch.full_like(net.scale_v, float(v_scale)) if v_scale else net.scale_v.clone(),
-                   f=torch.as_tensor(float(np.std(record.f)), dtype=dt))
+    return _Scales(
+        x=torch.full_like(net.scale_x, float(x_scale)) if x_scale else net.scale_x.clone(),
+        v=torch.full_like(net.scale_v, float(v_scale)) if v_scale else net.scale_v.clone(),
+        f=torch.as_tensor(float(np.std(record.f)), dtype=dt),
+    )
 
 
-def _march(module: PIDynNetModule, blank: Record, spans: deque, accel, scales: _Scales,
-           trainer_factory: Callable[..., L.Trainer], cfg: PredictSettings, x_pred: np.ndarray, pool_size: int,
-           batch_size: int, data_seed: int) -> list[tuple[float, float, float]]:
+def _march(
+    module: PIDynNetModule,
+    blank: Record,
+    spans: deque,
+    accel,
+    scales: _Scales,
+    trainer_factory: Callable[..., L.Trainer],
+    cfg: PredictSettings,
+    x_pred: np.ndarray,
+    pool_size: int,
+    batch_size: int,
+    data_seed: int,
+) -> list[tuple[float, float, float]]:
     """Window after window from rest, each started from the state the last one ended in; a
     window left above ``split_tol`` is solved again as two halves. Writes ``x_pred``; returns
     (t0, t1, final physics loss) per solved window."""
     net = module.net
     dt = net.scale_x.dtype
-    state = (torch.zeros(net.system.n_dof, dtype=dt), torch.zeros(net.system.n_dof, dtype=dt),
-             torch.zeros(net.system.n_latent, dtype=dt) if net.system.n_latent else None)
+    state = (
+        torch.zeros(net.system.n_dof, dtype=dt),
+        torch.zeros(net.system.n_dof, dtype=dt),
+        torch.zeros(net.system.n_latent, dtype=dt) if net.system.n_latent else None,
+    )
     done: list[tuple[float, float, float]] = []
     while spans:
         t0, t1 = spans.popleft()
-        wdm = SubperiodDataModule(blank, window_length=t1 - t0, pool_size=pool_size, batch_size=batch_size,
-                                  min_peak_fraction=0.0, t_start=t0, t_end=t1, data_seed=data_seed + len(done),
-                                  accel_signal=accel)
+        wdm = SubperiodDataModule(
+            blank,
+            window_length=t1 - t0,
+            pool_size=pool_size,
+            batch_size=batch_size,
+            min_peak_fraction=0.0,
+            t_start=t0,
+            t_end=t1,
+            data_seed=data_seed + len(done),
+            accel_signal=accel,
+        )
         w = wdm.windows[0]
         before = _nets_state(net)
         loss = _solve_window(module, wdm, w, state, scales, trainer_factory, cfg)
         if not (loss <= cfg.split_tol) and (t1 - t0) / 2 >= cfg.min_window - 1e-9:
-            log.info("%s: window %.2f-%.2f s ended at physics loss %.3g > %.3g: solving it as two halves",
-                     blank.name, t0, t1, loss, cfg.split_tol)
+            log.info(
+                "%s: window %.2f-%.2f s ended at physics loss %.3g > %.3g: solving it as two halves",
+                blank.name,
+                t0,
+                t1,
+                loss,
+                cfg.split_tol,
+            )
             _load_nets(net, before)
             mid = 0.5 * (t0 + t1)
             spans.extendleft([(mid, t1), (t0, mid)])
@@ -184,8 +239,15 @@ def _reset_networks(net, seed: int) -> None:
                     layer.reset_parameters()
 
 
-def _solve_window(module: PIDynNetModule, wdm: SubperiodDataModule, w, state, scales: _Scales,
-                  trainer_factory, cfg: PredictSettings) -> float:
+def _solve_window(
+    module: PIDynNetModule,
+    wdm: SubperiodDataModule,
+    w,
+    state,
+    scales: _Scales,
+    trainer_factory,
+    cfg: PredictSettings,
+) -> float:
     """Adam, then L-BFGS, on the physics of one window from the handed-over state; returns the
     window's final physics loss."""
     net = module.net
@@ -205,7 +267,9 @@ def _write_window(net, w, t: np.ndarray, x_pred: np.ndarray) -> None:
 
 
 def _nets_state(net) -> dict:
-    return copy.deepcopy({"rpn": net.rpn.state_dict(), "lnn": net.lnn.state_dict() if net.lnn is not None else None})
+    return copy.deepcopy(
+        {"rpn": net.rpn.state_dict(), "lnn": net.lnn.state_dict() if net.lnn is not None else None}
+    )
 
 
 def _load_nets(net, state: dict) -> None:
@@ -230,7 +294,12 @@ def _lbfgs_finish(module: PIDynNetModule, dm: SubperiodDataModule, w, trainer_fa
     final = module.last_losses.get("total", float("nan"))
     if not np.isfinite(final) or final > adam_loss:
         _load_nets(net, keep)
-        log.debug("window %d: L-BFGS ended at %.3g, worse than Adam's %.3g; Adam's networks kept", w.index, final, adam_loss)
+        log.debug(
+            "window %d: L-BFGS ended at %.3g, worse than Adam's %.3g; Adam's networks kept",
+            w.index,
+            final,
+            adam_loss,
+        )
         return adam_loss
     log.debug("window %d: L-BFGS %.3g -> %.3g", w.index, adam_loss, final)
     return float(final)

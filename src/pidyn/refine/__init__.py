@@ -3,5 +3,13 @@
 from pidyn.refine.problem import Channel, ShootingProblem, record_channels, segment_bounds
 from pidyn.refine.stage import RefineResult, RefineSettings, initial_states, refine
 
-__all__ = ["Channel", "ShootingProblem", "record_channels", "segment_bounds", "RefineResult", "RefineSettings",
-           "initial_states", "refine"]
+__all__ = [
+    "Channel",
+    "ShootingProblem",
+    "record_channels",
+    "segment_bounds",
+    "RefineResult",
+    "RefineSettings",
+    "initial_states",
+    "refine",
+]

@@ -52,8 +52,10 @@ def record_channels(record, n_dof: int) -> list[Channel]:
             continue
         arr = np.asarray(arr, float).reshape(len(record.t), -1)
         if arr.shape[1] != n_dof:
-            raise ValueError(f"record '{record.name}': channel '{kind}' has {arr.shape[1]} columns, "
-                             f"the system has {n_dof} degrees of freedom")
+            raise ValueError(
+                f"record '{record.name}': channel '{kind}' has {arr.shape[1]} columns, "
+                f"the system has {n_dof} degrees of freedom"
+            )
         for j in range(n_dof):
             col = arr[:, j]
             if np.all(np.isnan(col)):
@@ -64,8 +66,9 @@ def record_channels(record, n_dof: int) -> list[Channel]:
     return out
 
 
-def segment_bounds(t: np.ndarray, length: float | None, t_start: float | None = None,
-                   t_end: float | None = None) -> np.ndarray:
+def segment_bounds(
+    t: np.ndarray, length: float | None, t_start: float | None = None, t_end: float | None = None
+) -> np.ndarray:
     """Sample indices b_0 < ... < b_S of segments of about ``length`` s over [t_start, t_end]
     (None: one segment). A last piece shorter than half a segment joins its neighbour."""
     i0 = 0 if t_start is None else int(np.searchsorted(t, t_start - 1e-9))
@@ -87,8 +90,11 @@ RESIDUAL_CAP = 1e8
 
 
 def _bounded(r: np.ndarray) -> np.ndarray:
-    return np.clip(np.nan_to_num(r, nan=RESIDUAL_CAP, posinf=RESIDUAL_CAP, neginf=-RESIDUAL_CAP),
-                   -RESIDUAL_CAP, RESIDUAL_CAP)
+    return np.clip(
+        np.nan_to_num(r, nan=RESIDUAL_CAP, posinf=RESIDUAL_CAP, neginf=-RESIDUAL_CAP),
+        -RESIDUAL_CAP,
+        RESIDUAL_CAP,
+    )
 
 
 class ShootingProblem:
@@ -113,7 +119,10 @@ class ShootingProblem:
         self.bounds = np.asarray(bounds, int)
         self.substeps = substeps
         self.specs: list[ParamSpec] = trainable_specs(system)
-        self.fixed = {**fixed_values(system), **{k: v for k, v in (fixed or {}).items() if k in fixed_values(system)}}
+        self.fixed = {
+            **fixed_values(system),
+            **{k: v for k, v in (fixed or {}).items() if k in fixed_values(system)},
+        }
         self.names = [s.name for s in self.specs]
         self.n_theta = len(self.specs)
         self.ns = system.n_state
@@ -150,7 +159,7 @@ class ShootingProblem:
     def unpack(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(theta, states (S, n_state)) from u."""
         theta = u[: self.n_theta]
-        rest = u[self.n_theta:].reshape(-1, self.ns) * self.state_scale
+        rest = u[self.n_theta :].reshape(-1, self.ns) * self.state_scale
         states = rest if self.free_state0 else np.vstack([self.fixed_state0[None, :], rest])
         return theta, states
 
@@ -190,7 +199,7 @@ class ShootingProblem:
         """The accelerometers' readings from the rates: the relative x'' for one input, absolute
         (the influence-weighted ground added) for several."""
         n = self.system.n_dof
-        return self.system.acceleration_output(R[..., n:2 * n], F, p)
+        return self.system.acceleration_output(R[..., n : 2 * n], F, p)
 
     def _channel_sim(self, Y, A, ch: Channel):
         n = self.system.n_dof
@@ -251,7 +260,7 @@ class ShootingProblem:
         if self.S > 1:
             s = np.arange(self.S - 1)
             end_d = Y.d[self.ends[:-1], s] / self.state_scale[None, :, None]  # (S-1, ns, D)
-            rr = (s[:, None] * ns + np.arange(ns)[None, :])  # defect rows
+            rr = s[:, None] * ns + np.arange(ns)[None, :]  # defect rows
             C[rr.ravel(), :nt] = -end_d[..., :nt].reshape(-1, nt)
             own = self._state_cols(s)
             ok = own[:, 0] >= 0
@@ -282,8 +291,10 @@ class ShootingProblem:
         y0 = np.repeat(self.fixed_state0[None, :], nt + 1, axis=0)
         with np.errstate(all="ignore"):
             Y, R = rk4(self.system, p, self.t_local, self.F[:, 0], y0, self.substeps, t0=float(self.t0[0]))
-            A = self._accelerations(R, p, np.broadcast_to(self.F[:, :1], (self.F.shape[0], nt + 1) + self.F.shape[2:]))
-        res = [self._data_res(Y[:, j:j + 1], A[:, j:j + 1]) for j in range(nt + 1)]
+            A = self._accelerations(
+                R, p, np.broadcast_to(self.F[:, :1], (self.F.shape[0], nt + 1) + self.F.shape[2:])
+            )
+        res = [self._data_res(Y[:, j : j + 1], A[:, j : j + 1]) for j in range(nt + 1)]
         return res[0], np.stack([(res[j + 1] - res[0]) / step for j in range(nt)], axis=1)
 
     # ------------------------------------------------------------------ helpers
@@ -291,16 +302,24 @@ class ShootingProblem:
         m = len(self.sel_s)
         return [slice(i * m, (i + 1) * m) for i in range(len(self.channels))]
 
-    def free_run(self, theta: np.ndarray, y0: np.ndarray, i0: int | None = None,
-                 i1: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def free_run(
+        self, theta: np.ndarray, y0: np.ndarray, i0: int | None = None, i1: int | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Samples i0..i1 (default: the whole span) as one trajectory from ``y0``: states
         (N_span, n_state) and rates."""
         i0 = int(self.bounds[0]) if i0 is None else i0
         i1 = int(self.bounds[-1]) if i1 is None else i1
         p = self._params(np.asarray(theta, float), False)
         with np.errstate(all="ignore"):
-            Y, R = rk4(self.system, p, self.t[i0:i1 + 1], self.f[i0:i1 + 1], np.asarray(y0, float)[None, :],
-                       self.substeps, t0=float(self.t[i0]))
+            Y, R = rk4(
+                self.system,
+                p,
+                self.t[i0 : i1 + 1],
+                self.f[i0 : i1 + 1],
+                np.asarray(y0, float)[None, :],
+                self.substeps,
+                t0=float(self.t[i0]),
+            )
         return Y[:, 0], R[:, 0]
 
     def free_run_cost(self, theta: np.ndarray, y0: np.ndarray) -> float:
@@ -314,11 +333,11 @@ class ShootingProblem:
         i0, i1 = self.bounds[0], self.bounds[-1]
         n = self.system.n_dof
         with np.errstate(all="ignore"):
-            A = self._accelerations(R, self._params(np.asarray(theta, float), False), self.f[i0:i1 + 1])
+            A = self._accelerations(R, self._params(np.asarray(theta, float), False), self.f[i0 : i1 + 1])
         total = 0.0
         for ch in self.channels:
             sim = {"x": Y[:, ch.dof], "v": Y[:, n + ch.dof], "a": A[:, ch.dof]}[ch.kind]
             with np.errstate(all="ignore"):
-                e = (sim - ch.data[i0:i1 + 1]) / ch.sigma
+                e = (sim - ch.data[i0 : i1 + 1]) / ch.sigma
             total += float(np.sum(_bounded(e) ** 2))
         return total, diverged(Y)

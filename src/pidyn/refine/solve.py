@@ -56,9 +56,16 @@ def _penalised(problem: ShootingProblem, mu: float):
     return fun, jac
 
 
-def solve_penalty(problem: ShootingProblem, u0: np.ndarray, mu0: float = 100.0, growth: float = 100.0,
-                  penalty_tol: float = 1e-6, max_rounds: int = 6, max_nfev: int = 100,
-                  history: list[dict] | None = None) -> tuple[np.ndarray, int, int]:
+def solve_penalty(
+    problem: ShootingProblem,
+    u0: np.ndarray,
+    mu0: float = 100.0,
+    growth: float = 100.0,
+    penalty_tol: float = 1e-6,
+    max_rounds: int = 6,
+    max_nfev: int = 100,
+    history: list[dict] | None = None,
+) -> tuple[np.ndarray, int, int]:
     """Stage 1. The penalty weight is relative to the mean data term per sample."""
     u = np.asarray(u0, float).copy()
     nfev = njev = 0
@@ -66,16 +73,24 @@ def solve_penalty(problem: ShootingProblem, u0: np.ndarray, mu0: float = 100.0, 
     for k in range(max_rounds):
         mu = mu0 * per_sample * growth**k
         fun, jac = _penalised(problem, mu)
-        sol = least_squares(fun, u, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12,
-                            max_nfev=max_nfev, x_scale="jac")
+        sol = least_squares(
+            fun, u, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=max_nfev, x_scale="jac"
+        )
         u = sol.x
         nfev += sol.nfev
         njev += int(sol.njev or 0)
         r, c = problem.residuals(u)
         dmax = float(np.max(np.abs(c))) if c.size else 0.0
         if history is not None:
-            history.append({"stage": "penalty", "mu": mu, "cost": float(r @ r), "max_defect": dmax,
-                            "nfev": int(sol.nfev)})
+            history.append(
+                {
+                    "stage": "penalty",
+                    "mu": mu,
+                    "cost": float(r @ r),
+                    "max_defect": dmax,
+                    "nfev": int(sol.nfev),
+                }
+            )
         log.debug("penalty mu=%.3g: cost %.6g, max defect %.3g (%d evaluations)", mu, r @ r, dmax, sol.nfev)
         if dmax < penalty_tol:
             break
@@ -86,8 +101,9 @@ def _max_abs(a: np.ndarray) -> float:
     return float(np.max(np.abs(a))) if a.size else 0.0
 
 
-def _damped_step(problem: ShootingProblem, u: np.ndarray, lin: tuple, lam: float, rho: float,
-                 defect_slack: float) -> tuple[np.ndarray | None, float]:
+def _damped_step(
+    problem: ShootingProblem, u: np.ndarray, lin: tuple, lam: float, rho: float, defect_slack: float
+) -> tuple[np.ndarray | None, float]:
     """One accepted step d of stage 2 from ``u`` (None when no damping up to 1e12 gives one),
     and the damping it took. ``lin`` = (r, J, c, C) at ``u``."""
     r, J, c, C = lin
@@ -107,8 +123,9 @@ def _damped_step(problem: ShootingProblem, u: np.ndarray, lin: tuple, lam: float
         # the merit falls, or (filter) the misfit falls while the defects stay within the
         # slack that the next step's restoration closes
         rn, cn = problem.residuals(v)
-        ok = (float(rn @ rn) + rho * float(cn @ cn) <= merit0 * (1 + 1e-12)
-              or (float(rn @ rn) <= cost0 * (1 + 1e-12) and _max_abs(cn) <= slack))
+        ok = float(rn @ rn) + rho * float(cn @ cn) <= merit0 * (1 + 1e-12) or (
+            float(rn @ rn) <= cost0 * (1 + 1e-12) and _max_abs(cn) <= slack
+        )
         return ok, cn
 
     while lam <= 1e12:
@@ -128,9 +145,15 @@ def _damped_step(problem: ShootingProblem, u: np.ndarray, lin: tuple, lam: float
     return None, lam
 
 
-def solve_constrained(problem: ShootingProblem, u0: np.ndarray, max_steps: int = 40, step_tol: float = 1e-10,
-                      defect_tol: float = 1e-8, defect_slack: float = 1e-7,
-                      history: list[dict] | None = None) -> tuple[np.ndarray, int, bool]:
+def solve_constrained(
+    problem: ShootingProblem,
+    u0: np.ndarray,
+    max_steps: int = 40,
+    step_tol: float = 1e-10,
+    defect_tol: float = 1e-8,
+    defect_slack: float = 1e-7,
+    history: list[dict] | None = None,
+) -> tuple[np.ndarray, int, bool]:
     """Stage 2: min |r|^2 subject to c = 0. Each step restores the linearised continuity
     exactly (minimum-norm correction) and takes a Levenberg-Marquardt step within its null
     space, accepted when the merit |r|^2 + rho |c|^2 falls (rho far above any stage-1 weight).
@@ -142,14 +165,21 @@ def solve_constrained(problem: ShootingProblem, u0: np.ndarray, max_steps: int =
     rho = 1e12 * max(len(problem.sel_s) / max(problem.S, 1), 1.0)
     lam, converged, steps = 1e-6, False, 0
     lin = problem.linearize(u)
-    for steps in range(1, max_steps + 1):
+    for steps in range(1, max_steps + 1):  # noqa: B007 (the count is returned)
         r, J, c, _ = lin
         d, lam = _damped_step(problem, u, lin, lam, rho, defect_slack)
         if d is None:  # no damping lowers the merit: stay, converged if only round-off is left to gain
             converged = _max_abs(c) < defect_tol
             if history is not None:
-                history.append({"stage": "constrained", "cost": float(r @ r), "max_defect": _max_abs(c),
-                                "step": 0.0, "lam": lam})
+                history.append(
+                    {
+                        "stage": "constrained",
+                        "cost": float(r @ r),
+                        "max_defect": _max_abs(c),
+                        "step": 0.0,
+                        "lam": lam,
+                    }
+                )
             break
         with np.errstate(over="ignore", invalid="ignore"):  # a step from a diverging start may overflow
             rp = r + J @ d
@@ -159,8 +189,15 @@ def solve_constrained(problem: ShootingProblem, u0: np.ndarray, max_steps: int =
         lin = problem.linearize(u)
         r, c = lin[0], lin[2]
         if history is not None:
-            history.append({"stage": "constrained", "cost": float(r @ r), "max_defect": _max_abs(c),
-                            "step": _max_abs(d), "lam": lam})
+            history.append(
+                {
+                    "stage": "constrained",
+                    "cost": float(r @ r),
+                    "max_defect": _max_abs(c),
+                    "step": _max_abs(d),
+                    "lam": lam,
+                }
+            )
         small = _max_abs(d) < step_tol * max(1.0, _max_abs(u))
         if (small or abs(decrease) < 1e-10 * (1.0 + float(r @ r))) and _max_abs(c) < defect_tol:
             converged = True
@@ -168,25 +205,45 @@ def solve_constrained(problem: ShootingProblem, u0: np.ndarray, max_steps: int =
     return u, steps, converged
 
 
-def solve(problem: ShootingProblem, u0: np.ndarray, penalty_tol: float = 1e-6, max_nfev: int = 100,
-          gn_steps: int = 40, penalty_start: float = 100.0) -> SolveReport:
+def solve(
+    problem: ShootingProblem,
+    u0: np.ndarray,
+    penalty_tol: float = 1e-6,
+    max_nfev: int = 100,
+    gn_steps: int = 40,
+    penalty_start: float = 100.0,
+) -> SolveReport:
     """Both stages from ``u0``."""
     t0 = time.perf_counter()
     hist: list[dict] = []
-    u, nfev, njev = solve_penalty(problem, u0, mu0=penalty_start, penalty_tol=penalty_tol, max_nfev=max_nfev,
-                                  history=hist) \
-        if problem.S > 1 else _single(problem, u0, max_nfev, hist)
+    u, nfev, njev = (
+        solve_penalty(
+            problem, u0, mu0=penalty_start, penalty_tol=penalty_tol, max_nfev=max_nfev, history=hist
+        )
+        if problem.S > 1
+        else _single(problem, u0, max_nfev, hist)
+    )
     u, steps, ok = solve_constrained(problem, u, max_steps=gn_steps, history=hist)
     r, c = problem.residuals(u)
-    return SolveReport(u=u, cost=float(r @ r), max_defect=float(np.max(np.abs(c))) if c.size else 0.0, nfev=nfev,
-                       njev=njev + steps, gn_steps=steps, seconds=time.perf_counter() - t0, converged=ok,
-                       history=hist)
+    return SolveReport(
+        u=u,
+        cost=float(r @ r),
+        max_defect=float(np.max(np.abs(c))) if c.size else 0.0,
+        nfev=nfev,
+        njev=njev + steps,
+        gn_steps=steps,
+        seconds=time.perf_counter() - t0,
+        converged=ok,
+        history=hist,
+    )
 
 
-def _single(problem: ShootingProblem, u0: np.ndarray, max_nfev: int, hist: list[dict]) -> tuple[np.ndarray, int, int]:
+def _single(
+    problem: ShootingProblem, u0: np.ndarray, max_nfev: int, hist: list[dict]
+) -> tuple[np.ndarray, int, int]:
     fun, jac = _penalised(problem, 0.0)
-    sol = least_squares(fun, u0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=max_nfev,
-                        x_scale="jac")
+    sol = least_squares(
+        fun, u0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=max_nfev, x_scale="jac"
+    )
     hist.append({"stage": "single", "cost": float(2 * sol.cost), "nfev": int(sol.nfev)})
     return sol.x, int(sol.nfev), int(sol.njev or 0)
-

@@ -58,8 +58,9 @@ class RefineSettings:
         if self.states not in STATE_SOURCES:
             raise ValueError(f"refine.states must be one of {', '.join(STATE_SOURCES)}; got '{self.states}'")
         if self.initial_state not in INITIAL_STATES:
-            raise ValueError(f"refine.initial_state must be one of {', '.join(INITIAL_STATES)}; "
-                             f"got '{self.initial_state}'")
+            raise ValueError(
+                f"refine.initial_state must be one of {', '.join(INITIAL_STATES)}; got '{self.initial_state}'"
+            )
         if not 0 < self.rest_test_level < 1:
             raise ValueError(f"refine.rest_test_level must lie in (0, 1), got {self.rest_test_level}")
         if self.segment_length is not None and self.segment_length <= 0:
@@ -102,8 +103,9 @@ def _lookup(network_states: np.ndarray | None, t: float, tol: float) -> np.ndarr
     return network_states[i, 1:] if abs(network_states[i, 0] - t) <= tol else None
 
 
-def initial_states(problem: ShootingProblem, theta: np.ndarray, source: StateSource,
-                   network_states: np.ndarray | None = None) -> np.ndarray:
+def initial_states(
+    problem: ShootingProblem, theta: np.ndarray, source: StateSource, network_states: np.ndarray | None = None
+) -> np.ndarray:
     """Segment initial states (S, n_state): from the networks, the measured x, x' or the
     integrated measurements where they exist, otherwise carried from the previous segment's
     simulated end (at ``theta``)."""
@@ -134,7 +136,7 @@ def integrated_states(problem: ShootingProblem) -> dict[tuple[str, int], np.ndar
     """x and x' of every floor with a sensor, as a practitioner gets them from accelerometers:
     the acceleration integrated (trapezoidal rule) with a linear baseline correction of the
     velocity and of the displacement; a measured velocity or displacement is used as it is.
-    This is the refinement's start without networks (integration drifts, see the README)."""
+    This is the refinement's start without networks (integration drifts, see docs/buildings.md)."""
     t = problem.t
     by = {(ch.kind, ch.dof): ch.data for ch in problem.channels}
     out: dict[tuple[str, int], np.ndarray] = {}
@@ -167,12 +169,15 @@ def _measured_state(y: np.ndarray, measured: dict, i: int, n: int) -> np.ndarray
     return y
 
 
-def build_problem(system, record, settings: RefineSettings, t_start: float | None = None,
-                  t_end: float | None = None) -> ShootingProblem:
+def build_problem(
+    system, record, settings: RefineSettings, t_start: float | None = None, t_end: float | None = None
+) -> ShootingProblem:
     channels = record_channels(record, system.n_dof)
     bounds = segment_bounds(record.t, settings.segment_length, t_start, t_end)
     state0 = np.zeros(system.n_state) if settings.initial_state == "rest" else None
-    return ShootingProblem(system, record.t, record.f, channels, bounds, settings.substeps, fixed_state0=state0)
+    return ShootingProblem(
+        system, record.t, record.f, channels, bounds, settings.substeps, fixed_state0=state0
+    )
 
 
 def _state_scale(problem: ShootingProblem, states: np.ndarray) -> np.ndarray:
@@ -186,9 +191,16 @@ def _state_scale(problem: ShootingProblem, states: np.ndarray) -> np.ndarray:
     return np.where(scale > 1e-9 * floor, scale, floor)
 
 
-def refine(system, record, start: dict[str, dict[str, float]], settings: RefineSettings | None = None,
-           network_states: np.ndarray | None = None, t_start: float | None = None,
-           t_end: float | None = None, prefer: str = "pidynnet") -> RefineResult:
+def refine(
+    system,
+    record,
+    start: dict[str, dict[str, float]],
+    settings: RefineSettings | None = None,
+    network_states: np.ndarray | None = None,
+    t_start: float | None = None,
+    t_end: float | None = None,
+    prefer: str = "pidynnet",
+) -> RefineResult:
     """Refine the best of the ``start`` estimates (label -> parameter values) by multiple shooting.
 
     Every candidate is scored by a free simulation of the span from the same initial state;
@@ -216,18 +228,32 @@ def refine(system, record, start: dict[str, dict[str, float]], settings: RefineS
     for n_ in notes:
         log.warning("identifiability: %s", n_)
     return RefineResult(
-        params=problem.values(theta), intervals=ints, correlation=corr.tolist(), names=problem.names,
-        noise_std=estimate_noise(problem, r), notes=starts.notes + test.pop("notes", []) + notes, start=used,
-        start_costs=starts.costs, initial_state=states[0].tolist(), cost=float(r @ r),
-        max_defect=float(np.max(np.abs(c))) if c.size else 0.0, segments=problem.S, condition_number=cond,
-        converged=bool(converged), seconds=time.perf_counter() - t_wall, state_source=settings.states,
-        initial_state_mode="free" if problem.free_state0 else "rest", rest_test=test, history=rep.history,
+        params=problem.values(theta),
+        intervals=ints,
+        correlation=corr.tolist(),
+        names=problem.names,
+        noise_std=estimate_noise(problem, r),
+        notes=starts.notes + test.pop("notes", []) + notes,
+        start=used,
+        start_costs=starts.costs,
+        initial_state=states[0].tolist(),
+        cost=float(r @ r),
+        max_defect=float(np.max(np.abs(c))) if c.size else 0.0,
+        segments=problem.S,
+        condition_number=cond,
+        converged=bool(converged),
+        seconds=time.perf_counter() - t_wall,
+        state_source=settings.states,
+        initial_state_mode="free" if problem.free_state0 else "rest",
+        rest_test=test,
+        history=rep.history,
         covariance=cov.tolist(),
     )
 
 
-def _test_rest(problem: ShootingProblem, u: np.ndarray, converged: bool, settings: RefineSettings,
-               history: list[dict]) -> tuple[ShootingProblem, np.ndarray, bool, dict]:
+def _test_rest(
+    problem: ShootingProblem, u: np.ndarray, converged: bool, settings: RefineSettings, history: list[dict]
+) -> tuple[ShootingProblem, np.ndarray, bool, dict]:
     """Is the record's initial state rest? An earthquake record starts before the ground
     moves, and a structure at rest gives its initial state for free: on a hysteretic system
     that roughly halves the spread of beta, gamma and n (``cramer_rao``'s two bounds). Test
@@ -247,16 +273,30 @@ def _test_rest(problem: ShootingProblem, u: np.ndarray, converged: bool, setting
 
     ns = problem.ns
     if int(problem.bounds[0]) > 0:
-        return problem, u, converged, {"notes": [], "applies": False,
-                                       "reason": "the span starts inside the record"}
+        return (
+            problem,
+            u,
+            converged,
+            {"notes": [], "applies": False, "reason": "the span starts inside the record"},
+        )
     r, _ = problem.residuals(u)
     theta, _ = problem.unpack(u)
-    rest = ShootingProblem(problem.system, problem.t, problem.f, problem.channels, problem.bounds, problem.substeps,
-                           fixed_state0=np.zeros(ns), state_scale=problem.state_scale, fixed=problem.fixed)
+    rest = ShootingProblem(
+        problem.system,
+        problem.t,
+        problem.f,
+        problem.channels,
+        problem.bounds,
+        problem.substeps,
+        fixed_state0=np.zeros(ns),
+        state_scale=problem.state_scale,
+        fixed=problem.fixed,
+    )
     run, _ = rest.free_run(theta, np.zeros(ns))
     states = np.nan_to_num(run[rest.bounds[:-1] - rest.bounds[0]])
-    ur, _, ok = solve_constrained(rest, rest.pack(problem.values(theta), states), max_steps=settings.gn_steps,
-                                  history=history)
+    ur, _, ok = solve_constrained(
+        rest, rest.pack(problem.values(theta), states), max_steps=settings.gn_steps, history=history
+    )
     rr, cr = rest.residuals(ur)
     rho = residual_correlation(problem, r)
     inflation = (1 + rho) / (1 - rho)
@@ -264,17 +304,33 @@ def _test_rest(problem: ShootingProblem, u: np.ndarray, converged: bool, setting
     threshold = float(chi2.ppf(1.0 - settings.rest_test_level, ns))
     closed = (float(np.max(np.abs(cr))) if cr.size else 0.0) < 1e-6
     at_rest = bool(delta <= threshold and closed)
-    test = {"applies": True, "misfit_drop": delta, "threshold": threshold, "level": settings.rest_test_level,
-            "dof": ns, "at_rest": at_rest, "residual_lag1_correlation": rho, "inflation": inflation}
+    test = {
+        "applies": True,
+        "misfit_drop": delta,
+        "threshold": threshold,
+        "level": settings.rest_test_level,
+        "dof": ns,
+        "at_rest": at_rest,
+        "residual_lag1_correlation": rho,
+        "inflation": inflation,
+    }
     corrected = f" (divided by {inflation:.3g} for correlated residuals)" if inflation > 1.01 else ""
     if at_rest:
-        log.info("the record starts at rest: estimating its initial state lowers the misfit by %.3g%s, below the "
-                 "%g %% chi-square threshold %.3g (%d states), so the state is held at rest", max(delta, 0.0),
-                 corrected, 100 * settings.rest_test_level, threshold, ns)
+        log.info(
+            "the record starts at rest: estimating its initial state lowers the misfit by %.3g%s, below the "
+            "%g %% chi-square threshold %.3g (%d states), so the state is held at rest",
+            max(delta, 0.0),
+            corrected,
+            100 * settings.rest_test_level,
+            threshold,
+            ns,
+        )
         return rest, ur, ok, {**test, "notes": []}
-    note = (f"the record does not start at rest: estimating its initial state lowers the misfit by {delta:.3g}"
-            f"{corrected}, beyond the {100 * settings.rest_test_level:g} % chi-square threshold {threshold:.3g} ({ns} states); "
-            f"the initial state is estimated, which widens the intervals")
+    note = (
+        f"the record does not start at rest: estimating its initial state lowers the misfit by {delta:.3g}"
+        f"{corrected}, beyond the {100 * settings.rest_test_level:g} % chi-square threshold {threshold:.3g} ({ns} states); "
+        f"the initial state is estimated, which widens the intervals"
+    )
     log.warning(note)
     return problem, u, converged, {**test, "notes": [note]}
 
@@ -302,12 +358,20 @@ def _uncertainty(problem: ShootingProblem, r: np.ndarray, J: np.ndarray, C: np.n
 class _Starts:
     """The candidate starting estimates, scored by a free simulation from the same state."""
 
-    def __init__(self, problem: ShootingProblem, settings: RefineSettings, start: dict[str, dict[str, float]],
-                 network_states: np.ndarray | None, prefer: str) -> None:
+    def __init__(
+        self,
+        problem: ShootingProblem,
+        settings: RefineSettings,
+        start: dict[str, dict[str, float]],
+        network_states: np.ndarray | None,
+        prefer: str,
+    ) -> None:
         from pidyn.params import to_theta
 
         names = problem.names
-        self.cands = {k: v for k, v in start.items() if v and all(n in v and np.isfinite(v[n]) for n in names)}
+        self.cands = {
+            k: v for k, v in start.items() if v and all(n in v and np.isfinite(v[n]) for n in names)
+        }
         if not self.cands:
             raise ValueError(f"refinement: no starting estimate has every parameter {names}")
         self.problem, self.settings, self.network_states = problem, settings, network_states
@@ -321,31 +385,48 @@ class _Starts:
         self.notes: list[str] = []
         blown = [k for k, (_, b) in fits.items() if b]
         if len(blown) == len(fits):
-            self.notes.append(f"no starting estimate ({', '.join(blown)}) simulates the record without blowing up: the "
-                              "refinement starts from a diverging model and may end at a degenerate fit (parameters "
-                              "at their bounds); give a classical start (baselines.run and model.refine.starts) or a "
-                              "better guess (system.guess)")
+            self.notes.append(
+                f"no starting estimate ({', '.join(blown)}) simulates the record without blowing up: the "
+                "refinement starts from a diverging model and may end at a degenerate fit (parameters "
+                "at their bounds); give a classical start (baselines.run and model.refine.starts) or a "
+                "better guess (system.guess)"
+            )
             log.warning(self.notes[-1])
         best = self.order[0]
         if prefer in self.costs and best != prefer:
-            self.notes.append(f"PIDynNet's estimate simulates the record worse than {best}'s (cost "
-                              f"{self.costs[prefer]:.4g} against {self.costs[best]:.4g}); the refinement started "
-                              f"from {best}")
+            self.notes.append(
+                f"PIDynNet's estimate simulates the record worse than {best}'s (cost "
+                f"{self.costs[prefer]:.4g} against {self.costs[best]:.4g}); the refinement started "
+                f"from {best}"
+            )
             log.warning(self.notes[-1])
 
     def run_from(self, label: str):
-        st = self.states0 if label == self.first else initial_states(
-            self.problem, self.thetas[label], self.settings.states, self.network_states)
+        st = (
+            self.states0
+            if label == self.first
+            else initial_states(self.problem, self.thetas[label], self.settings.states, self.network_states)
+        )
         s = self.settings
-        return solve(self.problem, self.problem.pack(self.cands[label], st), s.penalty_tol, s.max_nfev, s.gn_steps,
-                     s.penalty_start)
+        return solve(
+            self.problem,
+            self.problem.pack(self.cands[label], st),
+            s.penalty_tol,
+            s.max_nfev,
+            s.gn_steps,
+            s.penalty_start,
+        )
 
     def solve_best(self):
         rep, used = self.run_from(self.order[0]), self.order[0]
         for other in self.order[1:]:
             if self.costs[other] < rep.cost * (1 - 1e-6):
-                log.warning("%s's estimate simulates better (%.4g) than the refined one (%.4g): refining it too",
-                            other, self.costs[other], rep.cost)
+                log.warning(
+                    "%s's estimate simulates better (%.4g) than the refined one (%.4g): refining it too",
+                    other,
+                    self.costs[other],
+                    rep.cost,
+                )
                 alt = self.run_from(other)
                 if alt.cost < rep.cost:
                     rep, used = alt, other

@@ -63,8 +63,12 @@ def intervals(specs: list[ParamSpec], theta: np.ndarray, cov: np.ndarray) -> dic
         value = to_v(theta[i])
         std = abs(dvalue_draw(s, float(theta[i]))) * sd[i]
         lo, hi = sorted((to_v(theta[i] - Z95 * sd[i]), to_v(theta[i] + Z95 * sd[i])))
-        out[s.name] = {"value": value, "std": float(std), "ci95": [lo, hi],
-                       "rel_std_pct": float(100 * std / abs(value)) if value != 0 else None}
+        out[s.name] = {
+            "value": value,
+            "std": float(std),
+            "ci95": [lo, hi],
+            "rel_std_pct": float(100 * std / abs(value)) if value != 0 else None,
+        }
     return out
 
 
@@ -79,22 +83,34 @@ def bound_notes(specs: list[ParamSpec], theta: np.ndarray, edge: float = 12.0) -
     out = []
     for s, th in zip(specs, theta):
         if s.transform == "log" and th < -edge:
-            out.append(f"{s.name} ran to its lower bound (0): the record gives no evidence for this term, or the "
-                       "model lacks what the data show; treat its interval as meaningless")
+            out.append(
+                f"{s.name} ran to its lower bound (0): the record gives no evidence for this term, or the "
+                "model lacks what the data show; treat its interval as meaningless"
+            )
         elif s.transform == "box" and abs(th) > edge:
             end = s.lower if th < 0 else s.upper
-            out.append(f"{s.name} ran to the {'lower' if th < 0 else 'upper'} end of its range ({end:g}): widen "
-                       f"system.params.{s.name}.lower/upper if that range is not physical, else the record does not "
-                       "determine it")
+            out.append(
+                f"{s.name} ran to the {'lower' if th < 0 else 'upper'} end of its range ({end:g}): widen "
+                f"system.params.{s.name}.lower/upper if that range is not physical, else the record does not "
+                "determine it"
+            )
     return out
 
 
-def identifiability_notes(names: list[str], ints: dict[str, dict], corr: np.ndarray, cond: float,
-                          wide_pct: float = 10.0, strong_corr: float = 0.95) -> list[str]:
+def identifiability_notes(
+    names: list[str],
+    ints: dict[str, dict],
+    corr: np.ndarray,
+    cond: float,
+    wide_pct: float = 10.0,
+    strong_corr: float = 0.95,
+) -> list[str]:
     """Sentences a structural engineer acts on, for parameters the record does not pin down."""
     notes = []
-    half = {n: 100 * (ints[n]["ci95"][1] - ints[n]["ci95"][0]) / 2 / max(abs(ints[n]["value"]), 1e-300)
-            for n in names}
+    half = {
+        n: 100 * (ints[n]["ci95"][1] - ints[n]["ci95"][0]) / 2 / max(abs(ints[n]["value"]), 1e-300)
+        for n in names
+    }
     wide = [n for n in names if half[n] > wide_pct]
     done: set[str] = set()
     for n in wide:
@@ -107,12 +123,18 @@ def identifiability_notes(names: list[str], ints: dict[str, dict], corr: np.ndar
         if len(group) > 1:
             idx = [names.index(g) for g in group]
             rho = max(abs(corr[a, b]) for a in idx for b in idx if a != b)
-            notes.append(f"{', '.join(group)} are not separable from this record (correlation {rho:.2f}; 95 % "
-                         f"intervals {widths}); a stronger or longer excitation is needed")
+            notes.append(
+                f"{', '.join(group)} are not separable from this record (correlation {rho:.2f}; 95 % "
+                f"intervals {widths}); a stronger or longer excitation is needed"
+            )
         else:
-            notes.append(f"{n} is poorly determined by this record (95 % interval {widths}); a stronger or longer "
-                         "excitation, or a channel that responds to it, is needed")
+            notes.append(
+                f"{n} is poorly determined by this record (95 % interval {widths}); a stronger or longer "
+                "excitation, or a channel that responds to it, is needed"
+            )
     if cond > 1e14 and not notes:
-        notes.append(f"the information matrix is near-singular (condition number {cond:.2g}): some combination "
-                     "of parameters is not determined by this record")
+        notes.append(
+            f"the information matrix is near-singular (condition number {cond:.2g}): some combination "
+            "of parameters is not determined by this record"
+        )
     return notes

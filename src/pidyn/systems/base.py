@@ -16,8 +16,9 @@ record keeps them absolute and ``acceleration_output`` gives the model's reading
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable, Literal
+from typing import Any, Literal
 
 import numpy as np
 import torch
@@ -71,9 +72,7 @@ class StructuralSystem(ABC):
         """All parameters, known ones (trainable=False) included."""
 
     @abstractmethod
-    def residual(
-        self, k: Kinematics, f: torch.Tensor, p: dict[str, torch.Tensor]
-    ) -> dict[str, torch.Tensor]:
+    def residual(self, k: Kinematics, f: torch.Tensor, p: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
         """Named residuals, each (N, ·), zero when the response obeys the model.
 
         ``f`` is the excitation at the same points: ground acceleration (m/s^2) or force (N),
@@ -81,9 +80,7 @@ class StructuralSystem(ABC):
         """
 
     @abstractmethod
-    def rhs(
-        self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]
-    ) -> np.ndarray:
+    def rhs(self, t: float, y: np.ndarray, p: dict[str, float], f: Callable[[float], float]) -> np.ndarray:
         """dy/dt for the state y = [x (n_dof), v (n_dof), z (n_latent)]."""
 
     @property
@@ -166,7 +163,9 @@ def merge_specs(defaults: list[ParamSpec], overrides: dict | None) -> list[Param
         o = dict(overrides.get(s.name) or {})
         bad = set(o) - allowed
         if bad:
-            raise ValueError(f"parameter '{s.name}': unknown field(s) {sorted(bad)}; allowed {sorted(allowed)}")
+            raise ValueError(
+                f"parameter '{s.name}': unknown field(s) {sorted(bad)}; allowed {sorted(allowed)}"
+            )
         if "init" in o and "scale" not in o and s.transform != "box":
             o["scale"] = abs(float(o["init"])) or s.scale  # never scale by the (unknown) truth
         out.append(replace(s, **o))

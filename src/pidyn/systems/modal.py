@@ -9,7 +9,7 @@ roof component and signed so that it is positive.
 
 from __future__ import annotations
 
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 from scipy.linalg import eigh
@@ -23,8 +23,12 @@ def modal_properties(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> dict:
     w2 = np.clip(w2, 0.0, None)
     omega = np.sqrt(w2)
     phi = phi / np.where(np.abs(phi[-1]) > 1e-12, phi[-1], 1.0)
-    zeta = np.array([phi[:, r] @ C @ phi[:, r] / max(2 * omega[r] * (phi[:, r] @ M @ phi[:, r]), 1e-300)
-                     for r in range(len(omega))])
+    zeta = np.array(
+        [
+            phi[:, r] @ C @ phi[:, r] / max(2 * omega[r] * (phi[:, r] @ M @ phi[:, r]), 1e-300)
+            for r in range(len(omega))
+        ]
+    )
     freq = omega / (2 * np.pi)
     return {
         "frequency_hz": freq.tolist(),
@@ -48,8 +52,12 @@ def compare_modes(system, identified: Mapping[str, float], truth: Mapping[str, f
         tr = modal_properties(*system.linear_matrices(truth))
         out["truth"] = tr
         idf = out["identified"]
-        out["frequency_error_pct"] = [error_pct(a, b) for a, b in zip(idf["frequency_hz"], tr["frequency_hz"])]
-        out["damping_error_pct"] = [error_pct(a, b) for a, b in zip(idf["damping_ratio"], tr["damping_ratio"])]
+        out["frequency_error_pct"] = [
+            error_pct(a, b) for a, b in zip(idf["frequency_hz"], tr["frequency_hz"])
+        ]
+        out["damping_error_pct"] = [
+            error_pct(a, b) for a, b in zip(idf["damping_ratio"], tr["damping_ratio"])
+        ]
         out["mac"] = [mac(a, b) for a, b in zip(idf["mode_shapes"], tr["mode_shapes"])]
     return out
 
@@ -57,12 +65,16 @@ def compare_modes(system, identified: Mapping[str, float], truth: Mapping[str, f
 def modal_table(modes: dict) -> str:
     """A markdown table of the modes (identified, and the truth where known)."""
     idf, tr = modes["identified"], modes.get("truth")
-    head = "| mode | f (Hz) | zeta (%) | shape (floor 1..N) |" + (" f true (Hz) | zeta true (%) | MAC |" if tr else "")
+    head = "| mode | f (Hz) | zeta (%) | shape (floor 1..N) |" + (
+        " f true (Hz) | zeta true (%) | MAC |" if tr else ""
+    )
     rows = [head, "|" + "---|" * (head.count("|") - 1)]
     for r, (f, z, ph) in enumerate(zip(idf["frequency_hz"], idf["damping_ratio"], idf["mode_shapes"])):
         row = f"| {r + 1} | {f:.4f} | {100 * z:.3f} | {', '.join(f'{v:.3f}' for v in ph)} |"
         if tr:
-            row += f" {tr['frequency_hz'][r]:.4f} | {100 * tr['damping_ratio'][r]:.3f} | {modes['mac'][r]:.5f} |"
+            row += (
+                f" {tr['frequency_hz'][r]:.4f} | {100 * tr['damping_ratio'][r]:.3f} | {modes['mac'][r]:.5f} |"
+            )
         rows.append(row)
     return "\n".join(rows)
 
@@ -84,7 +96,9 @@ def stiffness_params(system) -> list[str]:
     spring's k, a Bouc-Wen spring's k since dz/dx = 1 at rest)."""
     from pidyn.systems.terms import BoucWenHysteresis, LinearStiffness
 
-    return [t.param for t in getattr(system, "terms", []) if isinstance(t, (LinearStiffness, BoucWenHysteresis))]
+    return [
+        t.param for t in getattr(system, "terms", []) if isinstance(t, (LinearStiffness, BoucWenHysteresis))
+    ]
 
 
 def damping_params(system) -> list[str]:
@@ -93,8 +107,14 @@ def damping_params(system) -> list[str]:
     return [t.linear[0] for t in getattr(system, "terms", []) if isinstance(t, ViscousDamping)]
 
 
-def modes_with_intervals(system, values: Mapping[str, float], names: list[str] | None = None,
-                         covariance: np.ndarray | None = None, draws: int = 4000, seed: int = 0) -> list[dict]:
+def modes_with_intervals(
+    system,
+    values: Mapping[str, float],
+    names: list[str] | None = None,
+    covariance: np.ndarray | None = None,
+    draws: int = 4000,
+    seed: int = 0,
+) -> list[dict]:
     """The model's modes about rest, fundamental first: period, frequency, damping ratio and
     their 95 % intervals (the ``modal.json`` entries), and the mode shape.
 
@@ -122,8 +142,12 @@ def modes_with_intervals(system, values: Mapping[str, float], names: list[str] |
         shapes: list = []
         for row in sample:
             p = dict(values)
-            p.update({k: float(from_raw(specs[k], torch.tensor(float(row[i]), dtype=torch.float64)))
-                      for i, k in enumerate(names)})
+            p.update(
+                {
+                    k: float(from_raw(specs[k], torch.tensor(float(row[i]), dtype=torch.float64)))
+                    for i, k in enumerate(names)
+                }
+            )
             try:
                 m = modal_properties(*linear_matrices(system, p))
             except (ValueError, np.linalg.LinAlgError):
@@ -134,12 +158,23 @@ def modes_with_intervals(system, values: Mapping[str, float], names: list[str] |
         for key, rows in out.items():
             arr = np.asarray(rows, float)
             if len(arr) > 0.9 * draws:
-                ci[key] = [[float(np.quantile(arr[:, r], 0.025)), float(np.quantile(arr[:, r], 0.975))]
-                           for r in range(n)]
+                ci[key] = [
+                    [float(np.quantile(arr[:, r], 0.025)), float(np.quantile(arr[:, r], 0.975))]
+                    for r in range(n)
+                ]
         if len(shapes) > 0.9 * draws:  # every floor's value, the top floor's being 1
             arr = np.asarray(shapes, float)
             shape_ci = [np.quantile(arr[:, r, :], [0.025, 0.975], axis=0).T.tolist() for r in range(n)]
-    return [{"period_s": point["period_s"][r], "period_ci95": ci["period_s"][r],
-             "frequency_hz": point["frequency_hz"][r], "frequency_ci95": ci["frequency_hz"][r],
-             "damping_ratio": point["damping_ratio"][r], "damping_ci95": ci["damping_ratio"][r],
-             "mode_shape": point["mode_shapes"][r], "mode_shape_ci95": shape_ci[r]} for r in range(n)]
+    return [
+        {
+            "period_s": point["period_s"][r],
+            "period_ci95": ci["period_s"][r],
+            "frequency_hz": point["frequency_hz"][r],
+            "frequency_ci95": ci["frequency_hz"][r],
+            "damping_ratio": point["damping_ratio"][r],
+            "damping_ci95": ci["damping_ratio"][r],
+            "mode_shape": point["mode_shapes"][r],
+            "mode_shape_ci95": shape_ci[r],
+        }
+        for r in range(n)
+    ]

@@ -26,7 +26,7 @@ the paper's form for its m = 1 examples.
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import torch
@@ -64,7 +64,9 @@ class SDOFSystem(StructuralSystem):
         if len(self.inputs) == 1:
             self.inputs = ()  # one input is the plain ag (no influence coefficient to identify)
         if self.inputs and excitation != "ground":
-            raise ValueError(f"{name}: several inputs are ground motions (supports); got excitation '{excitation}'")
+            raise ValueError(
+                f"{name}: several inputs are ground motions (supports); got excitation '{excitation}'"
+            )
         if len(set(self.inputs)) != len(self.inputs):
             raise ValueError(f"{name}: input names repeat: {list(self.inputs)}")
         if identify_mass and excitation == "ground":
@@ -76,14 +78,28 @@ class SDOFSystem(StructuralSystem):
         for term in self.terms:
             defaults += term.specs()
         share = 1.0 / max(len(self.inputs), 1)
-        defaults += [ParamSpec(influence_name(i), init=share, scale=share, transform="identity", unit="-")
-                     for i in self.inputs]
+        defaults += [
+            ParamSpec(influence_name(i), init=share, scale=share, transform="identity", unit="-")
+            for i in self.inputs
+        ]
         c0 = float(next((sp.init for sp in defaults if sp.name == "c"), 1.0))
-        defaults += [ParamSpec(support_damping_name(i), init=0.0, scale=max(abs(c0), 1e-6) * share,
-                               transform="identity", true=0.0, unit="N s/m")
-                     for i in self.inputs]
-        defaults += [ParamSpec(feedthrough_name(i), init=0.0, scale=0.1 * share, transform="identity", true=0.0,
-                               unit="-") for i in self.inputs]
+        defaults += [
+            ParamSpec(
+                support_damping_name(i),
+                init=0.0,
+                scale=max(abs(c0), 1e-6) * share,
+                transform="identity",
+                true=0.0,
+                unit="N s/m",
+            )
+            for i in self.inputs
+        ]
+        defaults += [
+            ParamSpec(
+                feedthrough_name(i), init=0.0, scale=0.1 * share, transform="identity", true=0.0, unit="-"
+            )
+            for i in self.inputs
+        ]
         self._specs = merge_specs(defaults, params)
         self.n_latent = sum(t.n_latent for t in self.terms)
         self.latent_names = tuple(t.name for t in self.terms if t.n_latent)
@@ -91,11 +107,16 @@ class SDOFSystem(StructuralSystem):
     def param_specs(self) -> list[ParamSpec]:
         return list(self._specs)
 
-    def with_term(self, term: ForceTerm, name: str | None = None, params: dict | None = None) -> "SDOFSystem":
+    def with_term(self, term: ForceTerm, name: str | None = None, params: dict | None = None) -> SDOFSystem:
         """This model plus one more force term (a discovered effect); the existing parameter
         specs (their initial values included) are kept, ``params`` overrides any of them."""
-        new = SDOFSystem(self.terms + [term], mass=self.mass, excitation=self.excitation,
-                         name=name or f"{self.name}+{term.name}", inputs=self.inputs)
+        new = SDOFSystem(
+            self.terms + [term],
+            mass=self.mass,
+            excitation=self.excitation,
+            name=name or f"{self.name}+{term.name}",
+            inputs=self.inputs,
+        )
         new.identify_mass = self.identify_mass
         new._specs = merge_specs(list(self._specs) + merge_specs(term.specs(), None), params)
         return new
@@ -162,8 +183,13 @@ class SDOFSystem(StructuralSystem):
 
         k = sum(float(p[n]) for n in stiffness_params(self))
         c = sum(float(p[n]) for n in damping_params(self))
-        return {i: {"k": float(p[influence_name(i)]) * k,
-                    "c": float(p[support_damping_name(i)]) + float(p[influence_name(i)]) * c} for i in self.inputs}
+        return {
+            i: {
+                "k": float(p[influence_name(i)]) * k,
+                "c": float(p[support_damping_name(i)]) + float(p[influence_name(i)]) * c,
+            }
+            for i in self.inputs
+        }
 
     def ground_motion(self, f, p):
         return self.ground_input(f, p)[..., None]
@@ -202,8 +228,9 @@ class SDOFSystem(StructuralSystem):
                 if sl is not None:
                     rate = term.latent_rate(t, x, v, z[..., sl], p)
                     parts += [rate[..., j] for j in range(term.n_latent)]
-        if plain and all(isinstance(q, (float, np.floating)) or (isinstance(q, np.ndarray) and q.ndim == 0)
-                         for q in parts):
+        if plain and all(
+            isinstance(q, (float, np.floating)) or (isinstance(q, np.ndarray) and q.ndim == 0) for q in parts
+        ):
             return np.array([float(q) for q in parts])
         if isinstance(y, np.ndarray) and all(type(q) is np.ndarray for q in parts):  # a plain batch: filled,
             out = np.empty(y.shape[:-1] + (len(parts),))  # not np.stack (a third of a batched step's cost)
@@ -219,16 +246,24 @@ class SDOFSystem(StructuralSystem):
         lhs = f"{p['m']:.5g} x'' + " + " + ".join(t.formula(p) for t in self.terms)
         rhs = f"-{p['m']:.5g} ag(t)" if self.excitation == "ground" else "u(t)"
         if self.inputs:
-            rhs = (f"-{p['m']:.5g} (" + " + ".join(f"{p[influence_name(i)]:.4g} ag_{i}(t)" for i in self.inputs) + ") + "
-                   + " + ".join(f"{p[support_damping_name(i)]:.4g} vg_{i}(t)" for i in self.inputs)
-                   + "; sensor: x'' + " + " + ".join(f"{p[influence_name(i)] + p[feedthrough_name(i)]:.4g} ag_{i}(t)"
-                                                    for i in self.inputs))
+            rhs = (
+                f"-{p['m']:.5g} ("
+                + " + ".join(f"{p[influence_name(i)]:.4g} ag_{i}(t)" for i in self.inputs)
+                + ") + "
+                + " + ".join(f"{p[support_damping_name(i)]:.4g} vg_{i}(t)" for i in self.inputs)
+                + "; sensor: x'' + "
+                + " + ".join(
+                    f"{p[influence_name(i)] + p[feedthrough_name(i)]:.4g} ag_{i}(t)" for i in self.inputs
+                )
+            )
         eqs = [f"{lhs} = {rhs}"]
         for t in self.terms:
             if isinstance(t, BoucWenHysteresis):
                 g, b, n = p["gamma"], p["beta"], p["n"]
-                eqs.append(f"z' = x' {'-' if g >= 0 else '+'} {abs(g):.5g} |x'| |z|^({n:.5g}-1) z "
-                           f"{'-' if b >= 0 else '+'} {abs(b):.5g} x' |z|^{n:.5g}")
+                eqs.append(
+                    f"z' = x' {'-' if g >= 0 else '+'} {abs(g):.5g} |x'| |z|^({n:.5g}-1) z "
+                    f"{'-' if b >= 0 else '+'} {abs(b):.5g} x' |z|^{n:.5g}"
+                )
         return "; ".join(eqs)
 
 
@@ -261,7 +296,9 @@ def Duffing(c: float = 0.5, k1: float = 15.0, k3: float = 120.0, signed_k3: bool
     )
 
 
-def BoucWen(c: float = 0.3, k: float = 12.0, beta: float = 1.0, gamma: float = 2.0, n: float = 2.0, **kw) -> SDOFSystem:
+def BoucWen(
+    c: float = 0.3, k: float = 12.0, beta: float = 1.0, gamma: float = 2.0, n: float = 2.0, **kw
+) -> SDOFSystem:
     """m x'' + c x' + k z = -m ag; z' = x' - gamma|x'||z|^(n-1)z - beta x'|z|^n (paper Eq. 16)."""
     return SDOFSystem(
         [ViscousDamping(c), BoucWenHysteresis(k, beta, gamma, n)], name=kw.pop("name", "bouc_wen"), **kw

@@ -26,8 +26,9 @@ ends in a digit).
 from __future__ import annotations
 
 import re
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -83,7 +84,9 @@ class OnStorey(ForceTerm):
 def _per_unit_m1(spec: ParamSpec) -> ParamSpec:
     """A storey parameter's unit per kg of floor 1 (the masses unknown): N/m -> s^-2, N s/m -> s^-1."""
     per = {"N/m": "N/m per kg of m1 (s^-2)", "N s/m": "N s/m per kg of m1 (s^-1)"}
-    return replace(spec, unit=per.get(spec.unit, f"{spec.unit} per kg of m1" if spec.unit else "per kg of m1"))
+    return replace(
+        spec, unit=per.get(spec.unit, f"{spec.unit} per kg of m1" if spec.unit else "per kg of m1")
+    )
 
 
 def _per_storey(value: float | Sequence[float], n: int, what: str) -> list[float]:
@@ -91,7 +94,9 @@ def _per_storey(value: float | Sequence[float], n: int, what: str) -> list[float
         return [float(value)] * n
     vals = [float(v) for v in value]
     if len(vals) != n:
-        raise ValueError(f"shear_building: {what} has {len(vals)} values for {n} storeys; give {n} or one scalar")
+        raise ValueError(
+            f"shear_building: {what} has {len(vals)} values for {n} storeys; give {n} or one scalar"
+        )
     return vals
 
 
@@ -153,7 +158,9 @@ class ShearBuilding(StructuralSystem):
         self.name = name
         self.mass_known = not (isinstance(masses, str) and masses == UNKNOWN_MASSES)
         if isinstance(masses, str) and self.mass_known:
-            raise ValueError(f"shear_building: masses '{masses}': give kg per storey, a list, or '{UNKNOWN_MASSES}'")
+            raise ValueError(
+                f"shear_building: masses '{masses}': give kg per storey, a list, or '{UNKNOWN_MASSES}'"
+            )
         lists = [v for v in (masses, dampings, stiffnesses) if not isinstance(v, (int, float, str))]
         n = int(n_storeys) if n_storeys is not None else (len(lists[0]) if lists else 3)
         if n < 1:
@@ -175,7 +182,9 @@ class ShearBuilding(StructuralSystem):
             self.storeys.append([OnStorey(t, i + 1) for t in terms])
         defaults = self._mass_specs()
         #: parameters in force units: per kg of floor 1 when the masses are unknown
-        self.force_params = {s.name for st in self.storeys for t in st for s in t.specs() if s.unit.startswith("N")}
+        self.force_params = {
+            s.name for st in self.storeys for t in st for s in t.specs() if s.unit.startswith("N")
+        }
         for storey in self.storeys:
             for term in storey:
                 defaults += term.specs() if self.mass_known else [_per_unit_m1(s) for s in term.specs()]
@@ -186,11 +195,14 @@ class ShearBuilding(StructuralSystem):
 
     def _mass_specs(self) -> list[ParamSpec]:
         if self.mass_known:
-            return [ParamSpec(f"m{i + 1}", init=m, scale=m, true=m, trainable=False, unit="kg")
-                    for i, m in enumerate(self.masses)]
+            return [
+                ParamSpec(f"m{i + 1}", init=m, scale=m, true=m, trainable=False, unit="kg")
+                for i, m in enumerate(self.masses)
+            ]
         return [ParamSpec("m1", init=1.0, scale=1.0, true=1.0, trainable=False, unit="m1 (the unit)")] + [
             ParamSpec(f"m{i + 1}", init=1.0, scale=1.0, lower=0.02, upper=50.0, unit="m1")
-            for i in range(1, self.n_dof)]
+            for i in range(1, self.n_dof)
+        ]
 
     @staticmethod
     def _extra_terms(storey_terms, n: int, k: list[float]) -> list[list[ForceTerm]]:
@@ -209,13 +221,19 @@ class ShearBuilding(StructuralSystem):
         bases = {re.sub(r"_?\d+$", "", s.name) for s in specs if s.trainable}
         unknown = set(guess) - bases
         if unknown:
-            raise ValueError(f"shear_building: guess for {sorted(unknown)}; the parameters' base names are {sorted(bases)}")
+            raise ValueError(
+                f"shear_building: guess for {sorted(unknown)}; the parameters' base names are {sorted(bases)}"
+            )
         out = []
         for s in specs:
             base = re.sub(r"_?\d+$", "", s.name)
             if s.trainable and base in guess:
                 g = float(guess[base])
-                s = replace(s, init=g, scale=abs(g) or s.scale) if s.transform != "box" else replace(s, init=g)
+                s = (
+                    replace(s, init=g, scale=abs(g) or s.scale)
+                    if s.transform != "box"
+                    else replace(s, init=g)
+                )
             out.append(s)
         return out
 
@@ -252,7 +270,8 @@ class ShearBuilding(StructuralSystem):
             raise UnknownMassError(
                 f"{self.name}: the masses are unknown (masses: {UNKNOWN_MASSES}); the records determine the mass "
                 f"ratios m_i/m1 and the stiffnesses and dampings per kg of floor 1 (k_i/m1 in s^-2), not absolute "
-                f"N/m: give floor 1's mass (m1 in kg) to scale them")
+                f"N/m: give floor 1's mass (m1 in kg) to scale them"
+            )
         return {k: float(v) * float(m1) for k, v in values.items()}
 
     def _latent_slices(self) -> list[list[slice | None]]:
@@ -318,7 +337,7 @@ class ShearBuilding(StructuralSystem):
 
     def state_rate(self, t, y, p, f):
         n = self.n_dof
-        x, v, z = y[..., :n], y[..., n:2 * n], y[..., 2 * n:]
+        x, v, z = y[..., :n], y[..., n : 2 * n], y[..., 2 * n :]
         d, dv = drifts = self._drifts(x, v)
         rhs = self._floor_forces(t, x, v, z, p, f, drifts)
         acc = [rhs[i] / p[f"m{i + 1}"] for i in range(n)]
@@ -345,12 +364,16 @@ class ShearBuilding(StructuralSystem):
             for t in storey:
                 if isinstance(t.term, BoucWenHysteresis):
                     q = t._local(p)
-                    lines.append(f"  z{i}' = d{i}' - {q['gamma']:.5g} |d{i}'| |z{i}|^({q['n']:.5g}-1) z{i} "
-                                 f"- {q['beta']:.5g} d{i}' |z{i}|^{q['n']:.5g}")
+                    lines.append(
+                        f"  z{i}' = d{i}' - {q['gamma']:.5g} |d{i}'| |z{i}|^({q['n']:.5g}-1) z{i} "
+                        f"- {q['beta']:.5g} d{i}' |z{i}|^{q['n']:.5g}"
+                    )
         return lines
 
     def describe(self, p: dict[str, float]) -> str:
-        eq = "m_i x_i'' + F_i - F_(i+1) = " + ("-m_i ag(t)" if self.excitation == "ground" else "u(t) on the top floor")
+        eq = "m_i x_i'' + F_i - F_(i+1) = " + (
+            "-m_i ag(t)" if self.excitation == "ground" else "u(t) on the top floor"
+        )
         return eq + "; " + "; ".join(s.strip() for s in self.storey_equations(p))
 
     def linear_matrices(self, p: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

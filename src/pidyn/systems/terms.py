@@ -63,7 +63,9 @@ class ForceTerm:
     def force(self, t: Array, x: Array, v: Array, z: Array | None, p: dict) -> Array:
         raise NotImplementedError
 
-    def measured_force(self, t: Array, x: Array, v: Array, z: Array | None, p: dict, v_noise: float = 0.0) -> Array:
+    def measured_force(
+        self, t: Array, x: Array, v: Array, z: Array | None, p: dict, v_noise: float = 0.0
+    ) -> Array:
         """The force along a measured velocity that still holds noise of std ``v_noise``: what a
         regression on measured signals must use. The same as ``force`` unless the force turns
         sharply with the velocity (dry friction), where noise flips its sign near rest."""
@@ -122,8 +124,16 @@ class CubicStiffness(ForceTerm):
         self.k3, self.signed = k3, signed
 
     def specs(self):
-        return [ParamSpec("k3", init=self.k3, scale=abs(self.k3) or 1.0, true=self.k3, unit="N/m^3",
-                          transform="identity" if self.signed else "log")]
+        return [
+            ParamSpec(
+                "k3",
+                init=self.k3,
+                scale=abs(self.k3) or 1.0,
+                true=self.k3,
+                unit="N/m^3",
+                transform="identity" if self.signed else "log",
+            )
+        ]
 
     def force(self, t, x, v, z, p):
         return p["k3"] * x**3
@@ -142,8 +152,15 @@ class BoucWenHysteresis(ForceTerm):
     n_latent = 1
 
     def __init__(
-        self, k: float = 12.0, beta: float = 1.0, gamma: float = 2.0, n: float = 2.0, param: str = "k",
-        shape_scale: float = 1.0, gamma_lower: float | None = None, beta_lower: float = 0.0,
+        self,
+        k: float = 12.0,
+        beta: float = 1.0,
+        gamma: float = 2.0,
+        n: float = 2.0,
+        param: str = "k",
+        shape_scale: float = 1.0,
+        gamma_lower: float | None = None,
+        beta_lower: float = 0.0,
     ) -> None:
         """``shape_scale`` sizes beta's and gamma's bounds (+-10 x it): they scale with
         displacement^-n, so a response in centimetres needs a larger range than one in metres.
@@ -161,10 +178,24 @@ class BoucWenHysteresis(ForceTerm):
         signed = self.beta_lower < 0
         return [
             ParamSpec(self.param, init=self.k, scale=self.k, true=self.k, unit="N/m"),
-            ParamSpec("beta", init=self.beta, scale=S, true=self.beta, lower=self.beta_lower, upper=10.0 * S,
-                      transform="box" if signed else "log"),
-            ParamSpec("gamma", init=self.gamma, scale=S, true=self.gamma, lower=self.gamma_lower, upper=10.0 * S,
-                      transform="box"),
+            ParamSpec(
+                "beta",
+                init=self.beta,
+                scale=S,
+                true=self.beta,
+                lower=self.beta_lower,
+                upper=10.0 * S,
+                transform="box" if signed else "log",
+            ),
+            ParamSpec(
+                "gamma",
+                init=self.gamma,
+                scale=S,
+                true=self.gamma,
+                lower=self.gamma_lower,
+                upper=10.0 * S,
+                transform="box",
+            ),
             ParamSpec("n", init=self.n, scale=1.0, true=self.n, lower=0.5, upper=6.0, transform="box"),
         ]
 
@@ -258,17 +289,38 @@ class StiffnessLoss(ForceTerm):
 
     name = "stiffness_loss"
 
-    def __init__(self, drop: float = 0.2, t_d: float = 10.0, t_min: float = 0.0, t_max: float = 40.0,
-                 stiffness: str = "k", tau: float = 0.05) -> None:
+    def __init__(
+        self,
+        drop: float = 0.2,
+        t_d: float = 10.0,
+        t_min: float = 0.0,
+        t_max: float = 40.0,
+        stiffness: str = "k",
+        tau: float = 0.05,
+    ) -> None:
         if not t_min < t_d < t_max:
             raise ValueError(f"stiffness_loss: t_d={t_d} outside ({t_min}, {t_max})")
-        self.drop, self.t_d, self.t_min, self.t_max, self.stiffness, self.tau = drop, t_d, t_min, t_max, stiffness, tau
+        self.drop, self.t_d, self.t_min, self.t_max, self.stiffness, self.tau = (
+            drop,
+            t_d,
+            t_min,
+            t_max,
+            stiffness,
+            tau,
+        )
 
     def specs(self):
         return [
             ParamSpec("drop", init=self.drop, true=self.drop, transform="box", lower=0.0, upper=0.95),
-            ParamSpec("t_d", init=self.t_d, true=self.t_d, transform="box", lower=self.t_min, upper=self.t_max,
-                      unit="s"),
+            ParamSpec(
+                "t_d",
+                init=self.t_d,
+                true=self.t_d,
+                transform="box",
+                lower=self.t_min,
+                upper=self.t_max,
+                unit="s",
+            ),
         ]
 
     def force(self, t, x, v, z, p):
@@ -288,19 +340,40 @@ class DampingChange(ForceTerm):
 
     name = "damping_change"
 
-    def __init__(self, change: float = 0.5, t_d: float = 10.0, t_min: float = 0.0, t_max: float = 40.0,
-                 damping: str = "c", tau: float = 0.05) -> None:
+    def __init__(
+        self,
+        change: float = 0.5,
+        t_d: float = 10.0,
+        t_min: float = 0.0,
+        t_max: float = 40.0,
+        damping: str = "c",
+        tau: float = 0.05,
+    ) -> None:
         if not t_min < t_d < t_max:
             raise ValueError(f"damping_change: t_d={t_d} outside ({t_min}, {t_max})")
         if not -0.95 < change < 10.0:
             raise ValueError(f"damping_change: change={change} outside (-0.95, 10)")
-        self.change, self.t_d, self.t_min, self.t_max, self.damping, self.tau = change, t_d, t_min, t_max, damping, tau
+        self.change, self.t_d, self.t_min, self.t_max, self.damping, self.tau = (
+            change,
+            t_d,
+            t_min,
+            t_max,
+            damping,
+            tau,
+        )
 
     def specs(self):
         return [
             ParamSpec("change", init=self.change, true=self.change, transform="box", lower=-0.95, upper=10.0),
-            ParamSpec("t_d", init=self.t_d, true=self.t_d, transform="box", lower=self.t_min, upper=self.t_max,
-                      unit="s"),
+            ParamSpec(
+                "t_d",
+                init=self.t_d,
+                true=self.t_d,
+                transform="box",
+                lower=self.t_min,
+                upper=self.t_max,
+                unit="s",
+            ),
         ]
 
     def force(self, t, x, v, z, p):
@@ -347,17 +420,22 @@ class TrilinearSpring(ForceTerm):
         self.dk1, self.x1, self.dk2, self.x2 = dk1, x1, dk2, x2
 
     def specs(self):
-        return [ParamSpec("dk1", init=self.dk1, scale=abs(self.dk1) or 1.0, true=self.dk1, transform="identity"),
-                ParamSpec("dk2", init=self.dk2, scale=abs(self.dk2) or 1.0, true=self.dk2, transform="identity"),
-                ParamSpec("x1", init=self.x1, scale=self.x1, true=self.x1, trainable=False, unit="m"),
-                ParamSpec("x2", init=self.x2, scale=self.x2, true=self.x2, trainable=False, unit="m")]
+        return [
+            ParamSpec("dk1", init=self.dk1, scale=abs(self.dk1) or 1.0, true=self.dk1, transform="identity"),
+            ParamSpec("dk2", init=self.dk2, scale=abs(self.dk2) or 1.0, true=self.dk2, transform="identity"),
+            ParamSpec("x1", init=self.x1, scale=self.x1, true=self.x1, trainable=False, unit="m"),
+            ParamSpec("x2", init=self.x2, scale=self.x2, true=self.x2, trainable=False, unit="m"),
+        ]
 
     def force(self, t, x, v, z, p):
-        return (p["dk1"] * (_relu(x - p["x1"]) - _relu(-x - p["x1"]))
-                + p["dk2"] * (_relu(x - p["x2"]) - _relu(-x - p["x2"])))
+        return p["dk1"] * (_relu(x - p["x1"]) - _relu(-x - p["x1"])) + p["dk2"] * (
+            _relu(x - p["x2"]) - _relu(-x - p["x2"])
+        )
 
     def formula(self, p):
-        return (f"{p['dk1']:.5g} (|x| - {p['x1']:.4g})+ sign(x) + {p['dk2']:.5g} (|x| - {p['x2']:.4g})+ sign(x)")
+        return (
+            f"{p['dk1']:.5g} (|x| - {p['x1']:.4g})+ sign(x) + {p['dk2']:.5g} (|x| - {p['x2']:.4g})+ sign(x)"
+        )
 
 
 class StribeckFriction(ForceTerm):
@@ -370,9 +448,11 @@ class StribeckFriction(ForceTerm):
         self.Fc, self.Fs, self.vs, self.eps = Fc, Fs, vs, eps
 
     def specs(self):
-        return [ParamSpec("Fc", init=self.Fc, scale=self.Fc, true=self.Fc, unit="N"),
-                ParamSpec("Fs", init=self.Fs, scale=self.Fs, true=self.Fs, unit="N"),
-                ParamSpec("vs", init=self.vs, scale=self.vs, true=self.vs, trainable=False, unit="m/s")]
+        return [
+            ParamSpec("Fc", init=self.Fc, scale=self.Fc, true=self.Fc, unit="N"),
+            ParamSpec("Fs", init=self.Fs, scale=self.Fs, true=self.Fs, unit="N"),
+            ParamSpec("vs", init=self.vs, scale=self.vs, true=self.vs, trainable=False, unit="m/s"),
+        ]
 
     def force(self, t, x, v, z, p):
         level = p["Fc"] + (p["Fs"] - p["Fc"]) * _exp(-((v / p["vs"]) ** 2))
@@ -391,8 +471,15 @@ class LearnedForce(ForceTerm):
 
     name = "learned_force"
 
-    def __init__(self, x_scale: float = 1.0, v_scale: float = 1.0, f_scale: float = 1.0, hidden: int = 24,
-                 depth: int = 2, seed: int = 0) -> None:
+    def __init__(
+        self,
+        x_scale: float = 1.0,
+        v_scale: float = 1.0,
+        f_scale: float = 1.0,
+        hidden: int = 24,
+        depth: int = 2,
+        seed: int = 0,
+    ) -> None:
         from torch import nn
 
         self.x_scale, self.v_scale, self.f_scale = float(x_scale), float(v_scale), float(f_scale)
@@ -418,8 +505,14 @@ class LearnedForce(ForceTerm):
         dtype = self.net[0].weight.dtype
         u = torch.as_tensor(np.stack([x / self.x_scale, v / self.v_scale], -1), dtype=dtype)
         target = torch.as_tensor(f / self.f_scale, dtype=dtype)
-        opt = torch.optim.LBFGS(self.net.parameters(), lr=1.0, max_iter=iters, line_search_fn="strong_wolfe",
-                                tolerance_grad=1e-12, tolerance_change=1e-14)
+        opt = torch.optim.LBFGS(
+            self.net.parameters(),
+            lr=1.0,
+            max_iter=iters,
+            line_search_fn="strong_wolfe",
+            tolerance_grad=1e-12,
+            tolerance_change=1e-14,
+        )
 
         def closure():
             opt.zero_grad()
@@ -429,7 +522,10 @@ class LearnedForce(ForceTerm):
 
         opt.step(closure)
         with torch.no_grad():
-            return float(((self.net(u)[..., 0] - target) ** 2).mean().sqrt() / target.pow(2).mean().sqrt().clamp_min(1e-300))
+            return float(
+                ((self.net(u)[..., 0] - target) ** 2).mean().sqrt()
+                / target.pow(2).mean().sqrt().clamp_min(1e-300)
+            )
 
     def force(self, t, x, v, z, p):
         if isinstance(x, torch.Tensor):
@@ -453,8 +549,16 @@ class LearnedForce(ForceTerm):
         key = tuple((id(q), q._version) for m in linear for q in (m.weight, m.bias))
         cached = getattr(self, "_numpy_cache", None)
         if cached is None or cached[0] != key:
-            self._numpy_cache = (key, [(m.weight.detach().cpu().double().numpy().copy().T,
-                                        m.bias.detach().cpu().double().numpy().copy()) for m in linear])
+            self._numpy_cache = (
+                key,
+                [
+                    (
+                        m.weight.detach().cpu().double().numpy().copy().T,
+                        m.bias.detach().cpu().double().numpy().copy(),
+                    )
+                    for m in linear
+                ],
+            )
         return self._numpy_cache[1]
 
     def formula(self, p):
@@ -463,7 +567,19 @@ class LearnedForce(ForceTerm):
 
 TERMS: dict[str, type[ForceTerm]] = {
     cls.name: cls
-    for cls in (ViscousDamping, LinearStiffness, CubicStiffness, BoucWenHysteresis, QuadraticStiffness,
-                CoulombFriction, QuadraticDamping, StiffnessLoss, DampingChange, GapContact, TrilinearSpring,
-                StribeckFriction, LearnedForce)
+    for cls in (
+        ViscousDamping,
+        LinearStiffness,
+        CubicStiffness,
+        BoucWenHysteresis,
+        QuadraticStiffness,
+        CoulombFriction,
+        QuadraticDamping,
+        StiffnessLoss,
+        DampingChange,
+        GapContact,
+        TrilinearSpring,
+        StribeckFriction,
+        LearnedForce,
+    )
 }

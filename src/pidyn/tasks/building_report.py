@@ -8,8 +8,9 @@ beside the truth, storey hysteresis loops, and the identified equation of every 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -18,8 +19,14 @@ from pidyn.reporting import diverged, plottable, write_json
 from pidyn.systems.modal import compare_modes, modal_table
 
 
-def storey_response(system, values: Mapping[str, float], t: np.ndarray, f: np.ndarray,
-                    state0: np.ndarray | None = None, substeps: int = 4) -> tuple[np.ndarray, np.ndarray]:
+def storey_response(
+    system,
+    values: Mapping[str, float],
+    t: np.ndarray,
+    f: np.ndarray,
+    state0: np.ndarray | None = None,
+    substeps: int = 4,
+) -> tuple[np.ndarray, np.ndarray]:
     """Drift and restoring force of every storey (each (N, n_storeys)) of the model simulated
     over the record."""
     y0 = np.zeros(system.n_state) if state0 is None else np.asarray(state0, float)
@@ -30,7 +37,7 @@ def storey_response(system, values: Mapping[str, float], t: np.ndarray, f: np.nd
 
 def _drift_and_force(system, values: Mapping[str, float], t: np.ndarray, Y: np.ndarray):
     n = system.n_dof
-    x, v, z = Y[:, :n], Y[:, n:2 * n], Y[:, 2 * n:]
+    x, v, z = Y[:, :n], Y[:, n : 2 * n], Y[:, 2 * n :]
     drift = np.diff(np.concatenate([np.zeros((len(t), 1)), x], axis=1), axis=1)
     force = np.stack(system.storey_forces(t, x, v, z, dict(values)), axis=1)
     return drift, force
@@ -47,30 +54,59 @@ def _interface_modes(path: Path) -> dict:
         return {}
 
 
-def write_building_report(system, record, identified: Mapping[str, float], truth: Mapping[str, Any] | None,
-                          state0: np.ndarray | None, run_dir: Path, logger: Any = None, step: int = 0) -> dict:
+def write_building_report(
+    system,
+    record,
+    identified: Mapping[str, float],
+    truth: Mapping[str, Any] | None,
+    state0: np.ndarray | None,
+    run_dir: Path,
+    logger: Any = None,
+    step: int = 0,
+) -> dict:
     """Modal table, storey equations and loops into ``run_dir``; returns the modal comparison."""
-    modes = compare_modes(system, identified, truth if truth and all(v is not None for v in truth.values()) else None)
+    modes = compare_modes(
+        system, identified, truth if truth and all(v is not None for v in truth.values()) else None
+    )
     d_id, f_id = storey_response(system, identified, record.t, record.f, state0)
     modes["diverged"] = diverged(d_id) or diverged(f_id)
     write_json(run_dir / "modal.json", {**_interface_modes(run_dir / "modal.json"), **modes})
     eqs = system.storey_equations(identified)
-    lines = [f"# {system.name}: {system.n_dof} storeys under {record.name}", "",
-             "## Modes of the identified linear part (about rest)", "", modal_table(modes), "",
-             "## Identified storey equations (d_i: drift of storey i)", "", "```", *eqs, "```", ""]
+    lines = [
+        f"# {system.name}: {system.n_dof} storeys under {record.name}",
+        "",
+        "## Modes of the identified linear part (about rest)",
+        "",
+        modal_table(modes),
+        "",
+        "## Identified storey equations (d_i: drift of storey i)",
+        "",
+        "```",
+        *eqs,
+        "```",
+        "",
+    ]
     if "truth" in modes:
         lines.append("Truth: " + "; ".join(s.strip() for s in system.storey_equations(truth)))
     if modes["diverged"]:
-        lines += ["", "**The identified model diverges when simulated over the record** (its response blows "
-                  "up): the estimate is not a usable model of this building, and the loops show only the part "
-                  "before the blow-up."]
+        lines += [
+            "",
+            "**The identified model diverges when simulated over the record** (its response blows "
+            "up): the estimate is not a usable model of this building, and the loops show only the part "
+            "before the blow-up.",
+        ]
     if not record.truth:  # a measured building: what the model leaves of each storey's force
         split = (record.meta or {}).get("split")
-        modes["storey_residuals"] = storey_residuals(system, identified, record, split["heldout"] if split else None)
+        modes["storey_residuals"] = storey_residuals(
+            system, identified, record, split["heldout"] if split else None
+        )
         lines += residual_lines(modes["storey_residuals"], bool(split))
     if not getattr(system, "mass_known", True):
-        lines += ["", "Masses unknown: floor 1's mass is the unit; stiffness and damping are per kg of floor 1 "
-                  "(k in s^-2, c in s^-1) and the masses are ratios to floor 1's. Absolute N/m need a mass."]
+        lines += [
+            "",
+            "Masses unknown: floor 1's mass is the unit; stiffness and damping are per kg of floor 1 "
+            "(k in s^-2, c in s^-1) and the masses are ratios to floor 1's. Absolute N/m need a mass.",
+        ]
     (run_dir / "building.md").write_text("\n".join(lines) + "\n")
     fig_dir = run_dir / "figures"
     fig_dir.mkdir(exist_ok=True)
@@ -79,7 +115,9 @@ def write_building_report(system, record, identified: Mapping[str, float], truth
         clean = record.clean
         Y = np.concatenate([clean.x, clean.v] + ([clean.z] if clean.z is not None else []), axis=1)
         true_loops = _drift_and_force(system, truth, record.t, Y)
-    plot_storey_loops(fig_dir / "storey_loops.png", d_id, f_id, true_loops, title=f"{system.name} under {record.name}")
+    plot_storey_loops(
+        fig_dir / "storey_loops.png", d_id, f_id, true_loops, title=f"{system.name} under {record.name}"
+    )
     exp = getattr(logger, "experiment", None) if logger is not None else None
     if exp is not None and hasattr(exp, "add_text"):
         exp.add_text("storey_equations", "\n\n".join(eqs), step)
@@ -90,8 +128,13 @@ def write_building_report(system, record, identified: Mapping[str, float], truth
     return modes
 
 
-def plot_storey_loops(path: Path, drift: np.ndarray, force: np.ndarray,
-                      truth: tuple[np.ndarray, np.ndarray] | None, title: str = "") -> None:
+def plot_storey_loops(
+    path: Path,
+    drift: np.ndarray,
+    force: np.ndarray,
+    truth: tuple[np.ndarray, np.ndarray] | None,
+    title: str = "",
+) -> None:
     """Restoring force against drift, one panel per storey: the identified model simulated over
     the record, and the true structure's when known."""
     import matplotlib
@@ -121,9 +164,12 @@ def plot_storey_loops(path: Path, drift: np.ndarray, force: np.ndarray,
 
 
 #: what a storey's residual force is compared with: the force shape each would leave behind
-RESIDUAL_SHAPES = {"stiffness (d)": lambda d, v: d, "viscous (d')": lambda d, v: v,
-                   "friction (sign d')": lambda d, v: np.tanh(v / max(3 * float(np.std(v)) * 0.05, 1e-12)),
-                   "cubic (d^3)": lambda d, v: d**3}
+RESIDUAL_SHAPES = {
+    "stiffness (d)": lambda d, v: d,
+    "viscous (d')": lambda d, v: v,
+    "friction (sign d')": lambda d, v: np.tanh(v / max(3 * float(np.std(v)) * 0.05, 1e-12)),
+    "cubic (d^3)": lambda d, v: d**3,
+}
 
 
 def residual_lines(rows: list[dict], heldout: bool) -> list[str]:
@@ -131,18 +177,28 @@ def residual_lines(rows: list[dict], heldout: bool) -> list[str]:
     if not rows:
         return []
     shapes = list(rows[0]["explained_by"])
-    out = ["", f"## What the model leaves of each storey's force ({'held-out part' if heldout else 'whole record'})",
-           "", "F_i = -sum_(j>=i) m_j a_j from the floors' accelerations against the model's storey force on the "
-           "integrated drifts; the share of the residual each force shape would explain says where to look.", "",
-           "| storey | residual / force (RMS) | residual's peak (Hz) | " + " | ".join(shapes) + " |",
-           "|---|---|---|" + "---|" * len(shapes)]
+    out = [
+        "",
+        f"## What the model leaves of each storey's force ({'held-out part' if heldout else 'whole record'})",
+        "",
+        "F_i = -sum_(j>=i) m_j a_j from the floors' accelerations against the model's storey force on the "
+        "integrated drifts; the share of the residual each force shape would explain says where to look.",
+        "",
+        "| storey | residual / force (RMS) | residual's peak (Hz) | " + " | ".join(shapes) + " |",
+        "|---|---|---|" + "---|" * len(shapes),
+    ]
     for r in rows:
-        out.append(f"| {r['storey']} | {r['residual_share']:.3f} | {r['residual_peak_hz']:.2f} | "
-                   + " | ".join(f"{r['explained_by'][k]:.2f}" for k in shapes) + " |")
+        out.append(
+            f"| {r['storey']} | {r['residual_share']:.3f} | {r['residual_peak_hz']:.2f} | "
+            + " | ".join(f"{r['explained_by'][k]:.2f}" for k in shapes)
+            + " |"
+        )
     return out
 
 
-def storey_residuals(system, values: Mapping[str, float], record, span: tuple[float, float] | None = None) -> list[dict]:
+def storey_residuals(
+    system, values: Mapping[str, float], record, span: tuple[float, float] | None = None
+) -> list[dict]:
     """Per storey, what the identified model leaves of the storey force the floors' accelerations
     give: F_i = -sum_{j >= i} m_j a_j (absolute; masses as identified, per kg of floor 1 when
     unknown) against the model's F_i on the drifts integrated from the same accelerations (both
@@ -165,11 +221,13 @@ def storey_residuals(system, values: Mapping[str, float], record, span: tuple[fl
     measured = integrate(measured, dt, 0, corner)
     x, v = integrate(record.a, dt, 2, corner), integrate(record.a, dt, 1, corner)
     z = np.zeros((len(record.t), system.n_latent))
-    model = np.stack([np.broadcast_to(f, record.t.shape) for f in
-                      system.storey_forces(record.t, x, v, z, dict(values))], axis=1)
+    model = np.stack(
+        [np.broadcast_to(f, record.t.shape) for f in system.storey_forces(record.t, x, v, z, dict(values))],
+        axis=1,
+    )
     edge = max(1, int(round(2.0 / (5 * corner) / dt)))
     keep = np.zeros(len(record.t), bool)
-    keep[edge:len(record.t) - edge] = True
+    keep[edge : len(record.t) - edge] = True
     if span is not None:
         keep &= (record.t >= span[0]) & (record.t <= span[1])
     d = np.diff(np.concatenate([np.zeros((len(x), 1)), x], axis=1), axis=1)[keep]
@@ -183,7 +241,12 @@ def storey_residuals(system, values: Mapping[str, float], record, span: tuple[fl
             g = shape(d[:, i], dv[:, i])
             coef = float(g @ r) / max(float(g @ g), 1e-300)
             shares[name] = float(1.0 - np.sum((r - coef * g) ** 2) / max(float(r @ r), 1e-300))
-        rows.append({"storey": i + 1, "residual_share": float(np.std(r) / max(np.std(F), 1e-300)),
-                     "residual_peak_hz": float(freq[int(np.argmax(P[1:])) + 1]),
-                     "explained_by": shares})
+        rows.append(
+            {
+                "storey": i + 1,
+                "residual_share": float(np.std(r) / max(np.std(F), 1e-300)),
+                "residual_peak_hz": float(freq[int(np.argmax(P[1:])) + 1]),
+                "explained_by": shares,
+            }
+        )
     return rows

@@ -32,7 +32,9 @@ def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
     """What the nominal model ``cfg.system`` misses on ``record`` (default: built from
     ``cfg.data``); writes diagnosis.json, report.md and figures to the run folder."""
     done = Path(cfg.paths.output_dir) / "diagnosis.json"
-    if record is None and cfg.get("skip_done", False) and done.exists():  # a sweep resumed: this run is finished
+    if (
+        record is None and cfg.get("skip_done", False) and done.exists()
+    ):  # a sweep resumed: this run is finished
         log.info("%s holds this diagnosis (skip_done): not run again", done.parent)
         return json.loads(done.read_text())
     t_wall = time.perf_counter()
@@ -43,9 +45,13 @@ def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
     write_json(case.run_dir / "diagnosis.json", diagnosis)
     write_figures(case, outcome, diagnosis)
     gain = diagnosis["gain"]
-    log.info("verdict: %s%s; held-out NRMSE nominal %.4g%s", diagnosis["verdict"],
-             f" ({diagnosis['cause']})" if diagnosis["cause"] else "", gain["nominal"],
-             "" if gain["extended"] is None else f", extended {gain['extended']:.4g}")
+    log.info(
+        "verdict: %s%s; held-out NRMSE nominal %.4g%s",
+        diagnosis["verdict"],
+        f" ({diagnosis['cause']})" if diagnosis["cause"] else "",
+        gain["nominal"],
+        "" if gain["extended"] is None else f", extended {gain['extended']:.4g}",
+    )
     log.info("run folder %s (%.0f s)", case.run_dir, diagnosis["wall_seconds"])
     return diagnosis
 
@@ -67,8 +73,15 @@ def compose_case(cfg: DictConfig, record: Record | None = None) -> pipeline.Case
         metrics, obj = identify(_sub_cfg(cfg, system_node, folder, fit), record)
         return metrics, obj["system"], obj["module"].net.params.as_floats()
 
-    return pipeline.prepare(record, base, node, settings, cfg.data.get("mass", 1.0), Path(cfg.paths.output_dir),
-                            run_identification)
+    return pipeline.prepare(
+        record,
+        base,
+        node,
+        settings,
+        cfg.data.get("mass", 1.0),
+        Path(cfg.paths.output_dir),
+        run_identification,
+    )
 
 
 def _sub_cfg(cfg: DictConfig, system_node: dict, out_dir: Path, fit: tuple[float, float]) -> DictConfig:
@@ -80,7 +93,9 @@ def _sub_cfg(cfg: DictConfig, system_node: dict, out_dir: Path, fit: tuple[float
         c.data.windows.t_start = fit[0]
         c.data.windows.t_end = fit[1]
         c.baselines = {"run": [], "cramer_rao": False}
-        c.model.refine = {"method": "none"}  # the diagnosis polishes with output error itself (diagnosis.polish)
+        c.model.refine = {
+            "method": "none"
+        }  # the diagnosis polishes with output error itself (diagnosis.polish)
         c.model.start = "config"  # the diagnosis gives its own start (weak form, then each step's estimate)
         if cfg.diagnosis.get("ls_init") is not None:
             c.model.schedule.ls_init = cfg.diagnosis.ls_init

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import logging
 from dataclasses import fields
-from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -74,34 +73,77 @@ def generalize(cfg: DictConfig) -> dict[str, Any]:
     for i, case in enumerate(cases):
         if i < len(rows):
             continue
-        gm = prepare(case["record"], scale=case["scale"], stretch=case["stretch"], duration=g.duration,
-                     dt=cfg.excitation.dt, start=case["start"])
-        truth = synthetic_from_motion(system, gm)  # the true response (true parameters), never shown to the networks
-        pred = predict_response(module, truth, make_trainer, settings, window_length=cfg.data.windows.window_length,
-                                batch_size=cfg.batch_size, x_scale=float(np.std(record.x)),
-                                v_scale=float(np.std(record.v)) if record.v is not None else None, seed=int(cfg.seed))
+        gm = prepare(
+            case["record"],
+            scale=case["scale"],
+            stretch=case["stretch"],
+            duration=g.duration,
+            dt=cfg.excitation.dt,
+            start=case["start"],
+        )
+        truth = synthetic_from_motion(
+            system, gm
+        )  # the true response (true parameters), never shown to the networks
+        pred = predict_response(
+            module,
+            truth,
+            make_trainer,
+            settings,
+            window_length=cfg.data.windows.window_length,
+            batch_size=cfg.batch_size,
+            x_scale=float(np.std(record.x)),
+            v_scale=float(np.std(record.v)) if record.v is not None else None,
+            seed=int(cfg.seed),
+        )
         sim = simulate(system, identified, gm, gm.t)
-        row = {"case": i, **case, "pga": gm.pga, "gamma_pidynnet": pearson(pred.x, truth.x),
-               "gamma_simulation": pearson(sim.x, truth.x), "peak_x_true": float(np.max(np.abs(truth.x))),
-               "windows": len(pred.windows), "max_window_loss": pred.max_window_loss, "seconds": pred.seconds}
+        row = {
+            "case": i,
+            **case,
+            "pga": gm.pga,
+            "gamma_pidynnet": pearson(pred.x, truth.x),
+            "gamma_simulation": pearson(sim.x, truth.x),
+            "peak_x_true": float(np.max(np.abs(truth.x))),
+            "windows": len(pred.windows),
+            "max_window_loss": pred.max_window_loss,
+            "seconds": pred.seconds,
+        }
         rows.append(row)
-        np.savez_compressed(pred_dir / f"case_{i:03d}.npz", t=truth.t, x_true=truth.x, x_pred=pred.x, x_sim=sim.x)
-        log.info("[%d/%d] %s x%.3g t%.3g: gamma PIDynNet %.4f, simulation %.4f", i + 1, len(cases), case["record"],
-                 case["scale"], case["stretch"], row["gamma_pidynnet"], row["gamma_simulation"])
+        np.savez_compressed(
+            pred_dir / f"case_{i:03d}.npz", t=truth.t, x_true=truth.x, x_pred=pred.x, x_sim=sim.x
+        )
+        log.info(
+            "[%d/%d] %s x%.3g t%.3g: gamma PIDynNet %.4f, simulation %.4f",
+            i + 1,
+            len(cases),
+            case["record"],
+            case["scale"],
+            case["stretch"],
+            row["gamma_pidynnet"],
+            row["gamma_simulation"],
+        )
         pd.DataFrame(rows).to_csv(run_dir / "generalization.csv", index=False)  # progress survives a crash
     df = pd.DataFrame(rows)
     share = float((df.gamma_pidynnet >= 0.95).mean()) if len(df) else float("nan")
-    summary = {"cases": len(df), "share_gamma_ge_0.95_pidynnet": share,
-               "share_gamma_ge_0.95_simulation": float((df.gamma_simulation >= 0.95).mean()) if len(df) else float("nan"),
-               "median_gamma_pidynnet": float(df.gamma_pidynnet.median()) if len(df) else float("nan"),
-               "median_gamma_simulation": float(df.gamma_simulation.median()) if len(df) else float("nan"),
-               "identification": {k: metrics[k] for k in ("params", "error_pct", "max_error_pct")}}
+    summary = {
+        "cases": len(df),
+        "share_gamma_ge_0.95_pidynnet": share,
+        "share_gamma_ge_0.95_simulation": float((df.gamma_simulation >= 0.95).mean())
+        if len(df)
+        else float("nan"),
+        "median_gamma_pidynnet": float(df.gamma_pidynnet.median()) if len(df) else float("nan"),
+        "median_gamma_simulation": float(df.gamma_simulation.median()) if len(df) else float("nan"),
+        "identification": {k: metrics[k] for k in ("params", "error_pct", "max_error_pct")},
+    }
     write_json(run_dir / "generalization.json", summary)
     _write_markdown(run_dir / "generalization.md", cfg, df, summary)
     _figures(run_dir / "figures", record, df, _examples(pred_dir, df))
     tb_figures(obj["logger"], run_dir / "figures", int(module.iteration), {})
-    log.info("generalisation: %d cases, share gamma >= 0.95: PIDynNet %.2f, simulation %.2f", len(df), share,
-             summary["share_gamma_ge_0.95_simulation"])
+    log.info(
+        "generalisation: %d cases, share gamma >= 0.95: PIDynNet %.2f, simulation %.2f",
+        len(df),
+        share,
+        summary["share_gamma_ge_0.95_simulation"],
+    )
     return summary
 
 
@@ -138,14 +180,18 @@ def _write_markdown(path: Path, cfg: DictConfig, df: pd.DataFrame, summary: dict
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in df.to_dict("records"):
-        lines.append(f"| {r['record']} | {r.get('start', 0.0):g} | {r['scale']:.3g} | {r['stretch']:.3g} | {r['pga']:.2f} | "
-                     f"{r['gamma_pidynnet']:.4f} | {r['gamma_simulation']:.4f} | {r.get('windows', '')} | "
-                     f"{r.get('max_window_loss', float('nan')):.2g} | {r['seconds']:.0f} |")
+        lines.append(
+            f"| {r['record']} | {r.get('start', 0.0):g} | {r['scale']:.3g} | {r['stretch']:.3g} | {r['pga']:.2f} | "
+            f"{r['gamma_pidynnet']:.4f} | {r['gamma_simulation']:.4f} | {r.get('windows', '')} | "
+            f"{r.get('max_window_loss', float('nan')):.2g} | {r['seconds']:.0f} |"
+        )
     lines.append("")
-    lines.append(f"Share with gamma >= 0.95 over {summary['cases']} excitations: PIDynNet "
-                 f"{summary['share_gamma_ge_0.95_pidynnet']:.2f}, identified model simulated "
-                 f"{summary['share_gamma_ge_0.95_simulation']:.2f} (paper: about 0.95 for PIDynNet). Median gamma: "
-                 f"PIDynNet {summary['median_gamma_pidynnet']:.4f}, simulation {summary['median_gamma_simulation']:.4f}.")
+    lines.append(
+        f"Share with gamma >= 0.95 over {summary['cases']} excitations: PIDynNet "
+        f"{summary['share_gamma_ge_0.95_pidynnet']:.2f}, identified model simulated "
+        f"{summary['share_gamma_ge_0.95_simulation']:.2f} (paper: about 0.95 for PIDynNet). Median gamma: "
+        f"PIDynNet {summary['median_gamma_pidynnet']:.4f}, simulation {summary['median_gamma_simulation']:.4f}."
+    )
     path.write_text("\n".join(lines) + "\n")
 
 
@@ -161,8 +207,12 @@ def _resume(run_dir: Path, cases: list[dict[str, Any]]) -> list[dict[str, Any]]:
         if i >= len(cases) or not npz.exists():
             break
         c = cases[i]
-        if (r["record"] != c["record"] or not np.isclose(r["scale"], c["scale"])
-                or not np.isclose(r["stretch"], c["stretch"]) or not np.isclose(r.get("start", 0.0), c["start"])):
+        if (
+            r["record"] != c["record"]
+            or not np.isclose(r["scale"], c["scale"])
+            or not np.isclose(r["stretch"], c["stretch"])
+            or not np.isclose(r.get("start", 0.0), c["start"])
+        ):
             break
         r["start"] = c["start"]  # sweeps written before records were aligned all started at 0
         rows.append(r)
@@ -215,8 +265,11 @@ def _figures(fig_dir: Path, record, df: pd.DataFrame, examples: list) -> None:
         ax.plot(t, xt, color="0.3", lw=0.9, label="true")
         ax.plot(t, xp, "--", lw=0.8, label=f"PIDynNet (gamma {row['gamma_pidynnet']:.3f})")
         ax.plot(t, xs, ":", lw=0.8, label=f"identified model simulated (gamma {row['gamma_simulation']:.3f})")
-        ax.set_title(f"prediction: {row['record']} from {row.get('start', 0.0):g} s, x{row['scale']:.3g}, "
-                     f"stretch {row['stretch']:.3g}", fontsize=9)
+        ax.set_title(
+            f"prediction: {row['record']} from {row.get('start', 0.0):g} s, x{row['scale']:.3g}, "
+            f"stretch {row['stretch']:.3g}",
+            fontsize=9,
+        )
         ax.legend(fontsize=7, loc="upper right")
     axes[-1][0].set_xlabel("t (s)")
     fig.tight_layout()

@@ -27,7 +27,15 @@ from pidyn.errors import errors_pct
 from pidyn.models.identify import Schedule, SubperiodIdentifier
 from pidyn.models.lit_module import PIDynNetModule
 from pidyn.models.pidynnet import PIDynNet
-from pidyn.reporting import diverged, nrmse, param_table, plot_convergence, plot_response, write_json, write_yaml
+from pidyn.reporting import (
+    diverged,
+    nrmse,
+    param_table,
+    plot_convergence,
+    plot_response,
+    write_json,
+    write_yaml,
+)
 from pidyn.simulate import simulate_identified, simulate_response  # noqa: F401  (re-exported)
 from pidyn.systems.base import StructuralSystem
 
@@ -86,9 +94,16 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     baselines = run_baselines(cfg, run.system, run.record, run.run_dir, params.as_floats(), pending)
     refined = run_refinement(cfg, run.system, run.record, pidyn_values, baselines, results, run.start)
     metrics = _report(cfg, run, results, pidyn_values, baselines, refined, t_wall)
-    objects = {"module": run.module, "system": run.system, "record": run.record,
-               "trainer_factory": run.trainer_factory, "run_dir": run.run_dir, "logger": run.logger,
-               "trajectory": run.ident.trajectory, "windows": [r.__dict__ for r in results]}
+    objects = {
+        "module": run.module,
+        "system": run.system,
+        "record": run.record,
+        "trainer_factory": run.trainer_factory,
+        "run_dir": run.run_dir,
+        "logger": run.logger,
+        "trajectory": run.ident.trajectory,
+        "windows": [r.__dict__ for r in results],
+    }
     return metrics, objects
 
 
@@ -126,8 +141,14 @@ def build_run(cfg: DictConfig, record: Record | None) -> Run:
             f"data '{record.name}' is {record.excitation}-excited but system '{system.name}' expects "
             f"'{system.excitation}' excitation: set system.excitation={record.excitation}"
         )
-    if record.n_inputs > 1 and system.n_inputs == 1 and OmegaConf.select(cfg, "system.inputs", default=1) is None:
-        system = hydra.utils.instantiate(cfg.system, inputs=record.inputs)  # the model takes the record's inputs
+    if (
+        record.n_inputs > 1
+        and system.n_inputs == 1
+        and OmegaConf.select(cfg, "system.inputs", default=1) is None
+    ):
+        system = hydra.utils.instantiate(
+            cfg.system, inputs=record.inputs
+        )  # the model takes the record's inputs
     check_inputs(system, record)
     if record.truth and hasattr(system, "own_units"):  # masses unknown: the truth per kg of floor 1
         record = replace(record, truth=system.own_units(record.truth))
@@ -145,18 +166,27 @@ def build_run(cfg: DictConfig, record: Record | None) -> Run:
     module: PIDynNetModule = hydra.utils.instantiate(cfg.model.module, net=core)
     schedule = Schedule(**OmegaConf.to_container(cfg.model.schedule, resolve=True))  # type: ignore[arg-type]
     clamp = hydra.utils.instantiate(cfg.callbacks.clamp) if cfg.callbacks.get("clamp") else None
-    stopper = hydra.utils.instantiate(cfg.callbacks.early_stopping) if cfg.callbacks.get("early_stopping") else None
-    extras = [hydra.utils.instantiate(node) for name, node in (cfg.get("callbacks") or {}).items()
-              if name not in ("clamp", "early_stopping") and node is not None and "_target_" in node]
+    stopper = (
+        hydra.utils.instantiate(cfg.callbacks.early_stopping) if cfg.callbacks.get("early_stopping") else None
+    )
+    extras = [
+        hydra.utils.instantiate(node)
+        for name, node in (cfg.get("callbacks") or {}).items()
+        if name not in ("clamp", "early_stopping") and node is not None and "_target_" in node
+    ]
     logger = hydra.utils.instantiate(cfg.logger) if cfg.get("logger") else None
     # a redrawn bar only on a terminal; elsewhere LineProgress writes a line now and then
-    progress = bool(cfg.trainer.get("enable_progress_bar", True)) and sys.stdout.isatty() and not _in_multirun()
+    progress = (
+        bool(cfg.trainer.get("enable_progress_bar", True)) and sys.stdout.isatty() and not _in_multirun()
+    )
 
     def trainer_factory(**kw: Any) -> L.Trainer:
         kw.setdefault("enable_progress_bar", progress)
         return hydra.utils.instantiate(cfg.trainer, logger=logger if logger is not None else False, **kw)
 
-    ident = SubperiodIdentifier(module, dm, trainer_factory, schedule, clamp, stopper, run_dir, extra_callbacks=extras)
+    ident = SubperiodIdentifier(
+        module, dm, trainer_factory, schedule, clamp, stopper, run_dir, extra_callbacks=extras
+    )
     return Run(system, record, module, ident, trainer_factory, logger, run_dir, start, hold_out)
 
 
@@ -174,7 +204,9 @@ def _hold_out(cfg: DictConfig, record: Record) -> bool:
     return True
 
 
-def data_start(cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path) -> tuple[StructuralSystem, Any]:
+def data_start(
+    cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path
+) -> tuple[StructuralSystem, Any]:
     """``model.start`` (see ``pidyn.baselines.data_start.start_policy``); the start goes to data_start.json."""
     from pidyn.baselines.data_start import start_policy
     from pidyn.config import user_settings
@@ -189,12 +221,21 @@ def check_inputs(system: StructuralSystem, record: Record) -> None:
     """A record with several inputs needs a system with as many (and the other way round)."""
     if record.n_inputs != system.n_inputs:
         names = record.inputs or [f"{record.n_inputs} column(s)"]
-        raise ValueError(f"data '{record.name}' has {record.n_inputs} input(s) {names} but system '{system.name}' "
-                         f"takes {system.n_inputs}: set system.inputs={record.inputs or 'null'}")
+        raise ValueError(
+            f"data '{record.name}' has {record.n_inputs} input(s) {names} but system '{system.name}' "
+            f"takes {system.n_inputs}: set system.inputs={record.inputs or 'null'}"
+        )
 
 
-def _report(cfg: DictConfig, run: Run, results: list, pidyn_values: dict[str, float], baselines: list[dict],
-            refined: Any, t_wall: float) -> dict[str, Any]:
+def _report(
+    cfg: DictConfig,
+    run: Run,
+    results: list,
+    pidyn_values: dict[str, float],
+    baselines: list[dict],
+    refined: Any,
+    t_wall: float,
+) -> dict[str, Any]:
     """identified_params.yaml, metrics.json, refinement.json, windows.json, figures, TensorBoard, log."""
     system, record, run_dir = run.system, run.record, run.run_dir
     params = run.module.net.params
@@ -205,9 +246,14 @@ def _report(cfg: DictConfig, run: Run, results: list, pidyn_values: dict[str, fl
     notes = [n for r in results for n in (r.notes or [])] + ([] if refined is None else refined.notes)
     units = {n: params.spec(n).unit for n in names}
     # the identified model simulated over the whole record (the physics-only check)
-    sim = simulate_response(system, final, record, state0=None if refined is None else np.array(refined.initial_state))
+    sim = simulate_response(
+        system, final, record, state0=None if refined is None else np.array(refined.initial_state)
+    )
     notes += _divergence_note(sim)
-    write_yaml(run_dir / "identified_params.yaml", identified_params(system, final, values, truths, units, refined, notes))
+    write_yaml(
+        run_dir / "identified_params.yaml",
+        identified_params(system, final, values, truths, units, refined, notes),
+    )
     errors, pidyn_errors = relative_errors(values, truths), relative_errors(pidyn_values, truths)
     metrics: dict[str, Any] = {
         "system": system.name,
@@ -224,8 +270,11 @@ def _report(cfg: DictConfig, run: Run, results: list, pidyn_values: dict[str, fl
         "error_pct": errors,
         "max_error_pct": max(errors.values()) if errors else None,
         "mean_error_pct": float(np.mean(list(errors.values()))) if errors else None,
-        "pidynnet": {"params": pidyn_values, "error_pct": pidyn_errors,
-                     "max_error_pct": max(pidyn_errors.values()) if pidyn_errors else None},
+        "pidynnet": {
+            "params": pidyn_values,
+            "error_pct": pidyn_errors,
+            "max_error_pct": max(pidyn_errors.values()) if pidyn_errors else None,
+        },
         "sim_nrmse_x": _sim_nrmse_x(sim, record),
         "sim_nrmse": channel_nrmse(sim, record),
         "notes": notes,
@@ -235,9 +284,14 @@ def _report(cfg: DictConfig, run: Run, results: list, pidyn_values: dict[str, fl
     if refined is not None:
         metrics.update(refined_metrics(refined, names, truths))
         write_json(run_dir / "refinement.json", refined.to_dict())
-        torch.save({"names": names, "values": values, "ci95": metrics["ci95"]}, run_dir / "checkpoints" / "refined.pt")
+        torch.save(
+            {"names": names, "values": values, "ci95": metrics["ci95"]},
+            run_dir / "checkpoints" / "refined.pt",
+        )
     if baselines:
-        metrics["baselines"] = {b["method"]: {"error_pct": b.get("error_pct"), "seconds": b["seconds"]} for b in baselines}
+        metrics["baselines"] = {
+            b["method"]: {"error_pct": b.get("error_pct"), "seconds": b["seconds"]} for b in baselines
+        }
     metrics["wall_seconds"] = time.perf_counter() - t_wall
     write_json(run_dir / "metrics.json", metrics)
     write_json(run_dir / "windows.json", {"windows": [r.__dict__ for r in results]})
@@ -245,9 +299,16 @@ def _report(cfg: DictConfig, run: Run, results: list, pidyn_values: dict[str, fl
     if hasattr(system, "storey_equations"):
         from pidyn.tasks.building_report import write_building_report
 
-        modes = write_building_report(system, record, final, {**final, **truths} if any(truths.values()) else None,
-                                      None if refined is None else np.array(refined.initial_state), run_dir,
-                                      run.logger, int(run.module.iteration))
+        modes = write_building_report(
+            system,
+            record,
+            final,
+            {**final, **truths} if any(truths.values()) else None,
+            None if refined is None else np.array(refined.initial_state),
+            run_dir,
+            run.logger,
+            int(run.module.iteration),
+        )
         metrics["modes"] = {k: v for k, v in modes.items() if k != "truth"}
         write_json(run_dir / "metrics.json", metrics)
     _figures(run, results, truths, baselines, refined, sim, metrics)
@@ -255,7 +316,9 @@ def _report(cfg: DictConfig, run: Run, results: list, pidyn_values: dict[str, fl
     return metrics
 
 
-def _assess(run: Run, final: dict[str, float], refined: Any, sim: dict[str, np.ndarray], metrics: dict) -> None:
+def _assess(
+    run: Run, final: dict[str, float], refined: Any, sim: dict[str, np.ndarray], metrics: dict
+) -> None:
     """modal.json and, on a record with a held-out part, how the model predicts it (``pidyn.assessment``)."""
     from pidyn.assessment import assess
 
@@ -267,15 +330,24 @@ def _divergence_note(sim: dict[str, np.ndarray]) -> list[str]:
     """Says so when the identified model's simulation over the record blows up."""
     if not any(diverged(v) for v in sim.values()):
         return []
-    note = ("the identified model diverges when simulated over the record (its response blows up): the estimate "
-            "is not a usable model; start from a better guess (system.guess) or a classical estimate "
-            "(model.refine.starts)")
+    note = (
+        "the identified model diverges when simulated over the record (its response blows up): the estimate "
+        "is not a usable model; start from a better guess (system.guess) or a classical estimate "
+        "(model.refine.starts)"
+    )
     log.warning(note)
     return [note]
 
 
-def identified_params(system: StructuralSystem, final: dict[str, float], values: dict[str, float],
-                      truths: dict[str, float | None], units: dict[str, str], refined: Any, notes: list[str]) -> dict:
+def identified_params(
+    system: StructuralSystem,
+    final: dict[str, float],
+    values: dict[str, float],
+    truths: dict[str, float | None],
+    units: dict[str, str],
+    refined: Any,
+    notes: list[str],
+) -> dict:
     """The content of ``identified_params.yaml``: the equation, every estimated parameter with
     its interval (and its error when the truth is known), the notes, the correlations."""
     table = param_table(values, truths, units, None if refined is None else refined.intervals)
@@ -294,32 +366,57 @@ def identified_params(system: StructuralSystem, final: dict[str, float], values:
 
 
 def refined_metrics(refined: Any, names: list[str], truths: dict[str, float | None]) -> dict[str, Any]:
-    out: dict[str, Any] = {"ci95": {n: refined.intervals[n]["ci95"] for n in names},
-                           "std": {n: refined.intervals[n]["std"] for n in names}}
+    out: dict[str, Any] = {
+        "ci95": {n: refined.intervals[n]["ci95"] for n in names},
+        "std": {n: refined.intervals[n]["std"] for n in names},
+    }
     if truths and all(truths.values()):
         out["covered"] = {n: bool(out["ci95"][n][0] <= truths[n] <= out["ci95"][n][1]) for n in names}
-    out["refinement"] = {k: v for k, v in refined.to_dict().items()
-                         if k not in ("params", "intervals", "correlation", "history")}
+    out["refinement"] = {
+        k: v
+        for k, v in refined.to_dict().items()
+        if k not in ("params", "intervals", "correlation", "history")
+    }
     if getattr(refined, "compared", None):
         out["refine_compare"] = refined.compared
     return out
 
 
-def _figures(run: Run, results: list, truths: dict, baselines: list[dict], refined: Any, sim: dict[str, np.ndarray],
-             metrics: dict) -> None:
+def _figures(
+    run: Run,
+    results: list,
+    truths: dict,
+    baselines: list[dict],
+    refined: Any,
+    sim: dict[str, np.ndarray],
+    metrics: dict,
+) -> None:
     system, record = run.system, run.record
     fig_dir = run.run_dir / "figures"
     fig_dir.mkdir(exist_ok=True)
     ukf = next((b for b in baselines if b["method"] == "ukf" and b.get("trajectory")), None)
-    plot_convergence(fig_dir / "param_convergence.png", run.ident.trajectory, truths, [r.__dict__ for r in results],
-                     title=f"{system.name} under {record.name}", other=None if ukf is None else ("UKF", ukf["trajectory"]),
-                     final=None if refined is None else refined.intervals)
+    plot_convergence(
+        fig_dir / "param_convergence.png",
+        run.ident.trajectory,
+        truths,
+        [r.__dict__ for r in results],
+        title=f"{system.name} under {record.name}",
+        other=None if ukf is None else ("UKF", ukf["trajectory"]),
+        final=None if refined is None else refined.intervals,
+    )
     kind, meas = record.reference()
     floor = max(record.sensors()[kind])  # the highest measured floor moves the most
     label = f"{kind}{floor}" if system.n_dof > 1 else kind
-    series = {f"measured {label}": meas[:, floor - 1], "identified model (simulated)": sim[kind][:, floor - 1]}
-    plot_response(fig_dir / "response.png", record.t, series,
-                  title=f"{system.name}: NRMSE {metrics['sim_nrmse'][label]:.3g} ({label})")
+    series = {
+        f"measured {label}": meas[:, floor - 1],
+        "identified model (simulated)": sim[kind][:, floor - 1],
+    }
+    plot_response(
+        fig_dir / "response.png",
+        record.t,
+        series,
+        title=f"{system.name}: NRMSE {metrics['sim_nrmse'][label]:.3g} ({label})",
+    )
     tb_figures(run.logger, fig_dir, int(run.module.iteration), metrics, refined)
 
 
@@ -330,7 +427,10 @@ def _log_summary(equation: str, errors: dict, pidyn_errors: dict, metrics: dict,
         if "ci95" in metrics:
             log.info("PIDynNet alone (%%): %s", ", ".join(f"{k}={v:.3f}" for k, v in pidyn_errors.items()))
     if "ci95" in metrics:
-        log.info("95 %% intervals: %s", ", ".join(f"{n} [{lo:.5g}, {hi:.5g}]" for n, (lo, hi) in metrics["ci95"].items()))
+        log.info(
+            "95 %% intervals: %s",
+            ", ".join(f"{n} [{lo:.5g}, {hi:.5g}]" for n, (lo, hi) in metrics["ci95"].items()),
+        )
     log.info("wall %.1f s, run folder %s", metrics["wall_seconds"], run_dir)
 
 
@@ -380,8 +480,10 @@ def check_method_names(cfg: DictConfig) -> None:
     if plan is not None:
         unknown = sorted(set(plan[0]) - set(PARAMETRIC) - {"data"})
         if unknown:
-            raise ValueError(f"model.refine.starts: unknown method(s) {unknown}; choose from "
-                             f"{', '.join(sorted(set(PARAMETRIC) | {'data'}))}")
+            raise ValueError(
+                f"model.refine.starts: unknown method(s) {unknown}; choose from "
+                f"{', '.join(sorted(set(PARAMETRIC) | {'data'}))}"
+            )
 
 
 def refine_plan(cfg: DictConfig) -> tuple[set[str], list[str], Any] | None:
@@ -407,8 +509,15 @@ def refine_plan(cfg: DictConfig) -> tuple[set[str], list[str], Any] | None:
     return allowed, compare, settings
 
 
-def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pidyn_values: dict[str, float],
-                   baselines: list[dict], results: list, start: Any = None) -> Any:
+def run_refinement(
+    cfg: DictConfig,
+    system: StructuralSystem,
+    record: Record,
+    pidyn_values: dict[str, float],
+    baselines: list[dict],
+    results: list,
+    start: Any = None,
+) -> Any:
     """The refinement stage after PIDynNet (``model.refine``); None when it is off.
 
     Starts: PIDynNet's estimate with its networks' states, and the classical estimates named
@@ -437,10 +546,17 @@ def run_refinement(cfg: DictConfig, system: StructuralSystem, record: Record, pi
     out.compared = {}
     for source in compare:
         alt = refine(system, record, {out.start: starts[out.start]}, replace(settings, states=source), **span)
-        out.compared[source] = {"params": alt.params, "cost": alt.cost, "converged": alt.converged,
-                                "max_defect": alt.max_defect, "seconds": alt.seconds,
-                                "error_pct": relative_errors(alt.params, record.truth or {})}
-        log.info("refinement from %s states: %s", source, ", ".join(f"{k}={v:.5g}" for k, v in alt.params.items()))
+        out.compared[source] = {
+            "params": alt.params,
+            "cost": alt.cost,
+            "converged": alt.converged,
+            "max_defect": alt.max_defect,
+            "seconds": alt.seconds,
+            "error_pct": relative_errors(alt.params, record.truth or {}),
+        }
+        log.info(
+            "refinement from %s states: %s", source, ", ".join(f"{k}={v:.5g}" for k, v in alt.params.items())
+        )
     return out
 
 
@@ -455,19 +571,25 @@ def check_refined(system: StructuralSystem, record: Record, out: Any, starts: li
     bad = sorted(n for n, v in out.params.items() if not np.isfinite(v))
     blown = False
     if not bad:
-        sim = simulate_response(system, {**{s.name: s.init for s in system.param_specs()}, **out.params}, record,
-                                state0=np.array(out.initial_state))
+        sim = simulate_response(
+            system,
+            {**{s.name: s.init for s in system.param_specs()}, **out.params},
+            record,
+            state0=np.array(out.initial_state),
+        )
         blown = any(diverged(v) for v in sim.values())
     if bad or blown:
         what = f"non-finite {bad}" if bad else "a model that blows up when simulated over the record"
         raise RefinementFailed(
             f"the refinement from {out.start} (starts tried: {', '.join(starts)}) ended on {what}; PIDynNet's "
             f"windows are kept in the run folder. Give a better start: model.refine.starts=[data, output_error, ukf] "
-            f"with baselines.run naming the classical ones, or system.guess / system.params.<name>.init")
+            f"with baselines.run naming the classical ones, or system.guess / system.params.<name>.init"
+        )
 
 
-def baseline_rows(bcfg: dict, noise: float, system: StructuralSystem, record: Record,
-                  fit: tuple[float, float] | None = None) -> list[dict]:
+def baseline_rows(
+    bcfg: dict, noise: float, system: StructuralSystem, record: Record, fit: tuple[float, float] | None = None
+) -> list[dict]:
     """The configured classical methods on one record (``bcfg``: the ``baselines`` config as a
     plain dict); a method that fails gives a row saying so. Pure, so it runs in a worker.
     ``fit``: the span the parametric methods see (a held-out part stays unseen; the modal peers
@@ -481,7 +603,9 @@ def baseline_rows(bcfg: dict, noise: float, system: StructuralSystem, record: Re
     fitted = record if fit is None else record.segment(*fit)
     for name in names:
         try:
-            row = ESTIMATORS[name](fitted if name in PARAMETRIC else record, system, dict(bcfg.get(name) or {}), noise)
+            row = ESTIMATORS[name](
+                fitted if name in PARAMETRIC else record, system, dict(bcfg.get(name) or {}), noise
+            )
         except Exception as exc:  # a failed baseline must not spoil the run
             row = {"method": name, "params": {}, "seconds": 0.0, "note": f"failed: {exc}"}
         if truth and row["params"]:
@@ -498,11 +622,18 @@ class BaselineJob:
     default run's wall time is PIDynNet's, not PIDynNet's plus the baselines'. Otherwise, or
     when the worker cannot start or dies, they run in this process when asked for."""
 
-    def __init__(self, cfg: DictConfig, system: StructuralSystem, record: Record, hold_out: bool = False) -> None:
+    def __init__(
+        self, cfg: DictConfig, system: StructuralSystem, record: Record, hold_out: bool = False
+    ) -> None:
         bcfg = cfg.get("baselines") or {}
         fit = (record.meta or {}).get("split", {}).get("fit") if hold_out else None
-        self._args = (OmegaConf.to_container(bcfg, resolve=True) if bcfg else {}, record_noise(cfg, record), system, record,
-                      None if fit is None else tuple(fit))
+        self._args = (
+            OmegaConf.to_container(bcfg, resolve=True) if bcfg else {},
+            record_noise(cfg, record),
+            system,
+            record,
+            None if fit is None else tuple(fit),
+        )
         self._proc: Any = None
         self._conn: Any = None
         names = set(self._args[0].get("run") or [])
@@ -557,8 +688,14 @@ def _baseline_worker(conn: Any, *args: Any) -> None:
         conn.close()
 
 
-def run_baselines(cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path,
-                  identified: dict[str, float], pending: BaselineJob | None = None) -> list[dict]:
+def run_baselines(
+    cfg: DictConfig,
+    system: StructuralSystem,
+    record: Record,
+    run_dir: Path,
+    identified: dict[str, float],
+    pending: BaselineJob | None = None,
+) -> list[dict]:
     """The configured classical methods on the same record (``pending``: already started),
     logged and written to baselines.json, and the Cramer-Rao bound to cramer_rao.json."""
     from pidyn import baselines as B
@@ -570,8 +707,13 @@ def run_baselines(cfg: DictConfig, system: StructuralSystem, record: Record, run
         if row.get("note", "").startswith("failed"):
             log.warning("baseline %s %s", row["method"], row["note"])
         else:
-            log.info("baseline %s: %s (%.1f s) %s", row["method"],
-                     ", ".join(f"{k}={v:.5g}" for k, v in row["params"].items()), row["seconds"], row.get("note", ""))
+            log.info(
+                "baseline %s: %s (%.1f s) %s",
+                row["method"],
+                ", ".join(f"{k}={v:.5g}" for k, v in row["params"].items()),
+                row["seconds"],
+                row.get("note", ""),
+            )
     if bcfg.get("cramer_rao"):
         # the bound at the truth when it is known, else at the identified model
         ref = {**{s.name: s.init for s in system.param_specs()}, **identified, **(truth or {})}
@@ -598,8 +740,13 @@ def _quiet_framework_warnings() -> None:
     """Silence Lightning notices that do not apply to a one-window-at-a-time loop."""
     import warnings
 
-    for msg in (".*LeafSpec.*", ".*IterableDataset.*has `__len__`.*", ".*smaller than the logging interval.*",
-                ".*does not have many workers.*", ".*litlogger.*"):
+    for msg in (
+        ".*LeafSpec.*",
+        ".*IterableDataset.*has `__len__`.*",
+        ".*smaller than the logging interval.*",
+        ".*does not have many workers.*",
+        ".*litlogger.*",
+    ):
         warnings.filterwarnings("ignore", message=msg)
 
 

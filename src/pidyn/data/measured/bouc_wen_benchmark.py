@@ -20,8 +20,11 @@ from pidyn.data.sources import DataError, Record
 
 FS = 750.0
 PERIOD = 8192  # samples per multisine period
-FILES = {"train": "train_multisine_5periods.csv.gz", "val_multisine": "val_multisine.csv.gz",
-         "val_sinesweep": "val_sinesweep.csv.gz"}
+FILES = {
+    "train": "train_multisine_5periods.csv.gz",
+    "val_multisine": "val_multisine.csv.gz",
+    "val_sinesweep": "val_sinesweep.csv.gz",
+}
 SOURCE = "Bouc-Wen hysteretic benchmark (Noel & Schoukens 2016)"
 
 
@@ -45,20 +48,32 @@ def _read(name: str) -> tuple[np.ndarray, np.ndarray]:
 
 def _record(name: str, u: np.ndarray, y: np.ndarray, meta: dict) -> Record:
     t = np.arange(len(u)) / FS
-    return Record(name=name, t=t, f=u, x=y, excitation="force",
-                  meta={"dt": 1 / FS, "fs": FS, "units": {"x": "m", "u": "N"}, "source": SOURCE, **meta})
+    return Record(
+        name=name,
+        t=t,
+        f=u,
+        x=y,
+        excitation="force",
+        meta={"dt": 1 / FS, "fs": FS, "units": {"x": "m", "u": "N"}, "source": SOURCE, **meta},
+    )
 
 
 def load_bouc_wen_benchmark(fit_periods: int = 3, periods: int = 5) -> Record:
     """The training multisine from rest: ``periods`` periods (1-5), of which the first
     ``fit_periods`` are fitted and the rest held out (``meta["split"]``)."""
     if not 1 <= fit_periods < periods <= 5:
-        raise DataError(f"bouc_wen_benchmark: need 1 <= fit_periods < periods <= 5, got {fit_periods}, {periods}")
+        raise DataError(
+            f"bouc_wen_benchmark: need 1 <= fit_periods < periods <= 5, got {fit_periods}, {periods}"
+        )
     u, y = _read("train")
     n = periods * PERIOD
     fit_end = (fit_periods * PERIOD - 1) / FS
-    return _record("bouc_wen_benchmark", u[:n], y[:n],
-                   {"split": {"fit": [0.0, fit_end], "heldout": [fit_periods * PERIOD / FS, (n - 1) / FS]}})
+    return _record(
+        "bouc_wen_benchmark",
+        u[:n],
+        y[:n],
+        {"split": {"fit": [0.0, fit_end], "heldout": [fit_periods * PERIOD / FS, (n - 1) / FS]}},
+    )
 
 
 def load_bouc_wen_validation(name: str) -> Record:

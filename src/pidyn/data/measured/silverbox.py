@@ -38,7 +38,9 @@ def load_silverbox(
     u, y = np.ravel(mat["V1"]).astype(float), np.ravel(mat["V2"]).astype(float)
     lo, hi = estimation[0], test[1]
     if not (0 <= lo < estimation[1] <= test[0] < hi <= len(u)):
-        raise DataError(f"silverbox: bad sample ranges estimation={estimation}, test={test} (record has {len(u)})")
+        raise DataError(
+            f"silverbox: bad sample ranges estimation={estimation}, test={test} (record has {len(u)})"
+        )
     e = slice(*estimation)
     u = u - u[e].mean()
     y = y - y[e].mean()
@@ -50,7 +52,11 @@ def load_silverbox(
         f=u[lo:hi],
         x=y[lo:hi],
         excitation="force",
-        meta={"dt": 1 / FS, "fs": FS, "units": {"x": "V", "u": "V"},
-              "split": {"fit": [0.0, fit_end], "heldout": [(test[0] - lo) / FS, (test[1] - 1 - lo) / FS]},
-              "source": "Silverbox SNLS80mV (Wigren & Schoukens 2013)"},
+        meta={
+            "dt": 1 / FS,
+            "fs": FS,
+            "units": {"x": "V", "u": "V"},
+            "split": {"fit": [0.0, fit_end], "heldout": [(test[0] - lo) / FS, (test[1] - 1 - lo) / FS]},
+            "source": "Silverbox SNLS80mV (Wigren & Schoukens 2013)",
+        },
     )
