@@ -3,6 +3,8 @@ and the walk-through example run end to end."""
 
 from __future__ import annotations
 
+import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -96,3 +98,25 @@ def test_walkthrough_example_runs(tmp_path):
     assert (tmp_path / "diagnosis" / "report.md").exists()
     pred = pd.read_csv(tmp_path / "prediction_el_centro.csv")
     assert np.corrcoef(pred.x1_pidynnet, pred.x1_simulated)[0, 1] > 0.95
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="the baselines run in a worker only with a second core")
+def test_a_plain_script_without_a_main_guard_runs_once(tmp_path):
+    """The baselines' worker must not import the caller's script: a top-level
+    ``pidyn.identify(...)`` without ``if __name__ == "__main__"`` runs (and prints) once."""
+    script = tmp_path / "plain.py"
+    script.write_text(
+        "import pidyn\n"
+        "record = pidyn.Record.simulate('duffing', duration=12.0)\n"
+        "res = pidyn.identify(record, 'duffing', out_dir='run', debug='smoke', logger='none',\n"
+        "                     baselines__run=['equation_error'], baselines__parallel=True)\n"
+        "print('IDENTIFIED', res.to_frame().shape[0])\n"
+    )
+    out = subprocess.run(
+        [sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=600
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.count("IDENTIFIED") == 1, out.stdout
+    assert "baseline worker failed" not in out.stderr, out.stderr[-2000:]
+    rows = json.loads((tmp_path / "run" / "baselines.json").read_text())["baselines"]
+    assert rows[0]["method"] == "equation_error" and rows[0]["params"], rows

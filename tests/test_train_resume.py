@@ -108,7 +108,7 @@ def test_resume_of_a_latent_system_carries_z_across(tmp_path):
 def test_baselines_take_the_noise_a_data_source_drew(tmp_path):
     """``noise=null`` lets the data source draw the level (the diagnosis benchmark does): the
     baselines and the bound read it from the record, not from the config."""
-    from pidyn.tasks.train import BaselineJob, record_noise
+    from pidyn.tasks.train import record_noise, start_baselines
 
     cfg = make_cfg(
         [
@@ -128,5 +128,5 @@ def test_baselines_take_the_noise_a_data_source_drew(tmp_path):
     record = build_record(cfg, system)
     level = record_noise(cfg, record)
     assert 0.0 <= level <= 0.05 and level == record.meta["noise"]
-    rows = BaselineJob(cfg, system, record).result()
+    rows = start_baselines(cfg, system, record).result()
     assert rows[0]["method"] == "equation_error" and rows[0]["params"]

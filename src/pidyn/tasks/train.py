@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -21,6 +20,7 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf, open_dict
 
+from pidyn.baselines.worker import BaselineJob
 from pidyn.data.datamodule import SubperiodDataModule
 from pidyn.data.sources import Record
 from pidyn.errors import errors_pct
@@ -82,7 +82,7 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     t_wall = time.perf_counter()
     run = build_run(cfg, record)
     # the classical baselines need nothing from PIDynNet: they run beside it on another core
-    pending = BaselineJob(cfg, run.system, run.record, run.hold_out)
+    pending = start_baselines(cfg, run.system, run.record, run.hold_out)
     try:
         results = run.ident.run(resume=cfg.get("resume", True))
     except BaseException:
@@ -587,105 +587,18 @@ def check_refined(system: StructuralSystem, record: Record, out: Any, starts: li
         )
 
 
-def baseline_rows(
-    bcfg: dict, noise: float, system: StructuralSystem, record: Record, fit: tuple[float, float] | None = None
-) -> list[dict]:
-    """The configured classical methods on one record (``bcfg``: the ``baselines`` config as a
-    plain dict); a method that fails gives a row saying so. Pure, so it runs in a worker.
-    ``fit``: the span the parametric methods see (a held-out part stays unseen; the modal peers
-    fit the record's own fitting part and predict the rest)."""
-    from pidyn.baselines.registry import ESTIMATORS, PARAMETRIC, check_names
-
-    out: list[dict] = []
-    truth = record.truth or {}
-    names = list(bcfg.get("run") or [])
-    check_names("baselines.run", names)
-    fitted = record if fit is None else record.segment(*fit)
-    for name in names:
-        try:
-            row = ESTIMATORS[name](
-                fitted if name in PARAMETRIC else record, system, dict(bcfg.get(name) or {}), noise
-            )
-        except Exception as exc:  # a failed baseline must not spoil the run
-            row = {"method": name, "params": {}, "seconds": 0.0, "note": f"failed: {exc}"}
-        if truth and row["params"]:
-            row["error_pct"] = relative_errors(row["params"], truth)
-        out.append(row)
-    return out
-
-
-class BaselineJob:
-    """The baselines of one run, started before PIDynNet.
-
-    With ``baselines.parallel`` (and a second core, outside a multirun whose jobs already use
-    the cores) they run in a spawned worker process while PIDynNet trains: on two cores the
-    default run's wall time is PIDynNet's, not PIDynNet's plus the baselines'. Otherwise, or
-    when the worker cannot start or dies, they run in this process when asked for."""
-
-    def __init__(
-        self, cfg: DictConfig, system: StructuralSystem, record: Record, hold_out: bool = False
-    ) -> None:
-        bcfg = cfg.get("baselines") or {}
-        fit = (record.meta or {}).get("split", {}).get("fit") if hold_out else None
-        self._args = (
-            OmegaConf.to_container(bcfg, resolve=True) if bcfg else {},
-            record_noise(cfg, record),
-            system,
-            record,
-            None if fit is None else tuple(fit),
-        )
-        self._proc: Any = None
-        self._conn: Any = None
-        names = set(self._args[0].get("run") or [])
-        from pidyn.baselines.registry import check_names
-
-        check_names("baselines.run", names)  # a typo fails now, not after PIDynNet's minutes
-        if names and bcfg.get("parallel", False) and (os.cpu_count() or 1) > 1 and not _in_multirun():
-            import multiprocessing as mp
-
-            ctx = mp.get_context("spawn")
-            try:
-                self._conn, child = ctx.Pipe(duplex=False)
-                self._proc = ctx.Process(target=_baseline_worker, args=(child, *self._args), daemon=True)
-                self._proc.start()
-                child.close()
-            except Exception as exc:  # no worker here: run them in this process afterwards
-                log.info("baselines run after PIDynNet (no worker process: %s)", exc)
-                self._proc = None
-
-    def result(self) -> list[dict]:
-        if self._proc is not None:
-            try:
-                while not self._conn.poll(1.0):
-                    if not self._proc.is_alive():
-                        raise RuntimeError(f"worker exited with code {self._proc.exitcode}")
-                ok, value = self._conn.recv()
-                if ok:
-                    return value
-                raise RuntimeError(value)
-            except Exception as exc:
-                log.warning("baseline worker failed (%s); running the baselines in this process", exc)
-            finally:
-                self.cancel()
-        return baseline_rows(*self._args)
-
-    def cancel(self) -> None:
-        """Stop the worker (PIDynNet failed or the run was interrupted)."""
-        if self._proc is not None:
-            if self._proc.is_alive():
-                self._proc.terminate()
-            self._proc.join(5)
-            self._conn.close()
-            self._proc = None
-
-
-def _baseline_worker(conn: Any, *args: Any) -> None:
-    try:
-        conn.send((True, baseline_rows(*args)))
-    except Exception as exc:
-        conn.send((False, f"{type(exc).__name__}: {exc}"))
-    finally:
-        conn.close()
+def start_baselines(
+    cfg: DictConfig, system: StructuralSystem, record: Record, hold_out: bool = False
+) -> BaselineJob:
+    """The run's baselines, started now (in a worker with ``baselines.parallel``, outside a
+    multirun whose jobs already use the cores); ``hold_out``: they see the fitting part only."""
+    bcfg = cfg.get("baselines") or {}
+    fit = (record.meta or {}).get("split", {}).get("fit") if hold_out else None
+    plain = OmegaConf.to_container(bcfg, resolve=True) if bcfg else {}
+    parallel = bool(bcfg.get("parallel", False)) and not _in_multirun()
+    return BaselineJob(
+        plain, record_noise(cfg, record), system, record, None if fit is None else tuple(fit), parallel
+    )
 
 
 def run_baselines(
@@ -701,7 +614,7 @@ def run_baselines(
     from pidyn import baselines as B
 
     bcfg = cfg.get("baselines") or {}
-    out = (pending if pending is not None else BaselineJob(cfg, system, record)).result()
+    out = (pending if pending is not None else start_baselines(cfg, system, record)).result()
     truth = record.truth or {}
     for row in out:
         if row.get("note", "").startswith("failed"):
