@@ -44,6 +44,9 @@ class DiagnosisSettings:
     extend: bool = True
     learn_unexplained: bool = True
     max_effects: int = 3
+    #: a building: a storey effect is named only when the extended model predicts the held-out
+    #: floor accelerations better than the model it extends by this share (NRMSE)
+    storey_min_gain: float = 0.01
     ls_init: str | None = "none"
     polish: bool = True
     polish_seconds: float | None = None

@@ -394,8 +394,9 @@ class _Starts:
             log.warning(self.notes[-1])
         best = self.order[0]
         if prefer in self.costs and best != prefer:
+            who = "PIDynNet's estimate" if prefer == "pidynnet" else f"the {prefer} start"
             self.notes.append(
-                f"PIDynNet's estimate simulates the record worse than {best}'s (cost "
+                f"{who} simulates the record worse than {best}'s (cost "
                 f"{self.costs[prefer]:.4g} against {self.costs[best]:.4g}); the refinement started "
                 f"from {best}"
             )

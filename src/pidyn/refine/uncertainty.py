@@ -74,7 +74,9 @@ def intervals(specs: list[ParamSpec], theta: np.ndarray, cov: np.ndarray) -> dic
 
 def correlation(cov: np.ndarray) -> np.ndarray:
     sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-    return cov / np.outer(sd, sd)
+    # a near-singular information matrix (a parameter on its bound) leaves a covariance whose
+    # round-off is not positive definite: a correlation is never beyond +-1
+    return np.clip(cov / np.outer(sd, sd), -1.0, 1.0)
 
 
 def bound_notes(specs: list[ParamSpec], theta: np.ndarray, edge: float = 12.0) -> list[str]:

@@ -52,12 +52,22 @@ class OnStorey(ForceTerm):
         self.n_latent = term.n_latent
         self.rename = {s.name: storey_param(s.name, storey) for s in term.specs()}
         self.linear = tuple(self.rename[n] for n in term.linear)
+        #: parameters of other terms this one reads by their full name (a stiffness loss scales k2)
+        self.reads = tuple(
+            ref
+            for ref in (getattr(term, "stiffness", None), getattr(term, "damping", None))
+            if isinstance(ref, str)
+        )
 
     def specs(self) -> list[ParamSpec]:
         return [replace(s, name=self.rename[s.name]) for s in self.term.specs()]
 
     def _local(self, p: Mapping[str, Any]) -> dict[str, Any]:
-        return {base: p[full] for base, full in self.rename.items()}
+        local = {base: p[full] for base, full in self.rename.items()}
+        for ref in self.reads:
+            if ref in p:
+                local[ref] = p[ref]
+        return local
 
     def force(self, t, x, v, z, p):
         return self.term.force(t, x, v, z, self._local(p))
@@ -135,7 +145,7 @@ class ShearBuilding(StructuralSystem):
         stiffness_taper: with a scalar stiffness, the top storey's stiffness as a share of the
             first's, linear in between (1: uniform).
         storey_terms: ``{storey: [ {term: hysteresis, beta: .., gamma: .., n: ..}, ...]}``
-            (1-based storeys; ``hysteresis`` replaces the storey's linear spring, its k being
+            (1-based storeys; a ``ForceTerm`` object in place of an entry is used as it is; ``hysteresis`` replaces the storey's linear spring, its k being
             the storey stiffness; other terms add to it).
         guess: starting values by base name for every storey (``{c: 1.0, k: 100.0}``);
             ``params`` overrides any single parameter (``{k2: {init: 80}}``).
@@ -211,8 +221,9 @@ class ShearBuilding(StructuralSystem):
             i = int(key)
             if not 1 <= i <= n:
                 raise ValueError(f"shear_building: storey_terms names storey {i}; storeys are 1..{n}")
-            entries = [entries] if isinstance(entries, Mapping) else list(entries)
-            extra[i - 1] = [_storey_term(e, k[i - 1]) for e in entries]
+            entries = [entries] if isinstance(entries, (Mapping, ForceTerm)) else list(entries)
+            # a config entry, or a term object (the diagnosis extends a building by its own terms)
+            extra[i - 1] = [e if isinstance(e, ForceTerm) else _storey_term(e, k[i - 1]) for e in entries]
         return extra
 
     @staticmethod

@@ -38,6 +38,8 @@ def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
         log.info("%s holds this diagnosis (skip_done): not run again", done.parent)
         return json.loads(done.read_text())
     t_wall = time.perf_counter()
+    if cfg.system.get("n_storeys") is not None:  # a shear building: storey by storey
+        return diagnose_building_task(cfg, record)
     case = compose_case(cfg, record)
     outcome = pipeline.run(case)
     diagnosis = summarize(case, outcome)
@@ -54,6 +56,49 @@ def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
     )
     log.info("run folder %s (%.0f s)", case.run_dir, diagnosis["wall_seconds"])
     return diagnosis
+
+
+def diagnose_building_task(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
+    """A shear building's diagnosis (``pidyn.discrepancy.storeys``), written to the run folder."""
+    from dataclasses import replace
+
+    from pidyn.discrepancy.storey_report import report_lines, summarize_building, write_building_figures
+    from pidyn.discrepancy.storeys import diagnose_building, split_spans
+    from pidyn.tasks.train import refine_plan
+
+    settings = DiagnosisSettings.from_mapping(OmegaConf.to_container(cfg.diagnosis, resolve=True))  # type: ignore[arg-type]
+    system = hydra.utils.instantiate(cfg.system)
+    record = build_record(cfg, system) if record is None else record
+    plan = refine_plan(cfg)
+    if plan is None:
+        raise ValueError(
+            "diagnose: a building's diagnosis refines every model; model.refine=none is not possible"
+        )
+    # no networks here: the segments start from the accelerations integrated twice
+    refine_settings = replace(plan[2], states="integrated")
+    run_dir = Path(cfg.paths.output_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    start, chosen = None, str(cfg.model.get("start", "auto"))
+    if chosen not in ("auto", "data", "config"):  # model.start=<an earlier run's folder>
+        from pidyn.baselines.data_start import start_from_run
+
+        start = start_from_run(chosen, system).values
+    d = diagnose_building(record, system, settings, refine_settings, start)
+    fit, held = split_spans(record, float(settings.fit_share))
+    out = summarize_building(record, system, d, fit, held, settings.thresholds)
+    write_json(run_dir / "diagnosis.json", out)
+    (run_dir / "report.md").write_text("\n".join(report_lines(out)) + "\n")
+    write_building_figures(run_dir, d)
+    where = ", ".join(f"{c} in storey {s}" for c, s in zip(out["causes"], out["storeys"]))
+    log.info(
+        "verdict: %s%s; held-out NRMSE of the floor accelerations nominal %.4g%s",
+        out["verdict"],
+        f" ({where})" if where else "",
+        out["gain"]["nominal"],
+        "" if out["gain"]["extended"] is None else f", extended {out['gain']['extended']:.4g}",
+    )
+    log.info("run folder %s (%.0f s)", run_dir, out["wall_seconds"])
+    return out
 
 
 def compose_case(cfg: DictConfig, record: Record | None = None) -> pipeline.Case:

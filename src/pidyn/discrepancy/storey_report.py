@@ -1,0 +1,182 @@
+"""What a building diagnosis writes: ``diagnosis.json`` (the SDOF diagnosis's fields, with
+``storeys`` parallel to ``causes`` and a located change's ``t_change`` at the top level),
+``report.md`` and, per storey, the force the model leaves unexplained against drift and drift
+velocity (``figures/storey_residuals.png``)."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from pidyn.data.sources import Record
+from pidyn.discrepancy.screening import Thresholds
+from pidyn.discrepancy.storeys import BuildingDiagnosis, StoreyView, building_with, storey_system
+from pidyn.systems.shear_building import ShearBuilding
+
+
+def summarize_building(
+    record: Record, system: ShearBuilding, d: BuildingDiagnosis, fit, held, thresholds: Thresholds
+) -> dict:
+    """``diagnosis.json`` of a building."""
+    causes = [f.effect for f in d.found]
+    params: dict = {}
+    t_change, t_ci = None, None
+    for step in d.steps:
+        if not step["accepted"]:
+            continue
+        params.update(step["parameters"])
+        for name, iv in step["intervals"].items():
+            if name.startswith("t_d") and iv is not None:
+                t_change, t_ci = float(step["parameters"][name]), [float(v) for v in iv["ci95"]]
+    if t_change is not None:
+        params["t_change"], params["t_change_ci95"] = t_change, t_ci
+    ext_sys = d.extended["system"] if d.extended else None
+    ext = None
+    if d.extended:
+        ext_obj, _ = building_with(system, d.nominal["params"], d.found)
+        ext = {"system": ext_sys, "storey_equations": ext_obj.storey_equations(d.extended["params"])}
+    return {
+        "nominal": {"system": system.name, "storey_equations": system.storey_equations(d.nominal["params"])},
+        "verdict": d.verdict,
+        "cause": causes[0] if causes else None,
+        "causes": causes,
+        "storeys": [f.storey for f in d.found],
+        "t_change": t_change,
+        "unexplained_storey": d.unexplained_storey,
+        "steps": d.steps,
+        "heldout_check": {
+            "metric": "nrmse_a",
+            "fit": d.nominal["fit"],
+            "heldout": d.nominal["heldout"],
+        },
+        "change": None if t_change is None else {"t_change": t_change, "ci95": t_ci},
+        "structure": [dict(sc.structure) for sc in d.screenings],
+        "ranking": [
+            {"storey": i, "verdict": sc.verdict, "cause": sc.cause, "rows": sc.ranking}
+            for i, sc in enumerate(d.screenings, start=1)
+        ],
+        "extended": ext,
+        "parameters": params,
+        "nominal_parameters": d.nominal["params"],
+        "nominal_intervals": d.nominal["intervals"],
+        "extended_parameters": d.extended["params"] if d.extended else None,
+        "extended_intervals": d.extended["intervals"] if d.extended else None,
+        "gain": d.gain,
+        "split": {"fit": list(fit), "heldout": list(held)},
+        "record": record.name,
+        "measured_floors": d.views[0].measured_floors if d.views else [],
+        "highpass_hz": d.corner_hz,
+        "noise": (record.meta or {}).get("noise"),
+        "thresholds": dataclasses.asdict(thresholds),
+        "wall_seconds": d.seconds,
+        "notes": d.notes,
+    }
+
+
+def storey_residual(view: StoreyView, values: dict[str, float], found) -> np.ndarray:
+    """The storey force the model leaves unexplained: measured shear minus the storey's law (a
+    hysteretic term found there is left in: its z needs the path, drawn as it is)."""
+    i = view.storey
+    here = [f for f in found if f.storey == i]
+    system, sv = storey_system(values[f"c{i}"], values[f"k{i}"], here)
+    law = np.zeros_like(view.drift)
+    for term in system.terms:
+        law = law + np.asarray(
+            term.force(view.t, view.drift, view.drift_velocity, None, sv)
+            if not term.n_latent
+            else np.zeros_like(view.drift),
+            float,
+        )
+    return view.shear - law
+
+
+def write_building_figures(run_dir: Path, d: BuildingDiagnosis) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(d.views)
+    fig, axes = plt.subplots(n, 2, figsize=(9, 2.6 * n), squeeze=False)
+    t = d.views[0].t if d.views else np.zeros(0)
+    edge = 0.05 * (t[-1] - t[0]) if len(t) else 0.0
+    inner = (t >= t[0] + edge) & (t <= t[-1] - edge) if len(t) else slice(None)  # the filter's ends left out
+    for row, view in zip(axes, d.views):
+        nominal = storey_residual(view, d.nominal["params"], [])
+        final = storey_residual(view, d.values, d.found) if d.found else None
+        named = [f.effect for f in d.found if f.storey == view.storey]
+        signals = (
+            (row[0], view.drift, "drift d (m)"),
+            (row[1], view.drift_velocity, "drift velocity d' (m/s)"),
+        )
+        for ax, sig, label in signals:
+            ax.plot(sig[inner], nominal[inner], ".", ms=1.5, alpha=0.5, color="0.55", label="nominal model")
+            if final is not None:
+                ax.plot(sig[inner], final[inner], ".", ms=1.5, alpha=0.6, color="C0", label="extended model")
+            ax.set_xlabel(label)
+            ax.set_ylabel(f"storey {view.storey} force (N)")
+        title = f"storey {view.storey}: unexplained force" + (f" ({', '.join(named)} found)" if named else "")
+        row[0].set_title(title, fontsize=9)
+        row[0].legend(fontsize=7, markerscale=4, loc="best")
+    fig.tight_layout()
+    (run_dir / "figures").mkdir(parents=True, exist_ok=True)
+    fig.savefig(run_dir / "figures" / "storey_residuals.png", dpi=110)
+    plt.close(fig)
+
+
+def report_lines(d: dict) -> list[str]:
+    """``report.md`` of a building diagnosis."""
+    lines = [f"# Diagnosis of '{d['record']}' (building, floors measured: {d['measured_floors']})", ""]
+    lines.append(
+        f"**Verdict: {d['verdict']}**"
+        + (
+            f": {', '.join(f'{c} in storey {s}' for c, s in zip(d['causes'], d['storeys']))}"
+            if d["causes"]
+            else ""
+        )
+    )
+    if d["unexplained_storey"]:
+        lines.append(
+            f"Storey {d['unexplained_storey']}'s force is structured, and no library effect earns its place there."
+        )
+    if d["t_change"] is not None:
+        lo, hi = d["change"]["ci95"]
+        lines.append(f"Change located at t = {d['t_change']:.3f} s (95 % interval {lo:.3f}-{hi:.3f} s).")
+    lines += ["", "Nominal model (fitting part):", ""] + [
+        f"    {e}" for e in d["nominal"]["storey_equations"]
+    ]
+    if d["extended"]:
+        lines += ["", "Extended model:", ""] + [f"    {e}" for e in d["extended"]["storey_equations"]]
+    g = d["gain"]
+    lines += [
+        "",
+        "| model | held-out NRMSE of the floor accelerations |",
+        "|---|---|",
+        f"| nominal | {g['nominal']:.4g} |",
+    ]
+    if g["extended"] is not None:
+        lines.append(f"| extended | {g['extended']:.4g} |")
+    lines += [
+        "",
+        "| storey | screening verdict | top effect | score | cross-validation gain |",
+        "|---|---|---|---|---|",
+    ]
+    for r in d["ranking"]:
+        top = r["rows"][0] if r["rows"] else {}
+        score = top.get("score")
+        lines.append(
+            f"| {r['storey']} | {r['verdict']} | {top.get('effect', '-')} | "
+            f"{'-' if score is None else f'{score:.1f}'} | {top.get('cv_gain', float('nan')):.3f} |"
+        )
+    for s in d["steps"]:
+        lines.append(
+            f"\nStep: {s['effect']} in storey {s['storey']} (score {s['score']:.1f}): held-out NRMSE "
+            f"{s['heldout_before']:.4g} -> {s['heldout_after']:.4g}, {'named' if s['accepted'] else 'refused (no held-out gain)'}."
+        )
+    lines += [
+        "",
+        "Figure: `figures/storey_residuals.png` (each storey's unexplained force against drift and drift velocity).",
+    ]
+    return lines
