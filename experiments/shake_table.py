@@ -65,7 +65,8 @@ def run_sweeps(base: Path, jobs: int = 2, launcher: str = "joblib") -> None:
                 base / "shake_table" / f"{slug(model)}_others",
                 jobs,
                 launcher,
-                [f"model.start='{start}'"],
+                # double quotes: a Hydra run folder's name holds the single-quoted overrides
+                [f'model.start="{start}"'],
             )
 
 

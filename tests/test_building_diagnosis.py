@@ -94,6 +94,19 @@ def test_floors_without_sensors_take_the_model_and_the_storey_is_still_found(tmp
     assert set(d["gain"]["per_floor"]["nominal"]) == {"a1", "a3"}
 
 
+@pytest.mark.slow
+def test_two_effects_in_two_storeys_are_both_named(tmp_path):
+    """A stiffness loss in storey 1 and a hardening spring in storey 3 (a quarter of that
+    storey's force): both named, each in its storey, the second found by screening the
+    building extended with the first."""
+    loss = {"term": "stiffness_loss", "drop": 0.25, "t_d": 8.0, "stiffness": "k1", "t_max": 40.0}
+    cubic = {"term": "cubic_stiffness", "k3": 40000.0}
+    d = run(tmp_path, building_csv(tmp_path, {1: [loss], 3: [cubic]}))
+    assert sorted(zip(d["causes"], d["storeys"])) == [("cubic_stiffness", 3), ("stiffness_loss", 1)], d["steps"]
+    assert d["parameters"]["k3_3"] == pytest.approx(40000.0, rel=0.2)
+    assert d["gain"]["extended"] < 0.5 * d["gain"]["nominal"]
+
+
 def test_storey_shear_from_floor_accelerations_is_the_storey_force():
     """The identity the screening rests on: -sum_{j>=i} m_j a_j (absolute) equals each storey's
     restoring force, noise-free and without any model."""
