@@ -102,7 +102,9 @@ def test_two_effects_in_two_storeys_are_both_named(tmp_path):
     loss = {"term": "stiffness_loss", "drop": 0.25, "t_d": 8.0, "stiffness": "k1", "t_max": 40.0}
     cubic = {"term": "cubic_stiffness", "k3": 40000.0}
     d = run(tmp_path, building_csv(tmp_path, {1: [loss], 3: [cubic]}))
-    assert sorted(zip(d["causes"], d["storeys"])) == [("cubic_stiffness", 3), ("stiffness_loss", 1)], d["steps"]
+    assert sorted(zip(d["causes"], d["storeys"])) == [("cubic_stiffness", 3), ("stiffness_loss", 1)], d[
+        "steps"
+    ]
     assert d["parameters"]["k3_3"] == pytest.approx(40000.0, rel=0.2)
     assert d["gain"]["extended"] < 0.5 * d["gain"]["nominal"]
 

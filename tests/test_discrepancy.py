@@ -21,10 +21,10 @@ from conftest import make_cfg  # noqa: E402
 from pidyn.discrepancy.effects import EFFECTS, Signals, bouc_wen_z, get_effect  # noqa: E402
 from pidyn.discrepancy.hidden import EQUIVALENT, hidden_case  # noqa: E402
 from pidyn.discrepancy.screening import screen  # noqa: E402
-from pidyn.discrepancy.weak_form import WeakForm, smooth_signals, velocity_noise  # noqa: E402
 from pidyn.excitation import prepare  # noqa: E402
 from pidyn.simulate import simulate  # noqa: E402
 from pidyn.systems import BoucWen, LinearSDOF  # noqa: E402
+from pidyn.weak_form import WeakForm, smooth_signals, velocity_noise  # noqa: E402
 
 PERIOD = 2 * np.pi / np.sqrt(15.0)
 
@@ -127,7 +127,7 @@ def test_silverbox_screening_finds_the_cubic_stiffness():
     """Real data: the Silverbox circuit is a Duffing oscillator; starting from a linear model
     the screening must name the cubic stiffness (hardening, k3 > 0)."""
     from pidyn.data.measured.silverbox import load_silverbox
-    from pidyn.discrepancy.residual import dominant_period
+    from pidyn.signals import dominant_period
 
     r = load_silverbox()
     fit_end = r.meta["split"]["fit"][1]
@@ -251,7 +251,7 @@ def test_bouc_wen_benchmark_screening_names_the_hysteresis():
     linear oscillator, the screening names the hysteresis; the term it would add lets beta
     and gamma take either sign (the benchmark's own x'|z|^n coefficient is negative)."""
     from pidyn.data.measured.bouc_wen_benchmark import load_bouc_wen_benchmark
-    from pidyn.discrepancy.residual import dominant_period
+    from pidyn.signals import dominant_period
 
     r = load_bouc_wen_benchmark()
     fit_end = r.meta["split"]["fit"][1]

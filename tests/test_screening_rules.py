@@ -151,7 +151,7 @@ def test_the_held_out_check_holds_on_a_quiet_held_out_part_with_nothing_hidden()
     (ratio 3.8) with the true model, and a record with nothing hidden got a learned force."""
     from pidyn.discrepancy.changes import heldout_check
     from pidyn.discrepancy.hidden import hidden_case
-    from pidyn.discrepancy.weak_form import measurement_noise, smooth_signals
+    from pidyn.weak_form import measurement_noise, smooth_signals
 
     period = 2 * np.pi / np.sqrt(15.0)
     case = hidden_case(None, 1198)

@@ -16,8 +16,8 @@ import numpy as np
 
 from pidyn.baselines.common import BaselineResult
 from pidyn.data.sources import Record
-from pidyn.discrepancy.residual import dominant_period
-from pidyn.discrepancy.weak_form import WeakForm, smooth_signals
+from pidyn.signals import dominant_period
+from pidyn.weak_form import WeakForm, smooth_signals
 
 #: the library: name -> force per unit coefficient
 LIBRARY = {

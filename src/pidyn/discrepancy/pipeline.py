@@ -41,12 +41,12 @@ from pidyn.discrepancy.learned_fit import (
     save_unexplained,
     train_learned_force,
 )
-from pidyn.discrepancy.residual import dominant_period
 from pidyn.discrepancy.screening import EXCLUSIVE, Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
-from pidyn.discrepancy.weak_form import WeakForm, measurement_noise, smooth_signals, velocity_noise
+from pidyn.signals import dominant_period
 from pidyn.simulate import simulate_identified, simulate_response
 from pidyn.systems.sdof import SDOFSystem
+from pidyn.weak_form import WeakForm, measurement_noise, smooth_signals, velocity_noise
 
 log = logging.getLogger(__name__)
 

@@ -41,8 +41,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pidyn.discrepancy.effects import EFFECTS, Candidate, Effect, Signals
-from pidyn.discrepancy.weak_form import WeakForm
 from pidyn.systems.sdof import SDOFSystem
+from pidyn.weak_form import WeakForm
 
 
 @dataclass

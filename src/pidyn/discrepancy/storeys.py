@@ -40,13 +40,13 @@ from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.pipeline import split_spans
 from pidyn.discrepancy.screening import Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
-from pidyn.discrepancy.weak_form import WeakForm, smooth_signals, velocity_noise
 from pidyn.reporting import nrmse
 from pidyn.signals import integrate
 from pidyn.simulate import simulate_response
 from pidyn.systems.sdof import SDOFSystem
 from pidyn.systems.shear_building import ShearBuilding, storey_param
 from pidyn.systems.terms import LinearStiffness, ViscousDamping
+from pidyn.weak_form import WeakForm, smooth_signals, velocity_noise
 
 log = logging.getLogger(__name__)
 

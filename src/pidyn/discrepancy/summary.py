@@ -20,9 +20,9 @@ from pidyn.discrepancy.report import (
     plot_running_estimate,
     write_report,
 )
-from pidyn.discrepancy.residual import band_limited
 from pidyn.discrepancy.screening import weak_system
 from pidyn.reporting import nrmse
+from pidyn.signals import band_limited
 from pidyn.systems.sdof import SDOFSystem
 
 

@@ -1,0 +1,78 @@
+"""The package's dependencies run one way: no two subpackages (or top-level modules) import
+each other, at module level or inside functions; type-only imports do not count."""
+
+from __future__ import annotations
+
+import ast
+from collections import defaultdict
+from pathlib import Path
+
+SRC = Path(__file__).resolve().parents[1] / "src" / "pidyn"
+
+
+def _unit(module: str) -> str:
+    """``pidyn.discrepancy.storeys`` -> ``discrepancy``; ``pidyn.signals`` -> ``signals``."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else parts[0]
+
+
+def _type_only(tree: ast.AST) -> set[int]:
+    """Line numbers of imports under ``if TYPE_CHECKING:``."""
+    lines: set[int] = set()
+    for node in ast.walk(tree):
+        if (
+            isinstance(node, ast.If)
+            and getattr(node.test, "id", getattr(node.test, "attr", "")) == "TYPE_CHECKING"
+        ):
+            for sub in ast.walk(node):
+                if isinstance(sub, (ast.Import, ast.ImportFrom)):
+                    lines.add(sub.lineno)
+    return lines
+
+
+def package_graph() -> dict[str, dict[str, set[str]]]:
+    """unit -> imported unit -> the files that import it."""
+    graph: dict[str, dict[str, set[str]]] = defaultdict(lambda: defaultdict(set))
+    for f in SRC.rglob("*.py"):
+        rel = f.relative_to(SRC.parent).with_suffix("")
+        unit = rel.parts[1] if len(rel.parts) > 1 else rel.parts[0]
+        tree = ast.parse(f.read_text())
+        skip = _type_only(tree)
+        for node in ast.walk(tree):
+            if getattr(node, "lineno", None) in skip:
+                continue
+            names = []
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("pidyn."):
+                names = [node.module]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names if a.name.startswith("pidyn.")]
+            for name in names:
+                target = _unit(name)
+                if target != unit:
+                    graph[unit.removesuffix(".py")][target].add(str(rel))
+    return graph
+
+
+def test_no_two_parts_of_the_package_import_each_other():
+    graph = package_graph()
+    cycles = [
+        (a, b, sorted(graph[a][b]), sorted(graph[b][a]))
+        for a in graph
+        for b in graph[a]
+        if a < b and a in graph.get(b, {})
+    ]
+    assert not cycles, cycles
+
+
+def test_the_weak_form_and_signals_need_neither_torch_nor_the_diagnosis():
+    """The low modules every part shares import NumPy and SciPy only."""
+    for name in ("signals.py", "weak_form.py"):
+        tree = ast.parse((SRC / name).read_text())
+        imported = {
+            (n.module if isinstance(n, ast.ImportFrom) else a.name).split(".")[0]
+            for n in ast.walk(tree)
+            if isinstance(n, (ast.Import, ast.ImportFrom))
+            for a in (n.names if isinstance(n, ast.Import) else [n])
+            if not isinstance(n, ast.ImportFrom) or n.module
+        }
+        assert imported <= {"__future__", "dataclasses", "numpy", "scipy", "typing", "math"}, (name, imported)
