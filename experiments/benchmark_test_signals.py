@@ -34,6 +34,15 @@ sys.path.insert(0, str(ROOT / "src"))
 #: The benchmark's own system in the project's notation (see bouc_wen_benchmark/PROVENANCE.md)
 BOUC_WEN_TRUTH = {"m": 2.0, "c": 10.0, "k": 5e4, "kh": 5e4, "beta": -1100.0, "gamma": 800.0, "n": 1.0}
 
+IACOB_2025 = (
+    "L.C. Iacob, M. Szécsi, G.I. Beintema, M. Schoukens, R. Tóth, Learning Koopman models from data under "
+    "general noise conditions (2025)"
+)
+CHAMPNEYS_2024 = (
+    "M.D. Champneys et al., Baseline results for selected nonlinear system identification benchmarks, "
+    "IFAC-PapersOnLine 58(15) (2024)"
+)
+
 #: Published figures for the same test signals, each with where it was read. Only what could be
 #: read is listed, with what could not be checked said beside it.
 PUBLISHED: dict[str, list[dict]] = {
@@ -49,8 +58,53 @@ PUBLISHED: dict[str, list[dict]] = {
             "validation set is the benchmark's val_multisine; the paper itself could not be consulted, so "
             "that its validation signal is this one is not confirmed",
         },
+        *[
+            {
+                "signal": "val_multisine",
+                "method": method,
+                "rms_error": value,
+                **({"shown": shown} if shown else {}),
+                "source": IACOB_2025,
+                "read_from": "Table 1 of the paper, as cited; not re-read here",
+            }
+            for method, value, shown in (
+                ("gR-SS-NN", 7.53e-6, None),
+                ("PNLSS", 1.34e-5, None),
+                ("Koopman models (the paper's variants)", 1.43e-5, "1.43e-05 to 1.6e-04"),
+            )
+        ],
     ],
-    "silverbox": [],
+    "silverbox": [
+        {
+            "signal": signal,
+            "method": method,
+            "rms_error": value,
+            "source": CHAMPNEYS_2024,
+            "read_from": "the paper's table, as cited; not re-read here",
+        }
+        for method, values in (
+            ("best known result (the table's best-known row)", (0.26, 0.32, 0.36)),
+            ("GP-NARX", (0.60, 0.26, 0.30)),
+            ("LSTM", (2.68, 0.96, 1.50)),
+        )
+        for signal, value in zip(("arrow (full)", "arrow (no extrapolation)", "multisine test"), values)
+    ],
+}
+
+
+#: what the comparison with the published figures says, per benchmark
+CONTEXT = {
+    "bouc_wen": (
+        "The extended model has the benchmark's own structure, found by the diagnosis; the published models "
+        "learn theirs from the data, so the comparison says what knowing the structure is worth, not that "
+        "one fitting method beats another."
+    ),
+    "silverbox": (
+        "The extended model (the cubic spring the diagnosis named) stays above the best published figures "
+        "on every test signal. The circuit is known to be asymmetric: the quadratic spring the screening "
+        "finds significant (score 417) removes 2.7 % of the remaining force in cross-validation, below "
+        "the 5 % relevance threshold, and is not in the model."
+    ),
 }
 
 
@@ -213,26 +267,20 @@ def render(benchmark: str, rows: list[dict], notes: list[str]) -> list[str]:
     lines += [f"| test signal | method | RMS error ({unit}) | source | read from |", "|---|---|---|---|---|"]
     for p in pub:
         value = 10 ** (p["db"] / 20) if "db" in p else p["rms_error"]
-        shown = f"{value:.3g}" + (f" ({p['db']:g} dB re 1 {unit})" if "db" in p else "")
+        shown = p.get("shown") or f"{value:.3g}" + (f" ({p['db']:g} dB re 1 {unit})" if "db" in p else "")
         lines.append(f"| {p['signal']} | {p['method']} | {shown} | {p['source']} | {p['read_from']} |")
     ours = {r["signal"]: r["rms_error"] for r in rows if r["model"].startswith("extended")}
+    lines += [
+        "",
+        f"| test signal | method | published ({unit}) | extended model ({unit}) | extended / published |",
+        "|---|---|---|---|---|",
+    ]
     for p in pub:
         if p["signal"] in ours:
             value = 10 ** (p["db"] / 20) if "db" in p else p["rms_error"]
             err = ours[p["signal"]]
-            where = f"{value / err:.2g}x below" if err < value else f"{err / value:.2g}x above"
-            tail = (
-                "the extended model has the benchmark's own structure, found by the diagnosis, so the "
-                "comparison says what knowing the structure is worth, not that one fitting method beats "
-                "another."
-                if err < value
-                else "the extended model, with the benchmark's own structure, does not reach it on this run."
-            )
-            lines += [
-                "",
-                f"On {p['signal']} the extended model's error is {err:.3g} {unit}, {where} the "
-                f"published figure. That figure is a black-box model's; {tail}",
-            ]
+            lines.append(f"| {p['signal']} | {p['method']} | {value:.3g} | {err:.3g} | {err / value:.2g} |")
+    lines += ["", CONTEXT[benchmark]]
     return lines
 
 
