@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # the default index would serve a CUDA build.
 TORCH_INDEX ?=
 
-.PHONY: install train test test-fast lint format bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench basin robustness efficiency benchmarks real
+.PHONY: install train test test-fast lint format bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench discrepancy-bench-building basin robustness efficiency benchmarks real
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -61,6 +61,9 @@ diagnose: $(STAMP)
 
 discrepancy-bench: $(STAMP)
 	$(PY) experiments/discrepancy_bench.py $(ARGS)
+
+discrepancy-bench-building: $(STAMP)
+	$(PY) experiments/discrepancy_bench_building.py $(ARGS)
 
 basin: $(STAMP)
 	$(PY) experiments/basin.py --cell duffing $(ARGS)

@@ -54,7 +54,13 @@ def summarize_building(
         "change": None if t_change is None else {"t_change": t_change, "ci95": t_ci},
         "structure": [dict(sc.structure) for sc in d.screenings],
         "ranking": [
-            {"storey": i, "verdict": sc.verdict, "cause": sc.cause, "rows": sc.ranking}
+            {
+                "storey": i,
+                "verdict": sc.verdict,
+                "cause": sc.cause,
+                "own_law": sc.nominal_params,
+                "rows": sc.ranking,
+            }
             for i, sc in enumerate(d.screenings, start=1)
         ],
         "extended": ext,
@@ -160,16 +166,29 @@ def report_lines(d: dict) -> list[str]:
         lines.append(f"| extended | {g['extended']:.4g} |")
     lines += [
         "",
-        "| storey | screening verdict | top effect | score | cross-validation gain |",
-        "|---|---|---|---|---|",
+        "| storey | the model's c, k | c, k from the storey's own shear | screening verdict | top effect | score "
+        "| cross-validation gain |",
+        "|---|---|---|---|---|---|---|",
     ]
+    final = d["extended_parameters"] or d["nominal_parameters"]
     for r in d["ranking"]:
         top = r["rows"][0] if r["rows"] else {}
         score = top.get("score")
+        i, own = r["storey"], r.get("own_law") or {}
+        model = f"{final.get(f'c{i}', float('nan')):.4g}, {final.get(f'k{i}', float('nan')):.5g}"
+        law = f"{own.get('c', float('nan')):.4g}, {own.get('k', float('nan')):.5g}"
         lines.append(
-            f"| {r['storey']} | {r['verdict']} | {top.get('effect', '-')} | "
+            f"| {i} | {model} | {law} | {r['verdict']} | {top.get('effect', '-')} | "
             f"{'-' if score is None else f'{score:.1f}'} | {top.get('cv_gain', float('nan')):.3f} |"
         )
+    lines += [
+        "",
+        "The storey's own c, k: its law refitted to the shear its floors' accelerations give (the weak form, "
+        "fitting part), without the other storeys; where it differs from the model's, the record places the "
+        "stiffness or damping in another storey than the model does.",
+    ]
+    for note in d["notes"]:
+        lines.append(f"\nNote: {note}.")
     for s in d["steps"]:
         lines.append(
             f"\nStep: {s['effect']} in storey {s['storey']} (score {s['score']:.1f}): held-out NRMSE "
