@@ -70,6 +70,74 @@ def run_sweeps(base: Path, jobs: int = 2, launcher: str = "joblib") -> None:
             )
 
 
+def diagnose_models(base: Path) -> None:
+    """Each model's identification run diagnosed storey by storey (``diagnose.py`` from that run's
+    estimate): which storey's shear the linear shear model misses, and what it looks like."""
+    for model, (storeys, ident) in MODELS.items():
+        start = _runs(base / "shake_table" / slug(model)).get(ident)
+        if start is None:
+            continue
+        folder = base / "shake_table_diagnose" / slug(model)
+        cmd = [
+            sys.executable,
+            "diagnose.py",
+            "data=xsens",
+            f"data.path={MODELS_DIR.relative_to(ROOT) / model}",
+            f"data.run={ident}",
+            "system=shear_building",
+            f"system.n_storeys={storeys}",
+            f'model.start="{start}"',
+            "skip_done=true",
+            f"hydra.run.dir={folder}",
+        ]
+        print("+", " ".join(cmd[1:]), flush=True)
+        t0 = time.perf_counter()
+        rc = subprocess.run(cmd, cwd=ROOT).returncode
+        print(f"  diagnose {slug(model)}: exit {rc} after {time.perf_counter() - t0:.0f} s", flush=True)
+
+
+def diagnosis_lines(base: Path) -> list[str]:
+    """The storey-by-storey diagnoses of the identification runs, as a table."""
+    rows = []
+    for model, (_, ident) in MODELS.items():
+        f = base / "shake_table_diagnose" / slug(model) / "diagnosis.json"
+        if not f.exists():
+            continue
+        d = json.loads(f.read_text())
+        final = d.get("extended_parameters") or d["nominal_parameters"]
+        for r in d["ranking"]:
+            i, own = r["storey"], r.get("own_law") or {}
+            top = r["rows"][0] if r["rows"] else {}
+            named = [f"{c}" for c, s_ in zip(d["causes"], d["storeys"]) if s_ == i]
+            rows.append(
+                f"| {model} | {ident} | {i} | {final[f'c{i}']:.4g}, {final[f'k{i}']:.5g} | "
+                f"{own.get('c', float('nan')):.4g}, {own.get('k', float('nan')):.5g} | {r['verdict']} | "
+                f"{top.get('effect', '-')} ({_fmt(top.get('score'))}, cv {_fmt(top.get('cv_gain'))}) | "
+                f"{', '.join(named) or '-'} |"
+            )
+        for note in d.get("notes") or []:
+            rows.append(f"| {model} | {ident} | note | {note} | | | | |")
+        rows.append(
+            f"| {model} | {ident} | verdict | **{d['verdict']}** | held-out NRMSE {_fmt(d['gain']['nominal'])}"
+            f"{'' if d['gain']['extended'] is None else ' -> ' + _fmt(d['gain']['extended'])} | | | {d['wall_seconds']:.0f} s |"
+        )
+    if not rows:
+        return []
+    return [
+        "",
+        "## Storey by storey: what the linear shear model misses",
+        "",
+        "`diagnose.py system=shear_building` on each identification run, from that run's estimate: every "
+        "storey's shear from the floors' accelerations (masses as identified, floor 1's the unit), screened "
+        "on its own. c, k per kg of floor 1. 'Own law': the storey's c, k refitted to its own shear, "
+        "without the other storeys.",
+        "",
+        "| model | run | storey | model's c, k | own law c, k | screening | top effect (score, cv gain) | named |",
+        "|---|---|---|---|---|---|---|---|",
+        *rows,
+    ]
+
+
 def _sweep(
     model: str, storeys: int, runs: list[str], folder: Path, jobs: int, launcher: str, extra: list[str] = ()
 ) -> None:
@@ -314,11 +382,14 @@ def aggregate(base: Path) -> None:
             w = csv.DictWriter(fh, keys)
             w.writeheader()
             w.writerows(preds)
-    (RESULTS / "shake_table.md").write_text("\n".join(report_lines(runs, preds, alignment_rows(base))) + "\n")
+    lines = report_lines(runs, preds, alignment_rows(base), diagnosis_lines(base))
+    (RESULTS / "shake_table.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {RESULTS / 'shake_table.md'}")
 
 
-def report_lines(runs: list[dict], preds: list[dict], align: list[dict]) -> list[str]:
+def report_lines(
+    runs: list[dict], preds: list[dict], align: list[dict], diagnosis: list[str] = ()
+) -> list[str]:
     out = [
         "# Mini shake table: three building models measured by wearable IMUs",
         "",
@@ -385,6 +456,7 @@ def report_lines(runs: list[dict], preds: list[dict], align: list[dict]) -> list
                     + " | ".join(f"{q['explained_by'][k]:.2f}" for k in shapes)
                     + " |"
                 )
+    out += list(diagnosis)
     if align:
         out += [
             "",
@@ -415,6 +487,7 @@ def main() -> None:
     base = a.aggregate or a.resume or ROOT / "outputs" / "real" / time.strftime("%Y-%m-%d_%H-%M-%S")
     if not a.aggregate:
         run_sweeps(base, a.jobs, a.launcher)
+        diagnose_models(base)
     aggregate(base)
 
 

@@ -70,7 +70,6 @@ def write_building_report(
     )
     d_id, f_id = storey_response(system, identified, record.t, record.f, state0)
     modes["diverged"] = diverged(d_id) or diverged(f_id)
-    write_json(run_dir / "modal.json", {**_interface_modes(run_dir / "modal.json"), **modes})
     eqs = system.storey_equations(identified)
     lines = [
         f"# {system.name}: {system.n_dof} storeys under {record.name}",
@@ -107,6 +106,8 @@ def write_building_report(
             "Masses unknown: floor 1's mass is the unit; stiffness and damping are per kg of floor 1 "
             "(k in s^-2, c in s^-1) and the masses are ratios to floor 1's. Absolute N/m need a mass.",
         ]
+    # written once every part is in (the storey residuals of a measured building included)
+    write_json(run_dir / "modal.json", {**_interface_modes(run_dir / "modal.json"), **modes})
     (run_dir / "building.md").write_text("\n".join(lines) + "\n")
     fig_dir = run_dir / "figures"
     fig_dir.mkdir(exist_ok=True)
