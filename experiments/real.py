@@ -19,12 +19,12 @@ import csv
 import json
 import platform
 import shutil
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from launch import run_logged
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"
@@ -92,12 +92,7 @@ def run_sweeps(base: Path, chosen: list[str], jobs: int, launcher: str, diagnose
             "skip_done=true",
             *extra,
         ]
-        if launcher != "joblib":
-            cmd.append(f"hydra/launcher={launcher}")
-        print("+", " ".join(cmd[1:]), flush=True)
-        t0 = time.perf_counter()
-        rc = subprocess.run(cmd, cwd=ROOT).returncode
-        print(f"  {name}: exit {rc} after {time.perf_counter() - t0:.0f} s", flush=True)
+        run_logged(cmd, name, ROOT, launcher)
 
 
 #: the events the diagnosis sweep takes (conf/experiment/painter_street_diagnose.yaml): the strong ones

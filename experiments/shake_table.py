@@ -14,12 +14,12 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from launch import run_logged
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"
@@ -90,10 +90,7 @@ def diagnose_models(base: Path) -> None:
             "skip_done=true",
             f"hydra.run.dir={folder}",
         ]
-        print("+", " ".join(cmd[1:]), flush=True)
-        t0 = time.perf_counter()
-        rc = subprocess.run(cmd, cwd=ROOT).returncode
-        print(f"  diagnose {slug(model)}: exit {rc} after {time.perf_counter() - t0:.0f} s", flush=True)
+        run_logged(cmd, f"diagnose {slug(model)}", ROOT)
 
 
 def diagnosis_lines(base: Path) -> list[str]:
@@ -153,12 +150,7 @@ def _sweep(
         "skip_done=true",
         *extra,
     ]
-    if launcher != "joblib":
-        cmd.append(f"hydra/launcher={launcher}")
-    print("+", " ".join(cmd[1:]), flush=True)
-    t0 = time.perf_counter()
-    rc = subprocess.run(cmd, cwd=ROOT).returncode
-    print(f"  {folder.name}: exit {rc} after {time.perf_counter() - t0:.0f} s", flush=True)
+    run_logged(cmd, folder.name, ROOT, launcher)
 
 
 def _runs(folder: Path) -> dict[str, Path]:
