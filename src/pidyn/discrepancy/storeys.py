@@ -267,6 +267,62 @@ def better(a: dict, b: dict, settings: DiagnosisSettings) -> bool:
     return gap > 0
 
 
+def leaning_rows(screenings: list[Screening], settings: DiagnosisSettings) -> list[tuple[int, dict]]:
+    """(storey, row) of the effects the weak form leans to without deciding (0 < score <
+    ``min_delta_bic``, no rule against them), strongest first, at most ``confirm.max_candidates``."""
+    th = settings.thresholds
+    rows = [
+        (i, r)
+        for i, sc in enumerate(screenings, start=1)
+        for r in sc.ranking
+        if r.get("score") is not None
+        and 0.0 < r["score"] < th.min_delta_bic
+        and r.get("persists", True)
+        and not r.get("heldout_miss")
+    ]
+    rows.sort(key=lambda ir: -ir[1]["score"])
+    return rows[: int(settings.confirm.max_candidates)]
+
+
+def confirm_leaning(
+    record: Record,
+    system: ShearBuilding,
+    current: dict,
+    found: list[Found],
+    views: list[StoreyView],
+    screenings: list[Screening],
+    fit: tuple[float, float],
+    held: tuple[float, float],
+    period: float,
+    settings: DiagnosisSettings,
+    refine_settings: Any,
+) -> dict | None:
+    """The output-error check of the leaning effects: each one's extension refined on the fitting
+    part and named when its free simulation beats the current model's by ``min_delta_bic`` (BIC,
+    in the nominal fit's noise units) and it predicts the held-out floor accelerations better.
+    Twice-integrated drifts are noisy regressors, and a weak form on them loses power that the
+    simulated floor accelerations keep. The strongest such effect is returned, or None."""
+    base = fit_bic(record, current["system"], current["values"], fit, current["noise"])
+    best = None
+    for storey, row in leaning_rows(screenings, settings):
+        sig, _ = storey_signals(views[storey - 1], current["values"][f"k{storey}"], period, fit[1])
+        cand = Found(row["effect"], storey, dict(row["parameters"]), row, sig.context())
+        trial = try_extension(record, system, current, found, cand, fit, held, settings, refine_settings)
+        gain = base - trial["report"]["fit_bic"]
+        trial["report"].update(source="output_error", delta_bic_fit=gain)
+        log.info(
+            "output-error check of %s in storey %d (weak-form score %.1f): BIC gain %.1f on the fitting part",
+            cand.effect,
+            storey,
+            row["score"],
+            gain,
+        )
+        if gain >= float(settings.thresholds.min_delta_bic) and trial["accepted"]:
+            if best is None or gain > best["report"]["delta_bic_fit"]:
+                best = trial
+    return best
+
+
 def close_rivals(screening: Screening, row: dict, settings: DiagnosisSettings) -> list[dict]:
     """The named row and every other passing effect of its storey less than ``min_delta_bic``
     below it in the weak form: the weak form does not decide between them (a stop and a cubic
@@ -397,8 +453,28 @@ def diagnose_building(
         views = storey_views(record, current["system"], current["values"], corner)
         screenings = screen_storeys(views, current["values"], found, period, fit[1], settings)
         pick = best_row(screenings)
-        if pick is None or not settings.extend:
+        if not settings.extend:
             break
+        if pick is None:  # the weak form names nothing: the effects it leans to are fitted by output error
+            step = confirm_leaning(
+                record,
+                system,
+                current,
+                found,
+                views,
+                screenings,
+                fit,
+                held,
+                period,
+                settings,
+                refine_settings,
+            )
+            if step is None:
+                break
+            steps.append(step["report"])
+            found.append(step["found"])
+            current = step["current"]
+            continue
         storey, row = pick
         sig, _ = storey_signals(views[storey - 1], current["values"][f"k{storey}"], period, fit[1])
         step = None
@@ -518,6 +594,7 @@ def try_extension(
         "screening_parameters": cand.params,
         "parameters": {names[b]: v for b, v in params.items()},
         "intervals": {full: res.intervals.get(full) for full in names.values() if full in res.intervals},
+        "source": "weak_form",
         "fit_bic": bic,
         "n_params": len(names),
         "heldout_before": before,
