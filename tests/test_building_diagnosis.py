@@ -123,3 +123,20 @@ def test_storey_shear_from_floor_accelerations_is_the_storey_force():
         law = values[f"c{i}"] * view.drift_velocity + values[f"k{i}"] * view.drift
         err = np.sqrt(np.mean((law[inner] - view.shear[inner]) ** 2)) / np.std(view.shear[inner])
         assert err < 0.02, (i, err)
+
+
+def test_a_hysteresis_found_by_the_diagnosis_adds_to_the_storey_spring():
+    """A configured hysteresis replaces the storey's linear spring (its k is the storey's); the
+    diagnosis's term object adds kh z beside k d, as the screening fitted it."""
+    from pidyn.discrepancy.effects import EFFECTS
+    from pidyn.systems.terms import LinearStiffness
+
+    def kinds(b):
+        return [type(t.term).__name__ for t in b.storeys[0]]
+
+    configured = ShearBuilding(2, 1.0, 0.5, 100.0, storey_terms={1: [{"term": "hysteresis"}]})
+    assert "LinearStiffness" not in kinds(configured), kinds(configured)
+    term = EFFECTS["hysteresis"].term({"kh": 20.0, "beta": 1.0, "gamma": 2.0, "n": 1.0}, {"stiffness": "k1"})
+    added = ShearBuilding(2, 1.0, 0.5, 100.0, storey_terms={1: [term]})
+    assert LinearStiffness.__name__ in kinds(added) and "BoucWenHysteresis" in kinds(added), kinds(added)
+    assert {"k1", "kh1"} <= {s.name for s in added.param_specs()}

@@ -367,9 +367,9 @@ def structured_storey(screenings: list[Screening], settings: DiagnosisSettings) 
 def nominal_fit(
     record: Record, system: ShearBuilding, fit: tuple[float, float], settings: Any, start: dict | None = None
 ) -> tuple[dict[str, float], Any]:
-    """The linear building on the fitting part, refined (intervals for every parameter) from
-    ``start`` (an earlier run's values), else from both the start read from the data and the
-    config's guesses, each refined on its own: the one whose model simulates the fitting part's
+    """The linear building on the fitting part, refined (intervals for every parameter) from the
+    start read from the data and from ``start`` (an earlier run's values) or else the config's
+    guesses, each refined on its own: the one whose model simulates the fitting part's
     floor accelerations better is kept. Scoring the starts by a free simulation before refining
     them misleads: a guess far below the structure's frequencies barely responds, and its small
     misfit beat a start at the right frequencies but off in phase (a shake-table building ended
@@ -378,17 +378,16 @@ def nominal_fit(
     from pidyn.refine.stage import refine
 
     config = {s.name: float(s.init) for s in system.param_specs()}
-    starts = {"config": config}
-    if start is not None:
-        starts = {"run": {**config, **start}}
-    else:
-        try:
-            data = start_from_data(record.segment(*fit), system)
-        except Exception as exc:  # a start that cannot be read leaves the config's
-            log.info("no start from the data (%s)", exc)
-            data = None
-        if data is not None:
-            starts["data"] = {**config, **data.values}
+    # an earlier run's estimate replaces the config's guesses, not the data's start: refined again
+    # here (segments from the integrated accelerations), a run's estimate can land elsewhere
+    starts = {"config": config} if start is None else {"run": {**config, **start}}
+    try:
+        data = start_from_data(record.segment(*fit), system)
+    except Exception as exc:  # a start that cannot be read leaves the others
+        log.info("no start from the data (%s)", exc)
+        data = None
+    if data is not None:
+        starts["data"] = {**config, **data.values}
     best = None
     for label, values in starts.items():
         try:

@@ -182,11 +182,11 @@ class ShearBuilding(StructuralSystem):
             k = [float(stiffnesses) * (1 - (1 - stiffness_taper) * i / max(n - 1, 1)) for i in range(n)]
         else:
             k = _per_storey(stiffnesses, n, "stiffnesses")
-        extra = self._extra_terms(storey_terms, n, k)
+        extra, replaced = self._extra_terms(storey_terms, n, k)
         self.storeys: list[list[OnStorey]] = []
         for i in range(n):
             terms: list[ForceTerm] = [ViscousDamping(c[i])]
-            if not any(isinstance(t, BoucWenHysteresis) for t in extra[i]):
+            if not replaced[i]:
                 terms.append(LinearStiffness(k[i]))
             terms += extra[i]
             self.storeys.append([OnStorey(t, i + 1) for t in terms])
@@ -215,8 +215,11 @@ class ShearBuilding(StructuralSystem):
         ]
 
     @staticmethod
-    def _extra_terms(storey_terms, n: int, k: list[float]) -> list[list[ForceTerm]]:
+    def _extra_terms(storey_terms, n: int, k: list[float]) -> tuple[list[list[ForceTerm]], list[bool]]:
+        """Each storey's further terms, and whether a configured hysteresis replaces its linear
+        spring (a term object adds to it: the diagnosis's hysteresis is k d + kh z)."""
         extra: list[list[ForceTerm]] = [[] for _ in range(n)]
+        replaced = [False] * n
         for key, entries in dict(storey_terms or {}).items():
             i = int(key)
             if not 1 <= i <= n:
@@ -224,7 +227,11 @@ class ShearBuilding(StructuralSystem):
             entries = [entries] if isinstance(entries, (Mapping, ForceTerm)) else list(entries)
             # a config entry, or a term object (the diagnosis extends a building by its own terms)
             extra[i - 1] = [e if isinstance(e, ForceTerm) else _storey_term(e, k[i - 1]) for e in entries]
-        return extra
+            replaced[i - 1] = any(
+                not isinstance(e, ForceTerm) and isinstance(t, BoucWenHysteresis)
+                for e, t in zip(entries, extra[i - 1])
+            )
+        return extra, replaced
 
     @staticmethod
     def _apply_guess(specs: list[ParamSpec], guess: Mapping[str, float]) -> list[ParamSpec]:
