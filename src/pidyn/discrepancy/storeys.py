@@ -416,6 +416,37 @@ def fundamental_hz(system: ShearBuilding, values: dict[str, float]) -> float:
     return float(min(f for f in modes["frequency_hz"] if f > 0))
 
 
+@dataclass
+class Study:
+    """What every step of one building diagnosis shares."""
+
+    record: Record
+    system: ShearBuilding  # the nominal (linear) building
+    settings: DiagnosisSettings
+    refine_settings: Any
+    fit: tuple[float, float]
+    held: tuple[float, float]
+    period: float = 0.0  # the weak form's window
+    corner: float = 0.0  # the drifts' high-pass (Hz)
+
+    def screen(self, current: dict, found: list[Found]) -> tuple[list[StoreyView], list[Screening]]:
+        views = storey_views(self.record, current["system"], current["values"], self.corner)
+        return views, screen_storeys(views, current["values"], found, self.period, self.fit[1], self.settings)
+
+    def extend(self, current: dict, found: list[Found], cand: Found) -> dict:
+        return try_extension(
+            self.record,
+            self.system,
+            current,
+            found,
+            cand,
+            self.fit,
+            self.held,
+            self.settings,
+            self.refine_settings,
+        )
+
+
 def diagnose_building(
     record: Record,
     system: ShearBuilding,
@@ -428,80 +459,23 @@ def diagnose_building(
     t_wall = time.perf_counter()
     fit, held = split_spans(record, float(settings.fit_share))
     log.info("building diagnosis of '%s': fit %.4g-%.4g s, held out %.4g-%.4g s", record.name, *fit, *held)
-    values, res = nominal_fit(record, system, fit, refine_settings, start)
-    nominal = {
-        "params": values,
-        "intervals": res.intervals,
-        "heldout": heldout_nrmse(record, system, values, held),
-    }
-    nominal["fit"] = heldout_nrmse(record, system, values, fit)
-    f1 = fundamental_hz(system, values)
-    period = WINDOW_SHARE / f1
-    corner = max(CORNER_SHARE * f1, 2.0 / float(record.t[-1] - record.t[0]))
-    current = {
-        "system": system,
-        "values": values,
-        "heldout": nominal["heldout"],
-        "result": res,
-        "noise": res.noise_std,
-    }
+    study = Study(record, system, settings, refine_settings, fit, held)
+    nominal, current = nominal_state(study, start)
     found: list[Found] = []
     steps: list[dict] = []
     refused = None
-    while len(found) < int(settings.max_effects):
-        views = storey_views(record, current["system"], current["values"], corner)
-        screenings = screen_storeys(views, current["values"], found, period, fit[1], settings)
-        pick = best_row(screenings)
-        if not settings.extend:
+    while len(found) < int(settings.max_effects) and settings.extend:
+        views, screenings = study.screen(current, found)
+        step = next_step(study, current, found, views, screenings)
+        if step is None:
             break
-        if pick is None:  # the weak form names nothing: the effects it leans to are fitted by output error
-            step = confirm_leaning(
-                record,
-                system,
-                current,
-                found,
-                views,
-                screenings,
-                fit,
-                held,
-                period,
-                settings,
-                refine_settings,
-            )
-            if step is None:
-                break
-            steps.append(step["report"])
-            found.append(step["found"])
-            current = step["current"]
-            continue
-        storey, row = pick
-        sig, _ = storey_signals(views[storey - 1], current["values"][f"k{storey}"], period, fit[1])
-        step = None
-        for rival in close_rivals(screenings[storey - 1], row, settings):
-            cand = Found(rival["effect"], storey, dict(rival["parameters"]), rival, sig.context())
-            trial = try_extension(record, system, current, found, cand, fit, held, settings, refine_settings)
-            if step is not None:
-                log.info(
-                    "storey %d: %s (fitting-part BIC %.1f) against %s (%.1f)",
-                    storey,
-                    cand.effect,
-                    trial["report"]["fit_bic"],
-                    step["report"]["effect"],
-                    step["report"]["fit_bic"],
-                )
-                keys = ("effect", "fit_bic", "n_params", "heldout_after")
-                trial["report"]["rival"] = {k: step["report"][k] for k in keys}
-                step["report"]["rival"] = {k: trial["report"][k] for k in keys}
-            if step is None or better(trial["report"], step["report"], settings):
-                step = trial
         steps.append(step["report"])
         if not step["accepted"]:
             refused = step["report"]
             break
         found.append(step["found"])
         current = step["current"]
-    views = storey_views(record, current["system"], current["values"], corner)
-    screenings = screen_storeys(views, current["values"], found, period, fit[1], settings)
+    views, screenings = study.screen(current, found)
     verdict, unexplained = "none", None
     if found:
         verdict = "discrepancy"
@@ -510,22 +484,6 @@ def diagnose_building(
         # and no library effect earned its place: a refused name is no evidence of nothing missing
         verdict = "unexplained"
         unexplained = structured_storey(screenings, settings)
-    notes = []
-    if refused is not None:
-        notes.append(
-            f"{refused['effect']} in storey {refused['storey']} passed the screening (score {refused['score']:.1f}) "
-            f"but did not predict the held-out floor accelerations better ({refused['heldout_before']:.4g} -> "
-            f"{refused['heldout_after']:.4g}): not named"
-        )
-    gain = {
-        "metric": "heldout_nrmse_a",
-        "nominal": nominal["heldout"]["mean"],
-        "extended": current["heldout"]["mean"] if found else None,
-        "per_floor": {
-            "nominal": nominal["heldout"]["per_floor"],
-            "extended": current["heldout"]["per_floor"] if found else None,
-        },
-    }
     extended = None
     if found:
         extended = {
@@ -539,15 +497,106 @@ def diagnose_building(
         nominal,
         extended,
         steps,
-        gain,
+        building_gain(nominal, current, bool(found)),
         unexplained,
         views,
         screenings,
         current["values"],
-        corner,
+        study.corner,
         time.perf_counter() - t_wall,
-        notes,
+        refusal_notes(refused),
     )
+
+
+def nominal_state(study: Study, start: dict | None) -> tuple[dict, dict]:
+    """The nominal model (refined, its held-out and fitting-part errors) and the time scales it
+    sets (``study.period``, ``study.corner``); the loop's first current model."""
+    record, system = study.record, study.system
+    values, res = nominal_fit(record, system, study.fit, study.refine_settings, start)
+    nominal = {
+        "params": values,
+        "intervals": res.intervals,
+        "heldout": heldout_nrmse(record, system, values, study.held),
+        "fit": heldout_nrmse(record, system, values, study.fit),
+    }
+    f1 = fundamental_hz(system, values)
+    study.period = WINDOW_SHARE / f1
+    study.corner = max(CORNER_SHARE * f1, 2.0 / float(record.t[-1] - record.t[0]))
+    current = {
+        "system": system,
+        "values": values,
+        "heldout": nominal["heldout"],
+        "result": res,
+        "noise": res.noise_std,
+    }
+    return nominal, current
+
+
+def next_step(
+    study: Study, current: dict, found: list[Found], views: list[StoreyView], screenings: list[Screening]
+) -> dict | None:
+    """The next extension: the strongest named cause (and its close rivals, the fitting part's
+    output error choosing), or, where the weak form names nothing, a leaning effect the output
+    error confirms; None when there is none."""
+    pick = best_row(screenings)
+    if pick is None:  # the weak form names nothing: the effects it leans to are fitted by output error
+        return confirm_leaning(
+            study.record,
+            study.system,
+            current,
+            found,
+            views,
+            screenings,
+            study.fit,
+            study.held,
+            study.period,
+            study.settings,
+            study.refine_settings,
+        )
+    storey, row = pick
+    sig, _ = storey_signals(views[storey - 1], current["values"][f"k{storey}"], study.period, study.fit[1])
+    step = None
+    for rival in close_rivals(screenings[storey - 1], row, study.settings):
+        cand = Found(rival["effect"], storey, dict(rival["parameters"]), rival, sig.context())
+        trial = study.extend(current, found, cand)
+        if step is not None:
+            log.info(
+                "storey %d: %s (fitting-part BIC %.1f) against %s (%.1f)",
+                storey,
+                cand.effect,
+                trial["report"]["fit_bic"],
+                step["report"]["effect"],
+                step["report"]["fit_bic"],
+            )
+            keys = ("effect", "fit_bic", "n_params", "heldout_after")
+            trial["report"]["rival"] = {k: step["report"][k] for k in keys}
+            step["report"]["rival"] = {k: trial["report"][k] for k in keys}
+        if step is None or better(trial["report"], step["report"], study.settings):
+            step = trial
+    return step
+
+
+def building_gain(nominal: dict, current: dict, extended: bool) -> dict:
+    """``gain`` of ``diagnosis.json``: the held-out NRMSE of the floor accelerations."""
+    return {
+        "metric": "heldout_nrmse_a",
+        "nominal": nominal["heldout"]["mean"],
+        "extended": current["heldout"]["mean"] if extended else None,
+        "per_floor": {
+            "nominal": nominal["heldout"]["per_floor"],
+            "extended": current["heldout"]["per_floor"] if extended else None,
+        },
+    }
+
+
+def refusal_notes(refused: dict | None) -> list[str]:
+    if refused is None:
+        return []
+    return [
+        f"{refused['effect']} in storey {refused['storey']} passed the screening (score {refused['score']:.1f}) "
+        f"but did not predict the held-out floor accelerations better ({refused['heldout_before']:.4g} -> "
+        f"{refused['heldout_after']:.4g}): not named"
+    ]
 
 
 def try_extension(
