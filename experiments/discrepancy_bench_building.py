@@ -174,14 +174,23 @@ def run_case(i: int, out: Path) -> dict:
     return row
 
 
-def write_results(rows: list[dict], results: Path, name: str) -> None:
+def code_commit() -> str:
+    out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
+    return out.stdout.strip() or "unknown"
+
+
+def write_results(rows: list[dict], results: Path, name: str, planned: int | None = None) -> None:
     df = pd.DataFrame(rows).sort_values("case")
     df.to_csv(results / f"{name}.csv", index=False)
     lines = [
         "# The building diagnosis over seeded hidden cases",
         "",
         "`python experiments/discrepancy_bench_building.py` (`make discrepancy-bench-building`); "
-        "every case diagnosed by `diagnose.py system=shear_building ... data=csv`, two at a time on 2 cores.",
+        "every case diagnosed by `diagnose.py system=shear_building ... data=csv`, two at a time on 2 cores "
+        f"(other work beside them for part of the time); code {code_commit()}; "
+        f"{len(df)} cases finished"
+        + (f" of {planned} planned (the run resumes where it stopped)" if planned else "")
+        + ".",
         "",
         "| kind | cases | top-1 (effect and storey) | storey errors | false discoveries | median s | max s |",
         "|---|---|---|---|---|---|---|",
@@ -225,8 +234,13 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=ROOT / "outputs" / "discrepancy_bench_building")
     ap.add_argument("--results", type=Path, default=ROOT / "experiments" / "results")
     ap.add_argument("--name", default="discrepancy_bench_building")
+    ap.add_argument("--aggregate", action="store_true", help="only rewrite the table from the finished cases")
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
+    if a.aggregate:
+        rows = [json.loads(f.read_text()) for f in sorted(a.out.glob("case_*/row.json"))]
+        write_results(rows, a.results, a.name, a.cases)
+        return
     rows: list[dict] = []
     with ThreadPoolExecutor(a.jobs) as pool:
         futures = {pool.submit(run_case, i, a.out): i for i in range(a.first, a.cases)}
@@ -238,7 +252,7 @@ def main() -> None:
                 f"{'hit' if row['hit'] else 'MISS'} {row['seconds']:.0f} s ({len(rows)}/{len(futures)})",
                 flush=True,
             )
-            write_results(rows, a.results, a.name)
+            write_results(rows, a.results, a.name, a.cases)
 
 
 if __name__ == "__main__":
