@@ -463,6 +463,7 @@ def test_diagnosis_of_signed_effects_and_changes_in_time(case, tmp_path):
         assert d["cause"] == "stiffness_loss"
         lo, hi = d["parameters"]["t_change_ci95"]
         assert lo <= truth["t_d"] <= hi
+        assert d["t_change"] == d["parameters"]["t_change"] and d["storeys"] == [None]  # a single storey
         assert d["parameters"]["drop"] == pytest.approx(truth["drop"], rel=0.25)
         assert (
             d["split"]["heldout"][0] > truth["t_d"]

@@ -73,6 +73,8 @@ def summarize(case: Case, o: Outcome) -> dict[str, Any]:
         "verdict": verdict,
         "cause": causes[0] if causes else (None if o.cause == LEARNED else o.cause),
         "causes": causes,
+        "storeys": [None] * len(causes),  # a building's diagnosis names each cause's storey here
+        "t_change": effect_params.get("t_change"),
         "steps": ext["steps"],
         "learned_force": learned,
         "structure": {k: v for k, v in sc.structure.items()},
