@@ -366,6 +366,23 @@ def align_floors(
     return grid[i0:i1] - grid[i0], data[i0:i1], report
 
 
+def checked_run(
+    path: str | Path, run: str, n_storeys: int | None, align: str, fit_share: float | None
+) -> list[tuple[str, Path]]:
+    """The run's files, one per floor, after the settings and the storey count are checked."""
+    if align not in ("clock", "lag"):
+        raise ImuFormatError(f"data.align must be 'clock' or 'lag', got '{align}'")
+    if fit_share is not None and not 0.1 <= fit_share <= 0.95:
+        raise ImuFormatError(f"data.fit_share must lie in [0.1, 0.95], got {fit_share}")
+    files = run_files(path, run)
+    if n_storeys is not None and int(n_storeys) != len(files) - 1:
+        raise ImuFormatError(
+            f"{path}: {len(files) - 1} floor(s) above the table, the model has {n_storeys} storey(s): set "
+            f"system.n_storeys={len(files) - 1}"
+        )
+    return files
+
+
 def xsens_record(
     path: str | Path,
     run: str,
@@ -387,17 +404,9 @@ def xsens_record(
     without a shared clock are placed by StartTime and moved by their lag whatever ``align`` says.
     ``dt``: resample (s). ``span``/``pre``/``post``: the shaking, as for strong-motion records.
     ``fit_share``: the first share of the span is for fitting, the rest held out (``meta['split']``)."""
-    if align not in ("clock", "lag"):
-        raise ImuFormatError(f"data.align must be 'clock' or 'lag', got '{align}'")
-    if fit_share is not None and not 0.1 <= fit_share <= 0.95:
-        raise ImuFormatError(f"data.fit_share must lie in [0.1, 0.95], got {fit_share}")
-    files = run_files(path, run)
-    want = n_storeys if n_storeys is not None else (None if system is None else system.n_dof)
-    if want is not None and int(want) != len(files) - 1:
-        raise ImuFormatError(
-            f"{path}: {len(files) - 1} floor(s) above the table, the model has {want} storey(s): set "
-            f"system.n_storeys={len(files) - 1}"
-        )
+    files = checked_run(
+        path, run, n_storeys if n_storeys is not None else getattr(system, "n_dof", None), align, fit_share
+    )
     imus = [read_xsens(f) for _, f in files]
     axes = [shaking_axis(m.acc) for m in imus]
     t, data, report = align_floors(imus, axes, align, max_lag_s, tuple(lag_band_hz))
