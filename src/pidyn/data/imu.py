@@ -383,6 +383,22 @@ def checked_run(
     return files
 
 
+def _meta(path, run: str, files, imus, report, align: str, notes: list[str], pre_rms) -> dict:
+    """What a run's record says of where it came from and how its sensors were placed."""
+    return {
+        "path": str(path),
+        "run": run,
+        "floors": [f.parent.name for _, f in files],
+        "files": [f.name for _, f in files],
+        "alignment": report.__dict__,
+        "align": align,
+        "units": {"a": "m/s^2", "ag": "m/s^2"},
+        "pre_event_rms": pre_rms,
+        "notes": notes,
+        "devices": [m.device for m in imus],
+    }
+
+
 def xsens_record(
     path: str | Path,
     run: str,
@@ -423,19 +439,10 @@ def xsens_record(
     t = np.arange(len(data)) * step
     ag = data[:, 0]
     meta = {
-        "path": str(path),
-        "run": run,
-        "floors": [f.parent.name for _, f in files],
-        "files": [f.name for _, f in files],
-        "alignment": report.__dict__,
-        "align": align,
+        **_meta(path, run, files, imus, report, align, notes, pre_rms),
         "dt": step,
-        "units": {"a": "m/s^2", "ag": "m/s^2"},
         "span": [i0 * step, (i1 - 1) * step],
-        "pre_event_rms": pre_rms,
-        "notes": notes,
         "pga": float(np.max(np.abs(ag))),
-        "devices": [m.device for m in imus],
     }
     if fit_share is not None:
         cut = float(t[-1]) * fit_share
