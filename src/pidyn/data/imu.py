@@ -71,6 +71,31 @@ class ImuFile:
     gaps_filled: int = 0
 
 
+def uniform_samples(
+    path: Path, clock: np.ndarray, acc: np.ndarray, first: int
+) -> tuple[np.ndarray, np.ndarray, float, int]:
+    """Times (s from the first sample), accelerations on the 120 Hz grid, the first clock reading
+    (us) and the dropped packets filled; a clock that stalls or runs at another rate is refused."""
+    clock = np.unwrap(clock, period=2.0**32)  # SampleTimeFine wraps at 2^32 us
+    step = np.diff(clock)
+    if np.any(step <= 0):
+        raise ImuFormatError(
+            f"{path}: SampleTimeFine does not increase at data row {int(np.flatnonzero(step <= 0)[0]) + first + 2}"
+        )
+    nominal = float(np.median(step))
+    if abs(nominal - NOMINAL_STEP_US) > 0.02 * NOMINAL_STEP_US:
+        raise ImuFormatError(
+            f"{path}: a step of {nominal:.0f} us; an Xsens DOT records at 120 Hz ({NOMINAL_STEP_US:.0f} us)"
+        )
+    gaps = int(np.sum(np.round(step / nominal) - 1))
+    t = (clock - clock[0]) * 1e-6
+    if gaps:  # dropped packets: onto the uniform grid
+        grid = np.arange(0.0, t[-1] + 0.5 * nominal * 1e-6, nominal * 1e-6)
+        acc = np.stack([np.interp(grid, t, acc[:, j]) for j in range(3)], axis=1)
+        t = grid
+    return t, acc, float(clock[0]), max(gaps, 0)
+
+
 def read_xsens(path: str | Path) -> ImuFile:
     """An Xsens DOT CSV export (``.csv`` or ``.csv.gz``)."""
     path = Path(path)
@@ -111,31 +136,15 @@ def read_xsens(path: str | Path) -> ImuFile:
             f"{path}: {int(bad.sum())} row(s) with missing or non-numeric accelerations or times, first at "
             f"data row {int(np.flatnonzero(bad)[0]) + first + 1}"
         )
-    clock = np.unwrap(clock, period=2.0**32)  # SampleTimeFine wraps at 2^32 us
-    step = np.diff(clock)
-    if np.any(step <= 0):
-        raise ImuFormatError(
-            f"{path}: SampleTimeFine does not increase at data row {int(np.flatnonzero(step <= 0)[0]) + first + 2}"
-        )
-    nominal = float(np.median(step))
-    if abs(nominal - NOMINAL_STEP_US) > 0.02 * NOMINAL_STEP_US:
-        raise ImuFormatError(
-            f"{path}: a step of {nominal:.0f} us; an Xsens DOT records at 120 Hz ({NOMINAL_STEP_US:.0f} us)"
-        )
-    gaps = int(np.sum(np.round(step / nominal) - 1))
-    t = (clock - clock[0]) * 1e-6
-    if gaps:  # dropped packets: onto the uniform grid
-        grid = np.arange(0.0, t[-1] + 0.5 * nominal * 1e-6, nominal * 1e-6)
-        acc = np.stack([np.interp(grid, t, acc[:, j]) for j in range(3)], axis=1)
-        t = grid
+    t, acc, clock0, gaps = uniform_samples(path, clock, acc, first)
     return ImuFile(
         path=path,
         device=meta.get("DeviceTag", ""),
         start_time=meta.get("StartTime", ""),
         t=t,
-        clock0_us=float(clock[0]),
+        clock0_us=clock0,
         acc=acc,
-        gaps_filled=max(gaps, 0),
+        gaps_filled=gaps,
     )
 
 
