@@ -479,11 +479,11 @@ def diagnose_building(
     verdict, unexplained = "none", None
     if found:
         verdict = "discrepancy"
-    elif structured_storey(screenings, settings) is not None:
+    elif (structured := structured_storey(screenings, settings)) is not None:
         # a storey's force is clearly structured (a generic f(d, d') explains it in cross-validation)
         # and no library effect earned its place: a refused name is no evidence of nothing missing
         verdict = "unexplained"
-        unexplained = structured_storey(screenings, settings)
+        unexplained = structured
     extended = None
     if found:
         extended = {
