@@ -34,7 +34,8 @@ def main() -> None:
     )
     a = ap.parse_args()
     current = OmegaConf.load(ROOT / "src" / "pidyn" / "conf" / "baselines" / "default.yaml")
-    from pidyn.tasks.train import build_record, run_baselines
+    from pidyn.runs.build import build_record
+    from pidyn.runs.methods import run_baselines
 
     done = 0
     for job in sorted(p for p in a.sweep.iterdir() if (p / "metrics.json").exists()):

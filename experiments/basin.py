@@ -96,7 +96,8 @@ def run_one(cell: dict, method: str, start: dict[str, float], out: Path) -> dict
 
     from pidyn.baselines import output_error, unscented_kalman_filter
     from pidyn.refine import RefineSettings, refine
-    from pidyn.tasks.train import build_record, train
+    from pidyn.runs.build import build_record
+    from pidyn.tasks.train import train
 
     base = [
         f"system={cell['system']}",

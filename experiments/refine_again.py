@@ -47,15 +47,11 @@ def _settings(saved: dict | str | None, overrides: list[str]) -> dict:
 def refine_job(job: Path, overrides: list[str]) -> dict:
     from pidyn.models.identify import WindowResult
     from pidyn.reporting import write_json, write_yaml
-    from pidyn.tasks.train import (
-        build_record,
-        channel_nrmse,
-        identified_params,
-        refined_metrics,
-        relative_errors,
-        run_refinement,
-        simulate_response,
-    )
+    from pidyn.runs.build import build_record
+    from pidyn.runs.methods import run_refinement
+    from pidyn.runs.metrics import channel_nrmse, relative_errors
+    from pidyn.runs.report import identified_params, refined_metrics
+    from pidyn.simulate import simulate_response
 
     cfg = OmegaConf.load(job / ".hydra" / "config.yaml")
     with open_dict(cfg):

@@ -68,7 +68,7 @@ def make_case(record: str, system: str, noise: float, seed: int, folder: Path) -
     from pidyn.baselines import cramer_rao
     from pidyn.data.sources import synthetic_from_motion
     from pidyn.excitation.ground_motion import prepare
-    from pidyn.tasks.generalize import strong_motion_start
+    from pidyn.runs.generalization import strong_motion_start
 
     spec = SYSTEMS[system]
     sysobj = hydra.utils.instantiate(OmegaConf.create({"_target_": spec["target"], **spec["truth"]}))

@@ -14,7 +14,7 @@ import pytest
 import torch
 from conftest import make_cfg
 
-from pidyn.tasks.train import build_run
+from pidyn.runs.build import build_run
 
 
 @pytest.fixture(scope="module", params=["duffing", "bouc_wen", "shear_building"])

@@ -157,7 +157,7 @@ def test_a_window_left_unsolved_is_solved_again_as_two_halves():
 
 
 def test_unseen_records_start_before_their_strong_motion_and_match_the_pga():
-    from pidyn.tasks.generalize import unseen_cases
+    from pidyn.runs.generalization import unseen_cases
 
     cfg = make_cfg([], config_name="generalize")
     cases = unseen_cases(cfg, "kobe", 8.0)
@@ -182,7 +182,7 @@ def test_prediction_settings_have_one_source_of_truth():
     misspelled option names the valid ones before any identification runs."""
     from dataclasses import fields
 
-    from pidyn.tasks.generalize import prediction_settings
+    from pidyn.runs.generalization import prediction_settings
 
     cfg = make_cfg([], config_name="generalize")
     from_yaml = prediction_settings(cfg.generalization)

@@ -42,8 +42,8 @@ def test_undetermined_k3_is_not_locked_by_the_first_window(tmp_path):
 
     from pidyn.data.sources import synthetic_from_motion
     from pidyn.excitation.ground_motion import prepare
+    from pidyn.runs.generalization import strong_motion_start
     from pidyn.systems import Duffing
-    from pidyn.tasks.generalize import strong_motion_start
 
     start = strong_motion_start("kobe", 2.0)
     raw = prepare("kobe", start=start, duration=12.0, dt=0.01)

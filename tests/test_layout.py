@@ -76,3 +76,30 @@ def test_the_weak_form_and_signals_need_neither_torch_nor_the_diagnosis():
             if not isinstance(n, ast.ImportFrom) or n.module
         }
         assert imported <= {"__future__", "dataclasses", "numpy", "scipy", "typing", "math"}, (name, imported)
+
+
+def test_the_parts_of_the_package_form_no_cycle_of_any_length():
+    """A topological order exists: signals and systems below, tasks at the top."""
+    graph = {a: set(b) for a, b in package_graph().items()}
+    done: set[str] = set()
+    path: list[str] = []
+
+    def visit(node: str) -> None:
+        if node in done:
+            return
+        assert node not in path, " -> ".join(path[path.index(node) :] + [node])
+        path.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            visit(nxt)
+        path.pop()
+        done.add(node)
+
+    for node in sorted(graph):
+        visit(node)
+
+
+def test_the_tasks_only_wire():
+    """Every module in ``pidyn.tasks`` composes, runs and writes in at most 150 lines; the domain
+    logic lives in the package."""
+    long = {f.name: n for f in (SRC / "tasks").glob("*.py") if (n := len(f.read_text().splitlines())) > 150}
+    assert not long, long

@@ -256,7 +256,7 @@ def test_a_start_where_single_shooting_fails_and_multiple_shooting_succeeds(tmp_
     from conftest import make_cfg
 
     from pidyn.baselines import output_error
-    from pidyn.tasks.train import build_record
+    from pidyn.runs.build import build_record
 
     start = {"c": 0.17283039480124285, "k1": 23.1578766613333, "k3": 297.2009298706063}
     cfg = make_cfg([f"system.params.{k}.init={v!r}" for k, v in start.items()] + ["logger=none"], tmp_path)

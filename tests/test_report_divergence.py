@@ -8,8 +8,8 @@ import numpy as np
 
 from pidyn.data.sources import synthetic
 from pidyn.reporting import plot_convergence, plot_response, plottable
+from pidyn.runs.building_report import write_building_report
 from pidyn.systems import ShearBuilding
-from pidyn.tasks.building_report import write_building_report
 
 
 def test_plottable_blanks_what_a_plot_cannot_scale():

@@ -135,7 +135,7 @@ def test_settings_dataclasses_mirror_their_config(cls, config, key, task_keys):
 
 
 def test_task_read_settings_default_to_the_config():
-    from pidyn.tasks.train import DEFAULT_STARTS
+    from pidyn.runs.methods import DEFAULT_STARTS
 
     refine = OmegaConf.select(compose("train"), "model.refine")
     assert list(DEFAULT_STARTS) == list(refine.starts)

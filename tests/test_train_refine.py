@@ -82,8 +82,8 @@ def test_compare_states_refines_from_the_start_the_stage_chose(tmp_path, monkeyp
     from types import SimpleNamespace
 
     import pidyn.refine
-    import pidyn.tasks.train
-    from pidyn.tasks.train import run_refinement
+    import pidyn.runs.methods
+    from pidyn.runs.methods import run_refinement
 
     calls = []
 
@@ -100,7 +100,7 @@ def test_compare_states_refines_from_the_start_the_stage_chose(tmp_path, monkeyp
 
     monkeypatch.setattr(pidyn.refine, "refine", fake_refine)
     # the fake refinement has no model to simulate: the divergence check is another test's
-    monkeypatch.setattr(pidyn.tasks.train, "check_refined", lambda *a, **k: None)
+    monkeypatch.setattr(pidyn.runs.methods, "check_refined", lambda *a, **k: None)
     cfg = make_cfg(
         SMOKE + ["model.refine.starts=[output_error]", "model.refine.compare_states=[integrated]"], tmp_path
     )

@@ -108,7 +108,8 @@ def test_resume_of_a_latent_system_carries_z_across(tmp_path):
 def test_baselines_take_the_noise_a_data_source_drew(tmp_path):
     """``noise=null`` lets the data source draw the level (the diagnosis benchmark does): the
     baselines and the bound read it from the record, not from the config."""
-    from pidyn.tasks.train import record_noise, start_baselines
+    from pidyn.runs.methods import start_baselines
+    from pidyn.runs.metrics import record_noise
 
     cfg = make_cfg(
         [
@@ -122,7 +123,7 @@ def test_baselines_take_the_noise_a_data_source_drew(tmp_path):
     )
     import hydra
 
-    from pidyn.tasks.train import build_record
+    from pidyn.runs.build import build_record
 
     system = hydra.utils.instantiate(cfg.system)
     record = build_record(cfg, system)

@@ -23,7 +23,8 @@ from pidyn.discrepancy.accelerometers import motion_view, needs_view
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.summary import summarize, write_figures
 from pidyn.reporting import write_json
-from pidyn.tasks.train import build_record, identify
+from pidyn.runs.build import build_record
+from pidyn.tasks.train import identify
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +65,7 @@ def diagnose_building_task(cfg: DictConfig, record: Record | None = None) -> dic
 
     from pidyn.discrepancy.storey_report import report_lines, summarize_building, write_building_figures
     from pidyn.discrepancy.storeys import diagnose_building, split_spans
-    from pidyn.tasks.train import refine_plan
+    from pidyn.runs.methods import refine_plan
 
     settings = DiagnosisSettings.from_mapping(OmegaConf.to_container(cfg.diagnosis, resolve=True))  # type: ignore[arg-type]
     system = hydra.utils.instantiate(cfg.system)

@@ -1,0 +1,288 @@
+"""What a run writes to its folder after identification: identified_params.yaml, metrics.json,
+refinement.json, windows.json, modal.json, the figures, TensorBoard and the log's summary."""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from omegaconf import DictConfig
+
+from pidyn.reporting import diverged, param_table, plot_convergence, plot_response, write_json, write_yaml
+from pidyn.runs.build import Run
+from pidyn.runs.metrics import channel_nrmse, record_noise, relative_errors, sim_nrmse_x
+from pidyn.simulate import simulate_response
+from pidyn.systems.base import StructuralSystem
+
+log = logging.getLogger(__name__)
+
+
+def write_report(
+    cfg: DictConfig,
+    run: Run,
+    results: list,
+    pidyn_values: dict[str, float],
+    baselines: list[dict],
+    refined: Any,
+    t_wall: float,
+) -> dict[str, Any]:
+    """identified_params.yaml, metrics.json, refinement.json, windows.json, figures, TensorBoard, log."""
+    system, record, run_dir = run.system, run.record, run.run_dir
+    params = run.module.net.params
+    names = params.trainable_names
+    truths = {n: (record.truth or {}).get(n) for n in names}
+    values = dict(refined.params) if refined is not None else dict(pidyn_values)
+    final = {**params.as_floats(), **values}
+    notes = [n for r in results for n in (r.notes or [])] + ([] if refined is None else refined.notes)
+    units = {n: params.spec(n).unit for n in names}
+    # the identified model simulated over the whole record (the physics-only check)
+    sim = simulate_response(
+        system, final, record, state0=None if refined is None else np.array(refined.initial_state)
+    )
+    notes += _divergence_note(sim)
+    write_yaml(
+        run_dir / "identified_params.yaml",
+        identified_params(system, final, values, truths, units, refined, notes),
+    )
+    errors, pidyn_errors = relative_errors(values, truths), relative_errors(pidyn_values, truths)
+    metrics = _metrics(
+        cfg,
+        run,
+        values,
+        truths,
+        errors,
+        pidyn_values,
+        pidyn_errors,
+        sim,
+        notes,
+        len(results),
+        refined is not None,
+    )
+    if refined is not None:
+        metrics.update(refined_metrics(refined, names, truths))
+        write_json(run_dir / "refinement.json", refined.to_dict())
+        torch.save(
+            {"names": names, "values": values, "ci95": metrics["ci95"]},
+            run_dir / "checkpoints" / "refined.pt",
+        )
+    if baselines:
+        metrics["baselines"] = {
+            b["method"]: {"error_pct": b.get("error_pct"), "seconds": b["seconds"]} for b in baselines
+        }
+    metrics["wall_seconds"] = time.perf_counter() - t_wall
+    write_json(run_dir / "metrics.json", metrics)
+    write_json(run_dir / "windows.json", {"windows": [r.__dict__ for r in results]})
+    _assess(run, final, refined, sim, metrics)
+    if hasattr(system, "storey_equations"):
+        _building(run, final, truths, refined, metrics)
+    _figures(run, results, truths, baselines, refined, sim, metrics)
+    _log_summary(system.describe(final), errors, pidyn_errors, metrics, run_dir)
+    return metrics
+
+
+def _metrics(
+    cfg: DictConfig,
+    run: Run,
+    values: dict[str, float],
+    truths: dict[str, float | None],
+    errors: dict[str, float],
+    pidyn_values: dict[str, float],
+    pidyn_errors: dict[str, float],
+    sim: dict[str, np.ndarray],
+    notes: list[str],
+    n_windows: int,
+    refined: bool,
+) -> dict[str, Any]:
+    """metrics.json's fields before the refinement and the baselines add theirs."""
+    return {
+        "system": run.system.name,
+        "record": run.record.name,
+        "noise": record_noise(cfg, run.record),
+        "seed": int(cfg.seed),
+        "data_seed": int(cfg.data_seed),
+        "batch_size": int(cfg.batch_size),
+        "eq_scale": float(cfg.eq_scale),
+        "eq_stretch": float(cfg.eq_stretch),
+        "refine": "multiple_shooting" if refined else "none",
+        "params": values,
+        "truth": truths,
+        "error_pct": errors,
+        "max_error_pct": max(errors.values()) if errors else None,
+        "mean_error_pct": float(np.mean(list(errors.values()))) if errors else None,
+        "pidynnet": {
+            "params": pidyn_values,
+            "error_pct": pidyn_errors,
+            "max_error_pct": max(pidyn_errors.values()) if pidyn_errors else None,
+        },
+        "sim_nrmse_x": sim_nrmse_x(sim, run.record),
+        "sim_nrmse": channel_nrmse(sim, run.record),
+        "notes": notes,
+        "windows": n_windows,
+        "iterations": int(run.module.iteration),
+    }
+
+
+def _building(run: Run, final: dict[str, float], truths: dict, refined: Any, metrics: dict) -> None:
+    """A building's modal table, storey equations and loops (``building_report``); its modes go to
+    metrics.json."""
+    from pidyn.runs.building_report import write_building_report
+
+    modes = write_building_report(
+        run.system,
+        run.record,
+        final,
+        {**final, **truths} if any(truths.values()) else None,
+        None if refined is None else np.array(refined.initial_state),
+        run.run_dir,
+        run.logger,
+        int(run.module.iteration),
+    )
+    metrics["modes"] = {k: v for k, v in modes.items() if k != "truth"}
+    write_json(run.run_dir / "metrics.json", metrics)
+
+
+def _assess(
+    run: Run, final: dict[str, float], refined: Any, sim: dict[str, np.ndarray], metrics: dict
+) -> None:
+    """modal.json and, on a record with a held-out part, how the model predicts it (``pidyn.assessment``)."""
+    from pidyn.assessment import assess
+
+    metrics.update(assess(run.system, run.record, final, refined, sim, run.hold_out, run.run_dir))
+    write_json(run.run_dir / "metrics.json", metrics)
+
+
+def _divergence_note(sim: dict[str, np.ndarray]) -> list[str]:
+    """Says so when the identified model's simulation over the record blows up."""
+    if not any(diverged(v) for v in sim.values()):
+        return []
+    note = (
+        "the identified model diverges when simulated over the record (its response blows up): the estimate "
+        "is not a usable model; start from a better guess (system.guess) or a classical estimate "
+        "(model.refine.starts)"
+    )
+    log.warning(note)
+    return [note]
+
+
+def identified_params(
+    system: StructuralSystem,
+    final: dict[str, float],
+    values: dict[str, float],
+    truths: dict[str, float | None],
+    units: dict[str, str],
+    refined: Any,
+    notes: list[str],
+) -> dict:
+    """The content of ``identified_params.yaml``: the equation, every estimated parameter with
+    its interval (and its error when the truth is known), the notes, the correlations."""
+    table = param_table(values, truths, units, None if refined is None else refined.intervals)
+    out = {"system": system.name, "equation": system.describe(final), "params": table, "notes": notes}
+    if hasattr(system, "storey_equations"):
+        out["storey_equations"] = system.storey_equations(final)
+    if not getattr(system, "mass_known", True):  # the records give the model up to one scale
+        try:
+            system.absolute_values(final)
+        except ValueError as exc:
+            out["absolute_values"] = str(exc)
+    if refined is not None:
+        out["correlation"] = {"names": refined.names, "matrix": refined.correlation}
+        out["noise_std"] = refined.noise_std
+    return out
+
+
+def refined_metrics(refined: Any, names: list[str], truths: dict[str, float | None]) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "ci95": {n: refined.intervals[n]["ci95"] for n in names},
+        "std": {n: refined.intervals[n]["std"] for n in names},
+    }
+    if truths and all(truths.values()):
+        out["covered"] = {n: bool(out["ci95"][n][0] <= truths[n] <= out["ci95"][n][1]) for n in names}
+    out["refinement"] = {
+        k: v
+        for k, v in refined.to_dict().items()
+        if k not in ("params", "intervals", "correlation", "history")
+    }
+    if getattr(refined, "compared", None):
+        out["refine_compare"] = refined.compared
+    return out
+
+
+def _figures(
+    run: Run,
+    results: list,
+    truths: dict,
+    baselines: list[dict],
+    refined: Any,
+    sim: dict[str, np.ndarray],
+    metrics: dict,
+) -> None:
+    system, record = run.system, run.record
+    fig_dir = run.run_dir / "figures"
+    fig_dir.mkdir(exist_ok=True)
+    ukf = next((b for b in baselines if b["method"] == "ukf" and b.get("trajectory")), None)
+    plot_convergence(
+        fig_dir / "param_convergence.png",
+        run.ident.trajectory,
+        truths,
+        [r.__dict__ for r in results],
+        title=f"{system.name} under {record.name}",
+        other=None if ukf is None else ("UKF", ukf["trajectory"]),
+        final=None if refined is None else refined.intervals,
+    )
+    kind, meas = record.reference()
+    floor = max(record.sensors()[kind])  # the highest measured floor moves the most
+    label = f"{kind}{floor}" if system.n_dof > 1 else kind
+    series = {
+        f"measured {label}": meas[:, floor - 1],
+        "identified model (simulated)": sim[kind][:, floor - 1],
+    }
+    plot_response(
+        fig_dir / "response.png",
+        record.t,
+        series,
+        title=f"{system.name}: NRMSE {metrics['sim_nrmse'][label]:.3g} ({label})",
+    )
+    tb_figures(run.logger, fig_dir, int(run.module.iteration), metrics, refined)
+
+
+def _log_summary(equation: str, errors: dict, pidyn_errors: dict, metrics: dict, run_dir: Path) -> None:
+    log.info("identified: %s", equation)
+    if errors:
+        log.info("errors (%%): %s", ", ".join(f"{k}={v:.3f}" for k, v in errors.items()))
+        if "ci95" in metrics:
+            log.info("PIDynNet alone (%%): %s", ", ".join(f"{k}={v:.3f}" for k, v in pidyn_errors.items()))
+    if "ci95" in metrics:
+        log.info(
+            "95 %% intervals: %s",
+            ", ".join(f"{n} [{lo:.5g}, {hi:.5g}]" for n, (lo, hi) in metrics["ci95"].items()),
+        )
+    log.info("wall %.1f s, run folder %s", metrics["wall_seconds"], run_dir)
+
+
+def tb_figures(logger: Any, fig_dir: Path, step: int, metrics: dict, refined: Any = None) -> None:
+    exp = getattr(logger, "experiment", None) if logger is not None else None
+    if exp is None or not hasattr(exp, "add_image"):
+        return
+    if refined is not None:
+        for n, row in refined.intervals.items():
+            exp.add_scalar(f"refined/{n}", row["value"], step)
+            exp.add_scalar(f"ci95_lo/{n}", row["ci95"][0], step)
+            exp.add_scalar(f"ci95_hi/{n}", row["ci95"][1], step)
+        for c, sd in refined.noise_std.items():
+            exp.add_scalar(f"noise_std/{c}", sd, step)
+        if refined.notes:
+            exp.add_text("identifiability", "\n\n".join(refined.notes), step)
+    import matplotlib.image as mpimg
+
+    for png in sorted(fig_dir.glob("*.png")):
+        img = mpimg.imread(png)[..., :3]
+        exp.add_image(f"figures/{png.stem}", np.transpose(img, (2, 0, 1)), step)
+    for k, v in (metrics.get("error_pct") or {}).items():
+        exp.add_scalar(f"final/error_pct_{k}", v, step)
+    for k, v in (metrics["pidynnet"].get("error_pct") or {}).items():
+        exp.add_scalar(f"pidynnet/error_pct_{k}", v, step)
+    exp.flush()
