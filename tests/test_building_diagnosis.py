@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import make_cfg
+from helpers import make_cfg
 
 from pidyn.data.sources import synthetic
 from pidyn.systems.shear_building import ShearBuilding

@@ -1,12 +1,8 @@
-import sys
-from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).parent))
 from pathlib import Path
 
 import hydra
 import pytest
-from conftest import CONF, make_cfg
+from helpers import CONF, make_cfg
 from hydra.errors import ConfigCompositionException
 from omegaconf.errors import ConfigAttributeError
 

@@ -12,7 +12,7 @@ import copy
 
 import pytest
 import torch
-from conftest import make_cfg
+from helpers import make_cfg
 
 from pidyn.runs.build import build_run
 

@@ -8,22 +8,19 @@ simulated data and require the diagnosis to name it; with nothing hidden the ans
 from __future__ import annotations
 
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from helpers import make_cfg  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).parent))
-from conftest import make_cfg  # noqa: E402
-
-from pidyn.discrepancy.effects import EFFECTS, Signals, bouc_wen_z, get_effect  # noqa: E402
+from pidyn.discrepancy.effects import EFFECTS, Signals, get_effect  # noqa: E402
 from pidyn.discrepancy.hidden import EQUIVALENT, hidden_case  # noqa: E402
 from pidyn.discrepancy.screening import screen  # noqa: E402
 from pidyn.excitation import prepare  # noqa: E402
 from pidyn.simulate import simulate  # noqa: E402
 from pidyn.systems import BoucWen, LinearSDOF  # noqa: E402
+from pidyn.systems.terms import latent_path  # noqa: E402
 from pidyn.weak_form import WeakForm, smooth_signals, velocity_noise  # noqa: E402
 
 PERIOD = 2 * np.pi / np.sqrt(15.0)
@@ -61,7 +58,7 @@ def test_every_effect_term_matches_its_regression_columns():
         params = eff.parameters(coef, cand.fixed, {"k": 15.0, "c": 0.5})
         term = eff.term(params, s.context())
         p = {"k": 15.0, "c": 0.5, **params}
-        z = bouc_wen_z(x, p["beta"], p["gamma"], p["n"]) if term.n_latent else None
+        z = latent_path(term, t, x, None, p) if term.n_latent else None
         col = cand.columns @ np.array([coef[n] for n in cand.coef_names])
         got = term.force(t, x, v, z, p)
         if name in (
@@ -74,12 +71,18 @@ def test_every_effect_term_matches_its_regression_columns():
             np.testing.assert_allclose(got, col, rtol=1e-6, atol=1e-9, err_msg=name)
 
 
-def test_bouc_wen_latent_along_the_displacement_path_matches_the_ode():
+def test_bouc_wen_latent_for_several_shapes_at_once_matches_the_ode_of_each():
+    """The hysteresis screening integrates z for its whole grid of shapes in one pass."""
     gm = prepare("el_centro", duration=15.0, dt=0.01)
     sys_ = BoucWen()
     tr = simulate(sys_, sys_.true_values(), gm, gm.t)
-    z = bouc_wen_z(tr.x[:, 0], 1.0, 2.0, 2.0)[:, 0]
-    assert np.max(np.abs(z - tr.z[:, 0])) < 2e-3 * np.max(np.abs(tr.z))
+    term = next(t for t in sys_.terms if t.n_latent)
+    shapes = {"beta": np.array([1.0, 0.5]), "gamma": np.array([2.0, 1.0]), "n": np.array([2.0, 1.0])}
+    z = latent_path(term, gm.t, tr.x[:, 0], tr.v[:, 0], shapes)
+    assert z.shape == (len(gm.t), 2, 1)
+    assert np.max(np.abs(z[:, 0, 0] - tr.z[:, 0])) < 2e-3 * np.max(np.abs(tr.z))
+    alone = latent_path(term, gm.t, tr.x[:, 0], tr.v[:, 0], {"beta": 0.5, "gamma": 1.0, "n": 1.0})
+    np.testing.assert_allclose(z[:, 1, 0], alone[:, 0], rtol=1e-12, atol=1e-15)
 
 
 def test_weak_form_recovers_a_linear_model_from_noisy_data():
@@ -310,15 +313,13 @@ def test_the_bouc_wen_benchmark_data_match_its_equations():
 def test_the_latent_state_along_the_measured_motion_matches_the_ode():
     """An extended model with a latent term (a hysteresis found in an earlier step) is screened
     again: its z is integrated along the measured motion, as the simulation has it."""
-    from pidyn.discrepancy.screening import latent_path
-
     gm = prepare("el_centro", duration=15.0, dt=0.01)
     sys_ = BoucWen()
     p = sys_.true_values()
     tr = simulate(sys_, p, gm, gm.t)
     s = Signals(gm.t, tr.x[:, 0], tr.v[:, 0], 1.0, 12.0, "k")
     term = next(t for t in sys_.terms if t.n_latent)
-    z = latent_path(term, s, p)[:, 0]
+    z = latent_path(term, s.t, s.x, s.v, p)[:, 0]
     assert np.max(np.abs(z - tr.z[:, 0])) < 2e-3 * np.max(np.abs(tr.z))
 
 
@@ -347,12 +348,12 @@ def test_a_change_in_time_is_located_before_and_after_the_split(t_d):
     part, wrong after it); the whole-record search finds the time inside its interval and the
     size of the drop; the same search on a record with nothing hidden finds nothing."""
     from pidyn.discrepancy.changes import heldout_check, locate_change
-    from pidyn.simulate import simulate_identified
+    from pidyn.simulate import simulate_response
 
     case = hidden_case("stiffness_loss", 21, noise=0.02, params={"t_d": t_d})
     r = case.record
     s, weak, values, names, A0, y, t_first, t_last = _change_rows(case, float(r.t[-1]))
-    x_sim = simulate_identified(LinearSDOF(), values, r, x0=float(r.x[0, 0]), v0=float(r.v[0, 0]))[:, 0]
+    x_sim = simulate_response(LinearSDOF(), values, r, state0=np.array([r.x[0, 0], r.v[0, 0]]))["x"][:, 0]
     fit, held = r.t <= case.fit_end, r.t >= case.fit_end
     check = heldout_check(
         r.x[:, 0], x_sim, fit, held, noise_std=0.02 * float(np.sqrt(np.mean(r.x[:, 0] ** 2)))

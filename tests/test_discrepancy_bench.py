@@ -7,7 +7,6 @@ from pathlib import Path
 import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "experiments"))
 import discrepancy_bench as bench  # noqa: E402
 
 

@@ -1,16 +1,11 @@
 """Prediction of an unseen response by physics-only training (paper Eq. 14)."""
 
-import sys
-from pathlib import Path
-
 import lightning as L
 import numpy as np
 import pandas as pd
 import pytest
 import torch
-
-sys.path.insert(0, str(Path(__file__).parent))
-from conftest import make_cfg  # noqa: E402
+from helpers import make_cfg  # noqa: E402
 
 from pidyn.data.sources import synthetic_from_motion  # noqa: E402
 from pidyn.excitation import prepare  # noqa: E402

@@ -103,3 +103,18 @@ def test_the_tasks_only_wire():
     logic lives in the package."""
     long = {f.name: n for f in (SRC / "tasks").glob("*.py") if (n := len(f.read_text().splitlines())) > 150}
     assert not long, long
+
+
+def test_no_function_is_longer_than_60_lines():
+    """A function says one thing: the package, the experiments and the scripts, each at most 60
+    lines from its ``def`` to its last line."""
+    root = SRC.parents[1]
+    files = [*SRC.rglob("*.py"), *(root / "experiments").glob("*.py"), *root.glob("*.py")]
+    long = []
+    for f in files:
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                n = node.end_lineno - node.lineno + 1
+                if n > 60:
+                    long.append(f"{f.relative_to(root)}:{node.lineno} {node.name} ({n} lines)")
+    assert not long, long

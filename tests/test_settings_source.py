@@ -14,6 +14,7 @@ import hydra
 import pytest
 from omegaconf import OmegaConf
 
+from pidyn.baselines.registry import entries
 from pidyn.config import compose, group_options
 
 #: compositions in order of precedence: the first that sets a target's key is its reference
@@ -135,25 +136,15 @@ def test_settings_dataclasses_mirror_their_config(cls, config, key, task_keys):
 
 
 def test_task_read_settings_default_to_the_config():
-    from pidyn.runs.methods import DEFAULT_STARTS
+    from pidyn.runs.methods import default_starts
 
     refine = OmegaConf.select(compose("train"), "model.refine")
-    assert list(DEFAULT_STARTS) == list(refine.starts)
+    assert list(default_starts()) == list(refine.starts)
 
 
-@pytest.mark.parametrize("method", ["output_error", "sindy", "ukf", "transfer_function", "srim", "okid_era"])
+@pytest.mark.parametrize("method", list(entries()))
 def test_baseline_settings_agree_with_their_functions(method):
-    import pidyn.baselines as B
-    from pidyn.baselines import peers
-
-    fn = {
-        "output_error": B.output_error,
-        "sindy": B.weak_sindy,
-        "ukf": B.unscented_kalman_filter,
-        "transfer_function": peers.transfer_function_estimate,
-        "srim": peers.srim,
-        "okid_era": peers.okid_era,
-    }[method]
+    fn = entries()[method].function
     node = OmegaConf.to_container(compose("train").baselines, resolve=True).get(method) or {}
     params = inspect.signature(fn).parameters
     for k, v in node.items():

@@ -2,14 +2,10 @@
 estimate with its intervals, PIDynNet's own numbers beside it; refine=none is PIDynNet alone."""
 
 import json
-import sys
-from pathlib import Path
 
 import pytest
 import yaml
-
-sys.path.insert(0, str(Path(__file__).parent))
-from conftest import make_cfg  # noqa: E402
+from helpers import make_cfg  # noqa: E402
 
 from pidyn.tasks.train import train  # noqa: E402
 

@@ -1,14 +1,10 @@
 """End-to-end runs of the training task at toy budgets: outputs, checkpoints, resume."""
 
 import json
-import sys
-from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).parent))
 
 import torch
 import yaml
-from conftest import make_cfg
+from helpers import make_cfg
 
 from pidyn.tasks.train import train
 

@@ -26,6 +26,18 @@ def _n_dir(p: dict[str, Any], y0: Any) -> int:
     return 0
 
 
+def _checked_excitation(system: StructuralSystem, f: np.ndarray) -> tuple[np.ndarray, bool]:
+    """The excitation as an array of a shape the system takes, and whether it is per trajectory."""
+    ff = np.asarray(f, float)
+    multi = system.n_inputs > 1
+    if ff.ndim not in ((2, 3) if multi else (1, 2)) or (multi and ff.shape[-1] != system.excitation_width):
+        raise ValueError(
+            f"{system.name}: excitation of shape {ff.shape} for {system.n_inputs} input(s) "
+            f"({system.excitation_width} columns)"
+        )
+    return ff, ff.ndim == (3 if multi else 2)
+
+
 def rk4(
     system: StructuralSystem,
     p: dict[str, Any],
@@ -57,14 +69,7 @@ def rk4(
         if np.ndim(t0)
         else float(t0) + np.asarray(t, float) - float(t[0])
     )
-    ff = np.asarray(f, float)
-    multi = system.n_inputs > 1
-    if ff.ndim not in ((2, 3) if multi else (1, 2)) or (multi and ff.shape[-1] != system.excitation_width):
-        raise ValueError(
-            f"{system.name}: excitation of shape {ff.shape} for {system.n_inputs} input(s) "
-            f"({system.excitation_width} columns)"
-        )
-    per_trajectory = ff.ndim == (3 if multi else 2)
+    ff, per_trajectory = _checked_excitation(system, f)
 
     def store(i: int, yi: Any) -> None:
         if D:

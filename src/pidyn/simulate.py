@@ -1,5 +1,8 @@
-"""Ground truth by tightly integrated LSODA, the measurement model, and the simulation of an
-identified model over a record (fixed-step RK4, bounded cost)."""
+"""Ground truth by tightly integrated LSODA, the measurement model, and the one simulator of
+identified models (torch-free, any system, fixed-step RK4 of ``pidyn.integrate``: bounded cost):
+``simulate_states`` for one model's states, ``simulate_response`` for its response in a record's
+convention, ``simulate_batch`` for many parameter sets at once. Train, diagnose, the baselines,
+the reports and the API use these."""
 
 from __future__ import annotations
 
@@ -63,9 +66,24 @@ def simulate(
         f_scalar = lambda t: np.asarray(excitation(t), dtype=float)  # noqa: E731
     else:
         f_scalar = lambda t: float(excitation(t))  # noqa: E731
+    y = _integrate(
+        lambda t, y: system.rhs(t, y, params, f_scalar), y0, t_eval, rtol, atol, step, method, system.name
+    )
+    dy = np.array([system.rhs(t, yi, params, f_scalar) for t, yi in zip(t_eval, y)])
+    x, v = y[:, :n], y[:, n : 2 * n]
+    a = dy[:, n : 2 * n]
+    z = y[:, 2 * n :] if nz else None
+    return Trajectory(t=t_eval, x=x, v=v, a=a, f=np.asarray(excitation(t_eval), dtype=float), z=z)
+
+
+def _integrate(
+    fun, y0: np.ndarray, t_eval: np.ndarray, rtol: float, atol: float, step: float, method: str, name: str
+):
+    """The states at ``t_eval``: LSODA through ``odeint`` (its steps stay in Fortran), other
+    methods through ``solve_ivp``; a failed integration raises, naming the system."""
     if method == "LSODA":
         y, info = odeint(
-            lambda t, y: system.rhs(t, y, params, f_scalar),
+            fun,
             y0,
             t_eval,
             tfirst=True,
@@ -76,10 +94,10 @@ def simulate(
             full_output=True,
         )
         if info["message"] != "Integration successful.":
-            raise RuntimeError(f"simulation of {system.name} failed: {info['message']}")
+            raise RuntimeError(f"simulation of {name} failed: {info['message']}")
     else:
         sol = solve_ivp(
-            lambda t, y: system.rhs(t, y, params, f_scalar),
+            fun,
             (float(t_eval[0]), float(t_eval[-1])),
             y0,
             method=method,
@@ -89,13 +107,9 @@ def simulate(
             max_step=step,
         )
         if not sol.success:
-            raise RuntimeError(f"simulation of {system.name} failed: {sol.message}")
+            raise RuntimeError(f"simulation of {name} failed: {sol.message}")
         y = sol.y.T
-    dy = np.array([system.rhs(t, yi, params, f_scalar) for t, yi in zip(t_eval, y)])
-    x, v = y[:, :n], y[:, n : 2 * n]
-    a = dy[:, n : 2 * n]
-    z = y[:, 2 * n :] if nz else None
-    return Trajectory(t=t_eval, x=x, v=v, a=a, f=np.asarray(excitation(t_eval), dtype=float), z=z)
+    return y
 
 
 def add_noise(
@@ -120,6 +134,22 @@ def add_noise(
     return out
 
 
+def simulate_states(
+    system: StructuralSystem,
+    values: dict[str, float],
+    t: np.ndarray,
+    f: np.ndarray,
+    state0: np.ndarray | None = None,
+    substeps: int = 4,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One model's states Y (N, n_state) and their rates R (N, n_state) under the excitation ``f``
+    from ``state0`` (the full state, default rest); a model that blows up gives NaNs."""
+    y0 = np.zeros(system.n_state) if state0 is None else np.asarray(state0, float)
+    with np.errstate(all="ignore"):
+        Y, R = rk4(system, dict(values), t, f, y0[None, :], substeps=substeps)
+    return Y[:, 0], R[:, 0]
+
+
 def simulate_response(
     system: StructuralSystem,
     values: dict[str, float],
@@ -132,27 +162,35 @@ def simulate_response(
     by the fixed-step batched RK4 (bounded cost: a model that blows up gives NaNs rather
     than an adaptive integrator crawling) from ``state0`` (the full state, default rest)."""
     n = system.n_dof
-    y0 = np.zeros(system.n_state) if state0 is None else np.asarray(state0, float)
+    Y, R = simulate_states(system, values, record.t, record.f, state0, substeps)
     with np.errstate(all="ignore"):
-        Y, R = rk4(system, dict(values), record.t, record.f, y0[None, :], substeps=substeps)
-        a = system.acceleration_output(R[:, 0, n : 2 * n], np.asarray(record.f, float), dict(values))
-    return {"x": Y[:, 0, :n], "v": Y[:, 0, n : 2 * n], "a": a}
+        a = system.acceleration_output(R[:, n : 2 * n], np.asarray(record.f, float), dict(values))
+    return {"x": Y[:, :n], "v": Y[:, n : 2 * n], "a": a}
 
 
-def simulate_identified(
+def simulate_batch(
     system: StructuralSystem,
-    values: dict[str, float],
-    record: Record,
-    x0: float = 0.0,
-    v0: float = 0.0,
+    params: dict[str, np.ndarray],
+    t: np.ndarray,
+    f: np.ndarray,
     substeps: int = 4,
-    state0: np.ndarray | None = None,
-) -> np.ndarray:
-    """The identified model's displacement (N, n_dof) from ``state0``, else from (x0, v0), z = 0."""
-    n = system.n_dof
-    y0 = np.zeros(system.n_state)
+    state0: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> dict[str, np.ndarray]:
+    """Simulate P parameter sets; ``params[name]`` has shape (P,) (or scalar).
+
+    ``state0`` = (x0, v0, z0) with shapes (P,) or (P, n_dof), and (P, n_latent).
+    Returns ``x``, ``v``, ``a`` of shape (N, P) for one degree of freedom, (N, P, n_dof)
+    otherwise, and ``z`` (N, P, n_latent).
+    """
+    P = max(np.size(v) for v in params.values())
+    p = {k: np.broadcast_to(np.asarray(v, float), (P,)).copy() for k, v in params.items()}
+    n, nz = system.n_dof, system.n_latent
+    y0 = np.zeros((P, system.n_state))
     if state0 is not None:
-        y0[:] = state0
-    else:
-        y0[:n], y0[n : 2 * n] = x0, v0
-    return simulate_response(system, values, record, substeps, y0)["x"]
+        y0[:, :n] = np.asarray(state0[0], float).reshape(P, n)
+        y0[:, n : 2 * n] = np.asarray(state0[1], float).reshape(P, n)
+        if nz:
+            y0[:, 2 * n :] = np.asarray(state0[2], float).reshape(P, nz)
+    Y, R = rk4(system, p, np.asarray(t, float), np.asarray(f, float), y0, substeps=substeps)
+    sq = (lambda a: a[..., 0]) if n == 1 else (lambda a: a)
+    return {"x": sq(Y[..., :n]), "v": sq(Y[..., n : 2 * n]), "a": sq(R[..., n : 2 * n]), "z": Y[..., 2 * n :]}

@@ -2,10 +2,10 @@
 
 from pidyn.baselines.common import BaselineResult
 from pidyn.baselines.cramer_rao import cramer_rao
-from pidyn.baselines.fastsim import simulate_batch
 from pidyn.baselines.least_squares import equation_error, output_error
 from pidyn.baselines.sindy import weak_sindy
 from pidyn.baselines.ukf import unscented_kalman_filter
+from pidyn.simulate import simulate_batch
 
 __all__ = [
     "BaselineResult",

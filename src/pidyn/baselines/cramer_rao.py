@@ -42,20 +42,7 @@ def cramer_rao(
     n = system.n_dof
     layout = dict(channels) if isinstance(channels, dict) else {c: list(range(1, n + 1)) for c in channels}
     levels = dict(noise_level) if isinstance(noise_level, dict) else {c: float(noise_level) for c in layout}
-    probe = ShootingProblem(
-        system,
-        t,
-        f,
-        [Channel("x", 0, np.zeros(len(t)), 1.0)],
-        segment_bounds(t, None),
-        substeps,
-        fixed_state0=np.zeros(system.n_state),
-        fixed=params,
-    )
-    u = probe.pack({s.name: params[s.name] for s in probe.specs}, np.zeros((1, system.n_state)))
-    Y, R, A = probe.simulate(u)
-    clean = {"x": Y[:, 0, :n], "v": Y[:, 0, n : 2 * n], "a": A[:, 0]}
-    chans = [Channel(c, fl - 1, clean[c][:, fl - 1], 1.0) for c, floors in layout.items() for fl in floors]
+    probe, u, chans = _clean_channels(system, params, t, f, layout, substeps)
     names = probe.names
     if max(levels.values(), default=0.0) <= 0:
         return {
@@ -71,6 +58,41 @@ def cramer_rao(
     for ch in chans:
         sensed = ch.data + (ground if ch.kind == "a" else 0.0)
         ch.sigma = max(levels.get(ch.kind, 0.0), 1e-12) * float(np.sqrt(np.mean(sensed**2)))
+    std, corr, std_free = _relative_std(system, params, t, f, chans, substeps, u)
+    return {
+        "names": names,
+        "std_pct": {k: float(100 * s) for k, s in zip(names, std)},
+        "std_pct_unknown_start": {k: float(100 * s) for k, s in zip(names, std_free)},
+        "correlation": corr.tolist(),
+        "noise_level": noise_level,
+        "channels": layout,
+    }
+
+
+def _clean_channels(system, params: dict[str, float], t, f, layout: dict[str, list[int]], substeps: int):
+    """The noise-free response on every measured channel (the model simulated from rest), with
+    the problem that simulated it and its packed parameters."""
+    n = system.n_dof
+    probe = ShootingProblem(
+        system,
+        t,
+        f,
+        [Channel("x", 0, np.zeros(len(t)), 1.0)],
+        segment_bounds(t, None),
+        substeps,
+        fixed_state0=np.zeros(system.n_state),
+        fixed=params,
+    )
+    u = probe.pack({s.name: params[s.name] for s in probe.specs}, np.zeros((1, system.n_state)))
+    Y, R, A = probe.simulate(u)
+    clean = {"x": Y[:, 0, :n], "v": Y[:, 0, n : 2 * n], "a": A[:, 0]}
+    chans = [Channel(c, fl - 1, clean[c][:, fl - 1], 1.0) for c, floors in layout.items() for fl in floors]
+    return probe, u, chans
+
+
+def _relative_std(system, params: dict[str, float], t, f, chans: list, substeps: int, u: np.ndarray):
+    """Relative standard deviations and correlations of the parameters from the sensitivity of
+    the simulated channels: with the start at rest, and with the initial state unknown."""
     # the initial state as unknowns too (columns after the parameters), at rest
     prob = ShootingProblem(system, t, f, chans, segment_bounds(t, None), substeps, fixed=params)
     _, J, _, _ = prob.linearize(prob.pack(params, np.zeros((1, system.n_state))))
@@ -84,11 +106,4 @@ def cramer_rao(
     corr = cov / np.outer(std, std).clip(1e-300)
     cov_free = np.linalg.pinv(Jr.T @ Jr)[:nt, :nt]  # its initial state is unknown
     std_free = np.sqrt(np.clip(np.diag(cov_free), 0, None))
-    return {
-        "names": names,
-        "std_pct": {k: float(100 * s) for k, s in zip(names, std)},
-        "std_pct_unknown_start": {k: float(100 * s) for k, s in zip(names, std_free)},
-        "correlation": corr.tolist(),
-        "noise_level": noise_level,
-        "channels": layout,
-    }
+    return std, corr, std_free

@@ -174,7 +174,7 @@ def _differentiate(y: np.ndarray, dt: float, times: int) -> np.ndarray:
 
 def _equation_error(record, system, corner: float, fn: float) -> DataStart | None:
     from pidyn.systems.base import Kinematics
-    from pidyn.systems.lstsq import forward_jacobian, solve_linear_params
+    from pidyn.systems.lstsq import solve_linear_params
     from pidyn.systems.sdof import feedthrough_name, influence_name, support_damping_name
 
     dt = record.dt
@@ -194,30 +194,7 @@ def _equation_error(record, system, corner: float, fn: float) -> DataStart | Non
         k = Kinematics(t, T(ch["x"]), T(ch["v"]), T(ch["a"]))
         est = solve_linear_params(system, k, T(F), values, names)
     else:  # absolute signals; relative = absolute - the supports' motion weighted by r (bilinear)
-        FV, FD = integrate(f, dt, 1, corner), integrate(f, dt, 2, corner)
-        Ft, FVt, FDt = T(F), T(FV), T(FD)
-        xa, va, aa = T(ch["x"]), T(ch["v"]), T(ch["a"])
-
-        def kin(p: dict) -> Kinematics:  # relative = absolute - what the sensor reads of the supports
-            g = lambda q: system.acceleration_output(torch.zeros_like(xa), q, p)  # noqa: E731
-            return Kinematics(t, xa - g(FDt), va - g(FVt), aa - g(Ft))
-
-        est = solve_linear_params(system, kin(values), Ft, values, names)
-        u = torch.tensor([est[n] for n in names] + [float(values[n]) for n in r_names], dtype=torch.float64)
-        all_names = names + r_names
-
-        def residual(q: torch.Tensor) -> torch.Tensor:
-            p = dict(values)
-            p.update({n: q[i] for i, n in enumerate(all_names)})
-            return system.residual(kin(p), Ft, p)["motion"].reshape(-1)
-
-        for _ in range(30):
-            J = forward_jacobian(residual, u)
-            step = torch.linalg.lstsq(J, -residual(u)[:, None], driver="gelsd").solution[:, 0]
-            u = u + step
-            if float(step.abs().max() / u.abs().clamp_min(1e-12).max()) < 1e-10:
-                break
-        est = {n: float(u[i]) for i, n in enumerate(all_names)}
+        est = _bilinear_fit(system, values, names, r_names, t, ch, f, dt, corner, T)
     specs = {s.name: s for s in system.param_specs()}
     bad = _out_of_range(est, specs)
     note = f"integrated signals high-passed at {corner:.3g} Hz, {edge} samples cut at each end"
@@ -245,6 +222,42 @@ def _equation_error(record, system, corner: float, fn: float) -> DataStart | Non
         return None
     freq, zeta = _modal(system, {**{n: float(v) for n, v in values.items()}, **est})
     return DataStart(est, "equation_error", freq, zeta, note=note)
+
+
+def _bilinear_fit(
+    system, values: dict, names: list[str], r_names: list[str], t, ch: dict, f, dt: float, corner: float, T
+):
+    """Several supports: the linear parameters and the supports' influence, feedthrough and
+    damping together (the relative motion is the absolute minus the supports' motion weighted by
+    their influence: bilinear), by Gauss-Newton from the linear fit at the config's influence."""
+    from pidyn.systems.base import Kinematics
+    from pidyn.systems.lstsq import forward_jacobian, solve_linear_params
+
+    F, FV, FD = (integrate(f, dt, k, corner) for k in (0, 1, 2))
+    Ft, FVt, FDt = T(F), T(FV), T(FD)
+    xa, va, aa = T(ch["x"]), T(ch["v"]), T(ch["a"])
+
+    def kin(p: dict) -> Kinematics:  # relative = absolute - what the sensor reads of the supports
+        g = lambda q: system.acceleration_output(torch.zeros_like(xa), q, p)  # noqa: E731
+        return Kinematics(t, xa - g(FDt), va - g(FVt), aa - g(Ft))
+
+    est = solve_linear_params(system, kin(values), Ft, values, names)
+    u = torch.tensor([est[n] for n in names] + [float(values[n]) for n in r_names], dtype=torch.float64)
+    all_names = names + r_names
+
+    def residual(q: torch.Tensor) -> torch.Tensor:
+        p = dict(values)
+        p.update({n: q[i] for i, n in enumerate(all_names)})
+        return system.residual(kin(p), Ft, p)["motion"].reshape(-1)
+
+    for _ in range(30):
+        J = forward_jacobian(residual, u)
+        step = torch.linalg.lstsq(J, -residual(u)[:, None], driver="gelsd").solution[:, 0]
+        u = u + step
+        if float(step.abs().max() / u.abs().clamp_min(1e-12).max()) < 1e-10:
+            break
+    est = {n: float(u[i]) for i, n in enumerate(all_names)}
+    return est
 
 
 def _out_of_range(est: dict[str, float], specs: dict) -> dict[str, float]:

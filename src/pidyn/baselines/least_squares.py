@@ -19,7 +19,9 @@ import torch
 from scipy.optimize import least_squares
 
 from pidyn.baselines.common import BaselineResult, starting_point
+from pidyn.baselines.registry import estimator, row
 from pidyn.data.sources import Record
+from pidyn.notes import note
 from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
 from pidyn.systems.base import Kinematics
 from pidyn.systems.lstsq import solve_linear_params
@@ -28,7 +30,9 @@ from pidyn.systems.lstsq import solve_linear_params
 def equation_error(record: Record, system) -> BaselineResult:
     t0 = time.perf_counter()
     if system.n_latent:
-        return BaselineResult("equation_error", {}, 0.0, note="not applicable: unmeasured latent state")
+        return BaselineResult(
+            "equation_error", {}, 0.0, note=note("not_applicable", "not applicable: unmeasured latent state")
+        )
     if record.x is None or np.isnan(record.x).any() or (record.v is not None and np.isnan(record.v).any()):
         # no displacement sensor: the accelerations (and the inputs) high-passed and integrated alike
         from pidyn.baselines.data_start import equation_error_integrated
@@ -36,7 +40,10 @@ def equation_error(record: Record, system) -> BaselineResult:
         est = equation_error_integrated(record, system)
         if est is None:
             return BaselineResult(
-                "equation_error", {}, 0.0, note="not applicable: needs a sensor on every degree of freedom"
+                "equation_error",
+                {},
+                0.0,
+                note=note("not_applicable", "not applicable: needs a sensor on every degree of freedom"),
             )
         return BaselineResult("equation_error", est.values, time.perf_counter() - t0, note=est.note)
     dt = record.dt
@@ -97,3 +104,13 @@ def output_error(
     return BaselineResult(
         "output_error", est, time.perf_counter() - t0, note=f"nfev={sol.nfev}, cost={sol.cost:.3g}"
     )
+
+
+@estimator("equation_error", equation_error, "EE", parametric=True, order=1)
+def _equation_error_row(record, system, settings: dict, noise: float) -> dict:
+    return row(equation_error(record, system))
+
+
+@estimator("output_error", output_error, "OE", parametric=True, order=3)
+def _output_error_row(record, system, settings: dict, noise: float) -> dict:
+    return row(output_error(record, system, **settings))

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pidyn.baselines.registry import estimator
 from pidyn.reporting import nrmse
 from pidyn.signals import dominant_peak, transfer_function, transmissibility
 
@@ -121,31 +122,7 @@ def _realize(record, method: str, orders: Sequence[int], options: dict) -> PeerR
     t0 = time.perf_counter()
     U, Y = io_arrays(record)
     fit, held = spans(record)
-    rows = []
-    for order in orders:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                real = mdof.system(
-                    U[:, fit], Y[:, fit], dt=record.dt, method=method, order=int(order), **options
-                )
-                modes = _modes(real)
-            A, B, C, D = real
-            rho = float(np.max(np.abs(np.linalg.eigvals(A))))
-            out = simulate_realization(A, B, C, D, U)
-            rows.append(
-                {
-                    "order": int(order),
-                    "spectral_radius": rho,
-                    "stable": bool(rho < 1.0),
-                    "modes": modes,
-                    "realization": (A, B, C, D),
-                    "fit_nrmse_a": _mean_nrmse(out, Y, fit),
-                    "heldout_nrmse_a": None if held is None else _mean_nrmse(out, Y, held),
-                }
-            )
-        except Exception as exc:  # an order the method cannot realise on this record
-            rows.append({"order": int(order), "error": f"{type(exc).__name__}: {exc}"})
+    rows = [_order_row(mdof, method, int(order), U, Y, fit, held, record.dt, options) for order in orders]
     ok = [r for r in rows if r.get("stable") and r["modes"] and np.isfinite(r["fit_nrmse_a"])]
     name = method.replace("-", "_")
     if not ok:
@@ -179,6 +156,30 @@ def _realize(record, method: str, orders: Sequence[int], options: dict) -> PeerR
         orders=rows,
         realization=realization,
     )
+
+
+def _order_row(mdof, method: str, order: int, U, Y, fit, held, dt: float, options: dict) -> dict:
+    """One order's realization on the fitting part: stability, modes, and the simulated
+    outputs' error on the fitting and held-out parts (or the error the method raised)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            real = mdof.system(U[:, fit], Y[:, fit], dt=dt, method=method, order=order, **options)
+            modes = _modes(real)
+        A, B, C, D = real
+        rho = float(np.max(np.abs(np.linalg.eigvals(A))))
+        out = simulate_realization(A, B, C, D, U)
+        return {
+            "order": order,
+            "spectral_radius": rho,
+            "stable": bool(rho < 1.0),
+            "modes": modes,
+            "realization": (A, B, C, D),
+            "fit_nrmse_a": _mean_nrmse(out, Y, fit),
+            "heldout_nrmse_a": None if held is None else _mean_nrmse(out, Y, held),
+        }
+    except Exception as exc:  # an order the method cannot realise on this record
+        return {"order": order, "error": f"{type(exc).__name__}: {exc}"}
 
 
 def _modes(real) -> list[dict]:
@@ -275,3 +276,18 @@ def transfer_function_estimate(record, band_halfwidth: float = 0.35) -> PeerResu
         note=f"H1 of the top output from the mean input, {tf.segments} Welch segments, "
         f"{int(sel.sum())} frequencies around {fn0:.3g} Hz",
     )
+
+
+@estimator("transfer_function", transfer_function_estimate, "TF", order=10)
+def _transfer_function_row(record, system, settings: dict, noise: float) -> dict:
+    return transfer_function_estimate(record, **settings).to_row()
+
+
+@estimator("srim", srim, "SRIM", order=11)
+def _srim_row(record, system, settings: dict, noise: float) -> dict:
+    return srim(record, **settings).to_row()
+
+
+@estimator("okid_era", okid_era, "OKID-ERA", order=12)
+def _okid_era_row(record, system, settings: dict, noise: float) -> dict:
+    return okid_era(record, **settings).to_row()

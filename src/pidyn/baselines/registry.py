@@ -1,9 +1,19 @@
-"""Every classical estimator by name, with one signature: ``baselines.run`` and
-``model.refine.starts`` name them, the train task runs them, the tables list them from here."""
+"""Every classical estimator by name, with one signature.
+
+An estimator registers itself where it is written, with ``@estimator`` on its adapter
+``(record, system, settings, noise) -> row``; the registry finds every module of
+``pidyn.baselines`` on first use. ``baselines.run`` and ``model.refine.starts`` name the
+estimators, the train task runs them, the tables and the settings test list them from here:
+adding an estimator is one module (with its adapter registered), its settings in
+``conf/baselines/default.yaml`` and its test.
+"""
 
 from __future__ import annotations
 
+import importlib
+import pkgutil
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 from pidyn.baselines.common import BaselineResult
@@ -12,7 +22,40 @@ from pidyn.baselines.common import BaselineResult
 Estimator = Callable[[Any, Any, dict, float], dict]
 
 
-def _row(r: BaselineResult) -> dict:
+@dataclass(frozen=True)
+class Entry:
+    """One estimator: its adapter, the function whose keyword arguments are its settings, the
+    label the tables print, whether it estimates the model's parameters (a refinement start) or
+    modes only, and its place in the tables."""
+
+    name: str
+    run: Estimator
+    function: Callable
+    label: str
+    parametric: bool
+    order: int
+
+
+_ENTRIES: dict[str, Entry] = {}
+_FOUND = False
+
+
+def estimator(
+    name: str, function: Callable, label: str, parametric: bool = False, order: int = 100
+) -> Callable[[Estimator], Estimator]:
+    """Register the decorated adapter as estimator ``name``."""
+
+    def register(run: Estimator) -> Estimator:
+        if name in _ENTRIES and _ENTRIES[name].run is not run:
+            raise ValueError(f"estimator '{name}' is registered twice")
+        _ENTRIES[name] = Entry(name, run, function, label, parametric, order)
+        return run
+
+    return register
+
+
+def row(r: BaselineResult) -> dict:
+    """A parametric estimator's result as the row the run folder keeps."""
     return {
         "method": r.method,
         "params": r.params,
@@ -22,67 +65,32 @@ def _row(r: BaselineResult) -> dict:
     }
 
 
-def _equation_error(record, system, settings: dict, noise: float) -> dict:
-    from pidyn.baselines.least_squares import equation_error
+def entries() -> dict[str, Entry]:
+    """Every registered estimator, in the tables' order (the modules found on first use)."""
+    global _FOUND
+    if not _FOUND:
+        import pidyn.baselines as package
 
-    return _row(equation_error(record, system))
-
-
-def _output_error(record, system, settings: dict, noise: float) -> dict:
-    from pidyn.baselines.least_squares import output_error
-
-    return _row(output_error(record, system, **settings))
-
-
-def _sindy(record, system, settings: dict, noise: float) -> dict:
-    from pidyn.baselines.sindy import weak_sindy
-
-    return _row(weak_sindy(record, system, **settings))
+        for info in pkgutil.iter_modules(package.__path__):
+            if info.name not in ("registry", "worker"):
+                importlib.import_module(f"{package.__name__}.{info.name}")
+        _FOUND = True
+    return dict(sorted(_ENTRIES.items(), key=lambda kv: (kv[1].order, kv[0])))
 
 
-def _ukf(record, system, settings: dict, noise: float) -> dict:
-    from pidyn.baselines.ukf import unscented_kalman_filter
-
-    return _row(unscented_kalman_filter(record, system, noise_level=noise, **settings))
-
-
-def _transfer_function(record, system, settings: dict, noise: float) -> dict:
-    from pidyn.baselines.peers import transfer_function_estimate
-
-    return transfer_function_estimate(record, **settings).to_row()
-
-
-def _srim(record, system, settings: dict, noise: float) -> dict:
-    from pidyn.baselines.peers import srim
-
-    return srim(record, **settings).to_row()
-
-
-def _okid_era(record, system, settings: dict, noise: float) -> dict:
-    from pidyn.baselines.peers import okid_era
-
-    return okid_era(record, **settings).to_row()
-
-
-ESTIMATORS: dict[str, Estimator] = {
-    "equation_error": _equation_error,
-    "output_error": _output_error,
-    "sindy": _sindy,
-    "ukf": _ukf,
-    "transfer_function": _transfer_function,
-    "srim": _srim,
-    "okid_era": _okid_era,
-}
-
-#: estimators that give the model's parameters (the others give modes only): refinement starts
-PARAMETRIC = ("equation_error", "output_error", "sindy", "ukf")
-#: estimators of modes that run on an optional extra (``pip install 'pidyn[peer]'``)
-PEERS = ("srim", "okid_era")
+def __getattr__(name: str) -> Any:
+    """``ESTIMATORS`` (name -> adapter) and ``PARAMETRIC`` (the names that estimate the model's
+    parameters), derived from the entries."""
+    if name == "ESTIMATORS":
+        return {k: e.run for k, e in entries().items()}
+    if name == "PARAMETRIC":
+        return tuple(k for k, e in entries().items() if e.parametric)
+    raise AttributeError(name)
 
 
 def check_names(key: str, names, extra: tuple[str, ...] = ()) -> None:
     """Misspelled estimator names fail with the list of the known ones."""
-    known = set(ESTIMATORS) | set(extra)
+    known = set(entries()) | set(extra)
     unknown = sorted(set(names) - known)
     if unknown:
         raise ValueError(f"{key}: unknown method(s) {unknown}; choose from {', '.join(sorted(known))}")

@@ -15,26 +15,46 @@ import time
 import numpy as np
 
 from pidyn.baselines.common import BaselineResult
+from pidyn.baselines.registry import estimator, row
 from pidyn.data.sources import Record
+from pidyn.notes import note
 from pidyn.signals import dominant_period
+from pidyn.systems.terms import (
+    CoulombFriction,
+    CubicStiffness,
+    ForceTerm,
+    LinearStiffness,
+    Monomial,
+    QuadraticDamping,
+    QuadraticStiffness,
+    ViscousDamping,
+)
 from pidyn.weak_form import WeakForm, smooth_signals
 
-#: the library: name -> force per unit coefficient
-LIBRARY = {
-    "x": lambda x, v: x,
-    "x'": lambda x, v: v,
-    "x^2": lambda x, v: x**2,
-    "x x'": lambda x, v: x * v,
-    "x'^2": lambda x, v: v**2,
-    "x^3": lambda x, v: x**3,
-    "x^2 x'": lambda x, v: x**2 * v,
-    "x x'^2": lambda x, v: x * v**2,
-    "x'^3": lambda x, v: v**3,
-    "x'|x'|": lambda x, v: v * np.abs(v),
-    "sign x'": lambda x, v: np.tanh(v / (0.02 * np.std(v))),
-}
-#: which system parameter multiplies which library term
-PARAM_TERMS = {"c": "x'", "k": "x", "k1": "x", "k3": "x^3", "k2": "x^2", "c2": "x'|x'|", "Fc": "sign x'"}
+
+def library(v: np.ndarray) -> list[ForceTerm]:
+    """The candidate terms, in the library's order: each gives its column by its own force
+    (``ForceTerm.columns``) and its name by its ``symbol``. The smoothed sign is 2 % of the
+    velocity's standard deviation wide."""
+    return [
+        LinearStiffness(param="k"),
+        ViscousDamping(),
+        QuadraticStiffness(),
+        Monomial(1, 1),
+        Monomial(0, 2),
+        CubicStiffness(signed=True),
+        Monomial(2, 1),
+        Monomial(1, 2),
+        Monomial(0, 3),
+        QuadraticDamping(),
+        CoulombFriction(eps=max(0.02 * float(np.std(v)), 1e-300)),
+    ]
+
+
+def param_terms(system) -> dict[str, str]:
+    """Which library term each of the system's parameters multiplies: its own term's symbol
+    (c: x', k or k1: x, k3: x^3)."""
+    return {name: term.symbol for term in getattr(system, "terms", []) if term.symbol for name in term.linear}
 
 
 def stlsq(A: np.ndarray, y: np.ndarray, threshold: float, max_iter: int = 20) -> np.ndarray:
@@ -60,56 +80,72 @@ def stlsq(A: np.ndarray, y: np.ndarray, threshold: float, max_iter: int = 20) ->
     return coef / norms
 
 
-def weak_sindy(record: Record, system, threshold: float = 0.01) -> BaselineResult:
-    t0 = time.perf_counter()
+def _not_applicable(record: Record, system) -> str | None:
+    """Why the library cannot describe this system on this record, or None."""
     if system.n_latent:
-        return BaselineResult("sindy", {}, 0.0, note="not applicable: unmeasured latent state")
+        return "not applicable: unmeasured latent state"
     if getattr(system, "n_dof", 1) != 1:
-        return BaselineResult("sindy", {}, 0.0, note="single-degree-of-freedom systems only")
+        return "single-degree-of-freedom systems only"
     if record.n_inputs > 1:
-        return BaselineResult(
-            "sindy",
-            {},
-            0.0,
-            note="not applicable: several inputs whose influence is unknown (the "
-            "relative motion the library needs depends on it)",
+        return (
+            "not applicable: several inputs whose influence is unknown (the "
+            "relative motion the library needs depends on it)"
         )
+    return None
+
+
+def _motion(record: Record) -> tuple | str:
+    """(t, x, measured x' or None, excitation): the measured displacement, or the accelerations
+    integrated (high-passed at a fifth of the resonance, the excitation filtered alike); why not
+    when the record has neither or shows no resonance."""
     t = record.t
     excitation = np.asarray(record.f, float)
     if record.x is not None and not np.isnan(record.x[:, 0]).any():
-        x = record.x[:, 0]
-        v_meas = None if record.v is None else record.v[:, 0]
-    elif record.a is not None and not np.isnan(record.a[:, 0]).any():  # accelerometers: integrate, all alike
-        from pidyn.baselines.data_start import fundamental
-        from pidyn.signals import integrate
+        return t, record.x[:, 0], None if record.v is None else record.v[:, 0], excitation
+    if record.a is None or np.isnan(record.a[:, 0]).any():
+        return "not applicable: needs a displacement or acceleration channel"
+    from pidyn.baselines.data_start import fundamental
+    from pidyn.signals import integrate
 
-        peak = fundamental(record)
-        if peak is None:
-            return BaselineResult("sindy", {}, 0.0, note="not applicable: the record shows no resonance")
-        corner = max(peak[0] / 5.0, 2.0 / float(t[-1] - t[0]))
-        x, v_meas = (
-            integrate(record.a[:, 0], record.dt, 2, corner),
-            integrate(record.a[:, 0], record.dt, 1, corner),
-        )
-        excitation = integrate(excitation, record.dt, 0, corner)
-    else:
-        return BaselineResult(
-            "sindy", {}, 0.0, note="not applicable: needs a displacement or acceleration channel"
-        )
+    peak = fundamental(record)
+    if peak is None:
+        return "not applicable: the record shows no resonance"
+    corner = max(peak[0] / 5.0, 2.0 / float(t[-1] - t[0]))
+    x, v_meas = (
+        integrate(record.a[:, 0], record.dt, 2, corner),
+        integrate(record.a[:, 0], record.dt, 1, corner),
+    )
+    return t, x, v_meas, integrate(excitation, record.dt, 0, corner)
+
+
+def weak_sindy(record: Record, system, threshold: float = 0.01) -> BaselineResult:
+    t0 = time.perf_counter()
+    why = _not_applicable(record, system)
+    signals = why or _motion(record)
+    if isinstance(signals, str):
+        return BaselineResult("sindy", {}, 0.0, note=note("not_applicable", signals))
+    t, x, v_meas, excitation = signals
     period = dominant_period(t, x)
     xs, vs = smooth_signals(t, x, v_meas, period)
     weak = WeakForm.for_record(t, period)
     m = system.nominal_mass()
     forcing = -m * excitation if system.excitation == "ground" else excitation
     y = weak.project(forcing)[:, 0] - weak.inertia(x, m)
-    names = list(LIBRARY)
-    A = weak.project(np.stack([LIBRARY[n](xs, vs) for n in names], axis=1))
+    terms = library(vs)
+    names = [term.symbol for term in terms]
+    A = weak.project(np.stack([term.columns(t, xs, vs, None, {})[term.linear[0]] for term in terms], axis=1))
     coef = stlsq(A, y, threshold)
     selected = {n: float(c) for n, c in zip(names, coef) if c != 0.0}
     trainable = [s.name for s in system.param_specs() if s.trainable and s.name != "m"]
-    params = {p: selected.get(PARAM_TERMS[p], 0.0) for p in trainable if p in PARAM_TERMS}
-    extra = sorted(set(selected) - {PARAM_TERMS[p] for p in params})
-    note = "selected: " + ", ".join(f"{n}={c:.4g}" for n, c in selected.items())
+    own = param_terms(system)
+    params = {p: selected.get(own[p], 0.0) for p in trainable if p in own}
+    extra = sorted(set(selected) - {own[p] for p in params})
+    text = "selected: " + ", ".join(f"{n}={c:.4g}" for n, c in selected.items())
     if extra:
-        note += f"; terms outside the model: {extra}"
-    return BaselineResult("sindy", params, time.perf_counter() - t0, note=note)
+        text += f"; terms outside the model: {extra}"
+    return BaselineResult("sindy", params, time.perf_counter() - t0, note=text)
+
+
+@estimator("sindy", weak_sindy, "SINDy", parametric=True, order=2)
+def _sindy_row(record, system, settings: dict, noise: float) -> dict:
+    return row(weak_sindy(record, system, **settings))

@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 from pidyn.baselines.common import BaselineResult, from_theta, starting_point
+from pidyn.baselines.registry import estimator, row
 from pidyn.data.sources import Record
 from pidyn.integrate import rk4
 from pidyn.refine.problem import record_channels
@@ -51,18 +52,8 @@ def unscented_kalman_filter(
     if q_param is None:
         if not len(tune):
             raise ValueError("ukf: q_param is None and the tuning grid is empty; give one of them")
-        kw = dict(
-            noise_level=noise_level,
-            init=init,
-            init_param_std=init_param_std,
-            q_state=q_state,
-            r_floor=r_floor,
-            alpha=alpha,
-            beta=beta,
-            kappa=kappa,
-            substeps=substeps,
-            thin=thin,
-        )
+        # every setting but the tuned one, passed on to each run of the grid
+        kw = {k: v for k, v in locals().items() if k not in ("record", "system", "q_param", "tune")}
         return _tuned(record, system, list(tune), kw)
     t0 = time.perf_counter()
     specs, fixed, theta0 = starting_point(system, init)
@@ -74,28 +65,11 @@ def unscented_kalman_filter(
     )
     m, P, Q = _prior(record, system, theta0, init_param_std, q_state, q_param)
     lam, wm, wc = _weights(ns + npar, alpha, beta, kappa)
-    rows = {
-        "x": lambda Yp, Ap, d: Yp[:, d],
-        "v": lambda Yp, Ap, d: Yp[:, nd + d],
-        "a": lambda Yp, Ap, d: Ap[:, d],
-    }
     traj: list[dict] = []
     loglik = 0.0
     t, f = record.t, record.f
     for i in range(len(t) - 1):
-        X = _sigma_points(m, P, lam)
-        p = from_theta(specs, X[ns:])
-        p.update({k: np.full(X.shape[1], v) for k, v in fixed.items()})
-        with np.errstate(all="ignore"):
-            Ys, Rs = rk4(system, p, t[i : i + 2], f[i : i + 2], X[:ns].T.copy(), substeps=substeps)
-            A = system.acceleration_output(Rs[1][:, nd : 2 * nd], f[i + 1], p)  # as the accelerometers read
-            # a filter that diverges says so by its likelihood (-inf), not by floating-point warnings
-            m, P, D = _predicted_belief(X, Ys[1], ns, wm, wc, Q)
-            # --- update with the measurement at t[i+1]
-            Y = np.nan_to_num(
-                np.array([rows[c.kind](Ys[1], A, c.dof) for c in chans]), nan=0.0, posinf=1e6, neginf=-1e6
-            )
-            m, P, ll = _update(m, P, D, Y, np.array([c.data[i + 1] for c in chans]), R, wm, wc)
+        m, P, ll = _step(system, specs, fixed, m, P, lam, wm, wc, Q, R, t, f, i, chans, substeps)
         loglik += ll
         if i % thin == 0 or i == len(t) - 2:
             vals = from_theta(specs, m[ns:])
@@ -104,6 +78,32 @@ def unscented_kalman_filter(
     res = BaselineResult("ukf", est, time.perf_counter() - t0, trajectory=traj)
     res.loglik = float(loglik)
     return res
+
+
+def _step(system, specs, fixed: dict, m, P, lam, wm, wc, Q, R, t, f, i: int, chans: list, substeps: int):
+    """One filter step: the sigma points simulated from t[i] to t[i+1], the predicted belief,
+    and its update with the measurement at t[i+1]; returns the new mean, covariance and the
+    innovation log-likelihood."""
+    ns, nd = system.n_state, system.n_dof
+    rows = {
+        "x": lambda Yp, Ap, d: Yp[:, d],
+        "v": lambda Yp, Ap, d: Yp[:, nd + d],
+        "a": lambda Yp, Ap, d: Ap[:, d],
+    }
+    X = _sigma_points(m, P, lam)
+    p = from_theta(specs, X[ns:])
+    p.update({k: np.full(X.shape[1], v) for k, v in fixed.items()})
+    with np.errstate(all="ignore"):
+        Ys, Rs = rk4(system, p, t[i : i + 2], f[i : i + 2], X[:ns].T.copy(), substeps=substeps)
+        A = system.acceleration_output(Rs[1][:, nd : 2 * nd], f[i + 1], p)  # as the accelerometers read
+        # a filter that diverges says so by its likelihood (-inf), not by floating-point warnings
+        m, P, D = _predicted_belief(X, Ys[1], ns, wm, wc, Q)
+        # --- update with the measurement at t[i+1]
+        Y = np.nan_to_num(
+            np.array([rows[c.kind](Ys[1], A, c.dof) for c in chans]), nan=0.0, posinf=1e6, neginf=-1e6
+        )
+        m, P, ll = _update(m, P, D, Y, np.array([c.data[i + 1] for c in chans]), R, wm, wc)
+    return m, P, ll
 
 
 def _prior(
@@ -216,3 +216,8 @@ def _tuned(record: Record, system, grid: list[float], kw: dict) -> BaselineResul
         f"({out.loglik:.6g})"
     )
     return out
+
+
+@estimator("ukf", unscented_kalman_filter, "UKF", parametric=True, order=4)
+def _ukf_row(record, system, settings: dict, noise: float) -> dict:
+    return row(unscented_kalman_filter(record, system, noise_level=noise, **settings))

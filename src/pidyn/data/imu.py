@@ -35,6 +35,7 @@ import numpy as np
 import pandas as pd
 
 from pidyn.data.sources import DataError, Record
+from pidyn.notes import note
 
 NOMINAL_STEP_US = 1e6 / 120.0
 COLUMNS = (
@@ -355,8 +356,11 @@ def align_floors(
         moved = lag if trusted and (align == "lag" or report.coarse == "start_time") else 0.0
         if k and not trusted:
             report.notes.append(
-                f"floor {k}: low-band correlation with the table {corr:.2f} < {MIN_LAG_CORRELATION}: "
-                f"its lag ({1e3 * lag:.1f} ms) is not used"
+                note(
+                    "lag_not_trusted",
+                    f"floor {k}: low-band correlation with the table {corr:.2f} < {MIN_LAG_CORRELATION}: "
+                    f"its lag ({1e3 * lag:.1f} ms) is not used",
+                )
             )
         cols.append(sign * np.interp(grid, m.t + offset - moved, s, left=np.nan, right=np.nan))
         report.clock_ms.append(1e3 * offset)

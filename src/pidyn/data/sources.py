@@ -250,27 +250,7 @@ def synthetic_from_motion(
     truth = params or system.true_values()
     clean = simulate(system, truth, gm, gm.t)
     several = system.n_inputs > 1
-    if system.excitation != "ground":
-        ground = 0.0
-    else:  # the ground acceleration each floor feels (several supports: weighted by their influence)
-        ground = (
-            system.acceleration_output(np.zeros((len(clean.t), system.n_dof)), clean.f, truth)
-            if several
-            else clean.f[:, None]
-        )
-    if several:
-        ground = ground[:, [s - 1 for s in floors]]
-    sensed = {c: getattr(clean, c)[:, [s - 1 for s in floors]] for c in channels}
-    if "a" in sensed:
-        sensed["a"] = sensed["a"] + ground  # an accelerometer measures the absolute acceleration
-    meas = add_noise(sensed, levels, data_seed)
-    if "a" in meas and not several:  # one ground: kept relative; several: no single ground, kept absolute
-        meas["a"] = meas["a"] - ground
-    full = {}
-    for c in channels:
-        arr = np.full((len(clean.t), n), np.nan)
-        arr[:, [s - 1 for s in floors]] = meas[c]
-        full[c] = arr
+    full = _measured(system, clean, truth, channels, floors, levels, data_seed)
     return Record(
         name=gm.name,
         t=clean.t,
@@ -293,6 +273,43 @@ def synthetic_from_motion(
             **({"inputs": list(system.inputs)} if several else {}),
         },
     )
+
+
+def _measured(
+    system: StructuralSystem,
+    clean,
+    truth: dict[str, float],
+    channels: tuple[str, ...],
+    floors: list[int],
+    levels: dict[str, float],
+    data_seed: int,
+) -> dict[str, np.ndarray]:
+    """What the sensors on ``floors`` read of the clean response, with noise: (N, n_dof) per
+    channel, NaN where a floor has no sensor. An accelerometer reads the absolute acceleration;
+    with one ground it is kept relative to it, with several supports absolute."""
+    several = system.n_inputs > 1
+    if system.excitation != "ground":
+        ground = 0.0
+    else:  # the ground acceleration each floor feels (several supports: weighted by their influence)
+        ground = (
+            system.acceleration_output(np.zeros((len(clean.t), system.n_dof)), clean.f, truth)
+            if several
+            else clean.f[:, None]
+        )
+    if several:
+        ground = ground[:, [s - 1 for s in floors]]
+    sensed = {c: getattr(clean, c)[:, [s - 1 for s in floors]] for c in channels}
+    if "a" in sensed:
+        sensed["a"] = sensed["a"] + ground  # an accelerometer measures the absolute acceleration
+    meas = add_noise(sensed, levels, data_seed)
+    if "a" in meas and not several:  # one ground: kept relative; several: no single ground, kept absolute
+        meas["a"] = meas["a"] - ground
+    full = {}
+    for c in channels:
+        arr = np.full((len(clean.t), system.n_dof), np.nan)
+        arr[:, [s - 1 for s in floors]] = meas[c]
+        full[c] = arr
+    return full
 
 
 def _noise_levels(noise: float | dict[str, float] | None, channels: Sequence[str]) -> dict[str, float]:

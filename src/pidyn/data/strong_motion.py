@@ -28,6 +28,7 @@ import logging
 from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -35,6 +36,7 @@ from scipy.signal import resample_poly
 
 from pidyn.data.csmip import Archive, CsmipFormatError, MissingChannelError, read_archive
 from pidyn.data.sources import DataError, Record
+from pidyn.notes import note
 
 log = logging.getLogger(__name__)
 
@@ -111,6 +113,55 @@ def csmip_record(
     split, the first share for fitting, the rest held out (``meta['split']``)."""
     if not 0.1 <= fit_share <= 0.95:
         raise DataError(f"data.fit_share must lie in [0.1, 0.95], got {fit_share}")
+    limit = max_outputs if max_outputs is not None else (None if system is None else system.n_dof)
+    archive, station, ins, outs, notes = _channels_used(
+        path, station, direction, inputs, outputs, on_missing, limit
+    )
+    acc_in, vel_in, acc_out, step = _aligned_channels(archive, ins, outs, dt, notes)
+    i0, i1, pre_rms = shaking_span(acc_in, acc_out, step, span, pre, post)
+    t = np.arange(i1 - i0) * step
+    a = acc_out[i0:i1]
+    several = len(ins) > 1
+    if (
+        several
+    ):  # the supports' accelerations, then their velocities (a support's dashpot acts on its velocity)
+        f = np.concatenate([acc_in[i0:i1], vel_in[i0:i1]], axis=1)
+    else:
+        f = acc_in[i0:i1, 0]
+        a = a - f[:, None]  # one ground: accelerations relative to it, as every record keeps them
+    for text in notes:
+        log.info("%s: %s", archive.path.name, text)
+    meta = {
+        "path": str(path),
+        "station": station,
+        "direction": direction,
+        **_channel_meta(archive, ins, outs, several),
+        "dt": step,
+        "t_offset": i0 * step,
+        "span": [i0 * step, (i1 - 1) * step],
+        "pre_event_rms": pre_rms,
+        "notes": notes,
+        "acceleration": "absolute" if several else "relative",
+        "units": {"a": "m/s^2", "ag": "m/s^2"},
+        "pga": float(np.max(np.abs(acc_in[i0:i1]))),
+    }
+    cut = float(t[-1]) * fit_share
+    meta["split"] = {"fit": [0.0, cut], "heldout": [cut, float(t[-1])]}
+    name = Path(path).name.split(".")[0]
+    return Record(name=name, t=t, f=f, a=a, excitation="ground", meta=meta)
+
+
+def _channels_used(
+    path: str | Path,
+    station: str | None,
+    direction: str,
+    inputs: Sequence[int] | None,
+    outputs: Sequence[int] | None,
+    on_missing: str,
+    limit: int | None,
+) -> tuple[Any, str, list[int], list[int], list[str]]:
+    """The archive, its station and the input and output channels used (at most ``limit``
+    outputs), with notes on what was left out."""
     if on_missing not in ("error", "drop"):
         raise DataError(f"data.on_missing must be 'error' or 'drop', got '{on_missing}'")
     archive = read_archive(path)
@@ -118,10 +169,37 @@ def csmip_record(
     notes: list[str] = []
     ins = _present(archive, ins, "input", on_missing, notes)
     outs = _present(archive, outs, "output", on_missing, notes)
-    limit = max_outputs if max_outputs is not None else (None if system is None else system.n_dof)
     if limit is not None and len(outs) > limit:
-        notes.append(f"outputs {outs[limit:]} not used: the model has {limit} degree(s) of freedom")
+        notes.append(
+            note(
+                "outputs_unused",
+                f"outputs {outs[limit:]} not used: the model has {limit} degree(s) of freedom",
+            )
+        )
         outs = outs[:limit]
+    return archive, station, ins, outs, notes
+
+
+def _channel_meta(archive, ins: list[int], outs: list[int], several: bool) -> dict:
+    """What the record's metadata says of its channels: names, columns, band, locations."""
+    names = [f"ch{c}" for c in ins]
+    return {
+        "inputs": names if several else [],
+        "excitation_columns": ([f"ag_{c}" for c in names] + [f"vg_{c}" for c in names])
+        if several
+        else ["ag"],
+        "input_channels": ins,
+        "output_channels": outs,
+        "band_hz": archive.channels[outs[0]].band_hz,
+        "locations": {c: archive.channels[c].location for c in ins + outs},
+    }
+
+
+def _aligned_channels(
+    archive, ins: list[int], outs: list[int], dt: float | None, notes: list[str]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """The inputs' accelerations and velocities and the outputs' accelerations on one time grid:
+    one sampling step, cut to the shortest channel, resampled to ``dt``."""
     chans = [archive.channels[c] for c in ins + outs]
     steps = {round(c.dt, 9) for c in chans}
     if len(steps) > 1:
@@ -131,53 +209,17 @@ def csmip_record(
     if any(c.n != n for c in chans):
         lengths = {c.station_channel: c.n for c in chans}
         notes.append(
-            f"channels of different lengths {lengths} (two recorders): cut to the shortest, {n} samples "
-            f"({(n - 1) * step:.3g} s)"
+            note(
+                "cut_to_shortest",
+                f"channels of different lengths {lengths} (two recorders): cut to the shortest, {n} samples "
+                f"({(n - 1) * step:.3g} s)",
+            )
         )
     acc_in = np.stack([archive.channels[c].acc[:n] for c in ins], axis=1)
     acc_out = np.stack([archive.channels[c].acc[:n] for c in outs], axis=1)
     vel_in = _velocities(archive, ins, n, step, acc_in, notes)
     acc_in, acc_out, step = _resample(np.concatenate([acc_in, vel_in], axis=1), acc_out, step, dt, notes)
-    acc_in, vel_in = acc_in[:, : len(ins)], acc_in[:, len(ins) :]
-    i0, i1, pre_rms = shaking_span(acc_in, acc_out, step, span, pre, post)
-    t = np.arange(i1 - i0) * step
-    a = acc_out[i0:i1]
-    names = [f"ch{c}" for c in ins]
-    several = len(ins) > 1
-    if (
-        several
-    ):  # the supports' accelerations, then their velocities (a support's dashpot acts on its velocity)
-        f = np.concatenate([acc_in[i0:i1], vel_in[i0:i1]], axis=1)
-    else:
-        f = acc_in[i0:i1, 0]
-        a = a - f[:, None]  # one ground: accelerations relative to it, as every record keeps them
-    for note in notes:
-        log.info("%s: %s", archive.path.name, note)
-    meta = {
-        "path": str(path),
-        "station": station,
-        "direction": direction,
-        "inputs": names if several else [],
-        "excitation_columns": ([f"ag_{c}" for c in names] + [f"vg_{c}" for c in names])
-        if several
-        else ["ag"],
-        "input_channels": ins,
-        "output_channels": outs,
-        "dt": step,
-        "t_offset": i0 * step,
-        "span": [i0 * step, (i1 - 1) * step],
-        "pre_event_rms": pre_rms,
-        "notes": notes,
-        "acceleration": "absolute" if several else "relative",
-        "units": {"a": "m/s^2", "ag": "m/s^2"},
-        "pga": float(np.max(np.abs(acc_in[i0:i1]))),
-        "band_hz": archive.channels[outs[0]].band_hz,
-        "locations": {c: archive.channels[c].location for c in ins + outs},
-    }
-    cut = float(t[-1]) * fit_share
-    meta["split"] = {"fit": [0.0, cut], "heldout": [cut, float(t[-1])]}
-    name = Path(path).name.split(".")[0]
-    return Record(name=name, t=t, f=f, a=a, excitation="ground", meta=meta)
+    return acc_in[:, : len(ins)], acc_in[:, len(ins) :], acc_out, step
 
 
 def _velocities(
@@ -191,7 +233,11 @@ def _velocities(
     for j, c in enumerate(ins):
         vel = archive.channels[c].vel
         if vel is None:
-            notes.append(f"channel {c}: no velocity block; integrated from its acceleration")
+            notes.append(
+                note(
+                    "velocity_integrated", f"channel {c}: no velocity block; integrated from its acceleration"
+                )
+            )
             vel = integrate(acc[:, j], step, 1, 0.05)
         cols.append(np.asarray(vel[:n], float))
     return np.stack(cols, axis=1)
@@ -208,7 +254,12 @@ def _present(archive: Archive, chans: list[int], what: str, on_missing: str, not
             f"(it holds {sorted(archive.channels)})"
         )
     if missing:
-        notes.append(f"{what} channel(s) {missing} missing in this event: left out (data.on_missing=drop)")
+        notes.append(
+            note(
+                "channel_missing",
+                f"{what} channel(s) {missing} missing in this event: left out (data.on_missing=drop)",
+            )
+        )
     return kept
 
 
@@ -224,7 +275,7 @@ def _resample(
     if abs(float(ratio) - dt / step) > 1e-6 * dt / step:
         raise DataError(f"cannot resample a step of {step} s to {dt} s (ratio {dt / step:g} not rational)")
     up, down = ratio.denominator, ratio.numerator
-    notes.append(f"resampled from {step:g} s to {dt:g} s (polyphase, zero phase)")
+    notes.append(note("resampled", f"resampled from {step:g} s to {dt:g} s (polyphase, zero phase)"))
     return (resample_poly(acc_in, up, down, axis=0), resample_poly(acc_out, up, down, axis=0), float(dt))
 
 

@@ -219,31 +219,50 @@ def make_windows(
     t_end = t[-1] if t_end is None else min(t_end, t[-1])
     bounds = window_bounds(t, length, t_start, t_end, cover_tail)
     record_peak = float(np.nanmax(np.abs(ref[(t >= t_start) & (t <= t_end)])))
-    T = lambda arr: None if arr is None else torch.as_tensor(np.asarray(arr, float), dtype=dtype)  # noqa: E731
-    out = []
-    for i, (t0, t1) in enumerate(bounds):
-        m = (t >= t0 - 1e-9) & (t <= t1 + 1e-9)
-        tp = np.linspace(t0, t1, pool_size)
-        peak = float(np.nanmax(np.abs(ref[m])))
-        q = _transform(t, accel_signal, m, tp, t0)
-        out.append(
-            Window(
-                index=i,
-                t0=t0,
-                t1=t1,
-                t_data=T(t[m]),
-                f_data=T(np.asarray(f, float)[m]),
-                x=None if x is None else T(x[m]),
-                v=None if v is None else T(v[m]),
-                a=None if a is None else T(a[m]),
-                t_pool=T(tp),
-                f_pool=T(_interp(tp, t, f)),
-                peak_x=peak,
-                informative=peak >= min_peak_fraction * record_peak,
-                **{k: T(val) for k, val in q.items()},
-            )
+    return [
+        _window(
+            i, t0, t1, t, f, x, v, a, pool_size, ref, accel_signal, min_peak_fraction * record_peak, dtype
         )
-    return out
+        for i, (t0, t1) in enumerate(bounds)
+    ]
+
+
+def _window(
+    i: int,
+    t0: float,
+    t1: float,
+    t: np.ndarray,
+    f: np.ndarray,
+    x: np.ndarray | None,
+    v: np.ndarray | None,
+    a: np.ndarray | None,
+    pool_size: int,
+    ref: np.ndarray,
+    accel_signal: np.ndarray | None,
+    min_peak: float,
+    dtype: torch.dtype,
+) -> Window:
+    """Window ``i`` over [t0, t1]: its samples, its collocation pool and excitation transform."""
+    T = lambda arr: None if arr is None else torch.as_tensor(np.asarray(arr, float), dtype=dtype)  # noqa: E731
+    m = (t >= t0 - 1e-9) & (t <= t1 + 1e-9)
+    tp = np.linspace(t0, t1, pool_size)
+    peak = float(np.nanmax(np.abs(ref[m])))
+    q = _transform(t, accel_signal, m, tp, t0)
+    return Window(
+        index=i,
+        t0=t0,
+        t1=t1,
+        t_data=T(t[m]),
+        f_data=T(np.asarray(f, float)[m]),
+        x=None if x is None else T(x[m]),
+        v=None if v is None else T(v[m]),
+        a=None if a is None else T(a[m]),
+        t_pool=T(tp),
+        f_pool=T(_interp(tp, t, f)),
+        peak_x=peak,
+        informative=peak >= min_peak,
+        **{k: T(val) for k, val in q.items()},
+    )
 
 
 def _interp(tq: np.ndarray, t: np.ndarray, f: np.ndarray) -> np.ndarray:

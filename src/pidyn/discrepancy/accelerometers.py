@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -42,8 +43,7 @@ def needs_view(record: Record) -> bool:
 def motion_view(record: Record, system, fit: tuple[float, float], corner_share: float = 0.1) -> Record:
     """The record as the relative motion of an accelerometer-measured structure (see the module's
     docstring); ``system``: the nominal model with the record's inputs (influence coefficients)."""
-    from pidyn.baselines.data_start import fundamental, start_from_data, with_start
-    from pidyn.baselines.least_squares import output_error
+    from pidyn.baselines.data_start import fundamental
 
     if record.a is None:
         raise ValueError(f"record '{record.name}': neither a displacement nor an acceleration channel")
@@ -51,24 +51,7 @@ def motion_view(record: Record, system, fit: tuple[float, float], corner_share: 
     if peak is None:
         raise ValueError(f"record '{record.name}': the accelerations show no resonance to integrate around")
     fn = peak[0]
-    start = start_from_data(record, system)
-    values = {s.name: float(s.init) for s in system.param_specs()}
-    note = "nominal influence: the config's"
-    if start is not None:
-        values.update(start.values)
-        system = with_start(system, start.values)
-        note = f"start from the data ({start.method})"
-    if system.n_inputs > 1:
-        seg = record.segment(*fit)
-        res = output_error(
-            seg,
-            system,
-            init={
-                k: v for k, v in values.items() if k in {s.name for s in system.param_specs() if s.trainable}
-            },
-        )
-        values.update(res.params)
-        note += f", then output error on the accelerations of {fit[0]:.4g}-{fit[1]:.4g} s ({res.note})"
+    system, values, note = _nominal_influence(record, system, fit)
     f = np.asarray(record.f, float)
     several = system.n_inputs > 1
     # the motion relative to the supports weighted by their influence (what the sensor reads of them
@@ -112,6 +95,33 @@ def motion_view(record: Record, system, fit: tuple[float, float], corner_share: 
     # drive as measured (unfiltered: a nonlinear structure's response to a filtered ground is not the
     # filtered response)
     return replace(record, f=drive, x=None, v=None, a=relative[:, None], meta=meta, clean=None)
+
+
+def _nominal_influence(record: Record, system, fit: tuple[float, float]) -> tuple[Any, dict[str, float], str]:
+    """The nominal model's values from the data's start and, with several inputs, the supports'
+    influence by output error on the fitting part; with a sentence that says where they came from."""
+    from pidyn.baselines.data_start import start_from_data, with_start
+    from pidyn.baselines.least_squares import output_error
+
+    start = start_from_data(record, system)
+    values = {s.name: float(s.init) for s in system.param_specs()}
+    note = "nominal influence: the config's"
+    if start is not None:
+        values.update(start.values)
+        system = with_start(system, start.values)
+        note = f"start from the data ({start.method})"
+    if system.n_inputs > 1:
+        seg = record.segment(*fit)
+        res = output_error(
+            seg,
+            system,
+            init={
+                k: v for k, v in values.items() if k in {s.name for s in system.param_specs() if s.trainable}
+            },
+        )
+        values.update(res.params)
+        note += f", then output error on the accelerations of {fit[0]:.4g}-{fit[1]:.4g} s ({res.note})"
+    return system, values, note
 
 
 def acceleration_gain(record: Record, sims: dict[str, dict | None], held: np.ndarray) -> dict:

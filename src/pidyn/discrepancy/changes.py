@@ -167,41 +167,95 @@ def locate_change(
         force = {"k": x, "k1": x, "c": v}.get(pname)
         if force is None or pname not in names:
             continue
-        rss = np.empty(len(grid))
-        coefs = np.empty(len(grid))
-        for i, tc in enumerate(grid):
-            B = weak.project(force * (t >= tc))[:, 0]
-            M = np.column_stack([A, B[rows]])
-            theta = lstsq(M, y[rows])
-            rss[i] = float(np.sum((y[rows] - M @ theta) ** 2))
-            coefs[i] = theta[-1]
-        j = int(np.argmin(rss))
-        gain_ho = None
-        if has_ho:  # the best step, fitted on ``rows``, predicting the rows no fit used
-            B = weak.project(force * (t >= grid[j]))[:, 0]
-            theta = lstsq(np.column_stack([A, B[rows]]), y[rows])
-            rss_ho = float(np.sum((y[heldout] - np.column_stack([A0[heldout], B[heldout]]) @ theta) ** 2))
-            gain_ho = float(1 - rss_ho / max(rss0_ho, 1e-300))
-        prof = n_eff * np.log(np.maximum(rss, 1e-300) / max(rss[j], 1e-300))
-        inside = np.flatnonzero(prof <= CHI2_95)
-        # the interval reaches to the neighbouring grid points: it is never narrower than the grid
-        ci = (float(grid[max(inside.min() - 1, 0)]), float(grid[min(inside.max() + 1, len(grid) - 1)]))
-        delta_bic = n_eff * np.log(max(rss[j], 1e-300) / max(rss0, 1e-300)) + 2 * np.log(n_eff)
-        base = nominal.get(pname, 1.0)
-        cand = Change(
+        cand = _best_step(
             effect,
             pname,
-            float(grid[j]),
-            ci,
-            float(coefs[j] / base),
-            float(delta_bic),
-            float(1 - rss[j] / max(rss0, 1e-300)),
-            {"t": grid.tolist(), "profile": prof.tolist()},
-            gain_ho,
+            force,
+            A0,
+            y,
+            rows,
+            heldout if has_ho else None,
+            rss0,
+            rss0_ho,
+            t,
+            grid,
+            weak,
+            n_eff,
+            nominal,
         )
         if best is None or cand.delta_bic < best.delta_bic:
             best = cand
     return best
+
+
+def _best_step(
+    effect: str,
+    pname: str,
+    force: np.ndarray,
+    A0: np.ndarray,
+    y: np.ndarray,
+    rows: np.ndarray,
+    heldout: np.ndarray | None,
+    rss0: float,
+    rss0_ho: float | None,
+    t: np.ndarray,
+    grid: np.ndarray,
+    weak,
+    n_eff: float,
+    nominal: dict[str, float],
+) -> Change:
+    """The best step of ``pname`` (its force ``force``) over the grid of change times: the
+    estimate, its profile interval, its BIC against no step, its held-out gain."""
+    rss, coefs = _step_profile(A0[rows], y[rows], rows, weak, force, t, grid)
+    j = int(np.argmin(rss))
+    gain_ho = None
+    if heldout is not None:  # the best step, fitted on ``rows``, predicting the rows no fit used
+        gain_ho = _step_heldout_gain(
+            A0, y, rows, heldout, weak.project(force * (t >= grid[j]))[:, 0], rss0_ho
+        )
+    prof = n_eff * np.log(np.maximum(rss, 1e-300) / max(rss[j], 1e-300))
+    inside = np.flatnonzero(prof <= CHI2_95)
+    # the interval reaches to the neighbouring grid points: it is never narrower than the grid
+    ci = (float(grid[max(inside.min() - 1, 0)]), float(grid[min(inside.max() + 1, len(grid) - 1)]))
+    delta_bic = n_eff * np.log(max(rss[j], 1e-300) / max(rss0, 1e-300)) + 2 * np.log(n_eff)
+    base = nominal.get(pname, 1.0)
+    return Change(
+        effect,
+        pname,
+        float(grid[j]),
+        ci,
+        float(coefs[j] / base),
+        float(delta_bic),
+        float(1 - rss[j] / max(rss0, 1e-300)),
+        {"t": grid.tolist(), "profile": prof.tolist()},
+        gain_ho,
+    )
+
+
+def _step_profile(
+    A: np.ndarray, y: np.ndarray, rows: np.ndarray, weak, force: np.ndarray, t: np.ndarray, grid: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The residual sum of squares and the step's coefficient for a step at every grid time,
+    the nominal parameters fitted with it."""
+    rss = np.empty(len(grid))
+    coefs = np.empty(len(grid))
+    for i, tc in enumerate(grid):
+        B = weak.project(force * (t >= tc))[:, 0]
+        M = np.column_stack([A, B[rows]])
+        theta = lstsq(M, y)
+        rss[i] = float(np.sum((y - M @ theta) ** 2))
+        coefs[i] = theta[-1]
+    return rss, coefs
+
+
+def _step_heldout_gain(
+    A0: np.ndarray, y: np.ndarray, rows: np.ndarray, heldout: np.ndarray, B: np.ndarray, rss0_ho: float
+) -> float:
+    """The step's column ``B`` fitted on ``rows`` with the nominal ones, predicting ``heldout``:
+    the share of the nominal model's held-out misfit it removes."""
+    theta = lstsq(np.column_stack([A0[rows], B[rows]]), y[rows])
+    rss_ho = float(np.sum((y[heldout] - np.column_stack([A0[heldout], B[heldout]]) @ theta) ** 2))
+    return float(1 - rss_ho / max(rss0_ho, 1e-300))
 
 
 def running_estimate(
@@ -253,13 +307,39 @@ def locate_step(
     ``th.min_step_heldout_gain``) does not persist: a stiffness lower only in the strong motion
     depends on the amplitude (softening), it is no damage. Nothing is named then, the split stays
     where it was, and the screening's rule for a step in time holds here too."""
-    from pidyn.discrepancy.effects import EFFECTS
     from pidyn.discrepancy.screening import weak_system
 
-    names, A0, y = weak_system(nominal, values, s, f, x_raw, weak, mass_known)
+    search = _step_search(
+        weak_system(nominal, values, s, f, x_raw, weak, mass_known), s, weak, candidates, values
+    )
+    t_end = float(s.t[-1])
+    fit0, held0 = fit, held
+    change = search(t_end if whole_record else fit[1])
+    if not _nameable(change, candidates, values, th):
+        return None, fit, held
+    if whole_record:
+        change, fit, held = _search_again(change, search, fit, held, t_end, values)
+        if change is None:
+            return None, fit0, held0
+    if not th.step_persists(change.heldout_gain):
+        log.info(
+            "%s, but the step does not persist: fitted up to %.4g s it fits the rest worse than no step "
+            "(held-out gain %.2f); a change in time lasts, a stiffness or damping that differs only in the "
+            "strong motion depends on the amplitude; none is named",
+            change.sentence(),
+            fit[1],
+            change.heldout_gain,
+        )
+        return None, fit0, held0
+    return change, fit, held
+
+
+def _step_search(regression: tuple, s, weak, candidates: dict[str, str], values: dict[str, float]):
+    """``search(end)``: the best step over the weak-form rows that end by ``end``, its held-out
+    gain on the rows after it (``locate_change``)."""
+    names, A0, y = regression
     w = 2 * weak.half + 1
     t_first, t_last = weak.t[weak.starts], weak.t[weak.starts + w - 1]
-    t_end = float(s.t[-1])
 
     def search(end: float):
         rows = t_last <= end + 1e-9
@@ -281,56 +361,62 @@ def locate_step(
             heldout=t_first >= end - 1e-9,
         )
 
-    fit0, held0 = fit, held
-    change = search(t_end if whole_record else fit[1])
+    return search
+
+
+def _nameable(change: Change | None, candidates: dict[str, str], values: dict[str, float], th) -> bool:
+    """The best step is one the library can name: inside its range, no stiffening, and passing
+    the screening's thresholds."""
+    from pidyn.discrepancy.effects import EFFECTS
+
     if change is not None and not EFFECTS[change.effect].admissible(change.effect_parameters(), values):
         log.info(
             "the best step in time, %s, is not one the library can name (outside its range)",
             change.sentence(),
         )
-        return None, fit, held
+        return False
     if change is not None and is_stiffening(change):
-        return None, fit, held
+        return False
     if change is None or change.delta_bic > -th.min_delta_bic or change.explained < th.min_cv_gain:
         log.info(
             "no step in %s explains the residual%s",
             " or ".join(sorted(set(candidates.values()))),
             "" if change is None else f" (best: {change.sentence()}, dBIC {change.delta_bic:.1f})",
         )
-        return None, fit, held
-    if whole_record:
-        cut = max(fit[1], change.t_change + 0.5 * (t_end - change.t_change))
-        if cut > fit[1]:
-            log.info(
-                "the change lies at %.4g s, late in or beyond the fitting part: fitting now %.4g-%.4g s, "
-                "held out %.4g-%.4g s",
-                change.t_change,
-                fit[0],
-                cut,
-                cut,
-                held[1],
-            )
-            fit, held = (fit[0], cut), (cut, held[1])
-        again = search(fit[1])
-        if again is not None and is_stiffening(again):
-            return None, fit0, held0
-        change = again if again is not None else change
-        if not EFFECTS[change.effect].admissible(change.effect_parameters(), values):
-            log.info(
-                "re-estimated on the new fitting part, %s is outside the library's range; none is named",
-                change.sentence(),
-            )
-            return None, fit0, held0
-    if not th.step_persists(change.heldout_gain):
+        return False
+    return True
+
+
+def _search_again(
+    change: Change, search, fit: tuple[float, float], held: tuple[float, float], t_end: float, values: dict
+) -> tuple[Change | None, tuple[float, float], tuple[float, float]]:
+    """A change found on the whole record, late in or beyond the fitting part: the split moves to
+    halfway between it and the record's end and the change is estimated again on the new fitting
+    part. None when the new estimate is a stiffening or outside the library's range."""
+    from pidyn.discrepancy.effects import EFFECTS
+
+    cut = max(fit[1], change.t_change + 0.5 * (t_end - change.t_change))
+    if cut > fit[1]:
         log.info(
-            "%s, but the step does not persist: fitted up to %.4g s it fits the rest worse than no step "
-            "(held-out gain %.2f); a change in time lasts, a stiffness or damping that differs only in the "
-            "strong motion depends on the amplitude; none is named",
-            change.sentence(),
-            fit[1],
-            change.heldout_gain,
+            "the change lies at %.4g s, late in or beyond the fitting part: fitting now %.4g-%.4g s, "
+            "held out %.4g-%.4g s",
+            change.t_change,
+            fit[0],
+            cut,
+            cut,
+            held[1],
         )
-        return None, fit0, held0
+        fit, held = (fit[0], cut), (cut, held[1])
+    again = search(fit[1])
+    if again is not None and is_stiffening(again):
+        return None, fit, held
+    change = again if again is not None else change
+    if not EFFECTS[change.effect].admissible(change.effect_parameters(), values):
+        log.info(
+            "re-estimated on the new fitting part, %s is outside the library's range; none is named",
+            change.sentence(),
+        )
+        return None, fit, held
     return change, fit, held
 
 

@@ -123,12 +123,7 @@ def confirm(
     out = Confirmation()
     if not candidates:
         return out
-    t = record.t
-    m_fit = (t >= fit[0] - 1e-9) & (t <= fit[1] + 1e-9)
-    m_ho = (t >= held[0] - 1e-9) & (t <= held[1] + 1e-9) & ~m_fit
-    r0 = channel_residuals(system, values, record, substeps)
-    rss0 = float(np.nansum(r0[:, m_fit] ** 2))
-    rss0_ho = float(np.nansum(r0[:, m_ho] ** 2)) if m_ho.any() else None
+    (m_fit, m_ho), (rss0, rss0_ho) = _nominal_misfit(record, system, values, fit, held, substeps)
     seg_end = fit[1] if polish_seconds is None else min(fit[1], fit[0] + float(polish_seconds))
     seg = record.segment(fit[0], seg_end)
     trainable0 = {s.name for s in system.param_specs() if s.trainable}
@@ -147,43 +142,79 @@ def confirm(
         except (ValueError, FloatingPointError) as err:  # a start the effect's bounds refuse
             out.tested.append({"effect": row["effect"], "weak_form_score": row["score"], "error": str(err)})
             continue
-        ext_values = {**{s.name: s.init for s in ext.param_specs()}, **values, **res.params}
-        r1 = channel_residuals(ext, ext_values, record, substeps)
-        rss1 = float(np.nansum(r1[:, m_fit] ** 2))
-        n_eff = float(sum(independent_samples(r1[c, m_fit]) for c in range(r1.shape[0])))
-        k = len({s.name for s in specs} - trainable0)
-        ok = np.isfinite(rss1) and rss1 > 0 and rss0 > 0
-        delta_bic = (n_eff * np.log(rss1 / rss0) + k * np.log(max(n_eff, 2.0))) if ok else np.inf
-        ho = None if rss0_ho is None or rss0_ho <= 0 else 1.0 - float(np.nansum(r1[:, m_ho] ** 2)) / rss0_ho
-        effect_params = {n: float(v) for n, v in res.params.items() if n not in trainable0}
-        nominal_refit = {n: float(v) for n, v in res.params.items() if n in trainable0}
-        passes = bool(delta_bic <= -th.min_delta_bic and (ho is None or ho >= th.min_heldout_gain))
-        tested = {
-            "effect": row["effect"],
-            "weak_form_score": float(row["score"]),
-            "score": float(-delta_bic),
-            "delta_bic": float(delta_bic),
-            "explained": float(1 - rss1 / rss0) if ok else None,
-            "heldout_gain": ho,
-            "independent_samples": n_eff,
-            "parameters": effect_params,
-            "nominal_refit": nominal_refit,
-            "passes": passes,
-            "seconds": time.perf_counter() - t0,
-            "source": "output_error",
-        }
+        tested = _judge(
+            row, ext, specs, values, res, record, substeps, (m_fit, m_ho), (rss0, rss0_ho), trainable0, th
+        )
+        tested["seconds"] = time.perf_counter() - t0
         out.tested.append(tested)
         log.info(
             "output-error check of %s (weak-form score %.1f): dBIC %.1f over %.0f independent samples, "
             "held-out gain %s%s",
             row["effect"],
             row["score"],
-            delta_bic,
-            n_eff,
-            "n/a" if ho is None else f"{ho:.2f}",
-            ": named" if passes else "",
+            tested["delta_bic"],
+            tested["independent_samples"],
+            "n/a" if tested["heldout_gain"] is None else f"{tested['heldout_gain']:.2f}",
+            ": named" if tested["passes"] else "",
         )
     passing = [r for r in out.tested if r.get("passes")]
     if passing:
         out.row = max(passing, key=lambda r: r["score"])
     return out
+
+
+def _judge(
+    row: dict,
+    ext,
+    specs: list,
+    values: dict[str, float],
+    res,
+    record: Record,
+    substeps: int,
+    masks: tuple[np.ndarray, np.ndarray],
+    rss_nominal: tuple[float, float | None],
+    trainable0: set[str],
+    th: Thresholds,
+) -> dict:
+    """One candidate's output-error fit judged on the simulated channels: its BIC against the
+    nominal model on the fitting part and its gain on the held-out part."""
+    m_fit, m_ho = masks
+    rss0, rss0_ho = rss_nominal
+    ext_values = {**{s.name: s.init for s in ext.param_specs()}, **values, **res.params}
+    r1 = channel_residuals(ext, ext_values, record, substeps)
+    rss1 = float(np.nansum(r1[:, m_fit] ** 2))
+    n_eff = float(sum(independent_samples(r1[c, m_fit]) for c in range(r1.shape[0])))
+    k = len({s.name for s in specs} - trainable0)
+    ok = np.isfinite(rss1) and rss1 > 0 and rss0 > 0
+    delta_bic = (n_eff * np.log(rss1 / rss0) + k * np.log(max(n_eff, 2.0))) if ok else np.inf
+    ho = None if rss0_ho is None or rss0_ho <= 0 else 1.0 - float(np.nansum(r1[:, m_ho] ** 2)) / rss0_ho
+    effect_params = {n: float(v) for n, v in res.params.items() if n not in trainable0}
+    nominal_refit = {n: float(v) for n, v in res.params.items() if n in trainable0}
+    passes = bool(delta_bic <= -th.min_delta_bic and (ho is None or ho >= th.min_heldout_gain))
+    tested = {
+        "effect": row["effect"],
+        "weak_form_score": float(row["score"]),
+        "score": float(-delta_bic),
+        "delta_bic": float(delta_bic),
+        "explained": float(1 - rss1 / rss0) if ok else None,
+        "heldout_gain": ho,
+        "independent_samples": n_eff,
+        "parameters": effect_params,
+        "nominal_refit": nominal_refit,
+        "passes": passes,
+        "source": "output_error",
+    }
+    return tested
+
+
+def _nominal_misfit(
+    record: Record, system, values: dict[str, float], fit: tuple, held: tuple, substeps: int
+) -> tuple[tuple[np.ndarray, np.ndarray], tuple[float, float | None]]:
+    """The fitting and held-out masks and the nominal model's residual sums of squares on them."""
+    t = record.t
+    m_fit = (t >= fit[0] - 1e-9) & (t <= fit[1] + 1e-9)
+    m_ho = (t >= held[0] - 1e-9) & (t <= held[1] + 1e-9) & ~m_fit
+    r0 = channel_residuals(system, values, record, substeps)
+    rss0 = float(np.nansum(r0[:, m_fit] ** 2))
+    rss0_ho = float(np.nansum(r0[:, m_ho] ** 2)) if m_ho.any() else None
+    return (m_fit, m_ho), (rss0, rss0_ho)

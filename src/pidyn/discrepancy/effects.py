@@ -1,21 +1,24 @@
 """The library of candidate effects a nominal model may be missing.
 
-Each effect is one small class that knows three things:
+The force itself is written once, as a term in ``pidyn.systems.terms``; an effect keeps only
+what is its own:
 
-* ``candidates``: its force as regression columns on the measured signals, one set per
-  point of a small grid over the parameters the force is nonlinear in (a gap, a damage
-  time, a hysteresis shape). The screening fits the coefficients by least squares.
-* ``term``: the restoring-force term (``pidyn.systems.terms``) that extends the model,
-  initialised from the screening estimate, whose parameters PIDynNet then trains.
+* ``candidates``: the grid over the parameters the force is nonlinear in (a gap, a damage
+  time, a hysteresis shape); at each point the term's own columns (``ForceTerm.columns``) on
+  the measured signals. The screening fits the coefficients by least squares.
+* ``term``: the term that extends the model at the screening's estimate, whose parameters
+  PIDynNet then trains.
 * ``sample``: a hidden instance of itself with a random magnitude, for the tests and the
   benchmark that hide an effect in simulated data and require the diagnosis to find it.
+* ``admissible`` (optional): which fits describe a physical structure.
 
-To add an effect: write the force term in ``terms.py``, one subclass here, and register
-it in ``EFFECTS``.
+To add an effect: the force term in ``terms.py``, one subclass here registered in ``EFFECTS``,
+and a test that hides it (see the README's "Adding a force effect or an estimator").
 """
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
@@ -28,9 +31,12 @@ from pidyn.systems.terms import (
     DampingChange,
     ForceTerm,
     GapContact,
+    LinearStiffness,
     QuadraticDamping,
     QuadraticStiffness,
     StiffnessLoss,
+    ViscousDamping,
+    latent_path,
 )
 
 
@@ -90,16 +96,17 @@ class Candidate:
     positive: tuple[bool, ...] = ()  # coefficient must be > 0 to be physical
 
 
-class Effect:
-    """Base class of a candidate effect."""
+class Effect(ABC):
+    """A candidate effect: its grid (``candidates``), its term and its sampler are abstract."""
 
     name: str = "effect"
     n_grid: int = 0  # parameters found by the grid (they count in the information criterion)
     #: a step in time: what changed stays changed, so it must not fit the held-out part worse
     step_in_time: bool = False
 
+    @abstractmethod
     def candidates(self, s: Signals) -> Iterator[Candidate]:
-        raise NotImplementedError
+        """The regression columns at every point of the effect's grid."""
 
     def parameters(
         self, coef: dict[str, float], fixed: dict[str, float], nominal: dict[str, float]
@@ -113,16 +120,16 @@ class Effect:
         fit that does not is no evidence for the effect."""
         return True
 
+    @abstractmethod
     def term(self, params: dict[str, float], ctx: dict) -> ForceTerm:
         """The force term at ``params``; ``ctx`` is ``Signals.context()``."""
-        raise NotImplementedError
 
+    @abstractmethod
     def sample(self, rng: np.random.Generator, s: Signals, sign: float | None = None) -> dict[str, float]:
         """Random true parameters of a hidden instance, sized against the response ``s``.
 
         ``sign`` (+1 / -1) fixes the sign of an effect whose sign is a finding (cubic and
         quadratic stiffness); None draws it. Effects whose sign physics fixes ignore it."""
-        raise NotImplementedError
 
     #: the effect's sign is a finding (its coefficient is identified with either sign)
     signed: bool = False
@@ -140,7 +147,8 @@ class Cubic(Effect):
     name, key, tolerance = "cubic_stiffness", "k3", 0.2
 
     def candidates(self, s):
-        yield Candidate(self.name, s.x[:, None] ** 3, ("k3",), positive=(False,))
+        col = CubicStiffness(1.0, signed=True).columns(s.t, s.x, s.v, None, {})["k3"]
+        yield Candidate(self.name, col[:, None], ("k3",), positive=(False,))
 
     signed = True
 
@@ -158,7 +166,8 @@ class Quadratic(Effect):
     name, key, tolerance = "quadratic_stiffness", "k2", 0.25
 
     def candidates(self, s):
-        yield Candidate(self.name, s.x[:, None] ** 2, ("k2",), positive=(False,))
+        col = QuadraticStiffness(1.0).columns(s.t, s.x, s.v, None, {})["k2"]
+        yield Candidate(self.name, col[:, None], ("k2",), positive=(False,))
 
     def term(self, p, s):
         return QuadraticStiffness(p["k2"])
@@ -177,9 +186,8 @@ class Coulomb(Effect):
     def candidates(self, s):
         # near rest, noise flips the sign of the measured velocity: a column no sharper than
         # the noise (the term's own rule, so a screening of the extended model sees the same)
-        col = CoulombFriction(1.0, eps=s.friction_eps).measured_force(
-            s.t, s.x, s.v, None, {"Fc": 1.0}, s.v_noise
-        )
+        term = CoulombFriction(1.0, eps=s.friction_eps)
+        col = term.columns(s.t, s.x, s.v, None, {}, v_noise=s.v_noise)["Fc"]
         yield Candidate(self.name, col[:, None], ("Fc",), positive=(True,))
 
     def term(self, p, s):
@@ -193,7 +201,8 @@ class QuadDamping(Effect):
     name, key, tolerance = "quadratic_damping", "c2", 0.3
 
     def candidates(self, s):
-        yield Candidate(self.name, (s.v * np.abs(s.v))[:, None], ("c2",), positive=(True,))
+        col = QuadraticDamping(1.0).columns(s.t, s.x, s.v, None, {})["c2"]
+        yield Candidate(self.name, col[:, None], ("c2",), positive=(True,))
 
     def term(self, p, s):
         return QuadraticDamping(p["c2"])
@@ -201,26 +210,6 @@ class QuadDamping(Effect):
     def sample(self, rng, s, sign=None):
         v_peak = float(np.max(np.abs(s.v)))
         return {"c2": self._size(rng, s, 0.08, 0.2) / v_peak**2}
-
-
-def bouc_wen_z(
-    x: np.ndarray, beta: np.ndarray, gamma: np.ndarray, n: np.ndarray, substeps: int = 4
-) -> np.ndarray:
-    """Bouc-Wen z along a displacement path, for P parameter sets at once: (N,) -> (N, P).
-
-    z' = x' (1 - (beta + gamma sgn(x' z)) |z|^n) is rate independent, so z follows from the
-    increments of x alone (midpoint rule on ``substeps`` sub-increments).
-    """
-    beta, gamma, n = (np.atleast_1d(np.asarray(a, float)) for a in (beta, gamma, n))
-    z = np.zeros((len(x), beta.size))
-    zi = np.zeros(beta.size)
-    dxs = np.diff(x) / substeps
-    for i, dx in enumerate(dxs):
-        for _ in range(substeps):
-            g = lambda zz: dx * (1 - (beta + gamma * np.sign(dx * zz)) * np.abs(zz) ** n)  # noqa: E731
-            zi = zi + g(zi + 0.5 * g(zi))
-        z[i + 1] = zi
-    return z
 
 
 class Hysteresis(Effect):
@@ -243,11 +232,13 @@ class Hysteresis(Effect):
 
     def candidates(self, s):
         grid = self._grid(s)
-        z = bouc_wen_z(s.x, grid[:, 0], grid[:, 1], grid[:, 2])
+        term = BoucWenHysteresis(1.0, param="kh")
+        # rate independent: z along the displacement path alone (a smoothed velocity drifts from it)
+        z = latent_path(term, s.t, s.x, None, {"beta": grid[:, 0], "gamma": grid[:, 1], "n": grid[:, 2]})
         for j, (beta, gamma, n) in enumerate(grid):
             yield Candidate(
                 self.name,
-                z[:, j : j + 1],
+                term.columns(s.t, s.x, s.v, z[:, j], {})["kh"][:, None],
                 ("kh",),
                 fixed={"beta": beta, "gamma": gamma, "n": n},
                 positive=(True,),
@@ -295,13 +286,14 @@ class Damage(Effect):
         return float(s.t[0]) + 0.05 * (t_end - s.t[0]), t_end
 
     signal, coef = "x", "dk"  # the force that steps: k x (a damping change steps c x')
+    base: ForceTerm = LinearStiffness(1.0, param="k")  # the nominal term whose column steps
     #: the column is -x H(t - t_d), so the coefficient dk is the stiffness lost (> 0): a stiffness
     #: that rises in time is no loss but the mark of an amplitude-dependent one
     column_sign, positive = -1.0, True
 
     def candidates(self, s):
         lo, hi = self._span(s)
-        sig = getattr(s, self.signal)
+        sig = self.base.columns(s.t, s.x, s.v, None, {})[self.base.linear[0]]
         for t_d in np.linspace(lo, hi, self.n_times + 2)[1:-1]:
             col = self.column_sign * sig * (s.t >= t_d)
             yield Candidate(
@@ -345,6 +337,7 @@ class DampChange(Damage):
 
     name, key, tolerance = "damping_change", "change", 0.35
     signal, coef = "v", "dc"
+    base = ViscousDamping(1.0)
     column_sign, positive = 1.0, False  # damping may rise or fall
 
     def parameters(self, coef, fixed, nominal):
@@ -382,7 +375,7 @@ class Gap(Effect):
     def candidates(self, s):
         for share in self.gap_shares:
             gap = share * s.x_peak
-            col = np.maximum(s.x - gap, 0) - np.maximum(-s.x - gap, 0)
+            col = GapContact(1.0, gap).columns(s.t, s.x, s.v, None, {"gap": gap})["kg"]
             yield Candidate(self.name, col[:, None], ("kg",), fixed={"gap": float(gap)}, positive=(True,))
 
     def term(self, p, s):

@@ -114,16 +114,15 @@ def _starts(
     displacement smoothed over a tenth of the period, else from the model's simulation; latent
     states from the model's simulation. They are trained with the rest; this is only where
     they start."""
-    from pidyn.integrate import rk4
+    from pidyn.simulate import simulate_states
 
     n = system.n_dof
     width = max(5, int(round(0.1 * period / record.dt)) | 1)
     measured = record.x is not None and bool(np.all(np.isfinite(record.x))) and width < len(record.t)
     y0 = np.zeros((len(idx), system.n_state))
     if system.n_latent or (smoothed is None and not measured):
-        with np.errstate(all="ignore"):
-            Y, _ = rk4(system, dict(values), record.t, record.f, np.zeros((1, system.n_state)), substeps=2)
-        y0 = np.array(Y[idx, 0, :])
+        Y, _ = simulate_states(system, values, record.t, record.f, substeps=2)
+        y0 = np.array(Y[idx, :])
     if smoothed is not None:
         y0[:, :n] = np.reshape(smoothed[0], (len(record.t), -1))[idx]
         y0[:, n : 2 * n] = np.reshape(smoothed[1], (len(record.t), -1))[idx]
@@ -286,13 +285,8 @@ def fit_learned_force(
     g = None if not terms else _grid(record, samples, period, periods_per_segment, substeps)
     if g is None:
         return None
-    start, dtype, nd = time.perf_counter(), torch.float64, system.n_dof
-    specs = {s.name: s for s in system.param_specs()}
-    free = [name for name, s in specs.items() if s.trainable and name in values]
-    fspecs = {name: _free_spec(specs[name], float(values[name])) for name in free}
-    raw = torch.tensor(
-        [to_raw(fspecs[name], float(values[name])) for name in free], dtype=dtype, requires_grad=True
-    )
+    start, dtype = time.perf_counter(), torch.float64
+    free, fspecs, raw = _free_parameters(system, values, dtype)
     y0 = _starts(record, system, values, g.idx, period, smoothed)
     y_scale = torch.tensor(np.maximum(np.abs(y0).max(0), 1e-12), dtype=dtype)
     y_raw = torch.tensor(y0, dtype=dtype).div(y_scale).requires_grad_(True)
@@ -304,34 +298,11 @@ def fit_learned_force(
     def loss_fn() -> torch.Tensor:
         p = {**fixed, **{name: from_raw(fspecs[name], raw[i]) for i, name in enumerate(free)}}
         Y = _simulate(system.state_rate, y_raw * y_scale, p, g)  # torch states in, torch rates out
-        sim = {"x": Y[..., :nd], "v": Y[..., nd : 2 * nd]}
-        if any(kind == "a" for kind, *_ in targets):
-            sim["a"] = system.state_rate(t_rows, Y, p, f_rows)[..., nd : 2 * nd]
-        total = torch.zeros((), dtype=dtype)
-        for kind, target, mask, var in targets:
-            total = total + (((sim[kind] - target) ** 2) * mask / var).sum() / mask.sum().clamp_min(1.0)
-        return total
+        return _segment_loss(system, Y, p, targets, t_rows, f_rows)
 
-    def keep() -> dict:
-        return {"raw": raw.detach().clone(), "nets": [copy.deepcopy(c.state_dict()) for c in copies]}
-
-    try:
-        for t, c in zip(terms, copies):
-            t.net = c
-        params = [raw, y_raw] + [w for c in copies for w in c.parameters()]
-        before, evaluations, best = _lbfgs_best(loss_fn, params, keep, max_evaluations)
-    finally:
-        for t, o in zip(terms, originals):
-            t.net = o
+    before, evaluations, best = _train_copies(terms, copies, [raw, y_raw], loss_fn, max_evaluations)
     after = best.get("loss", before)
-    out_values = dict(values)
-    if after < before:
-        with torch.no_grad():
-            for i, name in enumerate(free):
-                out_values[name] = float(from_raw(fspecs[name], best["raw"][i]))
-            for o, state in zip(originals, best["nets"]):
-                for w, (_, trained) in zip(o.parameters(), state.items()):
-                    w.copy_(trained.to(w.dtype))
+    out_values = _keep_best(values, free, fspecs, originals, best) if after < before else dict(values)
     result = LearnedFit(
         out_values,
         before,
@@ -343,6 +314,62 @@ def fit_learned_force(
     )
     log.info("%s", result.note)
     return result
+
+
+def _train_copies(terms: list, copies: list, tensors: list[torch.Tensor], loss_fn, max_evaluations: int):
+    """L-BFGS on ``tensors`` and the copies of the terms' networks (set in the terms while it runs,
+    the originals put back after): (loss before, evaluations, the best evaluation's state)."""
+    originals = [t.net for t in terms]
+    raw = tensors[0]
+
+    def keep() -> dict:
+        return {"raw": raw.detach().clone(), "nets": [copy.deepcopy(c.state_dict()) for c in copies]}
+
+    try:
+        for t, c in zip(terms, copies):
+            t.net = c
+        params = list(tensors) + [w for c in copies for w in c.parameters()]
+        return _lbfgs_best(loss_fn, params, keep, max_evaluations)
+    finally:
+        for t, o in zip(terms, originals):
+            t.net = o
+
+
+def _free_parameters(system, values: dict[str, float], dtype) -> tuple[list[str], dict, torch.Tensor]:
+    """The trainable parameters with a value, their specs for the segment fit and their raw
+    (unconstrained) values as one tensor to train."""
+    specs = {s.name: s for s in system.param_specs()}
+    free = [name for name, s in specs.items() if s.trainable and name in values]
+    fspecs = {name: _free_spec(specs[name], float(values[name])) for name in free}
+    raw = torch.tensor(
+        [to_raw(fspecs[name], float(values[name])) for name in free], dtype=dtype, requires_grad=True
+    )
+    return free, fspecs, raw
+
+
+def _segment_loss(system, Y: torch.Tensor, p: dict, targets: list, t_rows, f_rows) -> torch.Tensor:
+    """The segments' simulated response against the measured channels: each channel's mean
+    squared error over its variance, summed."""
+    nd = system.n_dof
+    sim = {"x": Y[..., :nd], "v": Y[..., nd : 2 * nd]}
+    if any(kind == "a" for kind, *_ in targets):
+        sim["a"] = system.state_rate(t_rows, Y, p, f_rows)[..., nd : 2 * nd]
+    total = torch.zeros((), dtype=Y.dtype)
+    for kind, target, mask, var in targets:
+        total = total + (((sim[kind] - target) ** 2) * mask / var).sum() / mask.sum().clamp_min(1.0)
+    return total
+
+
+def _keep_best(values: dict, free: list[str], fspecs: dict, originals: list, best: dict) -> dict[str, float]:
+    """The best evaluation's parameters as values and its weights set in the terms' networks."""
+    out_values = dict(values)
+    with torch.no_grad():
+        for i, name in enumerate(free):
+            out_values[name] = float(from_raw(fspecs[name], best["raw"][i]))
+        for o, state in zip(originals, best["nets"]):
+            for w, (_, trained) in zip(o.parameters(), state.items()):
+                w.copy_(trained.to(w.dtype))
+    return out_values
 
 
 __all__ = ["LearnedFit", "fit_learned_force"]
@@ -382,7 +409,7 @@ def save_unexplained(
     excitation paired with ``x_raw`` (default the record's)."""
     from pidyn.discrepancy.residual import unexplained_force
 
-    period = 2 * np.pi * np.sqrt(values["m"] / max(values.get("k", values.get("k1", 1.0)), 1e-300))
+    period = 2 * np.pi * np.sqrt(values["m"] / max(values.get(system.stiffness_name, 1.0), 1e-300))
     pw = unexplained_force(system, values, record.t, x_raw, record.f if f is None else f, period)
     dt = float(record.t[1] - record.t[0])
     edge = max(1, int(round(period / dt)))

@@ -43,8 +43,9 @@ from pidyn.discrepancy.learned_fit import (
 )
 from pidyn.discrepancy.screening import EXCLUSIVE, Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
+from pidyn.discrepancy.verdicts import Verdict
 from pidyn.signals import dominant_period
-from pidyn.simulate import simulate_identified, simulate_response
+from pidyn.simulate import simulate_response
 from pidyn.systems.sdof import SDOFSystem
 from pidyn.weak_form import WeakForm, measurement_noise, smooth_signals, velocity_noise
 
@@ -83,14 +84,6 @@ def split_spans(record: Record, fit_share: float) -> tuple[tuple[float, float], 
     t0, t1 = float(record.t[0]), float(record.t[-1])
     cut = t0 + fit_share * (t1 - t0)
     return (t0, cut), (cut, t1)
-
-
-def stiffness_name(system: SDOFSystem) -> str:
-    names = [s.name for s in system.param_specs()]
-    for n in ("k", "k1"):
-        if n in names:
-            return n
-    raise ValueError(f"nominal system '{system.name}' has no linear stiffness 'k' or 'k1' to extend")
 
 
 @dataclass
@@ -140,7 +133,7 @@ class Case:
 
     @property
     def stiff(self) -> str:
-        return stiffness_name(self.base)
+        return self.base.stiffness_name
 
     def mask(self, span: tuple[float, float]) -> np.ndarray:
         return (self.record.t >= span[0]) & (self.record.t <= span[1])
@@ -187,9 +180,7 @@ class Case:
 
     def free_run(self, system: SDOFSystem, values: dict[str, float], v0: float) -> np.ndarray:
         """The model from the measured initial state over the whole record."""
-        return simulate_identified(
-            system, values, self.record, x0=float(self.x_raw[0]), v0=v0, substeps=int(self.settings.substeps)
-        )[:, 0]
+        return self.free_response(system, values, v0)["x"][:, 0]
 
     def free_response(self, system: SDOFSystem, values: dict[str, float], v0: float) -> dict[str, np.ndarray]:
         """``free_run``'s x, v and a (relative) over the whole record."""
@@ -306,57 +297,23 @@ def run(case: Case) -> Outcome:
     # does the nominal model hold on the held-out part? if not, when did the structure change?
     x_nom = case.free_run(nom.system, nom.values, float(nom.s.v[0]))
     check, change_row = check_heldout(case, nom, sc, x_nom, bool(forced))
-    cause = change_row["effect"] if change_row is not None else (forced or sc.cause)
-    confirmation = None
-    if case.from_accelerometers and change_row is None and not forced:
-        # integrated accelerations are a poor measurement of the motion: the weak form proposes, output
-        # error on the accelerations decides among every effect it could fit
-        confirmation = confirm_undecided(
-            case, nom.system, nom.values, nom.node, sc, nom.s, 1, everything=True
-        )
-        cause = None if confirmation.row is None else confirmation.row["effect"]
-    elif cause is None and not forced and sc.verdict == "none":
-        # an effect the weak form leans towards without deciding: the simulated response decides
-        confirmation = confirm_undecided(case, nom.system, nom.values, nom.node, sc, nom.s, 1)
-        if confirmation.row is not None:
-            cause = confirmation.row["effect"]
+    cause, confirmation = _first_cause(case, nom, sc, check, change_row, forced)
     running = running_period(case, nom)
     if (
         case.from_accelerometers
     ):  # the period that moves beyond its windows' intervals refutes one linear model
         structured = check.failed or bool(running and running.get("variation", {}).get("varies"))
     else:
-        structured = sc.verdict == "unexplained" or check.failed
+        structured = sc.verdict == Verdict.UNEXPLAINED or check.failed
     if cause is None and case.settings.learn_unexplained and not forced and structured:
         cause = LEARNED  # structured, but nothing in the library explains it: learn the force
-    row = (
-        None
-        if cause is None
-        else (
-            learned_row(sc.structure)
-            if cause == LEARNED
-            else change_row
-            or (
-                confirmation.row
-                if confirmation and confirmation.row
-                else next(r for r in sc.ranking if r["effect"] == cause)
-            )
-        )
-    )
+    row = _cause_row(cause, sc, change_row, confirmation)
     ext = extend_until_explained(case, nom, cause, row, bool(forced))
     causes = ext["causes"] if case.settings.extend else ([] if cause is None else [cause])
     x_ext = (
         case.free_run(ext["system"], ext["values"], float(nom.s.v[0])) if ext["system"] is not None else None
     )
-    sims = {}
-    if case.from_accelerometers:  # the gain is measured on the accelerations, as the sensors read them
-        v0 = float(nom.s.v[0])
-        sims = {
-            "nominal": case.free_response(nom.system, nom.values, v0),
-            "extended": None
-            if ext["system"] is None
-            else case.free_response(ext["system"], ext["values"], v0),
-        }
+    sims = _acceleration_sims(case, nom, ext) if case.from_accelerometers else {}
     return Outcome(
         nom,
         sc,
@@ -374,6 +331,52 @@ def run(case: Case) -> Outcome:
         nominal_modes(case, nom),
         running,
     )
+
+
+def _first_cause(
+    case: Case, nom: Nominal, sc, check, change_row: dict | None, forced
+) -> tuple[str | None, Any]:
+    """The cause to extend with first (a located change, a forced effect, the screening's
+    choice) and, where the simulated response decides, the output-error confirmation."""
+    cause = change_row["effect"] if change_row is not None else (forced or sc.cause)
+    confirmation = None
+    if case.from_accelerometers and change_row is None and not forced:
+        # integrated accelerations are a poor measurement of the motion: the weak form proposes, output
+        # error on the accelerations decides among every effect it could fit
+        confirmation = confirm_undecided(
+            case, nom.system, nom.values, nom.node, sc, nom.s, 1, everything=True
+        )
+        cause = None if confirmation.row is None else confirmation.row["effect"]
+    elif cause is None and not forced and sc.verdict == Verdict.NONE:
+        # an effect the weak form leans towards without deciding: the simulated response decides
+        confirmation = confirm_undecided(case, nom.system, nom.values, nom.node, sc, nom.s, 1)
+        if confirmation.row is not None:
+            cause = confirmation.row["effect"]
+    return cause, confirmation
+
+
+def _cause_row(cause: str | None, sc, change_row: dict | None, confirmation) -> dict | None:
+    """The evidence row the extension starts from: the learned force's, the located change's,
+    the confirmation's or the screening's."""
+    if cause is None:
+        return None
+    if cause == LEARNED:
+        return learned_row(sc.structure)
+    if change_row:
+        return change_row
+    if confirmation and confirmation.row:
+        return confirmation.row
+    return next(r for r in sc.ranking if r["effect"] == cause)
+
+
+def _acceleration_sims(case: Case, nom: Nominal, ext: dict) -> dict:
+    """The nominal and extended models' responses: the gain is measured on the accelerations, as
+    the sensors read them."""
+    v0 = float(nom.s.v[0])
+    return {
+        "nominal": case.free_response(nom.system, nom.values, v0),
+        "extended": None if ext["system"] is None else case.free_response(ext["system"], ext["values"], v0),
+    }
 
 
 def running_period(case: Case, nom: Nominal) -> dict | None:
@@ -629,21 +632,24 @@ def _extension_step(
         if out["refused"] is not None:  # a network that fits the fitting part but predicts worse
             return None
     out["causes"].append(cause)
-    out["steps"].append(
-        {
-            "step": k,
-            "effect": cause,
-            "folder": folder.name,
-            "equation": system.describe(ext_values),
-            "evidence": {
-                **{key: row.get(key) for key in ROW_EVIDENCE},
-                **({"heldout_nrmse": errors} if cause == LEARNED else {}),
-            },
-        }
-    )
+    out["steps"].append(_step_record(k, cause, folder, system.describe(ext_values), row, errors))
     out.update(system=system, values=ext_values, metrics=metrics)
     log.info("step %d: extended with %s: %s", k, cause, system.describe(ext_values))
     return ext_node, ext_values, system
+
+
+def _step_record(k: int, cause: str, folder, equation: str, row: dict, errors) -> dict:
+    """What ``diagnosis.json`` keeps of extension step ``k``."""
+    return {
+        "step": k,
+        "effect": cause,
+        "folder": folder.name,
+        "equation": equation,
+        "evidence": {
+            **{key: row.get(key) for key in ROW_EVIDENCE},
+            **({"heldout_nrmse": errors} if cause == LEARNED else {}),
+        },
+    }
 
 
 def next_cause(
@@ -686,12 +692,12 @@ def next_cause(
         return (None, None) if confirmation.row is None else (confirmation.row["effect"], confirmation.row)
     if sc.cause is not None:
         return sc.cause, next(r for r in sc.ranking if r["effect"] == sc.cause)
-    if sc.verdict == "none":  # the simulated response decides what the weak form leans to
+    if sc.verdict == Verdict.NONE:  # the simulated response decides what the weak form leans to
         confirmation = confirm_undecided(case, system, values, node, sc, s, k + 1)
         step["next_confirmation"] = confirmation.tested
         if confirmation.row is not None:
             return confirmation.row["effect"], confirmation.row
-    if sc.verdict == "unexplained" and LEARNED not in out["causes"] and case.settings.learn_unexplained:
+    if sc.verdict == Verdict.UNEXPLAINED and LEARNED not in out["causes"] and case.settings.learn_unexplained:
         return LEARNED, learned_row(
             sc.structure
         )  # what remains is structured but no library effect: learn it

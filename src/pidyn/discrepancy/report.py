@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from pidyn.discrepancy.verdicts import Verdict
 from pidyn.reporting import plottable
 
 
@@ -179,36 +180,42 @@ def plot_running_estimate(
     )
     ax.legend(fontsize=8, loc="best")
     if with_period:
-        m = float(nominal.get("m", 1.0))
-        k = np.asarray(running[stiffness], float)
-        period = np.where(k > 0, 2 * np.pi * np.sqrt(m / np.where(k > 0, k, 1.0)), np.nan)
-        a2 = axes[1, 0]
-        _shade(a2, fit, held)
-        a2.plot(running["t"], period, marker=".", lw=1.2, color="tab:blue", label="running period")
-        a2.axhline(
-            2 * np.pi * np.sqrt(m / nominal[stiffness]),
-            color="tab:blue",
-            lw=0.7,
-            ls="--",
-            label="nominal model's period",
-        )
-        a2.set(xlabel="t [s] (window centre)", ylabel="period [s]", title="Natural period through the record")
-        if signal is not None:
-            b = a2.twinx()
-            b.plot(signal[0], np.abs(signal[1]), color="0.6", lw=0.5, zorder=0)
-            b.set_ylabel("|x| (relative displacement)", color="0.5")
-        if "c" in running and nominal.get("c") is not None:
-            c = np.asarray(running["c"], float)
-            zeta = np.where(k > 0, c / (2 * np.sqrt(m * np.where(k > 0, k, 1.0))), np.nan)
-            a2.plot([], [], color="tab:red", marker=".", label="damping ratio (right axis, x100 %)")
-            z = a2.twinx()
-            z.spines["right"].set_position(("axes", 1.08))
-            z.plot(running["t"], 100 * zeta, marker=".", lw=0.8, color="tab:red")
-            z.set_ylabel("damping ratio [%]", color="tab:red")
-        a2.legend(fontsize=8, loc="upper right")
+        _period_panel(axes[1, 0], running, nominal, fit, held, stiffness, signal)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _period_panel(a2, running: dict, nominal: dict, fit, held, stiffness: str, signal: tuple | None) -> None:
+    """The running natural period (and damping ratio) beside the motion's envelope."""
+    import numpy as np
+
+    m = float(nominal.get("m", 1.0))
+    k = np.asarray(running[stiffness], float)
+    period = np.where(k > 0, 2 * np.pi * np.sqrt(m / np.where(k > 0, k, 1.0)), np.nan)
+    _shade(a2, fit, held)
+    a2.plot(running["t"], period, marker=".", lw=1.2, color="tab:blue", label="running period")
+    a2.axhline(
+        2 * np.pi * np.sqrt(m / nominal[stiffness]),
+        color="tab:blue",
+        lw=0.7,
+        ls="--",
+        label="nominal model's period",
+    )
+    a2.set(xlabel="t [s] (window centre)", ylabel="period [s]", title="Natural period through the record")
+    if signal is not None:
+        b = a2.twinx()
+        b.plot(signal[0], np.abs(signal[1]), color="0.6", lw=0.5, zorder=0)
+        b.set_ylabel("|x| (relative displacement)", color="0.5")
+    if "c" in running and nominal.get("c") is not None:
+        c = np.asarray(running["c"], float)
+        zeta = np.where(k > 0, c / (2 * np.sqrt(m * np.where(k > 0, k, 1.0))), np.nan)
+        a2.plot([], [], color="tab:red", marker=".", label="damping ratio (right axis, x100 %)")
+        z = a2.twinx()
+        z.spines["right"].set_position(("axes", 1.08))
+        z.plot(running["t"], 100 * zeta, marker=".", lw=0.8, color="tab:red")
+        z.set_ylabel("damping ratio [%]", color="tab:red")
+    a2.legend(fontsize=8, loc="upper right")
 
 
 def plot_learned_force(path: Path, x, v, residual, learned, surface: dict, units: dict) -> None:
@@ -275,13 +282,13 @@ def write_report(path: Path, d: dict, figures: list[str]) -> None:
 def _verdict_lines(d: dict) -> list[str]:
     """The title and the verdict in words."""
     lines = [f"# Diagnosis of `{d['record']}`", ""]
-    if d["verdict"] == "none":
+    if d["verdict"] == Verdict.NONE:
         lines += [
             "**Verdict: none.** No candidate effect explains more of the residual than noise and the "
             "model's own error would (thresholds below). The nominal model is adequate for these data.",
             "",
         ]
-    elif d["verdict"] == "unexplained":
+    elif d["verdict"] == Verdict.UNEXPLAINED:
         lines += [
             "**Verdict: unexplained.** The nominal model is clearly wrong on these data, but no effect of the "
             "library (nor a change of stiffness or damping in time) explains what it misses. Look at the "
@@ -429,6 +436,11 @@ def _model_lines(d: dict) -> list[str]:
 
 def _evidence_lines(d: dict) -> list[str]:
     """The learned force, the held-out check, a change in time, the effect parameters, the truth."""
+    return _learned_lines(d) + _check_lines(d) + _change_and_truth_lines(d)
+
+
+def _learned_lines(d: dict) -> list[str]:
+    """The learned force that was added, and how it was trained."""
     lines: list[str] = []
     if d.get("learned_force"):
         st = d.get("structure") or {}
@@ -453,6 +465,12 @@ def _evidence_lines(d: dict) -> list[str]:
                 "(mean squared error over the response's variance).",
                 "",
             ]
+    return lines
+
+
+def _check_lines(d: dict) -> list[str]:
+    """A learned force refused, two effects at once, the held-out check."""
+    lines: list[str] = []
     refused = d.get("learned_force_refused")
     if refused:
         lines += [
@@ -481,6 +499,12 @@ def _evidence_lines(d: dict) -> list[str]:
             f"{'beyond' if hc['failed'] else 'within'} the threshold {hc['threshold']:g}).",
             "",
         ]
+    return lines
+
+
+def _change_and_truth_lines(d: dict) -> list[str]:
+    """A change in time, the effect parameters, and what was hidden in simulated data."""
+    lines: list[str] = []
     ch = d.get("change")
     if ch:
         what = "stiffness" if ch["effect"] == "stiffness_loss" else "damping"

@@ -41,7 +41,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pidyn.discrepancy.effects import EFFECTS, Candidate, Effect, Signals
+from pidyn.discrepancy.verdicts import Verdict
 from pidyn.systems.sdof import SDOFSystem
+from pidyn.systems.terms import latent_path
 from pidyn.weak_form import WeakForm
 
 
@@ -88,7 +90,7 @@ class Screening:
 
     nominal_params: dict[str, float]
     ranking: list[dict]
-    verdict: str
+    verdict: Verdict
     cause: str | None
     rss_nominal_fit: float
     rss_nominal_heldout: float | None
@@ -108,7 +110,7 @@ def nominal_columns(
         # velocity noise, as in its screening (sharper, noise near rest reads as a damping change)
         if term.n_latent:  # e.g. a hysteresis found in an earlier step: its z along the measured motion
             remainder = remainder + term.measured_force(
-                s.t, s.x, s.v, latent_path(term, s, values), values, s.v_noise
+                s.t, s.x, s.v, latent_path(term, s.t, s.x, s.v, values), values, s.v_noise
             )
             continue
         # a stop's kg is refitted too (its gap held): held at the value fitted without the next
@@ -120,27 +122,6 @@ def nominal_columns(
         cols.append(term.measured_force(s.t, s.x, s.v, None, {**values, name: 1.0}, s.v_noise))
         names.append(name)
     return names, np.stack(cols, axis=1) if cols else np.zeros((len(s.x), 0)), remainder
-
-
-def latent_path(term, s: Signals, values: dict[str, float], substeps: int = 4) -> np.ndarray:
-    """A latent state (N, n_latent) integrated along the measured x, x' from zero (Heun's
-    rule, x and x' interpolated linearly between samples): what the term's z was, given the
-    motion the structure made."""
-    z = np.zeros((len(s.t), term.n_latent))
-    zi = np.zeros(term.n_latent)
-    for i in range(len(s.t) - 1):
-        h = (s.t[i + 1] - s.t[i]) / substeps
-        for j in range(substeps):
-            a, b = j / substeps, (j + 1) / substeps
-            x0, v0 = s.x[i] + a * (s.x[i + 1] - s.x[i]), s.v[i] + a * (s.v[i + 1] - s.v[i])
-            x1, v1 = s.x[i] + b * (s.x[i + 1] - s.x[i]), s.v[i] + b * (s.v[i + 1] - s.v[i])
-            k1 = np.asarray(term.latent_rate(s.t[i], x0, v0, zi, values), float).reshape(term.n_latent)
-            k2 = np.asarray(term.latent_rate(s.t[i], x1, v1, zi + h * k1, values), float).reshape(
-                term.n_latent
-            )
-            zi = zi + 0.5 * h * (k1 + k2)
-        z[i + 1] = zi
-    return z
 
 
 def weak_system(
@@ -238,6 +219,11 @@ def screen(
     pairs = _score_pairs(effects, projected, ranking, base, values)
     structure["pair"] = _pair_lead(ranking, pairs, structure, th)
     verdict, cause = _verdict(ranking, structure, th)
+    return _screening(base, weak, ranking, structure, verdict, cause)
+
+
+def _screening(base, weak: WeakForm, ranking: list[dict], structure: dict, verdict, cause) -> Screening:
+    """The screening's outcome with the nominal regression's residual rows."""
     return Screening(
         nominal_params=dict(zip(base.names, map(float, base.theta0))),
         ranking=ranking,
@@ -402,15 +388,7 @@ def _score_pairs(
     for a, b in itertools.combinations(sorted(cols), 2):
         if any({a, b} <= g for g in EXCLUSIVE):
             continue
-        na, nb = len(cols[a]), len(cols[b])
-        if na * nb <= PAIR_FULL_GRID:
-            best, i, j = min((rss(a, b, i, j), i, j) for i in range(na) for j in range(nb))
-        else:
-            i = j = 0
-            for _ in range(3):
-                i = min(range(na), key=lambda q: rss(a, b, q, j))
-                j = min(range(nb), key=lambda q: rss(a, b, i, q))
-            best = rss(a, b, i, j)
+        best, i, j = _best_pair_point(lambda i, j, a=a, b=b: rss(a, b, i, j), len(cols[a]), len(cols[b]))
         if not np.isfinite(best):
             continue
         k = sum(len(cols[e][q][0].coef_names) + effects[e].n_grid for e, q in ((a, i), (b, j)))
@@ -429,6 +407,18 @@ def _score_pairs(
         )
     out.sort(key=lambda p: p["score"], reverse=True)
     return out
+
+
+def _best_pair_point(rss, na: int, nb: int) -> tuple[float, int, int]:
+    """The grid point (i, j) of a pair with the least misfit ``rss(i, j)``: the whole grid when
+    it is small, else three passes of coordinate search."""
+    if na * nb <= PAIR_FULL_GRID:
+        return min((rss(i, j), i, j) for i in range(na) for j in range(nb))
+    i = j = 0
+    for _ in range(3):
+        i = min(range(na), key=lambda q: rss(q, j))
+        j = min(range(nb), key=lambda q: rss(i, q))
+    return rss(i, j), i, j
 
 
 def _pair_lead(ranking: list[dict], pairs: list[dict], structure: dict, th: Thresholds) -> dict | None:
@@ -472,7 +462,7 @@ def _pair_lead(ranking: list[dict], pairs: list[dict], structure: dict, th: Thre
     return {**best, "lead": lead, "why": why}
 
 
-def _verdict(ranking: list[dict], structure: dict, th: Thresholds) -> tuple[str, str | None]:
+def _verdict(ranking: list[dict], structure: dict, th: Thresholds) -> tuple[Verdict, str | None]:
     """``discrepancy`` when the top effect passes and explains a fair share of what a generic
     f(x, x') explains; ``unexplained`` when the residual is structured but no effect does;
     else ``none``. Marks ``structure['structured']`` (and a note when the top effect is refused)."""
@@ -481,7 +471,7 @@ def _verdict(ranking: list[dict], structure: dict, th: Thresholds) -> tuple[str,
     structure["structured"] = bool(structured)
     pair = structure.get("pair")
     if pair is not None:  # two effects explain it together: name the pair's lead first
-        return "discrepancy", pair["lead"]
+        return Verdict.DISCREPANCY, pair["lead"]
     found = top is not None and _passes(top, th)
     if found and structured and top["cv_gain"] < th.min_library_share * structure["cv_gain"]:
         # the best library effect explains only a small part of a clearly structured residual:
@@ -500,9 +490,9 @@ def _verdict(ranking: list[dict], structure: dict, th: Thresholds) -> tuple[str,
                 f"{top['cv_gain']:.2f}): BIC does not decide between them, "
                 "cross-validation does"
             )
-            return "discrepancy", rival["effect"]
-        return "discrepancy", top["effect"]
-    return ("unexplained" if structured else "none"), None
+            return Verdict.DISCREPANCY, rival["effect"]
+        return Verdict.DISCREPANCY, top["effect"]
+    return (Verdict.UNEXPLAINED if structured else Verdict.NONE), None
 
 
 def generic_columns(s: Signals, knots: int = 11) -> np.ndarray:

@@ -12,7 +12,7 @@ import numpy as np
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy.screening import Thresholds
-from pidyn.discrepancy.storeys import BuildingDiagnosis, StoreyView, building_with, storey_system
+from pidyn.discrepancy.storeys import BuildingDiagnosis, StoreyView, storey_system
 from pidyn.systems.shear_building import ShearBuilding
 
 
@@ -21,22 +21,10 @@ def summarize_building(
 ) -> dict:
     """``diagnosis.json`` of a building."""
     causes = [f.effect for f in d.found]
-    params: dict = {}
-    t_change, t_ci = None, None
-    for step in d.steps:
-        if not step["accepted"]:
-            continue
-        params.update(step["parameters"])
-        for name, iv in step["intervals"].items():
-            if name.startswith("t_d") and iv is not None:
-                t_change, t_ci = float(step["parameters"][name]), [float(v) for v in iv["ci95"]]
-    if t_change is not None:
-        params["t_change"], params["t_change_ci95"] = t_change, t_ci
-    ext_sys = d.extended["system"] if d.extended else None
+    params, t_change, t_ci = _accepted_parameters(d.steps)
     ext = None
     if d.extended:
-        ext_obj, _ = building_with(system, d.nominal["params"], d.found)
-        ext = {"system": ext_sys, "storey_equations": ext_obj.storey_equations(d.extended["params"])}
+        ext = {"system": d.extended["system"], "storey_equations": d.extended["storey_equations"]}
     return {
         "nominal": {"system": system.name, "storey_equations": system.storey_equations(d.nominal["params"])},
         "verdict": d.verdict,
@@ -53,16 +41,7 @@ def summarize_building(
         },
         "change": None if t_change is None else {"t_change": t_change, "ci95": t_ci},
         "structure": [dict(sc.structure) for sc in d.screenings],
-        "ranking": [
-            {
-                "storey": i,
-                "verdict": sc.verdict,
-                "cause": sc.cause,
-                "own_law": sc.nominal_params,
-                "rows": sc.ranking,
-            }
-            for i, sc in enumerate(d.screenings, start=1)
-        ],
+        "ranking": [_ranking_row(i, sc) for i, sc in enumerate(d.screenings, start=1)],
         "extended": ext,
         "parameters": params,
         "nominal_parameters": d.nominal["params"],
@@ -78,6 +57,32 @@ def summarize_building(
         "thresholds": dataclasses.asdict(thresholds),
         "wall_seconds": d.seconds,
         "notes": d.notes,
+    }
+
+
+def _accepted_parameters(steps: list[dict]) -> tuple[dict, float | None, list[float] | None]:
+    """The accepted steps' effect parameters and a located change's time with its interval."""
+    params: dict = {}
+    t_change, t_ci = None, None
+    for step in steps:
+        if not step["accepted"]:
+            continue
+        params.update(step["parameters"])
+        for name, iv in step["intervals"].items():
+            if name.startswith("t_d") and iv is not None:
+                t_change, t_ci = float(step["parameters"][name]), [float(v) for v in iv["ci95"]]
+    if t_change is not None:
+        params["t_change"], params["t_change_ci95"] = t_change, t_ci
+    return params, t_change, t_ci
+
+
+def _ranking_row(storey: int, sc) -> dict:
+    return {
+        "storey": storey,
+        "verdict": sc.verdict,
+        "cause": sc.cause,
+        "own_law": sc.nominal_params,
+        "rows": sc.ranking,
     }
 
 
@@ -164,6 +169,24 @@ def report_lines(d: dict) -> list[str]:
     ]
     if g["extended"] is not None:
         lines.append(f"| extended | {g['extended']:.4g} |")
+    lines += _storey_table(d)
+    for note in d["notes"]:
+        lines.append(f"\nNote: {note}.")
+    for s in d["steps"]:
+        lines.append(
+            f"\nStep: {s['effect']} in storey {s['storey']} (score {s['score']:.1f}): held-out NRMSE "
+            f"{s['heldout_before']:.4g} -> {s['heldout_after']:.4g}, {'named' if s['accepted'] else 'refused (no held-out gain)'}."
+        )
+    lines += [
+        "",
+        "Figure: `figures/storey_residuals.png` (each storey's unexplained force against drift and drift velocity).",
+    ]
+    return lines
+
+
+def _storey_table(d: dict) -> list[str]:
+    """report.md's table: per storey the model's c, k, the storey's own, and its screening."""
+    lines: list[str] = []
     lines += [
         "",
         "| storey | the model's c, k | c, k from the storey's own shear | screening verdict | top effect | score "
@@ -186,16 +209,5 @@ def report_lines(d: dict) -> list[str]:
         "The storey's own c, k: its law refitted to the shear its floors' accelerations give (the weak form, "
         "fitting part), without the other storeys; where it differs from the model's, the record places the "
         "stiffness or damping in another storey than the model does.",
-    ]
-    for note in d["notes"]:
-        lines.append(f"\nNote: {note}.")
-    for s in d["steps"]:
-        lines.append(
-            f"\nStep: {s['effect']} in storey {s['storey']} (score {s['score']:.1f}): held-out NRMSE "
-            f"{s['heldout_before']:.4g} -> {s['heldout_after']:.4g}, {'named' if s['accepted'] else 'refused (no held-out gain)'}."
-        )
-    lines += [
-        "",
-        "Figure: `figures/storey_residuals.png` (each storey's unexplained force against drift and drift velocity).",
     ]
     return lines

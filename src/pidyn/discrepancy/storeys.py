@@ -40,6 +40,8 @@ from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.pipeline import split_spans
 from pidyn.discrepancy.screening import Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
+from pidyn.discrepancy.verdicts import Verdict
+from pidyn.notes import note
 from pidyn.reporting import nrmse
 from pidyn.signals import integrate
 from pidyn.simulate import simulate_response
@@ -89,7 +91,7 @@ class Found:
 
 @dataclass
 class BuildingDiagnosis:
-    verdict: str
+    verdict: Verdict
     found: list[Found]
     nominal: dict
     extended: dict | None
@@ -246,7 +248,7 @@ def best_row(screenings: list[Screening]) -> tuple[int, dict] | None:
     decides whether it names one (its evidence, pair and tie rules), the scores between storeys."""
     best = None
     for i, sc in enumerate(screenings, start=1):
-        if sc.verdict != "discrepancy" or sc.cause is None:
+        if sc.verdict != Verdict.DISCREPANCY or sc.cause is None:
             continue
         row = next(r for r in sc.ranking if r["effect"] == sc.cause)
         if best is None or (row["score"] or 0.0) > (best[1]["score"] or 0.0):
@@ -476,13 +478,13 @@ def diagnose_building(
         found.append(step["found"])
         current = step["current"]
     views, screenings = study.screen(current, found)
-    verdict, unexplained = "none", None
+    verdict, unexplained = Verdict.NONE, None
     if found:
-        verdict = "discrepancy"
+        verdict = Verdict.DISCREPANCY
     elif (structured := structured_storey(screenings, settings)) is not None:
         # a storey's force is clearly structured (a generic f(d, d') explains it in cross-validation)
         # and no library effect earned its place: a refused name is no evidence of nothing missing
-        verdict = "unexplained"
+        verdict = Verdict.UNEXPLAINED
         unexplained = structured
     extended = None
     if found:
@@ -490,6 +492,7 @@ def diagnose_building(
             "system": current["system"].name,
             "params": current["values"],
             "intervals": current["result"].intervals,
+            "storey_equations": current["system"].storey_equations(current["values"]),
         }
     return BuildingDiagnosis(
         verdict,
@@ -593,9 +596,12 @@ def refusal_notes(refused: dict | None) -> list[str]:
     if refused is None:
         return []
     return [
-        f"{refused['effect']} in storey {refused['storey']} passed the screening (score {refused['score']:.1f}) "
-        f"but did not predict the held-out floor accelerations better ({refused['heldout_before']:.4g} -> "
-        f"{refused['heldout_after']:.4g}): not named"
+        note(
+            "refused_no_heldout_gain",
+            f"{refused['effect']} in storey {refused['storey']} passed the screening (score {refused['score']:.1f}) "
+            f"but did not predict the held-out floor accelerations better ({refused['heldout_before']:.4g} -> "
+            f"{refused['heldout_after']:.4g}): not named",
+        )
     ]
 
 
@@ -629,6 +635,29 @@ def try_extension(
     before = current["heldout"]["mean"]
     bic = fit_bic(record, ext, values, fit, current["noise"])
     accepted = bool(np.isfinite(ho["mean"]) and ho["mean"] < before * (1.0 - float(settings.storey_min_gain)))
+    params, report = _step_report(cand, values, res, bic, before, ho["mean"], accepted)
+    log.info(
+        "storey %d %s: held-out NRMSE %.4g -> %.4g (%s)",
+        cand.storey,
+        cand.effect,
+        before,
+        ho["mean"],
+        "named" if accepted else "refused: no held-out gain",
+    )
+    done = Found(cand.effect, cand.storey, params, cand.row, cand.ctx)
+    return {
+        "accepted": accepted,
+        "report": report,
+        "found": done,
+        "current": {"system": ext, "values": values, "heldout": ho, "result": res, "noise": current["noise"]},
+    }
+
+
+def _step_report(
+    cand: Found, values: dict, res: Any, bic: float, before: float, after: float, accepted: bool
+) -> tuple[dict[str, float], dict]:
+    """The effect's own parameters (its names without the storey) and what ``diagnosis.json``
+    keeps of the step."""
     names = {
         s.name: storey_param(s.name, cand.storey)
         for s in EFFECTS[cand.effect].term(cand.params, cand.ctx).specs()
@@ -646,21 +675,7 @@ def try_extension(
         "fit_bic": bic,
         "n_params": len(names),
         "heldout_before": before,
-        "heldout_after": ho["mean"],
+        "heldout_after": after,
         "accepted": accepted,
     }
-    log.info(
-        "storey %d %s: held-out NRMSE %.4g -> %.4g (%s)",
-        cand.storey,
-        cand.effect,
-        before,
-        ho["mean"],
-        "named" if accepted else "refused: no held-out gain",
-    )
-    done = Found(cand.effect, cand.storey, params, cand.row, cand.ctx)
-    return {
-        "accepted": accepted,
-        "report": report,
-        "found": done,
-        "current": {"system": ext, "values": values, "heldout": ho, "result": res, "noise": current["noise"]},
-    }
+    return params, report

@@ -21,6 +21,7 @@ from pidyn.discrepancy.report import (
     write_report,
 )
 from pidyn.discrepancy.screening import weak_system
+from pidyn.discrepancy.verdicts import Verdict
 from pidyn.reporting import nrmse
 from pidyn.signals import band_limited
 from pidyn.systems.sdof import SDOFSystem
@@ -28,45 +29,13 @@ from pidyn.systems.sdof import SDOFSystem
 
 def summarize(case: Case, o: Outcome) -> dict[str, Any]:
     """The content of diagnosis.json: verdict, causes, evidence, parameters, held-out gain."""
-    record, held_mask, nom, ext = case.record, case.mask(case.held), o.nominal, o.extension
-    gain = {
-        "metric": "heldout_nrmse_x",
-        "nominal": nrmse(o.x_nom[held_mask], case.x_raw[held_mask]),
-        "extended": None if o.x_ext is None else nrmse(o.x_ext[held_mask], case.x_raw[held_mask]),
-    }
-    if record.clean is not None:
-        xc = record.clean.x[:, 0]
-        gain["nominal_vs_clean"] = nrmse(o.x_nom[held_mask], xc[held_mask])
-        gain["extended_vs_clean"] = None if o.x_ext is None else nrmse(o.x_ext[held_mask], xc[held_mask])
-    if case.from_accelerometers:  # the sensors' quantity decides; the displacement's gain is kept beside it
-        from pidyn.discrepancy.accelerometers import acceleration_gain
-
-        gain = {**acceleration_gain(record, o.sims, held_mask), "x": gain}
+    record, nom, ext = case.record, o.nominal, o.extension
+    gain = heldout_gain(case, o)
     learned = LEARNED in o.causes
     causes = [c for c in o.causes if c != LEARNED]
     ext_system, ext_values, ext_metrics = ext["system"], ext["values"], ext["metrics"]
-    effect_params: dict[str, Any] = {}
-    if ext_values is not None and ext_system is not None:
-        nominal_names = {sp.name for sp in nom.system.param_specs()}
-        effect_params = {k: v for k, v in ext_values.items() if k not in nominal_names}
-    if o.change_row is not None:
-        ch = o.change_row["change"]
-        effect_params["t_change"] = effect_params.get("t_d", ch.t_change)
-        effect_params["t_change_ci95"] = list(ch.ci95)
-    sc, check = o.screening, o.check
-    varies = bool(((o.running or {}).get("variation") or {}).get("varies"))
-    structured = (
-        (check.failed or varies)
-        if case.from_accelerometers
-        else (check.failed or sc.verdict == "unexplained")
-    )
-    verdict = (
-        "discrepancy"
-        if causes or (o.cause is not None and o.cause != LEARNED)
-        else "unexplained"
-        if learned or structured
-        else "none"
-    )
+    effect_params = _effect_parameters(o, nom, ext_system, ext_values)
+    verdict = _verdict(case, o, bool(causes), learned)
     truth = dict(record.meta.get("hidden_params") or {}) if "hidden_effect" in record.meta else None
     return {
         "nominal": nom.system.describe(nom.values),
@@ -77,11 +46,11 @@ def summarize(case: Case, o: Outcome) -> dict[str, Any]:
         "t_change": effect_params.get("t_change"),
         "steps": ext["steps"],
         "learned_force": learned,
-        "structure": {k: v for k, v in sc.structure.items()},
-        "heldout_check": check.__dict__,
+        "structure": {k: v for k, v in o.screening.structure.items()},
+        "heldout_check": o.check.__dict__,
         "change": None if o.change_row is None else o.change_row["change"].to_dict(),
         "forced": o.forced,
-        "ranking": sc.ranking,
+        "ranking": o.screening.ranking,
         "extended": ext_system.describe(ext_values) if ext_system is not None else None,
         "parameters": effect_params,
         "nominal_parameters": nom.values,
@@ -109,6 +78,55 @@ def summarize(case: Case, o: Outcome) -> dict[str, Any]:
         "confirmation": None if o.confirmation is None else o.confirmation.tested,
         "learned_force_refused": ext.get("refused"),
     }
+
+
+def heldout_gain(case: Case, o: Outcome) -> dict[str, Any]:
+    """The nominal and extended models' NRMSE on the held-out part: of the displacement (and
+    against the noise-free truth when simulated), of the accelerations for accelerometer records."""
+    record, held_mask = case.record, case.mask(case.held)
+    gain = {
+        "metric": "heldout_nrmse_x",
+        "nominal": nrmse(o.x_nom[held_mask], case.x_raw[held_mask]),
+        "extended": None if o.x_ext is None else nrmse(o.x_ext[held_mask], case.x_raw[held_mask]),
+    }
+    if record.clean is not None:
+        xc = record.clean.x[:, 0]
+        gain["nominal_vs_clean"] = nrmse(o.x_nom[held_mask], xc[held_mask])
+        gain["extended_vs_clean"] = None if o.x_ext is None else nrmse(o.x_ext[held_mask], xc[held_mask])
+    if case.from_accelerometers:  # the sensors' quantity decides; the displacement's gain is kept beside it
+        from pidyn.discrepancy.accelerometers import acceleration_gain
+
+        gain = {**acceleration_gain(record, o.sims, held_mask), "x": gain}
+    return gain
+
+
+def _effect_parameters(o: Outcome, nom, ext_system, ext_values) -> dict[str, Any]:
+    """The extended model's parameters beyond the nominal ones, and a located change's time."""
+    effect_params: dict[str, Any] = {}
+    if ext_values is not None and ext_system is not None:
+        nominal_names = {sp.name for sp in nom.system.param_specs()}
+        effect_params = {k: v for k, v in ext_values.items() if k not in nominal_names}
+    if o.change_row is not None:
+        ch = o.change_row["change"]
+        effect_params["t_change"] = effect_params.get("t_d", ch.t_change)
+        effect_params["t_change_ci95"] = list(ch.ci95)
+    return effect_params
+
+
+def _verdict(case: Case, o: Outcome, named: bool, learned: bool) -> Verdict:
+    """``discrepancy`` with a named cause; ``unexplained`` with a learned force or a structured
+    misfit (the held-out check failed, or the weak form's residual, or the running period moved);
+    else ``none``."""
+    sc, check = o.screening, o.check
+    varies = bool(((o.running or {}).get("variation") or {}).get("varies"))
+    structured = (
+        (check.failed or varies)
+        if case.from_accelerometers
+        else (check.failed or sc.verdict == Verdict.UNEXPLAINED)
+    )
+    if named or (o.cause is not None and o.cause != LEARNED):
+        return Verdict.DISCREPANCY
+    return Verdict.UNEXPLAINED if learned or structured else Verdict.NONE
 
 
 def write_figures(case: Case, o: Outcome, d: dict) -> None:
@@ -143,11 +161,30 @@ def write_figures(case: Case, o: Outcome, d: dict) -> None:
         fig / "residual.png", record.t, pw["r"], pw["x"], pw["v"], fit, cause, explained, units, period
     )
     plot_ranking(fig / "ranking.png", sc.ranking, case.thresholds.min_delta_bic)
+    _running_figures(case, o, fig)
+    ext = o.extension
+    if d["learned_force"] and ext["system"] is not None and ext["system"].n_latent == 0:
+        plot_learned(
+            fig / "learned_force.png",
+            record.t,
+            nom.system,
+            nom.values,
+            ext["system"],
+            ext["values"],
+            pw,
+            units,
+        )
+    write_report(case.run_dir / "report.md", d, [p.name for p in sorted(fig.glob("*.png"))])
+
+
+def _running_figures(case: Case, o: Outcome, fig) -> None:
+    """The running estimate over the record and, for accelerometer records, the running period."""
+    record, fit, held, nom = case.record, case.fit, case.held, o.nominal
     names, A0, y = weak_system(
         nom.system, nom.values, nom.s, case.weak_f, case.x_raw, nom.weak, case.mass_known
     )
     running = running_estimate(
-        names, A0, y, nom.weak.centers, max(4 * period, 3 * nom.weak.dt * (2 * nom.weak.half + 1))
+        names, A0, y, nom.weak.centers, max(4 * nom.period, 3 * nom.weak.dt * (2 * nom.weak.half + 1))
     )
     plot_running_estimate(
         fig / "running_estimate.png",
@@ -171,19 +208,6 @@ def write_figures(case: Case, o: Outcome, d: dict) -> None:
             signal=(record.t, meas),
             nominal_period=(o.modal or [{}])[0].get("period_s"),
         )
-    ext = o.extension
-    if d["learned_force"] and ext["system"] is not None and ext["system"].n_latent == 0:
-        plot_learned(
-            fig / "learned_force.png",
-            record.t,
-            nom.system,
-            nom.values,
-            ext["system"],
-            ext["values"],
-            pw,
-            units,
-        )
-    write_report(case.run_dir / "report.md", d, [p.name for p in sorted(fig.glob("*.png"))])
 
 
 def plot_learned(
@@ -220,12 +244,12 @@ def explained_force(
     """What the screening's fit says the residual is: the effect's force plus the change it
     brings to the nominal parameters (which had absorbed part of the effect), on the same
     band-limited signals as the residual."""
-    from pidyn.discrepancy.effects import bouc_wen_z
+    from pidyn.systems.terms import latent_path
 
     p = {**values, **row["nominal_refit"], **row["parameters"]}
     term = EFFECTS[row["effect"]].term(row["parameters"], s.context())
     x, v = pw["x"], pw["v"]
-    z = bouc_wen_z(x, p["beta"], p["gamma"], p["n"]) if term.n_latent else None
+    z = latent_path(term, s.t, x, None, p) if term.n_latent else None
     change = nominal.restoring_force(s.t, x, v, None, values) - nominal.restoring_force(s.t, x, v, None, p)
     inertia = (p["m"] - values["m"]) * pw["a"]  # nonzero only when the mass is identified
     total = term.force(s.t, x, v, z, p) - change + inertia

@@ -43,6 +43,7 @@ from pidyn.models.latent_start import (
     teach_current_path,
 )
 from pidyn.models.lit_module import PIDynNetModule
+from pidyn.notes import note
 
 log = logging.getLogger(__name__)
 
@@ -394,9 +395,12 @@ class SubperiodIdentifier:
         notes = []
         for n, v in rejected.items():
             notes.append(
-                f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range or not "
-                f"determined by this window (standard error above half the value); {n} keeps "
-                f"{net.params.as_floats()[n]:.4g}"
+                note(
+                    "ls_start_rejected",
+                    f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range or not "
+                    f"determined by this window (standard error above half the value); {n} keeps "
+                    f"{net.params.as_floats()[n]:.4g}",
+                )
             )
             log.warning(notes[-1])
         return notes
@@ -416,9 +420,10 @@ class SubperiodIdentifier:
             # (measured: their beta, gamma, n pulled a determined start back by 20-30 %)
             self.fusion = InformationFusion()
         if rejected:
-            msg = (
+            msg = note(
+                "latent_start_undetermined",
                 f"window {w.index}: the latent least-squares start does not determine "
-                f"{', '.join(sorted(rejected))} from this window; they keep their values and the next window tries again"
+                f"{', '.join(sorted(rejected))} from this window; they keep their values and the next window tries again",
             )
             log.info(msg)
             return [msg]
@@ -438,8 +443,11 @@ class SubperiodIdentifier:
         notes = []
         for n, v in rejected.items():
             notes.append(
-                f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range or not "
-                f"determined by this window; {n} keeps {net.params.as_floats()[n]:.4g}"
+                note(
+                    "ls_start_rejected",
+                    f"window {w.index}: the least-squares start puts {n} at {v:.4g}, outside its range or not "
+                    f"determined by this window; {n} keeps {net.params.as_floats()[n]:.4g}",
+                )
             )
             log.warning(notes[-1])
         return notes
@@ -453,9 +461,10 @@ class SubperiodIdentifier:
             for n in determined:
                 self.clamp.bounds.pop(n, None)
         vals = self.module.net.params.as_floats()
-        msg = (
+        msg = note(
+            "ls_start_determined",
             f"window {index}: the least-squares start determined {', '.join(sorted(determined))} "
-            f"({', '.join(f'{n}={vals[n]:.4g}' for n in sorted(determined))}), which earlier windows did not"
+            f"({', '.join(f'{n}={vals[n]:.4g}' for n in sorted(determined))}), which earlier windows did not",
         )
         log.info(msg)
         notes.append(msg)
@@ -470,7 +479,10 @@ class SubperiodIdentifier:
             lo, hi = boxes[n]
             v = estimate[n]
             if min(abs(v - lo), abs(v - hi)) <= 1e-6 * max(abs(v), 1e-12):
-                msg = f"{n} = {v:.5g} ended the window on its clamp bound [{lo:.5g}, {hi:.5g}]"
+                msg = note(
+                    "on_clamp_bound",
+                    f"{n} = {v:.5g} ended the window on its clamp bound [{lo:.5g}, {hi:.5g}]",
+                )
                 log.warning(msg)
                 out.append(msg)
         return out

@@ -23,6 +23,7 @@ import torch
 from pidyn.data.windows import Window
 from pidyn.params import ParamSpec, PhysicalParameters, dvalue_draw, from_raw, in_range, to_raw
 from pidyn.systems.base import Kinematics
+from pidyn.systems.terms import heun_along
 
 
 def latent_shape_params(system) -> list[str]:
@@ -50,18 +51,10 @@ def integrate_latent(
         y = np.concatenate([np.broadcast_to(xi, (B, nd)), np.broadcast_to(vi, (B, nd)), zi], axis=1)
         return system.state_rate(ti, y, p, 0.0)[:, 2 * nd :]
 
-    zi = np.array(z0, dtype=float)
-    z[:, 0], zd[:, 0] = zi, rate(t[0], x[0], v[0], zi)
     with np.errstate(all="ignore"):
-        for i in range(len(t) - 1):
-            h = (t[i + 1] - t[i]) / substeps
-            for j in range(substeps):
-                a, b = j / substeps, (j + 1) / substeps
-                x0, v0 = x[i] + a * (x[i + 1] - x[i]), v[i] + a * (v[i + 1] - v[i])
-                x1, v1 = x[i] + b * (x[i + 1] - x[i]), v[i] + b * (v[i + 1] - v[i])
-                k1 = rate(t[i], x0, v0, zi)
-                zi = zi + 0.5 * h * (k1 + rate(t[i], x1, v1, zi + h * k1))
-            z[:, i + 1], zd[:, i + 1] = zi, rate(t[i + 1], x[i + 1], v[i + 1], zi)
+        path = heun_along(rate, t, x, v, np.array(z0, dtype=float), substeps)  # (N, B, nz)
+        for i in range(len(t)):
+            z[:, i], zd[:, i] = path[i], rate(t[i], x[i], v[i], path[i])
     return z, zd
 
 

@@ -112,24 +112,7 @@ def predict_response(
     for p in net.physical_parameters():
         p.requires_grad_(False)
     accel = net.system.excitation_as_acceleration(record.f)
-    # the DataModule needs response columns for its windows: zeros (never used in fine-tuning)
-    blank = Record(
-        name=record.name,
-        t=record.t,
-        f=record.f,
-        x=np.zeros((len(record.t), net.system.n_dof)),
-        excitation=record.excitation,
-    )
-    dm = SubperiodDataModule(
-        blank,
-        window_length=window_length,
-        pool_size=pool_size,
-        batch_size=batch_size,
-        min_peak_fraction=0.0,
-        data_seed=data_seed,
-        accel_signal=accel,
-        cover_tail=True,
-    )
+    blank, dm = _blank_windows(net, record, accel, window_length, pool_size, batch_size, data_seed)
     scales = _prediction_scales(net, record, x_scale, v_scale)
     x_pred = np.zeros((len(record.t), net.system.n_dof))
     saved = _nets_state(net)
@@ -156,6 +139,31 @@ def predict_response(
         for p in net.physical_parameters():
             p.requires_grad_(True)
     return Prediction(record.name, record.t, x_pred, time.perf_counter() - t_start, done)
+
+
+def _blank_windows(
+    net, record: Record, accel, window_length: float, pool_size: int, batch_size: int, data_seed: int
+):
+    """The record with a zero response (the DataModule needs response columns for its windows;
+    fine-tuning never uses them) and its windows, covering the record's tail."""
+    blank = Record(
+        name=record.name,
+        t=record.t,
+        f=record.f,
+        x=np.zeros((len(record.t), net.system.n_dof)),
+        excitation=record.excitation,
+    )
+    dm = SubperiodDataModule(
+        blank,
+        window_length=window_length,
+        pool_size=pool_size,
+        batch_size=batch_size,
+        min_peak_fraction=0.0,
+        data_seed=data_seed,
+        accel_signal=accel,
+        cover_tail=True,
+    )
+    return blank, dm
 
 
 def _prediction_scales(net, record: Record, x_scale: float | None, v_scale: float | None) -> _Scales:

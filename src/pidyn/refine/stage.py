@@ -19,6 +19,7 @@ from typing import Literal
 
 import numpy as np
 
+from pidyn.notes import note
 from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
 from pidyn.refine.solve import solve, solve_constrained
 from pidyn.refine.uncertainty import (
@@ -280,23 +281,7 @@ def _test_rest(
             {"notes": [], "applies": False, "reason": "the span starts inside the record"},
         )
     r, _ = problem.residuals(u)
-    theta, _ = problem.unpack(u)
-    rest = ShootingProblem(
-        problem.system,
-        problem.t,
-        problem.f,
-        problem.channels,
-        problem.bounds,
-        problem.substeps,
-        fixed_state0=np.zeros(ns),
-        state_scale=problem.state_scale,
-        fixed=problem.fixed,
-    )
-    run, _ = rest.free_run(theta, np.zeros(ns))
-    states = np.nan_to_num(run[rest.bounds[:-1] - rest.bounds[0]])
-    ur, _, ok = solve_constrained(
-        rest, rest.pack(problem.values(theta), states), max_steps=settings.gn_steps, history=history
-    )
+    rest, ur, ok = _solved_at_rest(problem, u, settings, history)
     rr, cr = rest.residuals(ur)
     rho = residual_correlation(problem, r)
     inflation = (1 + rho) / (1 - rho)
@@ -314,25 +299,54 @@ def _test_rest(
         "residual_lag1_correlation": rho,
         "inflation": inflation,
     }
-    corrected = f" (divided by {inflation:.3g} for correlated residuals)" if inflation > 1.01 else ""
+    text = _rest_sentence(test, settings)
     if at_rest:
-        log.info(
-            "the record starts at rest: estimating its initial state lowers the misfit by %.3g%s, below the "
-            "%g %% chi-square threshold %.3g (%d states), so the state is held at rest",
-            max(delta, 0.0),
-            corrected,
-            100 * settings.rest_test_level,
-            threshold,
-            ns,
-        )
+        log.info("%s", text)
         return rest, ur, ok, {**test, "notes": []}
-    note = (
+    log.warning(text)
+    return problem, u, converged, {**test, "notes": [text]}
+
+
+def _solved_at_rest(problem: ShootingProblem, u: np.ndarray, settings: RefineSettings, history: list[dict]):
+    """The same problem with the first segment's state held at rest, solved from one free run
+    from rest (so continuity holds from the first step)."""
+    ns = problem.ns
+    theta, _ = problem.unpack(u)
+    rest = ShootingProblem(
+        problem.system,
+        problem.t,
+        problem.f,
+        problem.channels,
+        problem.bounds,
+        problem.substeps,
+        fixed_state0=np.zeros(ns),
+        state_scale=problem.state_scale,
+        fixed=problem.fixed,
+    )
+    run, _ = rest.free_run(theta, np.zeros(ns))
+    states = np.nan_to_num(run[rest.bounds[:-1] - rest.bounds[0]])
+    ur, _, ok = solve_constrained(
+        rest, rest.pack(problem.values(theta), states), max_steps=settings.gn_steps, history=history
+    )
+    return rest, ur, ok
+
+
+def _rest_sentence(test: dict, settings: RefineSettings) -> str:
+    """What the rest test found, for the log and, when the state is estimated, the notes."""
+    delta, threshold, ns, inflation = test["misfit_drop"], test["threshold"], test["dof"], test["inflation"]
+    corrected = f" (divided by {inflation:.3g} for correlated residuals)" if inflation > 1.01 else ""
+    if test["at_rest"]:
+        return (
+            f"the record starts at rest: estimating its initial state lowers the misfit by {max(delta, 0.0):.3g}"
+            f"{corrected}, below the {100 * settings.rest_test_level:g} % chi-square threshold {threshold:.3g} "
+            f"({ns} states), so the state is held at rest"
+        )
+    return note(
+        "not_at_rest",
         f"the record does not start at rest: estimating its initial state lowers the misfit by {delta:.3g}"
         f"{corrected}, beyond the {100 * settings.rest_test_level:g} % chi-square threshold {threshold:.3g} ({ns} states); "
-        f"the initial state is estimated, which widens the intervals"
+        f"the initial state is estimated, which widens the intervals",
     )
-    log.warning(note)
-    return problem, u, converged, {**test, "notes": [note]}
 
 
 def residual_correlation(problem: ShootingProblem, r: np.ndarray, cap: float = 0.9999) -> float:
@@ -386,19 +400,25 @@ class _Starts:
         blown = [k for k, (_, b) in fits.items() if b]
         if len(blown) == len(fits):
             self.notes.append(
-                f"no starting estimate ({', '.join(blown)}) simulates the record without blowing up: the "
-                "refinement starts from a diverging model and may end at a degenerate fit (parameters "
-                "at their bounds); give a classical start (baselines.run and model.refine.starts) or a "
-                "better guess (system.guess)"
+                note(
+                    "starts_diverge",
+                    f"no starting estimate ({', '.join(blown)}) simulates the record without blowing up: the "
+                    "refinement starts from a diverging model and may end at a degenerate fit (parameters "
+                    "at their bounds); give a classical start (baselines.run and model.refine.starts) or a "
+                    "better guess (system.guess)",
+                )
             )
             log.warning(self.notes[-1])
         best = self.order[0]
         if prefer in self.costs and best != prefer:
             who = "PIDynNet's estimate" if prefer == "pidynnet" else f"the {prefer} start"
             self.notes.append(
-                f"{who} simulates the record worse than {best}'s (cost "
-                f"{self.costs[prefer]:.4g} against {self.costs[best]:.4g}); the refinement started "
-                f"from {best}"
+                note(
+                    "start_not_preferred",
+                    f"{who} simulates the record worse than {best}'s (cost "
+                    f"{self.costs[prefer]:.4g} against {self.costs[best]:.4g}); the refinement started "
+                    f"from {best}",
+                )
             )
             log.warning(self.notes[-1])
 

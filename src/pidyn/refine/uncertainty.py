@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import null_space
 
+from pidyn.notes import note
 from pidyn.params import ParamSpec, dvalue_draw, from_raw
 from pidyn.refine.problem import ShootingProblem
 
@@ -126,17 +127,26 @@ def identifiability_notes(
             idx = [names.index(g) for g in group]
             rho = max(abs(corr[a, b]) for a in idx for b in idx if a != b)
             notes.append(
-                f"{', '.join(group)} are not separable from this record (correlation {rho:.2f}; 95 % "
-                f"intervals {widths}); a stronger or longer excitation is needed"
+                note(
+                    "not_separable",
+                    f"{', '.join(group)} are not separable from this record (correlation {rho:.2f}; 95 % "
+                    f"intervals {widths}); a stronger or longer excitation is needed",
+                )
             )
         else:
             notes.append(
-                f"{n} is poorly determined by this record (95 % interval {widths}); a stronger or longer "
-                "excitation, or a channel that responds to it, is needed"
+                note(
+                    "poorly_determined",
+                    f"{n} is poorly determined by this record (95 % interval {widths}); a stronger or longer "
+                    "excitation, or a channel that responds to it, is needed",
+                )
             )
     if cond > 1e14 and not notes:
         notes.append(
-            f"the information matrix is near-singular (condition number {cond:.2g}): some combination "
-            "of parameters is not determined by this record"
+            note(
+                "near_singular",
+                f"the information matrix is near-singular (condition number {cond:.2g}): some combination "
+                "of parameters is not determined by this record",
+            )
         )
     return notes

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from pidyn.integrate import rk4
 from pidyn.reporting import diverged, plottable, write_json
+from pidyn.simulate import simulate_states
 from pidyn.systems.modal import compare_modes, modal_table
 
 
@@ -29,10 +29,8 @@ def storey_response(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Drift and restoring force of every storey (each (N, n_storeys)) of the model simulated
     over the record."""
-    y0 = np.zeros(system.n_state) if state0 is None else np.asarray(state0, float)
-    with np.errstate(all="ignore"):
-        Y, _ = rk4(system, dict(values), t, f, y0[None, :], substeps=substeps)
-    return _drift_and_force(system, values, t, Y[:, 0])
+    Y, _ = simulate_states(system, values, t, f, state0, substeps)
+    return _drift_and_force(system, values, t, Y)
 
 
 def _drift_and_force(system, values: Mapping[str, float], t: np.ndarray, Y: np.ndarray):
@@ -71,6 +69,35 @@ def write_building_report(
     d_id, f_id = storey_response(system, identified, record.t, record.f, state0)
     modes["diverged"] = diverged(d_id) or diverged(f_id)
     eqs = system.storey_equations(identified)
+    lines = _report_lines(system, record, identified, truth, modes, eqs)
+    # written once every part is in (the storey residuals of a measured building included)
+    write_json(run_dir / "modal.json", {**_interface_modes(run_dir / "modal.json"), **modes})
+    (run_dir / "building.md").write_text("\n".join(lines) + "\n")
+    fig_dir = run_dir / "figures"
+    fig_dir.mkdir(exist_ok=True)
+    true_loops = None
+    if record.clean is not None and truth and "truth" in modes:
+        clean = record.clean
+        Y = np.concatenate([clean.x, clean.v] + ([clean.z] if clean.z is not None else []), axis=1)
+        true_loops = _drift_and_force(system, truth, record.t, Y)
+    plot_storey_loops(
+        fig_dir / "storey_loops.png", d_id, f_id, true_loops, title=f"{system.name} under {record.name}"
+    )
+    exp = getattr(logger, "experiment", None) if logger is not None else None
+    if exp is not None and hasattr(exp, "add_text"):
+        exp.add_text("storey_equations", "\n\n".join(eqs), step)
+        exp.add_text("modes", modal_table(modes), step)
+        for r, fr in enumerate(modes["identified"]["frequency_hz"], 1):
+            exp.add_scalar(f"modes/f{r}_hz", fr, step)
+            exp.add_scalar(f"modes/zeta{r}", modes["identified"]["damping_ratio"][r - 1], step)
+    return modes
+
+
+def _report_lines(
+    system, record, identified: Mapping[str, float], truth, modes: dict, eqs: list[str]
+) -> list[str]:
+    """building.md: the modal table, the storey equations, the storey residuals of a measured
+    building (added to ``modes``), and what a divergence or unknown masses mean."""
     lines = [
         f"# {system.name}: {system.n_dof} storeys under {record.name}",
         "",
@@ -106,27 +133,7 @@ def write_building_report(
             "Masses unknown: floor 1's mass is the unit; stiffness and damping are per kg of floor 1 "
             "(k in s^-2, c in s^-1) and the masses are ratios to floor 1's. Absolute N/m need a mass.",
         ]
-    # written once every part is in (the storey residuals of a measured building included)
-    write_json(run_dir / "modal.json", {**_interface_modes(run_dir / "modal.json"), **modes})
-    (run_dir / "building.md").write_text("\n".join(lines) + "\n")
-    fig_dir = run_dir / "figures"
-    fig_dir.mkdir(exist_ok=True)
-    true_loops = None
-    if record.clean is not None and truth and "truth" in modes:
-        clean = record.clean
-        Y = np.concatenate([clean.x, clean.v] + ([clean.z] if clean.z is not None else []), axis=1)
-        true_loops = _drift_and_force(system, truth, record.t, Y)
-    plot_storey_loops(
-        fig_dir / "storey_loops.png", d_id, f_id, true_loops, title=f"{system.name} under {record.name}"
-    )
-    exp = getattr(logger, "experiment", None) if logger is not None else None
-    if exp is not None and hasattr(exp, "add_text"):
-        exp.add_text("storey_equations", "\n\n".join(eqs), step)
-        exp.add_text("modes", modal_table(modes), step)
-        for r, fr in enumerate(modes["identified"]["frequency_hz"], 1):
-            exp.add_scalar(f"modes/f{r}_hz", fr, step)
-            exp.add_scalar(f"modes/zeta{r}", modes["identified"]["damping_ratio"][r - 1], step)
-    return modes
+    return lines
 
 
 def plot_storey_loops(

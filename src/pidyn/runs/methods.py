@@ -22,7 +22,12 @@ from pidyn.systems.base import StructuralSystem
 log = logging.getLogger(__name__)
 
 
-DEFAULT_STARTS = ("data", "output_error", "equation_error", "sindy", "ukf")
+def default_starts() -> tuple[str, ...]:
+    """The refinement's starts when the config names none: the data's, then every parametric
+    estimator that ran (``model.refine.starts`` in conf/model/refine/multiple_shooting.yaml)."""
+    from pidyn.baselines.registry import PARAMETRIC
+
+    return ("data", *PARAMETRIC)
 
 
 def check_method_names(cfg: DictConfig) -> None:
@@ -55,7 +60,7 @@ def refine_plan(cfg: DictConfig) -> tuple[set[str], list[str], Any] | None:
         return None
     if method != "multiple_shooting":
         raise ValueError(f"model.refine: unknown method '{method}'; choose multiple_shooting or none")
-    allowed = set(rcfg.pop("starts", DEFAULT_STARTS))
+    allowed = set(rcfg.pop("starts", default_starts()))
     compare = list(rcfg.pop("compare_states", None) or [])
     settings = RefineSettings(**rcfg)
     for source in compare:

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 from omegaconf import DictConfig
 
+from pidyn.notes import note
 from pidyn.reporting import diverged, param_table, plot_convergence, plot_response, write_json, write_yaml
 from pidyn.runs.build import Run
 from pidyn.runs.metrics import channel_nrmse, record_noise, relative_errors, sim_nrmse_x
@@ -63,12 +64,7 @@ def write_report(
         refined is not None,
     )
     if refined is not None:
-        metrics.update(refined_metrics(refined, names, truths))
-        write_json(run_dir / "refinement.json", refined.to_dict())
-        torch.save(
-            {"names": names, "values": values, "ci95": metrics["ci95"]},
-            run_dir / "checkpoints" / "refined.pt",
-        )
+        _write_refined(run_dir, refined, names, values, truths, metrics)
     if baselines:
         metrics["baselines"] = {
             b["method"]: {"error_pct": b.get("error_pct"), "seconds": b["seconds"]} for b in baselines
@@ -82,6 +78,17 @@ def write_report(
     _figures(run, results, truths, baselines, refined, sim, metrics)
     _log_summary(system.describe(final), errors, pidyn_errors, metrics, run_dir)
     return metrics
+
+
+def _write_refined(
+    run_dir: Path, refined: Any, names: list[str], values: dict, truths: dict, metrics: dict
+) -> None:
+    """The refinement's metrics (intervals, coverage), refinement.json and the refined checkpoint."""
+    metrics.update(refined_metrics(refined, names, truths))
+    write_json(run_dir / "refinement.json", refined.to_dict())
+    torch.save(
+        {"names": names, "values": values, "ci95": metrics["ci95"]}, run_dir / "checkpoints" / "refined.pt"
+    )
 
 
 def _metrics(
@@ -159,13 +166,14 @@ def _divergence_note(sim: dict[str, np.ndarray]) -> list[str]:
     """Says so when the identified model's simulation over the record blows up."""
     if not any(diverged(v) for v in sim.values()):
         return []
-    note = (
+    text = note(
+        "model_diverges",
         "the identified model diverges when simulated over the record (its response blows up): the estimate "
         "is not a usable model; start from a better guess (system.guess) or a classical estimate "
-        "(model.refine.starts)"
+        "(model.refine.starts)",
     )
-    log.warning(note)
-    return [note]
+    log.warning(text)
+    return [text]
 
 
 def identified_params(

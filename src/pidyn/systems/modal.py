@@ -124,37 +124,13 @@ def modes_with_intervals(
     nonlinear maps k -> period and (c, k) -> damping ratio, which a first-order rule is not for
     the wide intervals of a short record. Modes are matched by their order in frequency. Mode
     shapes are scaled to 1 on the top floor; ``mode_shape_ci95`` gives each floor's interval."""
-    from pidyn.params import from_raw, to_raw
 
     point = modal_properties(*linear_matrices(system, values))
     n = len(point["frequency_hz"])
     ci = {key: [[None, None]] * n for key in ("period_s", "damping_ratio", "frequency_hz")}
     shape_ci: list = [None] * n
     if names and covariance is not None and np.all(np.isfinite(covariance)):
-        import torch
-
-        specs = {s.name: s for s in system.param_specs()}
-        theta = np.array([to_raw(specs[k], float(values[k])) for k in names])
-        rng = np.random.default_rng(seed)
-        cov = np.asarray(covariance, float)
-        sample = rng.multivariate_normal(theta, (cov + cov.T) / 2, size=draws, method="eigh")
-        out = {key: [] for key in ci}
-        shapes: list = []
-        for row in sample:
-            p = dict(values)
-            p.update(
-                {
-                    k: float(from_raw(specs[k], torch.tensor(float(row[i]), dtype=torch.float64)))
-                    for i, k in enumerate(names)
-                }
-            )
-            try:
-                m = modal_properties(*linear_matrices(system, p))
-            except (ValueError, np.linalg.LinAlgError):
-                continue
-            for key in out:
-                out[key].append(m[key])
-            shapes.append(m["mode_shapes"])
+        out, shapes = _drawn_modes(system, values, names, covariance, draws, seed)
         for key, rows in out.items():
             arr = np.asarray(rows, float)
             if len(arr) > 0.9 * draws:
@@ -178,3 +154,37 @@ def modes_with_intervals(
         }
         for r in range(n)
     ]
+
+
+def _drawn_modes(
+    system, values: Mapping[str, float], names: list[str], covariance: np.ndarray, draws: int, seed: int
+) -> tuple[dict[str, list], list]:
+    """The modal quantities and mode shapes of ``draws`` parameter sets drawn from the estimate's
+    covariance (unconstrained coordinates); a draw without modes (unstable) is left out."""
+    import torch
+
+    from pidyn.params import from_raw, to_raw
+
+    specs = {s.name: s for s in system.param_specs()}
+    theta = np.array([to_raw(specs[k], float(values[k])) for k in names])
+    rng = np.random.default_rng(seed)
+    cov = np.asarray(covariance, float)
+    sample = rng.multivariate_normal(theta, (cov + cov.T) / 2, size=draws, method="eigh")
+    out: dict[str, list] = {key: [] for key in ("period_s", "damping_ratio", "frequency_hz")}
+    shapes: list = []
+    for row in sample:
+        p = dict(values)
+        p.update(
+            {
+                k: float(from_raw(specs[k], torch.tensor(float(row[i]), dtype=torch.float64)))
+                for i, k in enumerate(names)
+            }
+        )
+        try:
+            m = modal_properties(*linear_matrices(system, p))
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        for key in out:
+            out[key].append(m[key])
+        shapes.append(m["mode_shapes"])
+    return out, shapes

@@ -167,6 +167,17 @@ class SDOFSystem(StructuralSystem):
             out = out + p[support_damping_name(name)] * f[..., n + j]
         return out
 
+    @property
+    def stiffness_name(self) -> str:
+        """The parameter that is this model's stiffness about rest (a linear spring's k or k1, a
+        Bouc-Wen spring's k): what a stiffness loss scales and a period is read from."""
+        from pidyn.systems.modal import stiffness_params
+
+        names = stiffness_params(self)
+        if not names:
+            raise ValueError(f"nominal system '{self.name}' has no linear stiffness to extend")
+        return names[0]
+
     def ground_input(self, f, p):
         """The ground acceleration the mass feels: ag, or sum_j r_j ag_j (``f[..., j]``) for several inputs."""
         if not self.inputs:

@@ -1,13 +1,16 @@
 """Restoring-force terms: the building blocks of single-degree-of-freedom models.
 
 A model is mass x acceleration + the sum of its terms = excitation force. Every term is one
-small class: its parameters, its force (torch and NumPy through the same array code) and,
-for hysteresis, the rate of its latent state. New physical effects (the discrepancy
-library) are added here and nowhere else.
+small class: its parameters, its force (torch and NumPy through the same array code), its
+regression columns (derived from the force) and, for hysteresis, the rate of its latent state.
+Every force is written here once: the systems, the screening effects of the diagnosis
+(``pidyn.discrepancy.effects``), the SINDy library and the hidden effects of the tests take their
+forces and columns from these classes. A new force is one subclass here.
 """
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from typing import Any
 
 import numpy as np
@@ -47,8 +50,13 @@ def _spow(z: Array, n: Array) -> Array:
     return _clamp_min(_abs(z), 1e-12) ** n
 
 
-class ForceTerm:
-    """One additive restoring-force term f(t, x, v, z; p)."""
+class ForceTerm(ABC):
+    """One additive restoring-force term f(t, x, v, z; p).
+
+    A subclass defines ``specs`` (its parameters), ``force`` and ``formula``; a term with a
+    latent state (``n_latent`` > 0) defines ``latent_rate`` too, checked when the class is made.
+    ``linear`` names the parameters the force is linear in: ``columns`` then gives a regression
+    its columns without another formula."""
 
     name: str = "term"
     n_latent: int = 0
@@ -56,12 +64,25 @@ class ForceTerm:
     #: the force is proportional to its one linear parameter at fixed other parameters (a
     #: screening refits that coefficient with the nominal ones, the others held)
     proportional: bool = False
+    #: the term's column as a regression library names it (``x^3``); empty for a term that has none
+    symbol: str = ""
 
+    def __init_subclass__(cls, **kw: Any) -> None:
+        super().__init_subclass__(**kw)
+        if cls.__dict__.get("n_latent", 0) and "latent_rate" not in cls.__dict__:
+            raise TypeError(f"{cls.__name__} has a latent state (n_latent > 0) but no latent_rate")
+
+    @abstractmethod
     def specs(self) -> list[ParamSpec]:
-        raise NotImplementedError
+        """The term's parameters, with their starts, scales, transforms and units."""
 
+    @abstractmethod
     def force(self, t: Array, x: Array, v: Array, z: Array | None, p: dict) -> Array:
-        raise NotImplementedError
+        """The restoring force at time ``t``, displacement ``x``, velocity ``v``, latent ``z``."""
+
+    @abstractmethod
+    def formula(self, p: dict[str, float]) -> str:
+        """The term as it is printed in an identified equation, at the values ``p``."""
 
     def measured_force(
         self, t: Array, x: Array, v: Array, z: Array | None, p: dict, v_noise: float = 0.0
@@ -71,15 +92,75 @@ class ForceTerm:
         sharply with the velocity (dry friction), where noise flips its sign near rest."""
         return self.force(t, x, v, z, p)
 
-    def latent_rate(self, t: Array, x: Array, v: Array, z: Array, p: dict) -> Array:
-        raise NotImplementedError
+    def columns(
+        self, t: Array, x: Array, v: Array, z: Array | None, p: dict, v_noise: float | None = None
+    ) -> dict[str, Array]:
+        """The force per unit of each ``linear`` parameter (the other parameters at ``p``): the
+        term's columns in a regression. ``v_noise``: along a measured velocity (``measured_force``)."""
+        zero = {n: 0.0 for n in self.linear}
+        if v_noise is None:
+            return {n: self.force(t, x, v, z, {**p, **zero, n: 1.0}) for n in self.linear}
+        return {n: self.measured_force(t, x, v, z, {**p, **zero, n: 1.0}, v_noise) for n in self.linear}
 
-    def formula(self, p: dict[str, float]) -> str:
-        raise NotImplementedError
+    def latent_rate(self, t: Array, x: Array, v: Array, z: Array, p: dict) -> Array:
+        """dz/dt of the latent state (terms with ``n_latent`` > 0 only)."""
+        raise NotImplementedError(f"{type(self).__name__} has no latent state")
+
+
+def heun_along(
+    rate, t: np.ndarray, x: np.ndarray, v: np.ndarray | None, z0: np.ndarray, substeps: int = 4
+) -> np.ndarray:
+    """A latent state integrated along a given motion (Heun's rule, x and x' interpolated
+    linearly between samples): the one z integrator of the package. ``rate(t, x, v, z)`` gives
+    dz/dt in ``z0``'s shape; returns (N, *z0.shape). A path that blows up is NaN from there on.
+
+    ``v=None``: along the displacement path alone, the velocity on each interval its chord's
+    (x[i+1] - x[i]) / dt. For a rate-independent law (Bouc-Wen) z then depends on the increments
+    of x only, whatever a smoothed or noisy velocity says."""
+    along_x = v is None
+    if along_x:
+        v = np.diff(x, axis=0) / np.reshape(np.diff(t), (-1,) + (1,) * (np.ndim(x) - 1))
+    z = np.zeros((len(t), *np.shape(z0)))
+    zi = np.array(z0, dtype=float)
+    z[0] = zi
+    for i in range(len(t) - 1):
+        h = (t[i + 1] - t[i]) / substeps
+        for j in range(substeps):
+            a, b = j / substeps, (j + 1) / substeps
+            x0, x1 = x[i] + a * (x[i + 1] - x[i]), x[i] + b * (x[i + 1] - x[i])
+            if along_x:  # the chord's velocity holds on the whole interval
+                v0 = v1 = v[i]
+            else:
+                v0, v1 = v[i] + a * (v[i + 1] - v[i]), v[i] + b * (v[i + 1] - v[i])
+            k1 = rate(t[i], x0, v0, zi)
+            zi = zi + 0.5 * h * (k1 + rate(t[i], x1, v1, zi + h * k1))
+        z[i + 1] = zi
+    return z
+
+
+def latent_path(
+    term: ForceTerm,
+    t: np.ndarray,
+    x: np.ndarray,
+    v: np.ndarray | None,
+    values: dict[str, Any],
+    substeps: int = 4,
+) -> np.ndarray:
+    """A term's latent state along a given motion from zero (``heun_along``; ``v=None``: along
+    the displacement path alone): what the term's z was, given the motion the structure made.
+    ``values`` may hold (P,) arrays (P parameter sets at once): z is then (N, P, n_latent), else
+    (N, n_latent)."""
+    shape = (*np.broadcast_shapes(*(np.shape(val) for val in values.values())), term.n_latent)
+
+    def rate(ti, xi, vi, zi):
+        return np.asarray(term.latent_rate(ti, xi, vi, zi, values), float).reshape(shape)
+
+    return heun_along(rate, t, x, v, np.zeros(shape), substeps)
 
 
 class ViscousDamping(ForceTerm):
     name = "viscous_damping"
+    symbol = "x'"
     linear = ("c",)
 
     def __init__(self, c: float = 0.5) -> None:
@@ -97,6 +178,7 @@ class ViscousDamping(ForceTerm):
 
 class LinearStiffness(ForceTerm):
     name = "linear_stiffness"
+    symbol = "x"
 
     def __init__(self, k: float = 15.0, param: str = "k") -> None:
         self.k, self.param = k, param
@@ -114,6 +196,7 @@ class LinearStiffness(ForceTerm):
 
 class CubicStiffness(ForceTerm):
     name = "cubic_stiffness"
+    symbol = "x^3"
     linear = ("k3",)
 
     def __init__(self, k3: float = 120.0, signed: bool = False) -> None:
@@ -217,6 +300,7 @@ class QuadraticStiffness(ForceTerm):
     """k2 x^2: a stiffness that differs in tension and compression (asymmetric)."""
 
     name = "quadratic_stiffness"
+    symbol = "x^2"
     linear = ("k2",)
 
     def __init__(self, k2: float = 10.0, scale: float | None = None) -> None:
@@ -240,6 +324,7 @@ class CoulombFriction(ForceTerm):
     """
 
     name = "coulomb_friction"
+    symbol = "sign x'"
     linear = ("Fc",)
 
     def __init__(self, Fc: float = 0.1, eps: float = 1e-3) -> None:
@@ -265,6 +350,7 @@ class QuadraticDamping(ForceTerm):
     """c2 x'|x'|: drag-type damping that grows with the square of the velocity."""
 
     name = "quadratic_damping"
+    symbol = "x'|x'|"
     linear = ("c2",)
 
     def __init__(self, c2: float = 0.5) -> None:
@@ -280,11 +366,57 @@ class QuadraticDamping(ForceTerm):
         return f"{p['c2']:.5g} x'|x'|"
 
 
-class StiffnessLoss(ForceTerm):
+class Monomial(ForceTerm):
+    """p x^i x'^j: a column of a polynomial library (SINDy's cross terms), no physical law of its
+    own; the physical monomials (x, x', x^2, x^3) are their own terms."""
+
+    def __init__(self, i: int, j: int, value: float = 0.0, param: str | None = None) -> None:
+        if i < 0 or j < 0 or i + j == 0:
+            raise ValueError(f"monomial: need powers i, j >= 0 and not both 0, got {i}, {j}")
+        self.i, self.j, self.value = i, j, value
+        self.param = param or f"p{i}{j}"
+        self.name, self.linear = f"monomial_{i}_{j}", (self.param,)
+        parts = [f"x^{i}" if i > 1 else "x"] * bool(i) + [f"x'^{j}" if j > 1 else "x'"] * bool(j)
+        self.symbol = " ".join(parts)
+
+    def specs(self):
+        return [ParamSpec(self.param, init=self.value, scale=1.0, true=self.value, transform="identity")]
+
+    def force(self, t, x, v, z, p):
+        out = p[self.param]
+        if self.i:
+            out = out * x**self.i
+        if self.j:
+            out = out * v**self.j
+        return out
+
+    def formula(self, p):
+        return f"{p[self.param]:.5g} {self.symbol}"
+
+
+class StepInTime(ForceTerm):
+    """A force that switches on at an unknown time t_d, smoothed over ``tau`` seconds (a sigmoid)
+    so that t_d has a gradient, and kept inside (t_min, t_max): what every change in time
+    shares."""
+
+    def __init__(self, t_d: float, t_min: float, t_max: float, tau: float) -> None:
+        if not t_min < t_d < t_max:
+            raise ValueError(f"{self.name}: t_d={t_d} outside ({t_min}, {t_max})")
+        self.t_d, self.t_min, self.t_max, self.tau = t_d, t_min, t_max, tau
+
+    def _t_d_spec(self) -> ParamSpec:
+        return ParamSpec(
+            "t_d", init=self.t_d, true=self.t_d, transform="box", lower=self.t_min, upper=self.t_max, unit="s"
+        )
+
+    def _step(self, t: Array, p: dict) -> Array:
+        return _sigmoid((t - p["t_d"]) / self.tau)
+
+
+class StiffnessLoss(StepInTime):
     """-drop k x H(t - t_d): the stiffness ``k`` falls by the fraction ``drop`` at time t_d.
 
-    Damage during the earthquake. The step is smoothed over ``tau`` seconds (a sigmoid) so
-    that t_d has a gradient; ``stiffness`` names the nominal stiffness parameter it scales.
+    Damage during the earthquake; ``stiffness`` names the nominal stiffness parameter it scales.
     """
 
     name = "stiffness_loss"
@@ -298,44 +430,27 @@ class StiffnessLoss(ForceTerm):
         stiffness: str = "k",
         tau: float = 0.05,
     ) -> None:
-        if not t_min < t_d < t_max:
-            raise ValueError(f"stiffness_loss: t_d={t_d} outside ({t_min}, {t_max})")
-        self.drop, self.t_d, self.t_min, self.t_max, self.stiffness, self.tau = (
-            drop,
-            t_d,
-            t_min,
-            t_max,
-            stiffness,
-            tau,
-        )
+        super().__init__(t_d, t_min, t_max, tau)
+        self.drop, self.stiffness = drop, stiffness
 
     def specs(self):
         return [
             ParamSpec("drop", init=self.drop, true=self.drop, transform="box", lower=0.0, upper=0.95),
-            ParamSpec(
-                "t_d",
-                init=self.t_d,
-                true=self.t_d,
-                transform="box",
-                lower=self.t_min,
-                upper=self.t_max,
-                unit="s",
-            ),
+            self._t_d_spec(),
         ]
 
     def force(self, t, x, v, z, p):
-        return -p["drop"] * p[self.stiffness] * x * _sigmoid((t - p["t_d"]) / self.tau)
+        return -p["drop"] * p[self.stiffness] * x * self._step(t, p)
 
     def formula(self, p):
         return f"- {p['drop']:.4g} {p[self.stiffness]:.5g} x H(t - {p['t_d']:.4g})"
 
 
-class DampingChange(ForceTerm):
+class DampingChange(StepInTime):
     """change c x' H(t - t_d): the damping ``c`` changes by the fraction ``change`` at t_d.
 
     Damage that opens cracks or loosens joints raises the dissipation (change > 0); a lost
-    damper lowers it (change < 0). The step is smoothed over ``tau`` seconds as in
-    :class:`StiffnessLoss`; ``damping`` names the nominal damping parameter it scales.
+    damper lowers it (change < 0). ``damping`` names the nominal damping parameter it scales.
     """
 
     name = "damping_change"
@@ -349,35 +464,19 @@ class DampingChange(ForceTerm):
         damping: str = "c",
         tau: float = 0.05,
     ) -> None:
-        if not t_min < t_d < t_max:
-            raise ValueError(f"damping_change: t_d={t_d} outside ({t_min}, {t_max})")
+        super().__init__(t_d, t_min, t_max, tau)
         if not -0.95 < change < 10.0:
             raise ValueError(f"damping_change: change={change} outside (-0.95, 10)")
-        self.change, self.t_d, self.t_min, self.t_max, self.damping, self.tau = (
-            change,
-            t_d,
-            t_min,
-            t_max,
-            damping,
-            tau,
-        )
+        self.change, self.damping = change, damping
 
     def specs(self):
         return [
             ParamSpec("change", init=self.change, true=self.change, transform="box", lower=-0.95, upper=10.0),
-            ParamSpec(
-                "t_d",
-                init=self.t_d,
-                true=self.t_d,
-                transform="box",
-                lower=self.t_min,
-                upper=self.t_max,
-                unit="s",
-            ),
+            self._t_d_spec(),
         ]
 
     def force(self, t, x, v, z, p):
-        return p["change"] * p[self.damping] * v * _sigmoid((t - p["t_d"]) / self.tau)
+        return p["change"] * p[self.damping] * v * self._step(t, p)
 
     def formula(self, p):
         return f"+ {p['change']:.4g} {p[self.damping]:.5g} x' H(t - {p['t_d']:.4g})"
