@@ -25,6 +25,8 @@ import numpy as np
 import pandas as pd
 from omegaconf import OmegaConf
 
+from pidyn.baselines.registry import entries
+
 # Paper Tables I-III (value, error %), PIDynNet and UKF.
 PAPER = {
     ("duffing", 0.0): {
@@ -80,8 +82,9 @@ PAPER = {
         },
     },
 }
-METHODS = ["equation_error", "sindy", "output_error", "ukf"]
-LABEL = {"equation_error": "EE", "sindy": "SINDy", "output_error": "OE", "ukf": "UKF"}
+#: the parametric estimators in the tables' order, and their labels (from the estimator registry)
+METHODS = [name for name, e in entries().items() if e.parametric]
+LABEL = {name: e.label for name, e in entries().items()}
 
 
 def _from_config(d: Path, job: dict) -> None:

@@ -136,21 +136,7 @@ def run_one(cell: dict, method: str, start: dict[str, float], out: Path) -> dict
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--cell", choices=list(CELLS), default="duffing")
-    ap.add_argument("--starts", type=int, default=50)
-    ap.add_argument("--methods", nargs="*", default=METHODS)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--shard", default=None, help="k/n: run only starts i with i %% n == k, no summary")
-    ap.add_argument(
-        "--machine-note", default="", help="how the starts were run (parallel shards), for the summary"
-    )
-    ap.add_argument(
-        "--collect",
-        action="store_true",
-        help="run nothing: write the table from the starts finished so far (an interrupted study, "
-        "committed, resumes from it)",
-    )
+    ap = _parser()
     a = ap.parse_args()
     if a.collect and a.shard:
         ap.error("--collect gathers every shard's results; give no --shard")
@@ -180,30 +166,10 @@ def main() -> None:
             if (i, method) in kept:
                 rows.append(kept[(i, method)])
                 continue
-            if f.exists():
-                r = json.loads(f.read_text())
-            elif a.collect:
+            r = _result(cell, method, start, work / f"{method}_{i:03d}", f, a.collect)
+            if r is None:
                 continue
-            else:
-                try:
-                    r = run_one(cell, method, start, work / f"{method}_{i:03d}")
-                except Exception as exc:  # a diverging start is an outcome, not a crash of the study
-                    r = {"params": {}, "seconds": float("nan"), "error": str(exc)[:300]}
-                r["start"] = start
-                f.write_text(json.dumps(r, default=float))
-            errs = errors_pct(r["params"], truth)
-            max_err = max(errs.values()) if r["params"] else float("inf")
-            rows.append(
-                {
-                    "start": i,
-                    "method": method,
-                    "max_error_pct": max_err,
-                    "success": bool(np.isfinite(max_err) and max_err <= 1.0),
-                    "seconds": r["seconds"],
-                    **{f"start_{k}": start[k] / truth[k] for k in truth},
-                }
-            )
-            print(f"start {i:3d} {method:13s} max error {max_err:10.4g} %  {r['seconds']:.0f} s", flush=True)
+            rows.append(_row(i, method, r, start, truth))
     if a.shard:
         return
     if not rows:
@@ -212,6 +178,55 @@ def main() -> None:
     df = pd.DataFrame(rows)
     df.to_csv(stem.with_suffix(".csv"), index=False)
     write_summary(df, stem, a, cell, truth)
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--cell", choices=list(CELLS), default="duffing")
+    ap.add_argument("--starts", type=int, default=50)
+    ap.add_argument("--methods", nargs="*", default=METHODS)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--shard", default=None, help="k/n: run only starts i with i %% n == k, no summary")
+    ap.add_argument(
+        "--machine-note", default="", help="how the starts were run (parallel shards), for the summary"
+    )
+    ap.add_argument(
+        "--collect",
+        action="store_true",
+        help="run nothing: write the table from the starts finished so far (an interrupted study, "
+        "committed, resumes from it)",
+    )
+    return ap
+
+
+def _result(cell: dict, method: str, start: dict, folder: Path, f: Path, collect: bool) -> dict | None:
+    """One start's result: read back when done, else run (None when only collecting)."""
+    if f.exists():
+        return json.loads(f.read_text())
+    if collect:
+        return None
+    try:
+        r = run_one(cell, method, start, folder)
+    except Exception as exc:  # a diverging start is an outcome, not a crash of the study
+        r = {"params": {}, "seconds": float("nan"), "error": str(exc)[:300]}
+    r["start"] = start
+    f.write_text(json.dumps(r, default=float))
+    return r
+
+
+def _row(i: int, method: str, r: dict, start: dict, truth: dict) -> dict:
+    """The table's row of one start and method (printed as it is made)."""
+    errs = errors_pct(r["params"], truth)
+    max_err = max(errs.values()) if r["params"] else float("inf")
+    print(f"start {i:3d} {method:13s} max error {max_err:10.4g} %  {r['seconds']:.0f} s", flush=True)
+    return {
+        "start": i,
+        "method": method,
+        "max_error_pct": max_err,
+        "success": bool(np.isfinite(max_err) and max_err <= 1.0),
+        "seconds": r["seconds"],
+        **{f"start_{k}": start[k] / truth[k] for k in truth},
+    }
 
 
 def committed_rows(path: Path, starts: list[dict[str, float]], truth: dict[str, float]) -> dict:

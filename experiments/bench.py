@@ -390,6 +390,13 @@ def write_markdown(res: dict) -> None:
         "|---|---|",
     ]
     lines += [f"| {k} | {v:.2f} |" for k, v in res["ms_per_iteration"].items()]
+    lines += _gpu_lines(res) + _overhead_lines(res) + _simulation_lines(res) + _end_to_end_lines(res)
+    (OUT / "bench.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+def _gpu_lines(res: dict) -> list[str]:
+    lines: list[str] = []
     gpu = res.get("gpu_ms_per_iteration") or {"device": None}
     if gpu["device"]:
         lines += [
@@ -410,6 +417,11 @@ def write_markdown(res: dict) -> None:
             "",
             "GPU: none on this machine (`make bench` adds GPU rows where `torch.cuda.is_available()`).",
         ]
+    return lines
+
+
+def _overhead_lines(res: dict) -> list[str]:
+    lines: list[str] = []
     lo = res["lightning_overhead"]
     lines += [
         "",
@@ -431,6 +443,11 @@ def write_markdown(res: dict) -> None:
         f"{r['peak_rss_mb']:.0f} |"
         for r in res["storeys"]
     ]
+    return lines
+
+
+def _simulation_lines(res: dict) -> list[str]:
+    lines: list[str] = []
     if "simulation" in res:
         when = (
             f", measured {res['simulation_date']} by `python experiments/bench.py --simulation`"
@@ -453,6 +470,11 @@ def write_markdown(res: dict) -> None:
             f"| {r['system']} | {r['truth_ms']:.0f} | {r['output_error_step_ms']:.0f} | {r['linearisation_ms']:.0f} |"
             for r in res["simulation"]
         ]
+    return lines
+
+
+def _end_to_end_lines(res: dict) -> list[str]:
+    lines: list[str] = []
     if "end_to_end" in res:
         lines += [
             "",
@@ -467,8 +489,7 @@ def write_markdown(res: dict) -> None:
             lines.append(
                 f"| `{e['command']}` | {e['wall_s']:.0f} | {e['windows']} | {e['iterations']} | {errs} |"
             )
-    (OUT / "bench.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    return lines
 
 
 if __name__ == "__main__":

@@ -134,13 +134,12 @@ def models(run: Path) -> tuple[list[tuple[str, object, dict]], dict]:
 
 
 def simulate(system, values: dict, u: np.ndarray, fs: float, repeat: int = 1) -> np.ndarray:
-    from pidyn.integrate import rk4
+    from pidyn.simulate import simulate_states
 
     f = np.tile(u, repeat)
     t = np.arange(len(f)) / fs
-    with np.errstate(all="ignore"):
-        Y, _ = rk4(system, dict(values), t, f, np.zeros((1, system.n_state)), substeps=4)
-    return Y[-len(u) :, 0, 0]
+    Y, _ = simulate_states(system, values, t, f, substeps=4)
+    return Y[-len(u) :, 0]
 
 
 def bouc_wen(run: Path) -> tuple[list[dict], list[str]]:

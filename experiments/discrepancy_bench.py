@@ -226,6 +226,21 @@ def write_results(
     summary["code_commits"] = (
         " ".join(sorted(set(df["commit"].dropna().astype(str)))) if "commit" in df else ""
     )
+    per = per_kind(df)
+    results.mkdir(parents=True, exist_ok=True)
+    df.to_csv(results / f"{stem}.csv", index=False)
+    (results / f"{stem}.json").write_text(
+        json.dumps(
+            {"summary": summary, "per_effect": per.reset_index().to_dict("records")}, indent=2, default=float
+        )
+    )
+    lines = _markdown(df, per, summary, planned, command, split)
+    (results / f"{stem}.md").write_text("\n".join(lines) + "\n")
+    return lines
+
+
+def per_kind(df: pd.DataFrame) -> pd.DataFrame:
+    """Per hidden kind: cases, top-1 hit rate, median parameter error, held-out NRMSE ratio, time."""
     rows_per = []
     for name, g in df.groupby("hidden", sort=False):
         errs = g["param_error_pct"] if "param_error_pct" in g else pd.Series(dtype=float)
@@ -246,13 +261,13 @@ def write_results(
     per = per.sort_values("hidden", key=lambda c: c.map(lambda v: order.get(v, len(order)))).set_index(
         "hidden"
     )
-    results.mkdir(parents=True, exist_ok=True)
-    df.to_csv(results / f"{stem}.csv", index=False)
-    (results / f"{stem}.json").write_text(
-        json.dumps(
-            {"summary": summary, "per_effect": per.reset_index().to_dict("records")}, indent=2, default=float
-        )
-    )
+    return per
+
+
+def _markdown(
+    df: pd.DataFrame, per: pd.DataFrame, summary: dict, planned: int, command: str | None, split: tuple
+) -> list[str]:
+    """The table's markdown: what was run, the summary, per kind, the misses."""
     done = (
         "" if len(df) >= planned else f" ({len(df)} of the {planned} planned cases finished; the rest resume)"
     )
@@ -295,11 +310,10 @@ def write_results(
             "",
             "Misses: " + "; ".join(f"case {r.case} {r.hidden} -> {r.found}" for r in misses.itertuples()),
         ]
-    (results / f"{stem}.md").write_text("\n".join(lines) + "\n")
     return lines
 
 
-def main() -> None:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", type=int, default=180)  # 10 of each of the 18 kinds
     ap.add_argument(
@@ -324,6 +338,11 @@ def main() -> None:
         help="write the table as experiments/results/NAME.{md,csv,json} (a study of its own, e.g. the "
         "default schedule on 40 s records; with --kinds too)",
     )
+    return ap
+
+
+def _checked_args(ap: argparse.ArgumentParser) -> tuple[argparse.Namespace, list[str]]:
+    """The options, checked, and the config overrides given after them (``key=value``)."""
     args, extra = ap.parse_known_args()
     if args.kinds:  # key=value after --kinds are config overrides, not kinds
         extra += [k for k in args.kinds if "=" in k]
@@ -337,6 +356,12 @@ def main() -> None:
         )
     if not 0 <= args.first < args.cases:
         ap.error(f"--first {args.first} must lie in 0..{args.cases - 1} (--cases {args.cases})")
+    return args, extra
+
+
+def main() -> None:
+    ap = _parser()
+    args, extra = _checked_args(ap)
     kinds = [BY_LABEL[k] for k in args.kinds] if args.kinds else KINDS
     schedule = "default" if args.full else "short: " + " ".join(FAST)
     given = dict(e.split("=", 1) for e in extra if "=" in e)  # the record's split, as the table states it

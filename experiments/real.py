@@ -436,12 +436,7 @@ def aggregate(base: Path) -> None:
     rows = identification_rows(base / "identify")
     if not rows:
         raise SystemExit(f"{base / 'identify'}: no run folders to aggregate (the sweep did not run?)")
-    with (RESULTS / "painter_street.csv").open("w", newline="") as fh:
-        keys = sorted({k for r in rows for k in r})
-        w = csv.DictWriter(fh, fieldnames=keys)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in r.items()})
+    write_csv(rows, RESULTS / "painter_street.csv")
     if rows:
         period_figure(rows, RESULTS / "figures" / "period_vs_pga.png")
     lines = [
@@ -470,24 +465,7 @@ def aggregate(base: Path) -> None:
     ]
     one = identification_rows(base / "one_input") if (base / "one_input").exists() else []
     lines += reduced_choice_lines(rows, one)
-    diag = diagnosis_rows(base / "diagnose") if (base / "diagnose").exists() else []
-    if diag:
-        lines += [
-            "## Diagnosis of the strong events (transverse)",
-            "",
-            "`python diagnose.py experiment=painter_street_diagnose`: the accelerations decide (output error "
-            "of every library effect), the period and damping are fitted window by window; a period that moves "
-            "beyond its windows' intervals refutes one linear model (verdict `unexplained`, a learned force "
-            "tried and kept only when it predicts the held-out part better).",
-            "",
-            *diagnosis_table(diag),
-        ]
-        for r in diag:
-            fig = Path(r["run"]) / "figures" / "running_period.png"
-            if fig.exists():
-                shutil.copy(fig, RESULTS / "figures" / f"running_period_{r['event']}.png")
-                lines.append(f"![{r['event']}](figures/running_period_{r['event']}.png)")
-        lines.append("")
+    lines += _diagnosis_lines(base)
     lines += [
         "## Buildings on a shake table, measured by wearable IMUs",
         "",
@@ -496,6 +474,41 @@ def aggregate(base: Path) -> None:
     ]
     (RESULTS / "README.md").write_text("\n".join(lines))
     print(f"wrote {RESULTS / 'README.md'}")
+
+
+def _diagnosis_lines(base: Path) -> list[str]:
+    """The strong events' diagnosis table and their running-period figures (copied beside it)."""
+    diag = diagnosis_rows(base / "diagnose") if (base / "diagnose").exists() else []
+    if not diag:
+        return []
+    lines: list[str] = []
+    lines += [
+        "## Diagnosis of the strong events (transverse)",
+        "",
+        "`python diagnose.py experiment=painter_street_diagnose`: the accelerations decide (output error "
+        "of every library effect), the period and damping are fitted window by window; a period that moves "
+        "beyond its windows' intervals refutes one linear model (verdict `unexplained`, a learned force "
+        "tried and kept only when it predicts the held-out part better).",
+        "",
+        *diagnosis_table(diag),
+    ]
+    for r in diag:
+        fig = Path(r["run"]) / "figures" / "running_period.png"
+        if fig.exists():
+            shutil.copy(fig, RESULTS / "figures" / f"running_period_{r['event']}.png")
+            lines.append(f"![{r['event']}](figures/running_period_{r['event']}.png)")
+    lines.append("")
+    return lines
+
+
+def write_csv(rows: list[dict], path: Path) -> None:
+    """One row per event and direction; lists and dicts as JSON."""
+    with path.open("w", newline="") as fh:
+        keys = sorted({k for r in rows for k in r})
+        w = csv.DictWriter(fh, fieldnames=keys)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in r.items()})
 
 
 def main() -> None:

@@ -395,6 +395,13 @@ def report_lines(
         "| model | run | f1 (Hz) | 95 % | zeta1 (%) | 95 % | vs the identification run | held-out NRMSE (mean of floors) | SRIM's | SRIM f1 (Hz) | wall (s) |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
+    out += _run_rows(runs)
+    out += _prediction_lines(preds) + _residual_lines(runs) + list(diagnosis) + _timing_lines(align)
+    return out
+
+
+def _run_rows(runs: list[dict]) -> list[str]:
+    out: list[str] = []
     for model, (_, ident) in MODELS.items():
         rows = [r for r in runs if r["model"] == model]
         ref = next((r["frequency_hz"] for r in rows if r["run"] == ident), None)
@@ -409,6 +416,11 @@ def report_lines(
                 f"{_fmt(r['heldout_mean'])} | {_fmt(r['srim_heldout_mean'])} | {_fmt(r['srim_fundamental_hz'])} | "
                 f"{_fmt(r['wall_s'], '.0f')} |"
             )
+    return out
+
+
+def _prediction_lines(preds: list[dict]) -> list[str]:
+    out: list[str] = []
     if preds:
         out += [
             "",
@@ -427,6 +439,11 @@ def report_lines(
                 f"| {p['model']} | {p['identified_on']} | {p['predicted_run']} | {ours} | "
                 f"{_fmt(p['pidyn_mean'])} | {theirs} | {_fmt(p['srim_mean'])} |"
             )
+    return out
+
+
+def _residual_lines(runs: list[dict]) -> list[str]:
+    out: list[str] = []
     resid = [r for r in runs if r["run"] == MODELS[r["model"]][1] and r["storey_residuals"]]
     if resid:
         shapes = list(resid[0]["storey_residuals"][0]["explained_by"])
@@ -448,7 +465,11 @@ def report_lines(
                     + " | ".join(f"{q['explained_by'][k]:.2f}" for k in shapes)
                     + " |"
                 )
-    out += list(diagnosis)
+    return out
+
+
+def _timing_lines(align: list[dict]) -> list[str]:
+    out: list[str] = []
     if align:
         out += [
             "",
