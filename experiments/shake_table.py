@@ -443,29 +443,21 @@ def _prediction_lines(preds: list[dict]) -> list[str]:
 
 
 def _residual_lines(runs: list[dict]) -> list[str]:
-    out: list[str] = []
+    from pidyn.runs.building_report import residual_table
+
     resid = [r for r in runs if r["run"] == MODELS[r["model"]][1] and r["storey_residuals"]]
-    if resid:
-        shapes = list(resid[0]["storey_residuals"][0]["explained_by"])
-        out += [
-            "",
-            "## What the shear model leaves of each storey's force (identification run, held-out part)",
-            "",
-            "F_i = -sum_(j>=i) m_j a_j from the floors' accelerations against the identified storey force on the "
-            "integrated drifts (`building.md` of each run); the share of the residual each simple force shape "
-            "would explain says where to look.",
-            "",
-            "| model | storey | residual / force (RMS) | residual's peak (Hz) | " + " | ".join(shapes) + " |",
-            "|---|---|---|---|" + "---|" * len(shapes),
-        ]
-        for r in resid:
-            for q in r["storey_residuals"]:
-                out.append(
-                    f"| {r['model']} | {q['storey']} | {q['residual_share']:.3f} | {q['residual_peak_hz']:.2f} | "
-                    + " | ".join(f"{q['explained_by'][k]:.2f}" for k in shapes)
-                    + " |"
-                )
-    return out
+    if not resid:
+        return []
+    return [
+        "",
+        "## What the shear model leaves of each storey's force (identification run, held-out part)",
+        "",
+        "F_i = -sum_(j>=i) m_j a_j from the floors' accelerations against the identified storey force on the "
+        "integrated drifts (`building.md` of each run); the share of the residual each simple force shape "
+        "would explain says where to look.",
+        "",
+        *residual_table({r["model"]: r["storey_residuals"] for r in resid}),
+    ]
 
 
 def _timing_lines(align: list[dict]) -> list[str]:

@@ -38,3 +38,20 @@ def test_building_report_of_a_model_that_blows_up(tmp_path):
     assert json.loads((tmp_path / "modal.json").read_text())["identified"]["frequency_hz"]
     assert "diverges" in (tmp_path / "building.md").read_text()
     assert modes["diverged"]
+
+
+def test_storey_residuals_point_at_the_storey_the_model_gets_wrong():
+    """The storey force the floors' accelerations give against the model's: small everywhere for
+    the true model, largest in the storey whose stiffness the model halves."""
+    from pidyn.runs.building_report import storey_residuals
+
+    sb = ShearBuilding()
+    r = synthetic(sb, "el_centro", duration=12.0, channels=("a",))
+    r = type(r)(**{**r.__dict__, "truth": None})  # as a measured building: no truth to compare with
+    truth = sb.true_values()
+    good = storey_residuals(sb, truth, r)
+    assert len(good) == sb.n_dof and max(row["residual_share"] for row in good) < 0.1, good
+    wrong = storey_residuals(sb, {**truth, "k2": 0.5 * truth["k2"]}, r)
+    shares = [row["residual_share"] for row in wrong]
+    assert int(np.argmax(shares)) == 1 and shares[1] > 0.3, shares
+    assert wrong[1]["explained_by"]["stiffness (d)"] > 0.8, wrong[1]

@@ -184,23 +184,36 @@ def residual_lines(rows: list[dict], heldout: bool) -> list[str]:
     """building.md's table of the storeys' residual forces."""
     if not rows:
         return []
-    shapes = list(rows[0]["explained_by"])
-    out = [
+    return [
         "",
         f"## What the model leaves of each storey's force ({'held-out part' if heldout else 'whole record'})",
         "",
         "F_i = -sum_(j>=i) m_j a_j from the floors' accelerations against the model's storey force on the "
         "integrated drifts; the share of the residual each force shape would explain says where to look.",
         "",
-        "| storey | residual / force (RMS) | residual's peak (Hz) | " + " | ".join(shapes) + " |",
-        "|---|---|---|" + "---|" * len(shapes),
+        *residual_table({None: rows}),
     ]
-    for r in rows:
-        out.append(
-            f"| {r['storey']} | {r['residual_share']:.3f} | {r['residual_peak_hz']:.2f} | "
-            + " | ".join(f"{r['explained_by'][k]:.2f}" for k in shapes)
-            + " |"
-        )
+
+
+def residual_table(rows_by: dict[str | None, list[dict]], label: str = "model") -> list[str]:
+    """The storeys' residual forces as a markdown table; with several buildings (keys not None)
+    a first column ``label`` names each row's building."""
+    first = next(iter(rows_by.values()))
+    shapes = list(first[0]["explained_by"])
+    named = any(k is not None for k in rows_by)
+    head = f"| {label} " if named else ""
+    out = [
+        head + "| storey | residual / force (RMS) | residual's peak (Hz) | " + " | ".join(shapes) + " |",
+        ("|---" if named else "") + "|---|---|---|" + "---|" * len(shapes),
+    ]
+    for key, rows in rows_by.items():
+        for r in rows:
+            out.append(
+                (f"| {key} " if named else "")
+                + f"| {r['storey']} | {r['residual_share']:.3f} | {r['residual_peak_hz']:.2f} | "
+                + " | ".join(f"{r['explained_by'][k]:.2f}" for k in shapes)
+                + " |"
+            )
     return out
 
 
@@ -216,18 +229,19 @@ def storey_residuals(
     from scipy.signal import welch
 
     from pidyn.baselines.data_start import fundamental
-    from pidyn.signals import integrate
+    from pidyn.discrepancy.storeys import storey_views
 
     if record.a is None or np.isnan(record.a).any() or record.n_inputs != 1:
         return []
     peak = fundamental(record)
     corner = max((peak[0] if peak else 1.0) / 5.0, 2.0 / max(float(record.t[-1]), 1e-9))
     dt, n = record.dt, system.n_dof
-    absolute = record.a + np.asarray(record.f, float)[:, None]
-    masses = np.array([float(values[f"m{i + 1}"]) for i in range(n)])
-    measured = -np.cumsum((absolute * masses)[:, ::-1], axis=1)[:, ::-1]  # F_i = -sum_{j>=i} m_j a_j
-    measured = integrate(measured, dt, 0, corner)
-    x, v = integrate(record.a, dt, 2, corner), integrate(record.a, dt, 1, corner)
+    # each storey's shear F_i = -sum_{j>=i} m_j a_j and its drift, as the building diagnosis sees them
+    views = storey_views(record, system, dict(values), corner)
+    measured = np.stack([view.shear for view in views], axis=1)
+    d_all = np.stack([view.drift for view in views], axis=1)
+    dv_all = np.stack([view.drift_velocity for view in views], axis=1)
+    x, v = np.cumsum(d_all, axis=1), np.cumsum(dv_all, axis=1)
     z = np.zeros((len(record.t), system.n_latent))
     model = np.stack(
         [np.broadcast_to(f, record.t.shape) for f in system.storey_forces(record.t, x, v, z, dict(values))],
@@ -238,8 +252,7 @@ def storey_residuals(
     keep[edge : len(record.t) - edge] = True
     if span is not None:
         keep &= (record.t >= span[0]) & (record.t <= span[1])
-    d = np.diff(np.concatenate([np.zeros((len(x), 1)), x], axis=1), axis=1)[keep]
-    dv = np.diff(np.concatenate([np.zeros((len(v), 1)), v], axis=1), axis=1)[keep]
+    d, dv = d_all[keep], dv_all[keep]
     rows = []
     for i in range(n):
         r, F = (measured - model)[keep, i], measured[keep, i]
