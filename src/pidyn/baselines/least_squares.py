@@ -16,13 +16,12 @@ import time
 
 import numpy as np
 import torch
-from scipy.optimize import least_squares
 
-from pidyn.baselines.common import BaselineResult, starting_point
+from pidyn.baselines.common import BaselineResult
 from pidyn.baselines.registry import estimator, row
 from pidyn.data.sources import Record
 from pidyn.notes import note
-from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
+from pidyn.refine.output_error import fit_output_error
 from pidyn.systems.base import Kinematics
 from pidyn.systems.lstsq import solve_linear_params
 
@@ -65,45 +64,10 @@ def output_error(
     substeps: int = 4,
     max_nfev: int = 60,
 ) -> BaselineResult:
-    """Single shooting from rest over the whole record (the shooting problem with one segment
-    and a fixed initial state), trust-region least squares, forward-difference Jacobian from
-    one batched simulation of the parameter set and all its perturbations."""
-    t0 = time.perf_counter()
-    specs, fixed, th0 = starting_point(system, init)
-    problem = ShootingProblem(
-        system,
-        record.t,
-        record.f,
-        record_channels(record, system.n_dof),
-        segment_bounds(record.t, None),
-        substeps,
-        fixed_state0=np.zeros(system.n_state),
-    )
-    for ch in problem.channels:  # residuals relative to each channel's spread, as a practitioner scales them
-        ch.sigma = max(float(np.std(ch.data)), 1e-300)
-    cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
-
-    def evaluate(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        key = th.tobytes()
-        if key not in cache:  # residuals and Jacobian come from the same batch: one simulation for both
-            cache.clear()
-            cache[key] = problem.residuals_and_fd_jacobian(th)
-        return cache[key]
-
-    sol = least_squares(
-        lambda th: evaluate(th)[0],
-        th0,
-        jac=lambda th: evaluate(th)[1],
-        method="trf",
-        max_nfev=max_nfev,
-        xtol=1e-12,
-        ftol=1e-12,
-        gtol=1e-12,
-    )
-    est = problem.values(sol.x)
-    return BaselineResult(
-        "output_error", est, time.perf_counter() - t0, note=f"nfev={sol.nfev}, cost={sol.cost:.3g}"
-    )
+    """Single shooting from rest over the whole record (``pidyn.refine.output_error``), as the
+    classical baseline."""
+    fit = fit_output_error(record, system, init, substeps, max_nfev)
+    return BaselineResult("output_error", fit.params, fit.seconds, note=fit.note)
 
 
 @estimator("equation_error", equation_error, "EE", parametric=True, order=1)

@@ -101,7 +101,7 @@ def _nominal_influence(record: Record, system, fit: tuple[float, float]) -> tupl
     """The nominal model's values from the data's start and, with several inputs, the supports'
     influence by output error on the fitting part; with a sentence that says where they came from."""
     from pidyn.baselines.data_start import start_from_data, with_start
-    from pidyn.baselines.least_squares import output_error
+    from pidyn.refine.output_error import fit_output_error
 
     start = start_from_data(record, system)
     values = {s.name: float(s.init) for s in system.param_specs()}
@@ -112,7 +112,7 @@ def _nominal_influence(record: Record, system, fit: tuple[float, float]) -> tupl
         note = f"start from the data ({start.method})"
     if system.n_inputs > 1:
         seg = record.segment(*fit)
-        res = output_error(
+        res = fit_output_error(
             seg,
             system,
             init={

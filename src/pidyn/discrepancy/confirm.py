@@ -30,9 +30,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pidyn.baselines.least_squares import output_error
 from pidyn.data.sources import Record
 from pidyn.discrepancy.screening import Thresholds
+from pidyn.refine.output_error import fit_output_error
 from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
 
 log = logging.getLogger(__name__)
@@ -132,7 +132,7 @@ def confirm(
         ext = build(row)
         specs = [s for s in ext.param_specs() if s.trainable]
         try:
-            res = output_error(
+            res = fit_output_error(
                 seg,
                 ext,
                 init={s.name: values.get(s.name, s.init) for s in specs},

@@ -28,7 +28,6 @@ from typing import Any
 
 import numpy as np
 
-from pidyn.baselines.least_squares import output_error
 from pidyn.data.sources import Record
 from pidyn.discrepancy.changes import HeldoutCheck, heldout_check, locate_step
 from pidyn.discrepancy.confirm import Confirmation, confirm, undecided
@@ -44,6 +43,7 @@ from pidyn.discrepancy.learned_fit import (
 from pidyn.discrepancy.screening import EXCLUSIVE, Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.verdicts import Verdict
+from pidyn.refine.output_error import fit_output_error
 from pidyn.signals import dominant_period
 from pidyn.simulate import simulate_response
 from pidyn.systems.sdof import SDOFSystem
@@ -458,7 +458,7 @@ def polish(case: Case, system: SDOFSystem, values: dict[str, float]) -> tuple[di
     seg_end = fit[1] if st.polish_seconds is None else min(fit[1], fit[0] + float(st.polish_seconds))
     seg = case.record.segment(fit[0], seg_end)
     trainable = {s.name for s in system.param_specs() if s.trainable}
-    res = output_error(
+    res = fit_output_error(
         seg,
         system,
         init={k: v for k, v in values.items() if k in trainable},
