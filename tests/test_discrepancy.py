@@ -347,7 +347,7 @@ def test_a_change_in_time_is_located_before_and_after_the_split(t_d):
     check fails when the change is after the split (the nominal model is fine on the fitting
     part, wrong after it); the whole-record search finds the time inside its interval and the
     size of the drop; the same search on a record with nothing hidden finds nothing."""
-    from pidyn.discrepancy.changes import heldout_check, locate_change
+    from pidyn.discrepancy.changes import StepRegression, heldout_check, locate_change
     from pidyn.simulate import simulate_response
 
     case = hidden_case("stiffness_loss", 21, noise=0.02, params={"t_d": t_d})
@@ -361,41 +361,17 @@ def test_a_change_in_time_is_located_before_and_after_the_split(t_d):
     assert check.failed == (t_d > case.fit_end), check
     rows = np.ones(len(y), bool)
     n_eff = rows.sum() / weak.rows_per_independent
-    ch = locate_change(
-        names,
-        A0,
-        y,
-        t_first,
-        t_last,
-        rows,
-        s.x,
-        s.v,
-        s.t,
-        weak,
-        n_eff,
-        {"stiffness_loss": "k", "damping_change": "c"},
-        values,
-    )
+    reg = StepRegression(names, A0, y, t_first, t_last, s.x, s.v, s.t, weak)
+    ch = locate_change(reg, rows, n_eff, {"stiffness_loss": "k", "damping_change": "c"}, values)
     assert ch is not None and ch.effect == "stiffness_loss" and ch.delta_bic < -10
     assert ch.ci95[0] <= t_d <= ch.ci95[1] and ch.ci95[1] - ch.ci95[0] < 1.0, ch.ci95
     assert -ch.fraction == pytest.approx(case.truth["drop"], rel=0.2)
 
     nothing = hidden_case(None, 21, noise=0.02)
     s0, weak0, _, names0, A00, y0, tf0, tl0 = _change_rows(nothing, float(r.t[-1]))
+    reg0 = StepRegression(names0, A00, y0, tf0, tl0, s0.x, s0.v, s0.t, weak0)
     ch0 = locate_change(
-        names0,
-        A00,
-        y0,
-        tf0,
-        tl0,
-        np.ones(len(y0), bool),
-        s0.x,
-        s0.v,
-        s0.t,
-        weak0,
-        n_eff,
-        {"stiffness_loss": "k", "damping_change": "c"},
-        values,
+        reg0, np.ones(len(y0), bool), n_eff, {"stiffness_loss": "k", "damping_change": "c"}, values
     )
     assert ch0 is None or ch0.delta_bic > -10, ch0
 

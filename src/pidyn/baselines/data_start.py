@@ -194,7 +194,7 @@ def _equation_error(record, system, corner: float, fn: float) -> DataStart | Non
         k = Kinematics(t, T(ch["x"]), T(ch["v"]), T(ch["a"]))
         est = solve_linear_params(system, k, T(F), values, names)
     else:  # absolute signals; relative = absolute - the supports' motion weighted by r (bilinear)
-        est = _bilinear_fit(system, values, names, r_names, t, ch, f, dt, corner, T)
+        est = _bilinear_fit(system, values, names, r_names, record, ch, corner, T)
     specs = {s.name: s for s in system.param_specs()}
     bad = _out_of_range(est, specs)
     note = f"integrated signals high-passed at {corner:.3g} Hz, {edge} samples cut at each end"
@@ -225,7 +225,7 @@ def _equation_error(record, system, corner: float, fn: float) -> DataStart | Non
 
 
 def _bilinear_fit(
-    system, values: dict, names: list[str], r_names: list[str], t, ch: dict, f, dt: float, corner: float, T
+    system, values: dict, names: list[str], r_names: list[str], record, ch: dict, corner: float, T
 ):
     """Several supports: the linear parameters and the supports' influence, feedthrough and
     damping together (the relative motion is the absolute minus the supports' motion weighted by
@@ -233,6 +233,7 @@ def _bilinear_fit(
     from pidyn.systems.base import Kinematics
     from pidyn.systems.lstsq import forward_jacobian, solve_linear_params
 
+    t, f, dt = T(record.t), np.asarray(record.f, float), record.dt
     F, FV, FD = (integrate(f, dt, k, corner) for k in (0, 1, 2))
     Ft, FVt, FDt = T(F), T(FV), T(FD)
     xa, va, aa = T(ch["x"]), T(ch["v"]), T(ch["a"])

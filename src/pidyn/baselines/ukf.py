@@ -18,6 +18,8 @@ for each value of the grid ``tune`` and keeps the one with the largest innovatio
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -65,11 +67,12 @@ def unscented_kalman_filter(
     )
     m, P, Q = _prior(record, system, theta0, init_param_std, q_state, q_param)
     lam, wm, wc = _weights(ns + npar, alpha, beta, kappa)
+    flt = _Filter(system, specs, fixed, lam, wm, wc, Q, R, chans, substeps)
     traj: list[dict] = []
     loglik = 0.0
     t, f = record.t, record.f
     for i in range(len(t) - 1):
-        m, P, ll = _step(system, specs, fixed, m, P, lam, wm, wc, Q, R, t, f, i, chans, substeps)
+        m, P, ll = _step(flt, m, P, t, f, i)
         loglik += ll
         if i % thin == 0 or i == len(t) - 2:
             vals = from_theta(specs, m[ns:])
@@ -80,10 +83,29 @@ def unscented_kalman_filter(
     return res
 
 
-def _step(system, specs, fixed: dict, m, P, lam, wm, wc, Q, R, t, f, i: int, chans: list, substeps: int):
+@dataclass
+class _Filter:
+    """What stays the same from step to step: the model, its parameters' coordinates, the sigma
+    points' weights, the process and measurement noise, the channels."""
+
+    system: Any
+    specs: list
+    fixed: dict
+    lam: float
+    wm: np.ndarray
+    wc: np.ndarray
+    Q: np.ndarray
+    R: np.ndarray
+    chans: list
+    substeps: int
+
+
+def _step(flt: _Filter, m: np.ndarray, P: np.ndarray, t: np.ndarray, f: np.ndarray, i: int):
     """One filter step: the sigma points simulated from t[i] to t[i+1], the predicted belief,
     and its update with the measurement at t[i+1]; returns the new mean, covariance and the
     innovation log-likelihood."""
+    system, specs, fixed, chans, substeps = flt.system, flt.specs, flt.fixed, flt.chans, flt.substeps
+    lam, wm, wc, Q, R = flt.lam, flt.wm, flt.wc, flt.Q, flt.R
     ns, nd = system.n_state, system.n_dof
     rows = {
         "x": lambda Yp, Ap, d: Yp[:, d],

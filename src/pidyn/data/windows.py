@@ -219,35 +219,37 @@ def make_windows(
     t_end = t[-1] if t_end is None else min(t_end, t[-1])
     bounds = window_bounds(t, length, t_start, t_end, cover_tail)
     record_peak = float(np.nanmax(np.abs(ref[(t >= t_start) & (t <= t_end)])))
+    series = _Series(t, np.asarray(f, float), x, v, a, ref, accel_signal)
     return [
-        _window(
-            i, t0, t1, t, f, x, v, a, pool_size, ref, accel_signal, min_peak_fraction * record_peak, dtype
-        )
+        _window(i, t0, t1, series, pool_size, min_peak_fraction * record_peak, dtype)
         for i, (t0, t1) in enumerate(bounds)
     ]
 
 
+@dataclass
+class _Series:
+    """The record's samples a window is cut from, the reference channel for its peak, and the
+    excitation as an acceleration (the excitation transform) when it is on."""
+
+    t: np.ndarray
+    f: np.ndarray
+    x: np.ndarray | None
+    v: np.ndarray | None
+    a: np.ndarray | None
+    ref: np.ndarray
+    accel_signal: np.ndarray | None
+
+
 def _window(
-    i: int,
-    t0: float,
-    t1: float,
-    t: np.ndarray,
-    f: np.ndarray,
-    x: np.ndarray | None,
-    v: np.ndarray | None,
-    a: np.ndarray | None,
-    pool_size: int,
-    ref: np.ndarray,
-    accel_signal: np.ndarray | None,
-    min_peak: float,
-    dtype: torch.dtype,
+    i: int, t0: float, t1: float, r: _Series, pool_size: int, min_peak: float, dtype: torch.dtype
 ) -> Window:
     """Window ``i`` over [t0, t1]: its samples, its collocation pool and excitation transform."""
+    t, f, x, v, a = r.t, r.f, r.x, r.v, r.a
     T = lambda arr: None if arr is None else torch.as_tensor(np.asarray(arr, float), dtype=dtype)  # noqa: E731
     m = (t >= t0 - 1e-9) & (t <= t1 + 1e-9)
     tp = np.linspace(t0, t1, pool_size)
-    peak = float(np.nanmax(np.abs(ref[m])))
-    q = _transform(t, accel_signal, m, tp, t0)
+    peak = float(np.nanmax(np.abs(r.ref[m])))
+    q = _transform(t, r.accel_signal, m, tp, t0)
     return Window(
         index=i,
         t0=t0,

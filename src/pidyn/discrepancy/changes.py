@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -127,24 +128,39 @@ class Change:
         )
 
 
+@dataclass
+class StepRegression:
+    """The nominal model's weak-form regression and the signals a step in time is built from:
+    parameter names, columns ``A0`` and target ``y`` (one row per window), each window's first
+    and last time, the smoothed x and x' on the record's times, the weak form."""
+
+    names: list[str]
+    A0: np.ndarray
+    y: np.ndarray
+    t_first: np.ndarray
+    t_last: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    t: np.ndarray
+    weak: Any
+
+    @classmethod
+    def of(cls, regression: tuple, s, weak) -> StepRegression:
+        """From ``weak_system``'s (names, A0, y) on the signals ``s``."""
+        w = 2 * weak.half + 1
+        return cls(*regression, weak.t[weak.starts], weak.t[weak.starts + w - 1], s.x, s.v, s.t, weak)
+
+
 def locate_change(
-    names: list[str],
-    A0: np.ndarray,
-    y: np.ndarray,
-    t_first: np.ndarray,
-    t_last: np.ndarray,
+    reg: StepRegression,
     rows: np.ndarray,
-    x: np.ndarray,
-    v: np.ndarray,
-    t: np.ndarray,
-    weak,
     n_eff: float,
     params: dict[str, str],
     nominal: dict[str, float],
     n_grid: int = 1500,
     heldout: np.ndarray | None = None,
 ) -> Change | None:
-    """The best single step in a nominal parameter over the rows ``rows``.
+    """The best single step in a nominal parameter over the regression's rows ``rows``.
 
     ``params`` maps each candidate effect to the nominal parameter it steps (``stiffness_loss``:
     ``k``, ``damping_change``: ``c``); its column is that parameter's force times H(t - t_c).
@@ -153,59 +169,55 @@ def locate_change(
     (n_eff log RSS(t_c) / RSS_min <= chi2_1(0.95)). None when nothing improves on no step.
     ``heldout`` (rows no fit uses): the step's ``heldout_gain`` there, whether it persists.
     """
+    A0, y, t = reg.A0, reg.y, reg.t
     A = A0[rows]
     theta0 = lstsq(A, y[rows])
     rss0 = float(np.sum((y[rows] - A @ theta0) ** 2))
     has_ho = heldout is not None and bool(np.any(heldout))
     rss0_ho = float(np.sum((y[heldout] - A0[heldout] @ theta0) ** 2)) if has_ho else None
-    lo, hi = float(t_first[rows].min()), float(t_last[rows].max())
+    lo, hi = float(reg.t_first[rows].min()), float(reg.t_last[rows].max())
     # the change time on the samples themselves (at most n_grid of them): no finer than the data
     inner = np.flatnonzero((t > lo) & (t < hi))
     grid = t[inner[:: max(1, int(np.ceil(len(inner) / n_grid)))]]
     best: Change | None = None
+    base = _NoStep(rows, heldout if has_ho else None, rss0, rss0_ho, grid, n_eff)
     for effect, pname in params.items():
-        force = {"k": x, "k1": x, "c": v}.get(pname)
-        if force is None or pname not in names:
+        force = {"k": reg.x, "k1": reg.x, "c": reg.v}.get(pname)
+        if force is None or pname not in reg.names:
             continue
-        cand = _best_step(
-            effect,
-            pname,
-            force,
-            A0,
-            y,
-            rows,
-            heldout if has_ho else None,
-            rss0,
-            rss0_ho,
-            t,
-            grid,
-            weak,
-            n_eff,
-            nominal,
-        )
+        cand = _best_step(effect, pname, force, reg, base, nominal)
         if best is None or cand.delta_bic < best.delta_bic:
             best = cand
     return best
 
 
+@dataclass
+class _NoStep:
+    """The rows a step is fitted on and judged by, the misfit without a step there, and the
+    grid of change times."""
+
+    rows: np.ndarray
+    heldout: np.ndarray | None
+    rss0: float
+    rss0_ho: float | None
+    grid: np.ndarray
+    n_eff: float
+
+
 def _best_step(
-    effect: str,
-    pname: str,
-    force: np.ndarray,
-    A0: np.ndarray,
-    y: np.ndarray,
-    rows: np.ndarray,
-    heldout: np.ndarray | None,
-    rss0: float,
-    rss0_ho: float | None,
-    t: np.ndarray,
-    grid: np.ndarray,
-    weak,
-    n_eff: float,
-    nominal: dict[str, float],
+    effect: str, pname: str, force: np.ndarray, reg: StepRegression, base: _NoStep, nominal: dict[str, float]
 ) -> Change:
     """The best step of ``pname`` (its force ``force``) over the grid of change times: the
     estimate, its profile interval, its BIC against no step, its held-out gain."""
+    A0, y, t, weak = reg.A0, reg.y, reg.t, reg.weak
+    rows, heldout, rss0, rss0_ho, grid, n_eff = (
+        base.rows,
+        base.heldout,
+        base.rss0,
+        base.rss0_ho,
+        base.grid,
+        base.n_eff,
+    )
     rss, coefs = _step_profile(A0[rows], y[rows], rows, weak, force, t, grid)
     j = int(np.argmin(rss))
     gain_ho = None
@@ -337,29 +349,12 @@ def locate_step(
 def _step_search(regression: tuple, s, weak, candidates: dict[str, str], values: dict[str, float]):
     """``search(end)``: the best step over the weak-form rows that end by ``end``, its held-out
     gain on the rows after it (``locate_change``)."""
-    names, A0, y = regression
-    w = 2 * weak.half + 1
-    t_first, t_last = weak.t[weak.starts], weak.t[weak.starts + w - 1]
+    reg = StepRegression.of(regression, s, weak)
 
     def search(end: float):
-        rows = t_last <= end + 1e-9
+        rows = reg.t_last <= end + 1e-9
         n_eff = max(rows.sum() / weak.rows_per_independent, 2.0)
-        return locate_change(
-            names,
-            A0,
-            y,
-            t_first,
-            t_last,
-            rows,
-            s.x,
-            s.v,
-            s.t,
-            weak,
-            n_eff,
-            candidates,
-            values,
-            heldout=t_first >= end - 1e-9,
-        )
+        return locate_change(reg, rows, n_eff, candidates, values, heldout=reg.t_first >= end - 1e-9)
 
     return search
 

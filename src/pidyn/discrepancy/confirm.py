@@ -123,10 +123,9 @@ def confirm(
     out = Confirmation()
     if not candidates:
         return out
-    (m_fit, m_ho), (rss0, rss0_ho) = _nominal_misfit(record, system, values, fit, held, substeps)
+    base = _nominal_misfit(record, system, values, fit, held, substeps, th)
     seg_end = fit[1] if polish_seconds is None else min(fit[1], fit[0] + float(polish_seconds))
     seg = record.segment(fit[0], seg_end)
-    trainable0 = {s.name for s in system.param_specs() if s.trainable}
     for row in candidates:
         t0 = time.perf_counter()
         ext = build(row)
@@ -142,9 +141,7 @@ def confirm(
         except (ValueError, FloatingPointError) as err:  # a start the effect's bounds refuse
             out.tested.append({"effect": row["effect"], "weak_form_score": row["score"], "error": str(err)})
             continue
-        tested = _judge(
-            row, ext, specs, values, res, record, substeps, (m_fit, m_ho), (rss0, rss0_ho), trainable0, th
-        )
+        tested = _judge(row, ext, specs, values, res, base)
         tested["seconds"] = time.perf_counter() - t0
         out.tested.append(tested)
         log.info(
@@ -163,23 +160,26 @@ def confirm(
     return out
 
 
-def _judge(
-    row: dict,
-    ext,
-    specs: list,
-    values: dict[str, float],
-    res,
-    record: Record,
-    substeps: int,
-    masks: tuple[np.ndarray, np.ndarray],
-    rss_nominal: tuple[float, float | None],
-    trainable0: set[str],
-    th: Thresholds,
-) -> dict:
+@dataclass
+class _Nominal:
+    """What every candidate is judged against: the record, the fitting and held-out masks, the
+    nominal model's misfit on them, its trainable parameters, the thresholds."""
+
+    record: Record
+    substeps: int
+    m_fit: np.ndarray
+    m_ho: np.ndarray
+    rss0: float
+    rss0_ho: float | None
+    trainable0: set[str]
+    th: Thresholds
+
+
+def _judge(row: dict, ext, specs: list, values: dict[str, float], res, base: _Nominal) -> dict:
     """One candidate's output-error fit judged on the simulated channels: its BIC against the
     nominal model on the fitting part and its gain on the held-out part."""
-    m_fit, m_ho = masks
-    rss0, rss0_ho = rss_nominal
+    record, substeps, m_fit, m_ho = base.record, base.substeps, base.m_fit, base.m_ho
+    rss0, rss0_ho, trainable0, th = base.rss0, base.rss0_ho, base.trainable0, base.th
     ext_values = {**{s.name: s.init for s in ext.param_specs()}, **values, **res.params}
     r1 = channel_residuals(ext, ext_values, record, substeps)
     rss1 = float(np.nansum(r1[:, m_fit] ** 2))
@@ -208,8 +208,8 @@ def _judge(
 
 
 def _nominal_misfit(
-    record: Record, system, values: dict[str, float], fit: tuple, held: tuple, substeps: int
-) -> tuple[tuple[np.ndarray, np.ndarray], tuple[float, float | None]]:
+    record: Record, system, values: dict[str, float], fit: tuple, held: tuple, substeps: int, th: Thresholds
+) -> _Nominal:
     """The fitting and held-out masks and the nominal model's residual sums of squares on them."""
     t = record.t
     m_fit = (t >= fit[0] - 1e-9) & (t <= fit[1] + 1e-9)
@@ -217,4 +217,5 @@ def _nominal_misfit(
     r0 = channel_residuals(system, values, record, substeps)
     rss0 = float(np.nansum(r0[:, m_fit] ** 2))
     rss0_ho = float(np.nansum(r0[:, m_ho] ** 2)) if m_ho.any() else None
-    return (m_fit, m_ho), (rss0, rss0_ho)
+    trainable0 = {s.name for s in system.param_specs() if s.trainable}
+    return _Nominal(record, substeps, m_fit, m_ho, rss0, rss0_ho, trainable0, th)

@@ -198,19 +198,7 @@ def screen(
     # every candidate's columns projected once: the single and the pair fits use them all
     projected = {n: [(c, weak.project(c.columns)) for c in e.candidates(s)] for n, e in effects.items()}
     ranking = [_score_effect(eff, projected[n], base, values) for n, eff in effects.items()]
-    structure = _structure(
-        s,
-        weak,
-        base.A0,
-        base.y,
-        base.fit,
-        base.ho,
-        base.folds,
-        base.rss0,
-        base.rss0_cv,
-        base.rss0_ho,
-        base.n_eff,
-    )
+    structure = _structure(s, weak, base)
     ranking.sort(key=lambda r: -np.inf if r["score"] is None else r["score"], reverse=True)
     for r in ranking:
         _mark_fleeting_step(r, th)
@@ -510,9 +498,11 @@ def generic_columns(s: Signals, knots: int = 11) -> np.ndarray:
     return np.stack(cols, axis=1)
 
 
-def _structure(s: Signals, weak: WeakForm, A0, y, fit, ho, folds, rss0, rss0_cv, rss0_ho, n_eff) -> dict:
+def _structure(s: Signals, weak: WeakForm, base: _NominalFit) -> dict:
     """How much of the nominal residual a generic f(x, x') explains: the yardstick for
     "clearly structured" and for whether a named effect explains a fair share of it."""
+    A0, y, fit, ho, folds = base.A0, base.y, base.fit, base.ho, base.folds
+    rss0, rss0_cv, rss0_ho, n_eff = base.rss0, base.rss0_cv, base.rss0_ho, base.n_eff
     G = weak.project(generic_columns(s))
     A = np.column_stack([A0, G])
     ridge = np.r_[np.zeros(A0.shape[1]), np.full(G.shape[1], 1e-3)]

@@ -49,20 +49,8 @@ def write_report(
         run_dir / "identified_params.yaml",
         identified_params(system, final, values, truths, units, refined, notes),
     )
-    errors, pidyn_errors = relative_errors(values, truths), relative_errors(pidyn_values, truths)
-    metrics = _metrics(
-        cfg,
-        run,
-        values,
-        truths,
-        errors,
-        pidyn_values,
-        pidyn_errors,
-        sim,
-        notes,
-        len(results),
-        refined is not None,
-    )
+    metrics = _metrics(cfg, run, values, truths, pidyn_values, sim, notes, len(results), refined is not None)
+    errors, pidyn_errors = metrics["error_pct"], metrics["pidynnet"]["error_pct"]
     if refined is not None:
         _write_refined(run_dir, refined, names, values, truths, metrics)
     if baselines:
@@ -96,15 +84,14 @@ def _metrics(
     run: Run,
     values: dict[str, float],
     truths: dict[str, float | None],
-    errors: dict[str, float],
     pidyn_values: dict[str, float],
-    pidyn_errors: dict[str, float],
     sim: dict[str, np.ndarray],
     notes: list[str],
     n_windows: int,
     refined: bool,
 ) -> dict[str, Any]:
     """metrics.json's fields before the refinement and the baselines add theirs."""
+    errors, pidyn_errors = relative_errors(values, truths), relative_errors(pidyn_values, truths)
     return {
         "system": run.system.name,
         "record": run.record.name,
