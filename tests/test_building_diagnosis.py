@@ -13,6 +13,7 @@ import pytest
 from helpers import make_cfg
 
 from pidyn.data.sources import synthetic
+from pidyn.notes import codes
 from pidyn.systems.shear_building import ShearBuilding
 from pidyn.tasks.diagnose import diagnose
 
@@ -80,6 +81,19 @@ def test_a_clean_building_gives_none(tmp_path):
     d = run(tmp_path, building_csv(tmp_path, {}, seed=3))
     assert d["verdict"] == "none" and d["causes"] == [] and d["storeys"] == [], d["ranking"]
     assert d["gain"]["extended"] is None and d["gain"]["nominal"] < 0.05
+    test = d["heldout_check"]["test"]
+    assert not test["failed"] and set(test["p_values"]) == {"a1", "a2", "a3"}, test
+
+
+@pytest.mark.slow
+def test_a_change_after_the_split_fails_the_held_out_test_of_a_building(tmp_path):
+    """Storey 2 loses a third of its stiffness at 16 s, after the fitting part (0-13 s): the
+    screening sees a linear building, but the nominal model no longer predicts the floors'
+    held-out accelerations, and the verdict says the model is wrong instead of `none`."""
+    loss = {"term": "stiffness_loss", "drop": 0.35, "t_d": 16.0, "stiffness": "k2", "t_max": 40.0}
+    d = run(tmp_path, building_csv(tmp_path, {2: [loss]}, seed=5))
+    assert d["verdict"] == "unexplained", (d["verdict"], d["causes"], d["notes"])
+    assert d["heldout_check"]["test"]["failed"] and "heldout_fails" in codes(d["notes"]), d["notes"]
 
 
 @pytest.mark.slow

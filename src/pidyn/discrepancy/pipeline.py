@@ -29,7 +29,14 @@ from typing import Any
 import numpy as np
 
 from pidyn.data.sources import Record
-from pidyn.discrepancy.changes import HeldoutCheck, heldout_check, locate_step
+from pidyn.discrepancy.changes import (
+    HELDOUT_BAND,
+    SETTLE_PERIODS,
+    HeldoutCheck,
+    heldout_check,
+    locate_step,
+    simulation_sensitivity,
+)
 from pidyn.discrepancy.confirm import Confirmation, confirm, undecided
 from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.extend import EXTENSION, build_system, extension_node, release_held, system_node  # noqa: F401
@@ -496,18 +503,27 @@ def check_heldout(
     """The held-out failure check, and where the structure changed when the data say it did
     (a located change moves ``case.fit`` / ``case.held`` to the change point). On an
     accelerometer record the check compares accelerations, as the sensors read them."""
+    v0 = float(nom.s.v[0])
     if case.from_accelerometers:
         meas = case.record.a[:, 0]
-        sim = case.free_response(nom.system, nom.values, float(nom.s.v[0]))["a"][:, 0]
+        simulate = lambda p: case.free_response(nom.system, p, v0)["a"][:, 0]  # noqa: E731
+        sim = simulate(nom.values)
     else:
         meas, sim = case.x_raw, x_nom
+        simulate = lambda p: case.free_run(nom.system, p, v0)  # noqa: E731
+    # how the prediction moves with the fitted parameters: their uncertainty widens what a correct
+    # model may leave on the held-out part
+    names = [s.name for s in nom.system.param_specs() if s.trainable and s.name in nom.values]
     check = heldout_check(
         meas,
         sim,
         case.mask(case.fit),
         case.mask(case.held),
         case.noise_std(meas, nom.period),
-        threshold=float(case.settings.changes.heldout_ratio),
+        level=float(case.settings.changes.heldout_level),
+        sensitivity=simulation_sensitivity(simulate, nom.values, names),
+        band=(case.record.dt, HELDOUT_BAND / nom.period),
+        settle=int(round(SETTLE_PERIODS * nom.period / case.record.dt)),
     )
     log.info("%s", check.sentence())
     time_effects = {

@@ -487,18 +487,11 @@ def _check_lines(d: dict) -> list[str]:
             "",
         ]
     hc = d.get("heldout_check")
-    if hc and hc.get("ratio") is None:  # not judged: the check's own sentence says why
+    if hc:
         from pidyn.discrepancy.changes import HeldoutCheck
 
         why = HeldoutCheck(**hc).sentence()
-        lines += [f"{why[0].upper()}{why[1:]}.", ""]
-    elif hc:
-        lines += [
-            f"Held-out check: simulation error above the noise {hc['nrmse_heldout']:.3g} of the signal on the "
-            f"held-out part against {hc['nrmse_fit']:.3g} on the fitting part (ratio {hc['ratio']:.3g}; "
-            f"{'beyond' if hc['failed'] else 'within'} the threshold {hc['threshold']:g}).",
-            "",
-        ]
+        lines += [f"Held-out check: {why}.", ""]
     return lines
 
 

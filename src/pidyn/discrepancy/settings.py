@@ -31,7 +31,9 @@ class ConfirmSettings:
 class ChangeSettings:
     """The held-out failure check that starts the search for a change in time."""
 
-    heldout_ratio: float = 3.0
+    #: the held-out test's level: the nominal model fails when a correct model would leave the
+    #: held-out part's simulation error with a smaller probability than this (see HeldoutCheck)
+    heldout_level: float = 0.001
 
 
 @dataclass

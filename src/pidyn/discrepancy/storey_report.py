@@ -38,6 +38,7 @@ def summarize_building(
             "metric": "nrmse_a",
             "fit": d.nominal["fit"],
             "heldout": d.nominal["heldout"],
+            "test": d.nominal.get("heldout_test"),
         },
         "change": None if t_change is None else {"t_change": t_change, "ci95": t_ci},
         "structure": [dict(sc.structure) for sc in d.screenings],

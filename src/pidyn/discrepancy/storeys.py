@@ -478,14 +478,8 @@ def diagnose_building(
         found.append(step["found"])
         current = step["current"]
     views, screenings = study.screen(current, found)
-    verdict, unexplained = Verdict.NONE, None
-    if found:
-        verdict = Verdict.DISCREPANCY
-    elif (structured := structured_storey(screenings, settings)) is not None:
-        # a storey's force is clearly structured (a generic f(d, d') explains it in cross-validation)
-        # and no library effect earned its place: a refused name is no evidence of nothing missing
-        verdict = Verdict.UNEXPLAINED
-        unexplained = structured
+    verdict, unexplained, notes = building_verdict(study, current, found, screenings, nominal)
+    notes = refusal_notes(refused) + notes
     extended = None
     if found:
         extended = {
@@ -507,8 +501,90 @@ def diagnose_building(
         current["values"],
         study.corner,
         time.perf_counter() - t_wall,
-        refusal_notes(refused),
+        notes,
     )
+
+
+def building_verdict(
+    study: Study, current: dict, found: list[Found], screenings: list[Screening], nominal: dict
+) -> tuple[Verdict, int | None, list[str]]:
+    """``discrepancy`` with a named effect; ``unexplained`` when a storey's force is structured
+    and nothing earned its place, or when the nominal building fails the held-out test (with the
+    storey, or None, and a note); else ``none``."""
+    settings = study.settings
+    verdict, unexplained, notes = Verdict.NONE, None, []
+    if found:
+        verdict = Verdict.DISCREPANCY
+    elif (structured := structured_storey(screenings, settings)) is not None:
+        # a storey's force is clearly structured (a generic f(d, d') explains it in cross-validation)
+        # and no library effect earned its place: a refused name is no evidence of nothing missing
+        verdict = Verdict.UNEXPLAINED
+        unexplained = structured
+    else:
+        # nothing named, nothing structured in the weak form: does the nominal building still predict
+        # the floors' held-out accelerations as a correct model would? A model that fails there is
+        # wrong, though the screening cannot say how
+        check = building_heldout_test(study, current)
+        nominal["heldout_test"] = check
+        if check["failed"]:
+            verdict = Verdict.UNEXPLAINED
+            notes.append(
+                note(
+                    "heldout_fails",
+                    f"no library effect is named and no storey's force is structured in the weak form, but the "
+                    f"nominal building fails the held-out test on floor(s) {check['failed_floors']} (least p "
+                    f"{check['p_min']:.2g} against {check['level']:.2g} per floor): it is wrong, and the screening "
+                    "cannot say how",
+                )
+            )
+    return verdict, unexplained, notes
+
+
+def building_heldout_test(study: Study, current: dict) -> dict:
+    """The calibrated held-out test (``pidyn.discrepancy.changes.heldout_check``) on every measured
+    floor's relative acceleration, simulated from rest, with the sensitivities to the building's
+    trainable parameters; a floor fails below the test's level shared among the floors
+    (Bonferroni)."""
+    from pidyn.discrepancy.changes import HELDOUT_BAND, SETTLE_PERIODS, heldout_check, simulation_sensitivity
+
+    record, system, values = study.record, current["system"], current["values"]
+    floors = [j for j in range(record.a.shape[1]) if not np.isnan(record.a[:, j]).all()]
+    names = [s.name for s in system.param_specs() if s.trainable and s.name in values]
+
+    def simulate(p: dict[str, float]) -> np.ndarray:
+        return simulate_response(system, {**values, **p}, record)["a"][:, floors].reshape(-1)
+
+    n = len(record.t)
+    jac = simulation_sensitivity(simulate, values, names).reshape(n, len(floors), len(names))
+    sim = simulate(values).reshape(n, len(floors))
+    f1 = fundamental_hz(system, values)
+    fit = (record.t >= study.fit[0]) & (record.t <= study.fit[1])
+    held = (record.t > study.fit[1]) & (record.t <= study.held[1])
+    level = float(study.settings.changes.heldout_level) / max(len(floors), 1)
+    p_values = {}
+    for i, j in enumerate(floors):
+        check = heldout_check(
+            record.a[:, j],
+            sim[:, i],
+            fit,
+            held,
+            0.0,
+            level=level,
+            sensitivity=jac[:, i, :],
+            band=(record.dt, HELDOUT_BAND * f1),
+            settle=int(round(SETTLE_PERIODS / f1 / record.dt)),
+        )
+        p_values[f"a{j + 1}"] = check.p_value
+    failed = [k for k, p in p_values.items() if p is not None and p < level]
+    p_min = min((p for p in p_values.values() if p is not None), default=1.0)
+    log.info("held-out test of the nominal building: least p %.3g against %.3g per floor", p_min, level)
+    return {
+        "p_values": p_values,
+        "level": level,
+        "p_min": p_min,
+        "failed_floors": failed,
+        "failed": bool(failed),
+    }
 
 
 def nominal_state(study: Study, start: dict | None) -> tuple[dict, dict]:
