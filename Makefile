@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # the default index would serve a CUDA build.
 TORCH_INDEX ?=
 
-.PHONY: install train test test-fast lint format bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench discrepancy-bench-building basin robustness efficiency benchmarks real
+.PHONY: install train test test-fast lint format bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench discrepancy-bench-building heldout-calibration basin robustness efficiency benchmarks real
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -64,6 +64,9 @@ discrepancy-bench: $(STAMP)
 
 discrepancy-bench-building: $(STAMP)
 	$(PY) experiments/discrepancy_bench_building.py $(ARGS)
+
+heldout-calibration: $(STAMP)
+	$(PY) experiments/heldout_calibration.py $(ARGS)
 
 basin: $(STAMP)
 	$(PY) experiments/basin.py --cell duffing $(ARGS)

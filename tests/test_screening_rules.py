@@ -214,3 +214,20 @@ def test_the_held_out_test_passes_clean_records_and_catches_a_change_after_the_s
         record, fit, held = make_record(name, 0.05, 0.7, 0.15, seed=97_002)
         changed = judge(record, fit, held)
         assert changed["failed"] and changed["p_value"] < 1e-4, (name, changed)
+
+
+def test_a_library_name_must_earn_its_place_on_the_held_out_part():
+    """An effect outside the library (a stiffness that drops only inside a band of displacement)
+    came out as ``stiffness_loss`` with the held-out NRMSE 1.061 -> 1.033: no name is kept for so
+    little, and the note says why. A name whose model predicts the held-out part better keeps it."""
+    from pidyn.discrepancy.screening import Thresholds
+    from pidyn.discrepancy.summary import unearned_names
+    from pidyn.notes import code_of
+
+    th = Thresholds()
+    refused = unearned_names(["stiffness_loss"], {"nominal": 1.061, "extended": 1.033}, th)
+    assert refused is not None and refused["causes"] == ["stiffness_loss"]
+    assert code_of(refused["note"]) == "name_unearned" and "1.061 -> 1.033" in refused["note"]
+    assert unearned_names(["gap_contact"], {"nominal": 0.26, "extended": 0.60}, th) is not None  # worse
+    assert unearned_names(["cubic_stiffness"], {"nominal": 0.131, "extended": 0.114}, th) is None
+    assert unearned_names([], {"nominal": 1.0, "extended": None}, th) is None

@@ -486,6 +486,8 @@ def _check_lines(d: dict) -> list[str]:
             "extended with it had to find the other on its own.",
             "",
         ]
+    if d.get("unearned"):
+        lines += [f"Not named: {d['unearned']['note']}.", ""]
     hc = d.get("heldout_check")
     if hc:
         from pidyn.discrepancy.changes import HeldoutCheck

@@ -70,6 +70,9 @@ class Thresholds:
     #: there explains none of the held-out structure: it is not named (pairs are not refused by it:
     #: the second effect of a pair may predict little alone)
     min_heldout_share: float = 0.1
+    #: a library name is kept only when the extended model's held-out error is at least this share
+    #: below the nominal model's (else the verdict is ``unexplained``)
+    min_name_gain: float = 0.05
     #: between passing effects this close in BIC (below "strong", 6, on Kass & Raftery's
     #: scale) the one with the clearly better blocked cross-validation gain is named
     tie_delta_bic: float = 6.0
