@@ -93,10 +93,10 @@ def judge(record, fit: tuple[float, float], held: tuple[float, float]) -> dict:
     xs, vs = smooth_signals(record.t, record.x[:, 0], record.v[:, 0], period)
     x0 = np.array([record.x[0, 0], vs[0]])  # as diagnose starts its free run: measured x, smoothed x'
 
-    def simulate(p: dict[str, float]) -> np.ndarray:
-        return simulate_response(nominal, {**values, **p}, record, state0=x0)["x"][:, 0]
+    def simulate(p: dict[str, float]) -> np.ndarray:  # the forced response, from rest (as diagnose)
+        return simulate_response(nominal, {**values, **p}, record)["x"][:, 0]
 
-    sim = simulate(values)
+    sim = simulate_response(nominal, values, record, state0=x0)["x"][:, 0]
     names = list(res.params)
     jac = simulation_sensitivity(simulate, values, names)
     m_fit = (record.t >= fit[0]) & (record.t <= fit[1])
