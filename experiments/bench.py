@@ -189,7 +189,7 @@ def simulation_ms(reps: int = 3) -> list[dict]:
 
     from pidyn.data.sources import synthetic_from_motion
     from pidyn.excitation import prepare
-    from pidyn.refine import RefineSettings, ShootingProblem, record_channels, segment_bounds
+    from pidyn.refine import RefineSettings, ShootingProblem
     from pidyn.refine.stage import build_problem
     from pidyn.simulate import simulate
     from pidyn.systems import BoucWen, Duffing, ShearBuilding
@@ -208,15 +208,7 @@ def simulation_ms(reps: int = 3) -> list[dict]:
         truth = system.true_values()
         row = {"system": system.name, "truth_ms": best(lambda: simulate(system, truth, gm, gm.t))}
         rec = synthetic_from_motion(system, gm, noise=0.0, data_seed=0, params=truth)
-        oe = ShootingProblem(
-            system,
-            rec.t,
-            rec.f,
-            record_channels(rec, system.n_dof),
-            segment_bounds(rec.t, None),
-            4,
-            fixed_state0=np.zeros(system.n_state),
-        )
+        oe = ShootingProblem.from_rest(system, rec, 4)
         th = oe.pack(truth, np.zeros((1, system.n_state)))[: oe.n_theta]
         row["output_error_step_ms"] = best(lambda: oe.residuals_and_fd_jacobian(th))
         problem = build_problem(system, rec, RefineSettings(initial_state="free"))

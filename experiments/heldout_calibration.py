@@ -216,13 +216,20 @@ def write(df: pd.DataFrame, out: Path, command: str) -> None:
         "",
         (__doc__ or "").split("\n\n")[2].replace("\n", " "),
         "",
-        f"Command: `{command}`; {platform.machine()}, {time.strftime('%Y-%m-%d')}; "
-        f"{df.seconds.sum():.0f} s in all.",
+        f"Command: `{command}` (`make heldout-calibration`); code {_commit()}; {platform.machine()}, "
+        f"{time.strftime('%Y-%m-%d')}; {df.seconds.sum():.0f} s in all.",
         "",
         *summary_lines(df),
         "",
     ]
     (out / "heldout_calibration.md").write_text("\n".join(lines))
+
+
+def _commit() -> str:
+    import subprocess
+
+    out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
+    return out.stdout.strip() or "unknown"
 
 
 def main() -> None:

@@ -626,7 +626,7 @@ def test_a_stiffness_that_rises_in_time_is_no_stiffness_loss():
     an effect outside the library; the screening now fits only losses, and a located step
     that is a rise is not named."""
     from pidyn.discrepancy.changes import Change, is_stiffening
-    from pidyn.discrepancy.screening import _fit_candidate
+    from pidyn.discrepancy.screening import fit_candidate
 
     t = np.linspace(0.0, 20.0, 2001)
     x = np.sin(2 * np.pi * 0.6 * t) * np.exp(-0.05 * t)
@@ -636,7 +636,7 @@ def test_a_stiffness_that_rises_in_time_is_no_stiffness_loss():
     A0 = np.column_stack([x, s.v])
     for step, found in ((-3.0, True), (+3.0, False)):  # restoring force k x + step x H(t - 8): a loss, a rise
         y = 15.0 * x + step * x * (t >= 8.0)
-        fits = [f for f in (_fit_candidate(c, A0, c.columns, y, fit, ho) for c in loss.candidates(s)) if f]
+        fits = [f for f in (fit_candidate(c, A0, c.columns, y, fit, ho) for c in loss.candidates(s)) if f]
         assert bool(fits) is found
         if found:
             best = min(fits, key=lambda f: f["rss_fit"])

@@ -11,7 +11,7 @@ from pidyn.discrepancy.confirm import confirm, independent_samples, undecided
 from pidyn.discrepancy.effects import Signals
 from pidyn.discrepancy.extend import extended_system
 from pidyn.discrepancy.hidden import hidden_case
-from pidyn.discrepancy.screening import Thresholds, _pair_lead
+from pidyn.discrepancy.screening import Thresholds, pair_lead
 from pidyn.systems import LinearSDOF
 
 
@@ -109,12 +109,12 @@ def test_a_pair_holding_an_effect_the_held_out_rule_refuses_leads_nowhere():
         {"effects": ["cubic_stiffness", "gap_contact"], "score": 15.0, "delta_bic": -15.0, "cv_gain": 0.8},
     ]
     structure = {"cv_gain": 0.9}
-    assert _pair_lead(ranking, pairs, structure, th) is None  # the best pair holds the refused spring
+    assert pair_lead(ranking, pairs, structure, th) is None  # the best pair holds the refused spring
     ranking[0].pop("heldout_miss")
-    lead = _pair_lead(ranking, pairs, structure, th)
+    lead = pair_lead(ranking, pairs, structure, th)
     assert lead is not None and lead["lead"] == "quadratic_stiffness"
     ranking[0]["heldout_small"] = True  # a small held-out share refuses an effect alone, not in a pair
-    assert _pair_lead(ranking, pairs, structure, th) is not None
+    assert pair_lead(ranking, pairs, structure, th) is not None
 
 
 def test_a_learned_force_is_kept_only_when_it_predicts_the_held_out_part_better():

@@ -33,7 +33,7 @@ import numpy as np
 from pidyn.data.sources import Record
 from pidyn.discrepancy.screening import Thresholds
 from pidyn.refine.output_error import fit_output_error
-from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
+from pidyn.refine.problem import ShootingProblem
 
 log = logging.getLogger(__name__)
 
@@ -65,16 +65,7 @@ def independent_samples(r: np.ndarray) -> float:
 def channel_residuals(system, values: dict[str, float], record: Record, substeps: int) -> np.ndarray:
     """Simulated minus measured, every measured channel over the whole record from rest, in
     units of each channel's spread: (n_channels, N)."""
-    problem = ShootingProblem(
-        system,
-        record.t,
-        record.f,
-        record_channels(record, system.n_dof),
-        segment_bounds(record.t, None),
-        substeps,
-        fixed_state0=np.zeros(system.n_state),
-        fixed=values,
-    )
+    problem = ShootingProblem.from_rest(system, record, substeps, fixed=values)
     u = problem.pack(values, np.zeros((1, system.n_state)))
     res, _ = problem.residuals(u)
     return res.reshape(len(problem.channels), -1)

@@ -208,7 +208,7 @@ def screen(
         _mark_heldout_miss(r, structure, th)
         r["passes"] = bool(r["score"] is not None and _passes(r, th))
     pairs = _score_pairs(effects, projected, ranking, base, values)
-    structure["pair"] = _pair_lead(ranking, pairs, structure, th)
+    structure["pair"] = pair_lead(ranking, pairs, structure, th)
     verdict, cause = _verdict(ranking, structure, th)
     return _screening(base, weak, ranking, structure, verdict, cause)
 
@@ -298,7 +298,7 @@ def _score_effect(
     force it explains (in sample, cross-validated, held out) and its parameters."""
     best = None
     for cand, B in projected:
-        row = _fit_candidate(cand, base.A0, B, base.y, base.fit, base.ho)
+        row = fit_candidate(cand, base.A0, B, base.y, base.fit, base.ho)
         if row is not None and not _admissible(
             eff, cand, list(row["coef"].values()), row["theta"], base, values
         ):
@@ -364,7 +364,7 @@ def _score_pairs(
             names,
             positive=(ca.positive or (False,) * Ba.shape[1]) + (cb.positive or (False,) * Bb.shape[1]),
         )
-        row = _fit_candidate(both, base.A0, np.column_stack([Ba, Bb]), base.y, base.fit, base.ho)
+        row = fit_candidate(both, base.A0, np.column_stack([Ba, Bb]), base.y, base.fit, base.ho)
         if row is None:  # a coefficient of the wrong sign
             return np.inf
         coef, theta = list(row["coef"].values()), row["theta"]
@@ -412,7 +412,7 @@ def _best_pair_point(rss, na: int, nb: int) -> tuple[float, int, int]:
     return rss(i, j), i, j
 
 
-def _pair_lead(ranking: list[dict], pairs: list[dict], structure: dict, th: Thresholds) -> dict | None:
+def pair_lead(ranking: list[dict], pairs: list[dict], structure: dict, th: Thresholds) -> dict | None:
     """The effect to name first when a pair explains the residual better than greedy
     one-at-a-time naming would (see the module's notes); None leaves the single ranking in charge."""
     if not pairs or not ranking or ranking[0].get("score") is None:
@@ -639,7 +639,7 @@ def _cv_rss(
     return total
 
 
-def _fit_candidate(cand: Candidate, A0, B, y, fit, ho) -> dict | None:
+def fit_candidate(cand: Candidate, A0, B, y, fit, ho) -> dict | None:
     A = np.column_stack([A0, B])
     theta = lstsq(A[fit], y[fit])
     coef = theta[A0.shape[1] :]

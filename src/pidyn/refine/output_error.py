@@ -14,7 +14,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from pidyn.params import to_theta, trainable_specs
-from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
+from pidyn.refine.problem import ShootingProblem
 
 
 @dataclass
@@ -41,15 +41,7 @@ def fit_output_error(
     start = {s.name: s.init for s in specs}
     start.update(init or {})
     th0 = to_theta(specs, start)
-    problem = ShootingProblem(
-        system,
-        record.t,
-        record.f,
-        record_channels(record, system.n_dof),
-        segment_bounds(record.t, None),
-        substeps,
-        fixed_state0=np.zeros(system.n_state),
-    )
+    problem = ShootingProblem.from_rest(system, record, substeps)
     for ch in problem.channels:  # residuals relative to each channel's spread, as a practitioner scales them
         ch.sigma = max(float(np.std(ch.data)), 1e-300)
     cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}

@@ -150,6 +150,23 @@ class ShootingProblem:
     def n_unknowns(self) -> int:
         return self.n_theta + self.ns * (self.S - (0 if self.free_state0 else 1))
 
+    @classmethod
+    def from_rest(
+        cls, system: StructuralSystem, record, substeps: int = 4, fixed: dict[str, float] | None = None
+    ) -> ShootingProblem:
+        """Single shooting: one segment over the whole record, every measured channel, the
+        initial state held at rest (output error and the simulated-channel checks)."""
+        return cls(
+            system,
+            record.t,
+            record.f,
+            record_channels(record, system.n_dof),
+            segment_bounds(record.t, None),
+            substeps,
+            fixed_state0=np.zeros(system.n_state),
+            fixed=fixed,
+        )
+
     def pack(self, values: dict[str, float], states: np.ndarray) -> np.ndarray:
         """u from physical parameter values and segment initial states (S, n_state)."""
         states = np.asarray(states, float).reshape(self.S, self.ns)
