@@ -497,12 +497,9 @@ def identify_nominal(case: Case, values0: dict[str, float], period: float) -> No
     return Nominal(node, system, values, metrics, polish_note, s, weak, period)
 
 
-def check_heldout(
-    case: Case, nom: Nominal, sc: Screening, x_nom: np.ndarray, forced: bool
-) -> tuple[HeldoutCheck, dict | None]:
-    """The held-out failure check, and where the structure changed when the data say it did
-    (a located change moves ``case.fit`` / ``case.held`` to the change point). On an
-    accelerometer record the check compares accelerations, as the sensors read them."""
+def heldout_test(case: Case, nom: Nominal, x_nom: np.ndarray) -> HeldoutCheck:
+    """The calibrated held-out test of the nominal model (``pidyn.discrepancy.changes``): on the
+    displacement, or on an accelerometer record the acceleration, as the sensors read it."""
     kind = "a" if case.from_accelerometers else "x"
     if case.from_accelerometers:
         meas = case.record.a[:, 0]
@@ -530,6 +527,16 @@ def check_heldout(
         band=(case.record.dt, HELDOUT_BAND / nom.period),
         settle=int(round(SETTLE_PERIODS * nom.period / case.record.dt)),
     )
+    return check
+
+
+def check_heldout(
+    case: Case, nom: Nominal, sc: Screening, x_nom: np.ndarray, forced: bool
+) -> tuple[HeldoutCheck, dict | None]:
+    """The held-out failure check, and where the structure changed when the data say it did
+    (a located change moves ``case.fit`` / ``case.held`` to the change point). On an
+    accelerometer record the check compares accelerations, as the sensors read them."""
+    check = heldout_test(case, nom, x_nom)
     log.info("%s", check.sentence())
     time_effects = {
         n: p_
