@@ -181,6 +181,7 @@ def code_commit() -> str:
 
 def write_results(rows: list[dict], results: Path, name: str, planned: int | None = None) -> None:
     df = pd.DataFrame(rows).sort_values("case")
+    results.mkdir(parents=True, exist_ok=True)
     df.to_csv(results / f"{name}.csv", index=False)
     lines = [
         "# The building diagnosis over seeded hidden cases",
