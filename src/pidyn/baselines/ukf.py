@@ -54,8 +54,18 @@ def unscented_kalman_filter(
     if q_param is None:
         if not len(tune):
             raise ValueError("ukf: q_param is None and the tuning grid is empty; give one of them")
-        # every setting but the tuned one, passed on to each run of the grid
-        kw = {k: v for k, v in locals().items() if k not in ("record", "system", "q_param", "tune")}
+        kw = dict(
+            noise_level=noise_level,
+            init=init,
+            init_param_std=init_param_std,
+            q_state=q_state,
+            r_floor=r_floor,
+            alpha=alpha,
+            beta=beta,
+            kappa=kappa,
+            substeps=substeps,
+            thin=thin,
+        )
         return _tuned(record, system, list(tune), kw)
     t0 = time.perf_counter()
     specs, fixed, theta0 = starting_point(system, init)

@@ -24,8 +24,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.stats import f as f_law
 
+from pidyn.discrepancy.confirm import independent_samples
 from pidyn.discrepancy.screening import lstsq
+from pidyn.signals import band_limited
 
 log = logging.getLogger(__name__)
 
@@ -124,8 +127,6 @@ def heldout_check(
         return HeldoutCheck(n_fit, n_ho, ratio, float(level), True, float("inf"), 0.0, (0.0, 0.0))
     fit = fit & (np.arange(len(e)) >= settle)
     if band is not None:
-        from pidyn.signals import band_limited
-
         e = band_limited(e, band[0], band[1])[0]
         if sensitivity is not None:
             sensitivity = np.stack(
@@ -144,14 +145,11 @@ def _f_test(
 ) -> tuple[float, float, tuple[float, float], float]:
     """The held-out mean squared error over its expectation under a correct model, its p-value
     under the F law, the two degrees of freedom and the parameters' share of the expectation."""
-    from scipy.stats import f as f_law
-
-    from pidyn.discrepancy.confirm import independent_samples
-
     p = 0 if sensitivity is None else sensitivity.shape[1]
     dof_fit = max(independent_samples(e[fit]) - p, 1.0)
     dof_ho = max(independent_samples(e[held]), 1.0)
-    resid_var = float(np.mean(e[fit] ** 2)) * fit.sum() / max(fit.sum() - p * fit.sum() / (dof_fit + p), 1.0)
+    # the fitting part's residual variance, unbiased for the p fitted parameters (n_eff = dof_fit + p)
+    resid_var = float(np.mean(e[fit] ** 2)) / max(1.0 - p / (dof_fit + p), 1.0 / fit.sum())
     pred_var = 0.0
     if p:
         J_fit, J_ho = sensitivity[fit], sensitivity[held]

@@ -478,7 +478,8 @@ def diagnose_building(
         found.append(step["found"])
         current = step["current"]
     views, screenings = study.screen(current, found)
-    verdict, unexplained, notes = building_verdict(study, current, found, screenings, nominal)
+    verdict, unexplained, notes, test = building_verdict(study, current, found, screenings)
+    nominal["heldout_test"] = test
     notes = refusal_notes(refused) + notes
     extended = None
     if found:
@@ -506,13 +507,13 @@ def diagnose_building(
 
 
 def building_verdict(
-    study: Study, current: dict, found: list[Found], screenings: list[Screening], nominal: dict
-) -> tuple[Verdict, int | None, list[str]]:
+    study: Study, current: dict, found: list[Found], screenings: list[Screening]
+) -> tuple[Verdict, int | None, list[str], dict | None]:
     """``discrepancy`` with a named effect; ``unexplained`` when a storey's force is structured
     and nothing earned its place, or when the nominal building fails the held-out test (with the
-    storey, or None, and a note); else ``none``."""
+    storey, or None, and a note); else ``none``. With the held-out test's result when it ran."""
     settings = study.settings
-    verdict, unexplained, notes = Verdict.NONE, None, []
+    verdict, unexplained, notes, check = Verdict.NONE, None, [], None
     if found:
         verdict = Verdict.DISCREPANCY
     elif (structured := structured_storey(screenings, settings)) is not None:
@@ -525,7 +526,6 @@ def building_verdict(
         # the floors' held-out accelerations as a correct model would? A model that fails there is
         # wrong, though the screening cannot say how
         check = building_heldout_test(study, current)
-        nominal["heldout_test"] = check
         if check["failed"]:
             verdict = Verdict.UNEXPLAINED
             notes.append(
@@ -537,7 +537,7 @@ def building_verdict(
                     "cannot say how",
                 )
             )
-    return verdict, unexplained, notes
+    return verdict, unexplained, notes, check
 
 
 def building_heldout_test(study: Study, current: dict) -> dict:
