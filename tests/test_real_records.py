@@ -220,12 +220,55 @@ def test_classical_estimators_run_on_a_record_of_several_supports():
 
 def test_mdof_peers_on_a_shipped_record():
     pytest.importorskip("mdof")
-    from pidyn.baselines.peers import okid_era, srim
+    from pidyn.baselines.peers import okid_era, realization_params, spans, srim
+    from pidyn.reporting import nrmse
+    from pidyn.simulate import simulate_response
+    from pidyn.systems import LinearSDOF
 
     rec = csmip_record(RECORDS / "nc73667866_ce89324p.zip", station="CE89324", max_outputs=1)
     for peer in (srim(rec), okid_era(rec)):
         assert peer.stable and 0.2 < peer.modes[0]["period_s"] < 0.26, peer.note
         assert peer.heldout_nrmse_a is not None and np.isfinite(peer.heldout_nrmse_a)
+    # SRIM's order-2 model as the supports' model (a refinement start) simulates the record as SRIM's does
+    peer = srim(rec, orders=(2,))
+    system = LinearSDOF(inputs=rec.inputs)
+    values = {
+        **{s.name: s.init for s in system.param_specs()},
+        **realization_params(system, peer.realization, rec.dt),
+    }
+    fit, _ = spans(rec)
+    a = simulate_response(system, values, rec)["a"][:, 0]
+    assert nrmse(a[fit], rec.a[fit, 0]) == pytest.approx(peer.fit_nrmse_a, rel=0.05)
+
+
+def test_an_order_two_realization_maps_onto_the_supports_model_exactly():
+    """A peer's state-space model of order 2 is the single degree of freedom on several supports:
+    the model's first-order-hold discretization (the input linear between samples) maps back to its own parameters."""
+    from scipy.signal import cont2discrete
+
+    from pidyn.baselines.peers import realization_params
+    from pidyn.systems import LinearSDOF
+
+    p = dict(c=1.3, k=400.0, r_a=0.6, r_b=0.45, g_a=0.8, g_b=-0.3, e_a=0.1, e_b=-0.05)
+    c, k = p["c"], p["k"]
+    B, D = [], []
+    for j in "ab":  # observable canonical form of (n2 s^2 + n1 s + n0) / (s^2 + c s + k)
+        e, r, g = p[f"e_{j}"], p[f"r_{j}"], p[f"g_{j}"]
+        n2, n1, n0 = e, g + (r + e) * c, (r + e) * k
+        B.append([n0 - n2 * k, n1 - n2 * c])
+        D.append(n2)
+    cont = (np.array([[0.0, -k], [1.0, -c]]), np.array(B).T, np.array([[0.0, 1.0]]), np.array([D]))
+    Ad, Bd, Cd, Dd, _ = cont2discrete(cont, 0.02, method="foh")
+    got = realization_params(LinearSDOF(inputs=["a", "b"]), (Ad, Bd, Cd, Dd), 0.02)
+    assert got == pytest.approx(p, rel=1e-9, abs=1e-9)
+    # one input: the model's input terms are fixed, only the oscillator is taken
+    assert set(realization_params(LinearSDOF(), (Ad, Bd[:, :1], Cd, Dd[:, :1]), 0.02)) == {"c", "k"}
+    # real poles (no oscillator) and a model of another class give nothing
+    assert realization_params(LinearSDOF(), (np.diag([0.9, 0.8]), Bd[:, :1], Cd, Dd[:, :1]), 0.02) == {}
+    assert (
+        realization_params(LinearSDOF(), (np.eye(4) * 0.5, np.ones((4, 1)), np.ones((1, 4)), Dd[:, :1]), 0.02)
+        == {}
+    )
 
 
 def test_the_running_period_sees_a_change_and_no_change_where_there_is_none():

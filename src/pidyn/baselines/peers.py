@@ -51,11 +51,13 @@ class PeerResult:
     realization: tuple | None = field(
         default=None, repr=False
     )  # (A, B, C, D) of the chosen order, to simulate other records
+    params: dict = field(default_factory=dict)  # the order-2 realization as the model's parameters
+    stable_realizations: dict = field(default_factory=dict, repr=False)  # order -> (A, B, C, D)
 
     def to_row(self) -> dict:
         return {
             "method": self.method,
-            "params": {},
+            "params": dict(self.params),
             "seconds": self.seconds,
             "note": self.note,
             "modes": self.modes,
@@ -124,6 +126,7 @@ def _realize(record, method: str, orders: Sequence[int], options: dict) -> PeerR
     fit, held = spans(record)
     rows = [_order_row(mdof, method, int(order), U, Y, fit, held, record.dt, options) for order in orders]
     ok = [r for r in rows if r.get("stable") and r["modes"] and np.isfinite(r["fit_nrmse_a"])]
+    stable = {r["order"]: r["realization"] for r in ok}
     name = method.replace("-", "_")
     if not ok:
         for r in rows:
@@ -155,7 +158,58 @@ def _realize(record, method: str, orders: Sequence[int], options: dict) -> PeerR
         heldout_nrmse_a=best["heldout_nrmse_a"],
         orders=rows,
         realization=realization,
+        stable_realizations=stable,
     )
+
+
+def realization_params(system, realization: tuple, dt: float) -> dict[str, float]:
+    """An order-2 realization of one output, mapped onto a single degree of freedom's parameters
+    (empty when the system is not one, or the realization does not map: a real pole pair, a
+    negative stiffness).
+
+    Continuous time through the first-order hold, the input linear between samples as the
+    package's integrator takes it: A_c = log(A) / dt, and B_c, D_c from inverting the hold's
+    B = (P1 - P2 + A P2) B_c, D = D_c + C P2 B_c (P1, P2 the hold's integrals of exp(A_c s)). Each
+    input's transfer function to the absolute acceleration is then
+    (n2 s^2 + n1 s + n0) / (s^2 + c s + k) with n2 = D_j, n1 = D_j c + C B_j and
+    n0 = D_j k + C (A_c - tr(A_c) I) B_j; the model's own is
+    (e_j s^2 + (g_j + (r_j + e_j) c) s + (r_j + e_j) k) / (s^2 + c s + k) per unit mass, which
+    gives e_j, r_j and g_j one to one. A model with one input keeps only c and k (its input
+    terms are fixed)."""
+    from scipy.linalg import logm
+
+    from pidyn.systems.modal import damping_params, stiffness_params
+    from pidyn.systems.sdof import feedthrough_name, influence_name, support_damping_name
+
+    A, B, C, D = (np.atleast_2d(np.asarray(x, float)) for x in realization)
+    stiff, damp = stiffness_params(system), damping_params(system)
+    if A.shape != (2, 2) or C.shape[0] != 1 or len(stiff) != 1 or len(damp) != 1:
+        return {}
+    eig = np.linalg.eigvals(A)
+    if np.any(np.abs(eig.imag) < 1e-12):  # real poles: no oscillator
+        return {}
+    Ac = np.real(logm(A)) / dt
+    P1, P2 = _hold_integrals(Ac, dt)
+    Bc = np.linalg.solve(P1 - P2 + A @ P2, B)
+    D = D - C @ P2 @ Bc
+    c, k = float(-np.trace(Ac)), float(np.linalg.det(Ac))
+    if not (k > 0 and c > 0):
+        return {}
+    m = next((s.init for s in system.param_specs() if s.name == "m"), 1.0)
+    out = {damp[0]: m * c, stiff[0]: m * k}
+    inputs = list(getattr(system, "inputs", []) or [])
+    if len(inputs) != B.shape[1]:
+        return out
+    shifted = Ac - np.trace(Ac) * np.eye(2)
+    for j, name in enumerate(inputs):
+        e = float(D[0, j])
+        n1 = e * c + float(C[0] @ Bc[:, j])
+        n0 = e * k + float(C[0] @ shifted @ Bc[:, j])
+        r = n0 / k - e
+        out[feedthrough_name(name)] = e
+        out[influence_name(name)] = r
+        out[support_damping_name(name)] = m * (n1 - (r + e) * c)
+    return out
 
 
 def _order_row(mdof, method: str, order: int, U, Y, fit, held, dt: float, options: dict) -> dict:
@@ -283,11 +337,31 @@ def _transfer_function_row(record, system, settings: dict, noise: float) -> dict
     return transfer_function_estimate(record, **settings).to_row()
 
 
-@estimator("srim", srim, "SRIM", order=11)
+def _hold_integrals(Ac: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The first-order hold's integrals of exp(A_c s) over a step (scipy's ``cont2discrete``
+    'foh' blocks with B = I): P1 = int_0^dt exp(A_c s) ds, P2 its ramp-weighted part."""
+    from scipy.linalg import expm
+
+    n = Ac.shape[0]
+    em = np.zeros((3 * n, 3 * n))
+    em[:n, :n], em[:n, n : 2 * n], em[n : 2 * n, 2 * n :] = Ac * dt, np.eye(n) * dt, np.eye(n)
+    ms = expm(em)
+    return ms[:n, n : 2 * n], ms[:n, 2 * n :]
+
+
+def _with_start(result: PeerResult, system, dt: float) -> dict:
+    """The peer's row, carrying its stable order-2 realization as the model's parameters (a start
+    of the refinement) when it maps onto the system."""
+    if 2 in result.stable_realizations:
+        result.params = realization_params(system, result.stable_realizations[2], dt)
+    return result.to_row()
+
+
+@estimator("srim", srim, "SRIM", order=11, starts=True)
 def _srim_row(record, system, settings: dict, noise: float) -> dict:
-    return srim(record, **settings).to_row()
+    return _with_start(srim(record, **settings), system, record.dt)
 
 
-@estimator("okid_era", okid_era, "OKID-ERA", order=12)
+@estimator("okid_era", okid_era, "OKID-ERA", order=12, starts=True)
 def _okid_era_row(record, system, settings: dict, noise: float) -> dict:
-    return okid_era(record, **settings).to_row()
+    return _with_start(okid_era(record, **settings), system, record.dt)

@@ -25,8 +25,10 @@ Estimator = Callable[[Any, Any, dict, float], dict]
 @dataclass(frozen=True)
 class Entry:
     """One estimator: its adapter, the function whose keyword arguments are its settings, the
-    label the tables print, whether it estimates the model's parameters (a refinement start) or
-    modes only, and its place in the tables."""
+    label the tables print, whether it estimates the model's parameters (fitted on the fitting
+    part only) or modes only, whether its row may carry the model's parameters as a refinement
+    start (every parametric one; a modal peer whose realization maps onto the model), and its
+    place in the tables."""
 
     name: str
     run: Estimator
@@ -34,6 +36,7 @@ class Entry:
     label: str
     parametric: bool
     order: int
+    starts: bool = False
 
 
 _ENTRIES: dict[str, Entry] = {}
@@ -41,14 +44,19 @@ _FOUND = False
 
 
 def estimator(
-    name: str, function: Callable, label: str, parametric: bool = False, order: int = 100
+    name: str,
+    function: Callable,
+    label: str,
+    parametric: bool = False,
+    order: int = 100,
+    starts: bool = False,
 ) -> Callable[[Estimator], Estimator]:
     """Register the decorated adapter as estimator ``name``."""
 
     def register(run: Estimator) -> Estimator:
         if name in _ENTRIES and _ENTRIES[name].run is not run:
             raise ValueError(f"estimator '{name}' is registered twice")
-        _ENTRIES[name] = Entry(name, run, function, label, parametric, order)
+        _ENTRIES[name] = Entry(name, run, function, label, parametric, order, starts or parametric)
         return run
 
     return register
@@ -79,12 +87,14 @@ def entries() -> dict[str, Entry]:
 
 
 def __getattr__(name: str) -> Any:
-    """``ESTIMATORS`` (name -> adapter) and ``PARAMETRIC`` (the names that estimate the model's
-    parameters), derived from the entries."""
+    """``ESTIMATORS`` (name -> adapter), ``PARAMETRIC`` (the names that estimate the model's
+    parameters) and ``STARTS`` (the names a refinement may start from), derived from the entries."""
     if name == "ESTIMATORS":
         return {k: e.run for k, e in entries().items()}
     if name == "PARAMETRIC":
         return tuple(k for k, e in entries().items() if e.parametric)
+    if name == "STARTS":
+        return tuple(k for k, e in entries().items() if e.starts)
     raise AttributeError(name)
 
 

@@ -23,25 +23,26 @@ log = logging.getLogger(__name__)
 
 
 def default_starts() -> tuple[str, ...]:
-    """The refinement's starts when the config names none: the data's, then every parametric
-    estimator that ran (``model.refine.starts`` in conf/model/refine/multiple_shooting.yaml)."""
-    from pidyn.baselines.registry import PARAMETRIC
+    """The refinement's starts when the config names none: the data's, then every estimator that
+    ran and gave the model's parameters (``model.refine.starts`` in
+    conf/model/refine/multiple_shooting.yaml)."""
+    from pidyn.baselines.registry import STARTS
 
-    return ("data", *PARAMETRIC)
+    return ("data", *STARTS)
 
 
 def check_method_names(cfg: DictConfig) -> None:
     """Misspelled names and settings fail before PIDynNet runs, not minutes later (or never)."""
-    from pidyn.baselines.registry import PARAMETRIC, check_names
+    from pidyn.baselines.registry import STARTS, check_names
 
     check_names("baselines.run", list((cfg.get("baselines") or {}).get("run") or []))
     plan = refine_plan(cfg)
     if plan is not None:
-        unknown = sorted(set(plan[0]) - set(PARAMETRIC) - {"data"})
+        unknown = sorted(set(plan[0]) - set(STARTS) - {"data"})
         if unknown:
             raise ValueError(
                 f"model.refine.starts: unknown method(s) {unknown}; choose from "
-                f"{', '.join(sorted(set(PARAMETRIC) | {'data'}))}"
+                f"{', '.join(sorted(set(STARTS) | {'data'}))}"
             )
 
 
@@ -92,9 +93,12 @@ def run_refinement(
     starts = {"pidynnet": pidyn_values}
     if start is not None and "data" in allowed:  # the data's values, PIDynNet's where the data give none
         starts["data"] = {**pidyn_values, **{k: v for k, v in start.values.items() if k in pidyn_values}}
-    for b in baselines:
+    for b in baselines:  # PIDynNet's values where an estimate gives none (a peer's c and k only)
         if b["method"] in allowed and b.get("params"):
-            starts[b["method"]] = b["params"]
+            starts[b["method"]] = {
+                **pidyn_values,
+                **{k: v for k, v in b["params"].items() if k in pidyn_values},
+            }
     w = cfg.data.windows
     span = {"t_start": w.get("t_start"), "t_end": w.get("t_end")}
     out = refine(system, record, starts, settings, network_states=network_states(results), **span)
