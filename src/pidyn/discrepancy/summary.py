@@ -81,6 +81,8 @@ def summarize(case: Case, o: Outcome) -> dict[str, Any]:
         "running": None if o.running is None else running_summary(o.running, case),
         "accelerometers": (record.meta or {}).get("accelerometers"),
         "confirmation": None if o.confirmation is None else o.confirmation.tested,
+        "confirmation_nominal": None if o.confirmation is None else o.confirmation.nominal,
+        "rivals": None if unearned else rivals(o),
         "learned_force_refused": ext.get("refused"),
     }
 
@@ -103,6 +105,25 @@ def heldout_gain(case: Case, o: Outcome) -> dict[str, Any]:
 
         gain = {**acceleration_gain(record, o.sims, held_mask), "x": gain}
     return gain
+
+
+def rivals(o: Outcome) -> dict[str, Any] | None:
+    """The effects the output-error check cannot tell from the one it named (within
+    ``tie_delta_bic``): the record does not decide between them. None when it does."""
+    row = None if o.confirmation is None else o.confirmation.row
+    if not row or not row.get("rivals"):
+        return None
+    named = row["effect"]
+    others = ", ".join(f"{r['effect']} ({r['score']:.1f})" for r in row["rivals"])
+    return {
+        "named": named,
+        "rivals": row["rivals"],
+        "note": note(
+            "not_decided",
+            f"{named} is named by the output-error check (score {row['score']:.1f}), but {others} "
+            "simulate the record as well: the record does not decide between them",
+        ),
+    }
 
 
 def unearned_names(causes: list[str], gain: dict[str, Any], th) -> dict[str, Any] | None:
