@@ -73,6 +73,7 @@ def test_the_simulated_response_names_a_softening_cubic_the_weak_form_leaves_und
     assert out.row is not None and out.row["effect"] == "cubic_stiffness", tested
     assert tested["delta_bic"] < -10 and tested["heldout_gain"] > 0
     assert tested["parameters"]["k3"] == pytest.approx(case.truth["k3"], rel=0.15)
+    assert out.row["rivals"] == []  # one candidate: nothing to tell it from
 
 
 def test_the_simulated_response_names_nothing_when_nothing_is_missing():
@@ -80,6 +81,35 @@ def test_the_simulated_response_names_nothing_when_nothing_is_missing():
     (tested,) = out.tested
     assert out.row is None and not tested["passes"], tested
     assert tested["delta_bic"] > -10
+
+
+def test_an_effect_is_judged_against_the_nominal_models_own_refit():
+    """A nominal model fitted elsewhere (its c and k off) leaves a misfit any effect with every
+    parameter free removes by refitting c and k: the check refits the nominal first, so on a clean
+    record nothing passes."""
+    case = hidden_case(None, 12, noise=0.03)
+    rec = case.record
+    nominal = LinearSDOF(c=case.nominal["c"], k=case.nominal["k"])
+    s = Signals(rec.t, rec.x[:, 0], rec.v[:, 0], 1.0, case.nominal["k"], "k", t_fit_end=case.fit_end)
+    fitted = output_error(rec.segment(0.0, case.fit_end), nominal, substeps=4, max_nfev=30).params
+    off = {"m": 1.0, "c": 1.6 * fitted["c"], "k": 1.06 * fitted["k"]}
+    rows = [
+        {"effect": "cubic_stiffness", "score": 4.0, "parameters": {"k3": 30.0}},
+        {"effect": "quadratic_damping", "score": 3.0, "parameters": {"c2": 0.1}},
+    ]
+    out = confirm(
+        rec,
+        nominal,
+        off,
+        rows,
+        lambda r: extended_system(nominal, r["effect"], r["parameters"], s.context()),
+        (0.0, case.fit_end),
+        (case.fit_end, float(rec.t[-1])),
+        Thresholds(),
+        max_nfev=60,
+    )
+    assert out.nominal["refit"] and out.nominal["rss_fit"] < 0.2 * out.nominal["rss_fit_before"], out.nominal
+    assert out.row is None and not any(t["passes"] for t in out.tested), out.tested
 
 
 def test_a_located_change_time_is_held_in_the_extension():
