@@ -391,24 +391,27 @@ def diagnosis_rows(folder: Path) -> list[dict]:
                 if best_ho is None
                 else (best_ho["effect"], best_ho["heldout_gain"]),
                 "wall_s": d.get("wall_seconds"),
+                "rivals": [r["effect"] for r in (d.get("rivals") or {}).get("rivals", [])],
             }
         )
         rows.append(row)
     return rows
 
 
-def diagnosis_table(rows: list[dict]) -> list[str]:
+def diagnosis_table(rows: list[dict], pga: dict[str, float]) -> list[str]:
+    """``pga``: each event's peak input acceleration (g) as the identification table reads it."""
     lines = [
         "| event | PGA (g) | verdict | period through the record (95 %) | held-out NRMSE of a: nominal -> "
         "extended | best library effect on the held-out part | s |",
         "|---|---|---|---|---|---|---|",
     ]
-    for r in sorted(rows, key=lambda r: -(r.get("pga_catalogue_g") or 0)):
+    for r in sorted(rows, key=lambda r: -(pga.get(r["event"]) or 0)):
         tag = " *(t)*" if r["role"] == "tuning" else ""
         if r["status"] != "ok":
-            lines.append(f"| {r['event']}{tag} | {_f(r['pga_catalogue_g'])} | {r['status']} | | | | |")
+            lines.append(f"| {r['event']}{tag} | {_f(pga.get(r['event']))} | {r['status']} | | | | |")
             continue
         verdict = r["verdict"] + (f" ({', '.join(r['causes'])})" if r["causes"] else "")
+        verdict += f", not told from {', '.join(r['rivals'])}" if r.get("rivals") else ""
         verdict += " + learned force" if r["learned"] else ""
         lo, hi = r.get("longest"), r.get("shortest")
         moves = (
@@ -423,7 +426,7 @@ def diagnosis_table(rows: list[dict]) -> list[str]:
         g = r["gain"]
         best = r["best_candidate_heldout"]
         lines.append(
-            f"| {r['event']}{tag} | {_f(r['pga_catalogue_g'])} | {verdict} | {moves} | {_f(g.get('nominal'))} -> "
+            f"| {r['event']}{tag} | {_f(pga.get(r['event']))} | {verdict} | {moves} | {_f(g.get('nominal'))} -> "
             f"{_f(g.get('extended'))} | {'-' if not best else f'{best[0]} ({best[1]:+.2f})'} | "
             f"{_f(r['wall_s'], '.0f')} |"
         )
@@ -466,7 +469,8 @@ def aggregate(base: Path) -> None:
     lines += srim_better_lines(rows, base / "identify")
     one = identification_rows(base / "one_input") if (base / "one_input").exists() else []
     lines += reduced_choice_lines(rows, one)
-    lines += _diagnosis_lines(base)
+    pga = {r["event"]: r["pga_g"] for r in rows if r["direction"] == "transverse" and r["status"] == "ok"}
+    lines += _diagnosis_lines(base, pga)
     lines += [
         "## Buildings on a shake table, measured by wearable IMUs",
         "",
@@ -540,7 +544,7 @@ def srim_better_lines(rows: list[dict], folder: Path) -> list[str]:
     return out + [""]
 
 
-def _diagnosis_lines(base: Path) -> list[str]:
+def _diagnosis_lines(base: Path, pga: dict[str, float]) -> list[str]:
     """The strong events' diagnosis table and their running-period figures (copied beside it)."""
     diag = diagnosis_rows(base / "diagnose") if (base / "diagnose").exists() else []
     if not diag:
@@ -554,7 +558,7 @@ def _diagnosis_lines(base: Path) -> list[str]:
         "beyond its windows' intervals refutes one linear model (verdict `unexplained`, a learned force "
         "tried and kept only when it predicts the held-out part better).",
         "",
-        *diagnosis_table(diag),
+        *diagnosis_table(diag, pga),
     ]
     for r in diag:
         fig = Path(r["run"]) / "figures" / "running_period.png"
