@@ -487,12 +487,6 @@ def srim_better_lines(rows: list[dict], folder: Path) -> list[str]:
     whose own period and damping differ from the fitting part's says the structure changed between
     the two (the amplitude falls in the coda), which no single linear model of the fitting part
     follows; SRIM's chosen order says where a second mode enters."""
-    from pidyn.data.strong_motion import csmip_record
-    from pidyn.refine.output_error import fit_output_error
-    from pidyn.reporting import nrmse
-    from pidyn.simulate import simulate_response
-    from pidyn.systems import LinearSDOF
-
     worse = {(r["event"], r["direction"]) for r in rows if judge(r).get("beats_srim") is False}
     if not worse:
         return []
@@ -500,9 +494,11 @@ def srim_better_lines(rows: list[dict], folder: Path) -> list[str]:
         "## Where SRIM predicts the held-out part better",
         "",
         "The same model fitted by output error to the held-out part itself, from the identified values: its "
-        "own period and damping, and the NRMSE it reaches there, simulated from rest at the part's start (about the best this model class does on that part).",
+        "own period and damping, and the NRMSE it reaches there, simulated from rest at the part's start "
+        "(about the best this model class does on that part).",
         "",
-        "| event | direction | T, ζ fitted part | T, ζ held-out part's own | held-out NRMSE: ours / SRIM / own fit | SRIM's order |",
+        "| event | direction | T, ζ fitted part | T, ζ held-out part's own | held-out NRMSE: ours / SRIM / "
+        "own fit | SRIM's order |",
         "|---|---|---|---|---|---|",
     ]
     by_key = {(r["event"], r["direction"]): r for r in rows}
@@ -511,27 +507,7 @@ def srim_better_lines(rows: list[dict], folder: Path) -> list[str]:
         key = (d["event"], d["direction"])
         if key not in worse:
             continue
-        metrics = _load(run / "metrics.json") or {}
-        rec = csmip_record(
-            RECORDS / "records" / f"{d['event']}_ce89324p.zip",
-            station=d.get("station"),
-            direction=d["direction"],
-            inputs=d.get("inputs"),
-            outputs=d.get("outputs"),
-            on_missing=d.get("on_missing", "error"),
-            dt=d.get("dt"),
-            span=d.get("span"),
-            max_outputs=1,
-            fit_share=float(d.get("fit_share", 0.65)),
-        )
-        system = LinearSDOF(inputs=rec.inputs)
-        ident = {
-            **{s.name: s.init for s in system.param_specs()},
-            **{k: float(v) for k, v in metrics["params"].items()},
-        }
-        held = rec.segment(rec.meta["split"]["fit"][1], float(rec.t[-1]))
-        own = {**ident, **fit_output_error(held, system, init=ident, max_nfev=100).params}
-        own_nrmse = nrmse(simulate_response(system, own, held)["a"][:, 0], held.a[:, 0])
+        ident, own, own_nrmse = _held_out_own_fit(d, _load(run / "metrics.json") or {})
         r = by_key[key]
 
         def tz(p: dict) -> str:
@@ -542,6 +518,38 @@ def srim_better_lines(rows: list[dict], folder: Path) -> list[str]:
             f"{_f(r.get('srim_heldout_nrmse_a'))} / {_f(own_nrmse)} | {r.get('srim_order')} |"
         )
     return out + [""]
+
+
+def _held_out_own_fit(d: dict, metrics: dict) -> tuple[dict, dict, float]:
+    """The identified values, the same model fitted by output error to the held-out part itself
+    (from them), and its NRMSE there simulated from rest at the part's start."""
+    from pidyn.data.strong_motion import csmip_record
+    from pidyn.refine.output_error import fit_output_error
+    from pidyn.reporting import nrmse
+    from pidyn.simulate import simulate_response
+    from pidyn.systems import LinearSDOF
+
+    rec = csmip_record(
+        RECORDS / "records" / f"{d['event']}_ce89324p.zip",
+        station=d.get("station"),
+        direction=d["direction"],
+        inputs=d.get("inputs"),
+        outputs=d.get("outputs"),
+        on_missing=d.get("on_missing", "error"),
+        dt=d.get("dt"),
+        span=d.get("span"),
+        max_outputs=1,
+        fit_share=float(d.get("fit_share", 0.65)),
+    )
+    system = LinearSDOF(inputs=rec.inputs)
+    ident = {
+        **{s.name: s.init for s in system.param_specs()},
+        **{k: float(v) for k, v in metrics["params"].items()},
+    }
+    held = rec.segment(rec.meta["split"]["fit"][1], float(rec.t[-1]))
+    own = {**ident, **fit_output_error(held, system, init=ident, max_nfev=100).params}
+    own_nrmse = nrmse(simulate_response(system, own, held)["a"][:, 0], held.a[:, 0])
+    return ident, own, own_nrmse
 
 
 def _diagnosis_lines(base: Path, pga: dict[str, float]) -> list[str]:

@@ -159,12 +159,17 @@ def confirm(
     passing = [r for r in out.tested if r.get("passes")]
     if passing:
         out.row = max(passing, key=lambda r: r["score"])
-        out.row["rivals"] = [
-            {"effect": r["effect"], "score": r["score"], "heldout_gain": r["heldout_gain"]}
-            for r in sorted(passing, key=lambda r: -r["score"])
-            if r is not out.row and out.row["score"] - r["score"] < th.tie_delta_bic
-        ]
+        out.row["rivals"] = _rivals(out.row, passing, th)
     return out
+
+
+def _rivals(best: dict, passing: list[dict], th: Thresholds) -> list[dict]:
+    """The passing effects within ``tie_delta_bic`` of the named one, best first."""
+    return [
+        {"effect": r["effect"], "score": r["score"], "heldout_gain": r["heldout_gain"]}
+        for r in sorted(passing, key=lambda r: -r["score"])
+        if r is not best and best["score"] - r["score"] < th.tie_delta_bic
+    ]
 
 
 def _refit_nominal(
