@@ -449,7 +449,8 @@ def aggregate(base: Path) -> None:
         f"{time.strftime('%Y-%m-%d')}. Model: one degree of freedom on three supports (transverse: inputs 3, 17, "
         "20 -> output 7; longitudinal: 15, 1, 18 -> 11), each support with its influence, its dashpot and what the "
         "sensor reads of it directly; identified by PIDynNet and the refinement on the first 65 % of the shaking "
-        "(from a start read from the record), the last 35 % held out. Peers on the same channels and span: "
+        "(from a start read from the record, or from a peer's order-2 model mapped onto it when that "
+        "simulates the fitting part better), the last 35 % held out. Peers on the same channels and span: "
         "the transfer function's fundamental (H1 from the mean input, with its interval), mdof's SRIM and "
         "OKID-ERA (the order with the lowest fitting-part error among those that do not diverge from rest).",
         "",
