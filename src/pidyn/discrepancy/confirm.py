@@ -133,13 +133,7 @@ def confirm(
         ext = build(row)
         specs = [s for s in ext.param_specs() if s.trainable]
         try:
-            res = fit_output_error(
-                seg,
-                ext,
-                init={s.name: values.get(s.name, s.init) for s in specs},
-                substeps=substeps,
-                max_nfev=max_nfev,
-            )
+            res = _fit(seg, ext, values, substeps, max_nfev)
         except (ValueError, FloatingPointError) as err:  # a start the effect's bounds refuse
             out.tested.append({"effect": row["effect"], "weak_form_score": row["score"], "error": str(err)})
             continue
@@ -172,6 +166,13 @@ def _rivals(best: dict, passing: list[dict], th: Thresholds) -> list[dict]:
     ]
 
 
+def _fit(seg: Record, system, values: dict[str, float], substeps: int, max_nfev: int):
+    """Output error of ``system``'s trainable parameters on ``seg``, started at ``values`` (the
+    specs' starts where it has none): every fit of the check, the nominal's refit included."""
+    init = {s.name: values.get(s.name, s.init) for s in system.param_specs() if s.trainable}
+    return fit_output_error(seg, system, init=init, substeps=substeps, max_nfev=max_nfev)
+
+
 def _refit_nominal(
     record: Record,
     seg: Record,
@@ -187,15 +188,8 @@ def _refit_nominal(
     a candidate must beat, and the start of every candidate's fit."""
     fit, held = spans
     base = _nominal_misfit(record, system, values, fit, held, substeps, th)
-    specs = [s for s in system.param_specs() if s.trainable]
     try:
-        res = fit_output_error(
-            seg,
-            system,
-            init={s.name: values.get(s.name, s.init) for s in specs},
-            substeps=substeps,
-            max_nfev=max_nfev,
-        )
+        res = _fit(seg, system, values, substeps, max_nfev)
     except (ValueError, FloatingPointError) as err:
         return values, base, {"refit": False, "error": str(err), "rss_fit": base.rss0}
     refit = {**values, **res.params}
