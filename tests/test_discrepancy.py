@@ -620,6 +620,36 @@ def test_diagnosis_of_an_effect_outside_the_library(effect, tmp_path):
     assert d["gain"]["extended"] < 0.95 * d["gain"]["nominal"]
 
 
+@pytest.mark.slow
+def test_names_that_do_not_earn_their_place_give_way_to_a_learned_force(tmp_path):
+    """Coulomb friction hidden, and the names required to cut the held-out error by 95 %: the
+    friction's extension is not kept (``unearned``, note ``name_unearned``), a learned force is
+    tried from the nominal model in its place, and the verdict is unexplained."""
+    from pidyn.notes import code_of
+    from pidyn.tasks.diagnose import diagnose
+
+    cfg = make_cfg(
+        [
+            "data.source.effect=coulomb_friction",
+            "noise=0.02",
+            "data_seed=5",
+            "diagnosis.thresholds.min_name_gain=0.95",
+            "diagnosis.learned.max_evaluations=30",
+            *FAST,
+        ],
+        tmp_path,
+        config_name="diagnose",
+    )
+    d = diagnose(cfg)
+    assert d["verdict"] == "unexplained" and d["causes"] == [] and d["cause"] is None, d["verdict"]
+    unearned = d["unearned"]
+    assert unearned["causes"] == ["coulomb_friction"] and code_of(unearned["note"]) == "name_unearned"
+    assert [s["effect"] for s in unearned["steps"]] == ["coulomb_friction"]  # what was tried, kept aside
+    assert all(s["effect"] != "coulomb_friction" for s in d["steps"])
+    assert "Fc" not in (d["extended_parameters"] or {})  # the friction is not in the reported model
+    assert d["learned_force"] or d["learned_force_refused"] is not None  # tried in its place
+
+
 def test_a_stiffness_that_rises_in_time_is_no_stiffness_loss():
     """Under an earthquake, a softening (or trilinear) spring looks like a stiffness that rises
     once the strong motion is over. Named `stiffness_loss`, it used to be the wrong name for

@@ -34,7 +34,7 @@ def summarize(case: Case, o: Outcome) -> dict[str, Any]:
     gain = heldout_gain(case, o)
     learned = LEARNED in o.causes
     causes = [c for c in o.causes if c != LEARNED]
-    unearned = unearned_names(causes, gain, case.thresholds)
+    unearned = unearned_names(causes, gain, case.thresholds) or ext.get("unearned")
     if unearned:  # the extended model does not predict the held-out part better: no name is kept
         causes = []
     ext_system, ext_values, ext_metrics = ext["system"], ext["values"], ext["metrics"]
