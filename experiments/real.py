@@ -508,7 +508,7 @@ def srim_better_lines(rows: list[dict], folder: Path) -> list[str]:
         key = (d["event"], d["direction"])
         if key not in worse:
             continue
-        ident, own, own_nrmse = _held_out_own_fit(d, _load(run / "metrics.json") or {})
+        ident, own, own_nrmse = _held_out_own_fit(cfg, _load(run / "metrics.json") or {})
         r = by_key[key]
 
         def tz(p: dict) -> str:
@@ -521,28 +521,22 @@ def srim_better_lines(rows: list[dict], folder: Path) -> list[str]:
     return out + [""]
 
 
-def _held_out_own_fit(d: dict, metrics: dict) -> tuple[dict, dict, float]:
+def _held_out_own_fit(cfg: dict, metrics: dict) -> tuple[dict, dict, float]:
     """The identified values, the same model fitted by output error to the held-out part itself
-    (from them), and its NRMSE there simulated from rest at the part's start."""
-    from pidyn.data.strong_motion import csmip_record
+    (from them), and its NRMSE there simulated from rest at the part's start. The record and the
+    model are the run's own, built from its saved config as the train task builds them."""
+    import hydra
+    from omegaconf import OmegaConf
+
     from pidyn.refine.output_error import fit_output_error
     from pidyn.reporting import nrmse
+    from pidyn.runs.build import build_record
     from pidyn.simulate import simulate_response
-    from pidyn.systems import LinearSDOF
 
-    rec = csmip_record(
-        RECORDS / "records" / f"{d['event']}_ce89324p.zip",
-        station=d.get("station"),
-        direction=d["direction"],
-        inputs=d.get("inputs"),
-        outputs=d.get("outputs"),
-        on_missing=d.get("on_missing", "error"),
-        dt=d.get("dt"),
-        span=d.get("span"),
-        max_outputs=1,
-        fit_share=float(d.get("fit_share", 0.65)),
-    )
-    system = LinearSDOF(inputs=rec.inputs)
+    node = OmegaConf.create(cfg)
+    node.data.records = str(RECORDS / "records")  # the run's relative path, from wherever this runs
+    rec = build_record(node, hydra.utils.instantiate(node.system))
+    system = hydra.utils.instantiate(node.system, inputs=rec.inputs)
     ident = {
         **{s.name: s.init for s in system.param_specs()},
         **{k: float(v) for k, v in metrics["params"].items()},
