@@ -221,7 +221,7 @@ def test_a_library_name_must_earn_its_place_on_the_held_out_part():
     came out as ``stiffness_loss`` with the held-out NRMSE 1.061 -> 1.033: no name is kept for so
     little, and the note says why. A name whose model predicts the held-out part better keeps it."""
     from pidyn.discrepancy.screening import Thresholds
-    from pidyn.discrepancy.summary import unearned_names
+    from pidyn.discrepancy.verdicts import unearned_names
     from pidyn.notes import code_of
 
     th = Thresholds()

@@ -42,7 +42,6 @@ from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.extend import EXTENSION, build_system, extension_node, release_held, system_node  # noqa: F401
 from pidyn.discrepancy.learned_fit import (
     LEARNED,
-    learned_predicts,
     learned_row,
     refuse_learned,
     save_unexplained,
@@ -50,9 +49,9 @@ from pidyn.discrepancy.learned_fit import (
 )
 from pidyn.discrepancy.screening import EXCLUSIVE, Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
-from pidyn.discrepancy.verdicts import Verdict
-from pidyn.notes import note
+from pidyn.discrepancy.verdicts import Verdict, unearned_names
 from pidyn.refine.output_error import fit_output_error
+from pidyn.reporting import nrmse
 from pidyn.signals import dominant_period
 from pidyn.simulate import simulate_response
 from pidyn.systems.sdof import SDOFSystem
@@ -630,38 +629,37 @@ def extend_until_explained(
 def names_earn_or_learn(
     case: Case, nom: Nominal, sc: Screening, ext: dict[str, Any], forced: bool
 ) -> dict[str, Any]:
-    """The library names of an extension must earn their place together: the extended model must
-    predict the held-out part ``min_name_gain`` better than the nominal one (the members of a pair
-    may help only together: a gap alone once predicted 1.82 -> 2.17, gap and friction 0.99). When
-    they do not, the extension is not kept (``unearned``, with its steps), and a learned force is
-    tried from the nominal model in their place. A forced effect is kept."""
-    st = case.settings
+    """The library names of an extension must earn their place together (``unearned_names``, on
+    the held-out errors the diagnosis reports): the members of a pair may help only together (a
+    gap alone once predicted 1.82 -> 2.17, gap and friction 0.99). When they do not, the extension
+    is not kept (``unearned``, with its steps) and a learned force is tried from the nominal model
+    in their place; a forced effect's model is kept, its name still refused."""
     names = [c for c in ext["causes"] if c != LEARNED]
-    if not names or forced or ext["system"] is None:
+    if not names or ext["system"] is None:
         return ext
-    args = (case.record, nom.system, nom.values, ext["system"], ext["values"], case.x_raw, float(nom.s.v[0]))
-    _, errors = learned_predicts(*args, case.held, int(st.substeps))
-    gain = float(case.thresholds.min_name_gain)
-    if np.isfinite(errors["with"]) and errors["with"] <= (1.0 - gain) * errors["without"]:
-        return ext
-    text = (
-        f"{' + '.join(names)} extended the model, but the extended model predicts the held-out part no better "
-        f"(NRMSE {errors['without']:.4g} -> {errors['with']:.4g}, at least {100 * gain:g} % less required): no "
-        "library name is kept, the model misses something the library does not hold"
-    )
-    log.info("%s", text)
-    learned = st.learn_unexplained and LEARNED not in ext["causes"]
+    refused = unearned_names(names, heldout_errors(case, nom, ext), case.thresholds)
+    if refused is None or forced:
+        return {**ext, "unearned": refused}
+    log.info("%s", refused["note"])
+    learned = case.settings.learn_unexplained and LEARNED not in ext["causes"]
     new = extend_until_explained(
         case, nom, LEARNED if learned else None, learned_row(sc.structure) if learned else None, False
     )
-    new["unearned"] = {
-        "causes": names,
-        "heldout_nominal": errors["without"],
-        "heldout_extended": errors["with"],
-        "note": note("name_unearned", text),
-        "steps": ext["steps"],
-    }
+    new["unearned"] = {**refused, "steps": ext["steps"]}
     return new
+
+
+def heldout_errors(case: Case, nom: Nominal, ext: dict[str, Any]) -> dict[str, float | None]:
+    """The nominal and extended models' held-out NRMSE as ``diagnosis.json``'s ``gain`` gives it:
+    of the displacement, or of the accelerations as the sensors read them."""
+    held = case.mask(case.held)
+    sims = _acceleration_sims(case, nom, ext)
+    if case.from_accelerometers:
+        from pidyn.discrepancy.accelerometers import acceleration_gain
+
+        gain = acceleration_gain(case.record, sims, held)
+        return {"nominal": gain["nominal"], "extended": gain["extended"]}
+    return {k: None if s is None else nrmse(s["x"][held, 0], case.x_raw[held]) for k, s in sims.items()}
 
 
 def _extension_step(

@@ -34,8 +34,8 @@ def summarize(case: Case, o: Outcome) -> dict[str, Any]:
     gain = heldout_gain(case, o)
     learned = LEARNED in o.causes
     causes = [c for c in o.causes if c != LEARNED]
-    unearned = unearned_names(causes, gain, case.thresholds) or ext.get("unearned")
-    if unearned:  # the extended model does not predict the held-out part better: no name is kept
+    unearned = ext.get("unearned")  # the extension's names did not earn their place: none is kept
+    if unearned:
         causes = []
     ext_system, ext_values, ext_metrics = ext["system"], ext["values"], ext["metrics"]
     effect_params = _effect_parameters(o, nom, ext_system, ext_values)
@@ -122,30 +122,6 @@ def rivals(o: Outcome) -> dict[str, Any] | None:
             "not_decided",
             f"{named} is named by the output-error check (score {row['score']:.1f}), but {others} "
             "simulate the record as well: the record does not decide between them",
-        ),
-    }
-
-
-def unearned_names(causes: list[str], gain: dict[str, Any], th) -> dict[str, Any] | None:
-    """Library names that do not earn their place: the extended model predicts the held-out part
-    no better than ``min_name_gain`` of the nominal model's error (an effect outside the library,
-    a stiffness that drops only inside a band of displacement, came out as ``stiffness_loss`` with
-    the held-out NRMSE 1.061 -> 1.033). The names, the two errors and a coded note; None when the
-    names earn their place (or nothing is named)."""
-    nominal, extended = gain.get("nominal"), gain.get("extended")
-    if not causes or nominal is None or extended is None:
-        return None
-    if np.isfinite(extended) and extended <= (1.0 - float(th.min_name_gain)) * nominal:
-        return None
-    return {
-        "causes": list(causes),
-        "heldout_nominal": nominal,
-        "heldout_extended": extended,
-        "note": note(
-            "name_unearned",
-            f"{' + '.join(causes)} extended the model, but the extended model predicts the held-out part "
-            f"no better (NRMSE {nominal:.4g} -> {extended:.4g}, at least {100 * th.min_name_gain:g} % less "
-            "required): no library name is kept, the model misses something the library does not hold",
         ),
     }
 
