@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 from launch import run_logged
+from real_modes import two_modes_lines
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"
@@ -59,7 +60,9 @@ def catalogue() -> dict[str, dict]:
     return {names[r["cesmd_id"].lower()]: r for r in rows if r["cesmd_id"].lower() in names}
 
 
-def run_sweeps(base: Path, chosen: list[str], jobs: int, launcher: str, diagnose: bool) -> None:
+def run_sweeps(
+    base: Path, chosen: list[str], jobs: int, launcher: str, diagnose: bool, two_modes: bool = True
+) -> None:
     sweep = ",".join(chosen)
     todo = [
         ("identify", "train.py", "painter_street", [f"data.event={sweep}"]),
@@ -71,6 +74,20 @@ def run_sweeps(base: Path, chosen: list[str], jobs: int, launcher: str, diagnose
             [f"data.event={sweep}", "data.direction=transverse", "data.inputs=[3]", "data.outputs=[7]"],
         ),
     ]
+    if two_modes:  # the same events with a second mode, started where each event's single mode ended
+        todo.append(
+            (
+                "two_modes",
+                "train.py",
+                "painter_street",
+                [
+                    f"data.event={sweep}",
+                    "system=modes",
+                    "baselines.run=[transfer_function,srim]",  # SRIM's order-4 model is one more start
+                    f"model.start='{base / 'identify'}/*_data.direction=${{data.direction}},data.event=${{data.event}}'",
+                ],
+            )
+        )
     if diagnose:
         strong = [e for e in chosen if e in DIAGNOSED]
         if strong:
@@ -130,6 +147,7 @@ def identification_rows(folder: Path) -> list[dict]:
         row = {
             "event": event,
             "direction": direction,
+            "run": run,
             "role": "tuning" if event in TUNING else "untouched",
             "date": cat.get(event, {}).get("time_utc", "")[:10],
             "magnitude": cat.get(event, {}).get("magnitude"),
@@ -470,6 +488,8 @@ def aggregate(base: Path) -> None:
     lines += srim_better_lines(rows, base / "identify")
     one = identification_rows(base / "one_input") if (base / "one_input").exists() else []
     lines += reduced_choice_lines(rows, one)
+    two = identification_rows(base / "two_modes") if (base / "two_modes").exists() else []
+    lines += two_modes_lines(rows, two, judge)
     pga = {r["event"]: r["pga_g"] for r in rows if r["direction"] == "transverse" and r["status"] == "ok"}
     lines += _diagnosis_lines(base, pga)
     lines += [
@@ -575,8 +595,8 @@ def _diagnosis_lines(base: Path, pga: dict[str, float]) -> list[str]:
 def write_csv(rows: list[dict], path: Path) -> None:
     """One row per event and direction; lists and dicts as JSON."""
     with path.open("w", newline="") as fh:
-        keys = sorted({k for r in rows for k in r})
-        w = csv.DictWriter(fh, fieldnames=keys)
+        keys = sorted({k for r in rows for k in r} - {"run"})  # the run folder is this machine's
+        w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
         w.writeheader()
         for r in rows:
             w.writerow({k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in r.items()})
@@ -589,6 +609,7 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--launcher", default="joblib", help="joblib, or submitit_slurm_cpu on a cluster")
     ap.add_argument("--skip-diagnosis", action="store_true")
+    ap.add_argument("--skip-two-modes", action="store_true", help="no second sweep with two modes")
     ap.add_argument("--resume", type=Path, help="an interrupted study's folder: its finished runs are kept")
     a = ap.parse_args()
     if a.aggregate:
@@ -599,7 +620,7 @@ def main() -> None:
     if unknown:
         raise SystemExit(f"unknown event(s) {unknown}; shipped: {', '.join(events())}")
     base = a.resume or ROOT / "outputs" / "real" / time.strftime("%Y-%m-%d_%H-%M-%S")
-    run_sweeps(base, chosen, a.jobs, a.launcher, not a.skip_diagnosis)
+    run_sweeps(base, chosen, a.jobs, a.launcher, not a.skip_diagnosis, not a.skip_two_modes)
     aggregate(base)
 
 

@@ -82,9 +82,14 @@ def modal_summary(system, values: dict[str, float], refined: Any = None) -> list
     cov = getattr(refined, "covariance", None) if refined is not None else None
     names = getattr(refined, "names", None) if refined is not None else None
     try:
-        return modes_with_intervals(system, values, names, None if not cov else np.asarray(cov))
+        modes = modes_with_intervals(system, values, names, None if not cov else np.asarray(cov))
     except (ValueError, KeyError, np.linalg.LinAlgError):
         return None
+    if getattr(system, "modal_coordinates", False):  # a modes model's own coordinates: no shapes to read
+        for m in modes:
+            m.pop("mode_shape", None)
+            m.pop("mode_shape_ci95", None)
+    return modes
 
 
 def write_modal(run_dir: Path, modes: list[dict] | None, extra: dict | None = None) -> None:

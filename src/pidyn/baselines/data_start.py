@@ -291,7 +291,9 @@ def _from_peak(system, fn: float, zeta: float) -> DataStart:
     init = {n: float(s.init) for n, s in specs.items()}
     w = 2 * np.pi * fn
     values: dict[str, float] = {}
-    if hasattr(system, "linear_matrices"):
+    if hasattr(system, "start_at"):  # modes: the fundamental at the peak, the others in proportion
+        values = system.start_at(fn, zeta)
+    elif hasattr(system, "linear_matrices"):
         from pidyn.systems.modal import modal_properties
 
         w0 = 2 * np.pi * modal_properties(*system.linear_matrices(init))["frequency_hz"][0]
@@ -365,10 +367,18 @@ def user_started(system, settings: list[str]) -> set[str]:
 def start_from_run(folder: str, system) -> DataStart:
     """The estimate of an earlier run (its folder's ``metrics.json``) as the start: another record of
     the same structure whose input does not show its resonance (a sine below it) starts from a
-    broadband record's estimate; the record at hand then decides."""
+    broadband record's estimate; the record at hand then decides. A pattern (``*``) must match one
+    folder. A single mode's run starts a modes model (``from_single_mode``)."""
     import json
     from pathlib import Path
 
+    if any(ch in folder for ch in "*?["):  # a pattern (a sweep names each job's earlier run by its options)
+        import glob
+
+        found = sorted(glob.glob(folder))
+        if len(found) != 1:
+            raise ValueError(f"model.start: the pattern '{folder}' matches {len(found)} run folders, not one")
+        folder = found[0]
     path = Path(folder) / "metrics.json"
     if not path.is_file():
         raise ValueError(
@@ -379,6 +389,9 @@ def start_from_run(folder: str, system) -> DataStart:
     trainable = {s.name for s in system.param_specs() if s.trainable}
     values = {n: float(v) for n, v in params.items() if n in trainable}
     missing = sorted(trainable - set(values))
+    nested = getattr(system, "from_single_mode", lambda _: None)(params) if missing else None
+    if nested is not None:  # a single mode's run starts a modes model (pidyn.systems.modes)
+        values, missing = {n: v for n, v in nested.items() if n in trainable}, []
     if missing:
         raise ValueError(f"model.start: the run in '{folder}' has no estimate of {missing} (another model?)")
     freq, zeta = _modal(system, {**{s.name: float(s.init) for s in system.param_specs()}, **values})

@@ -28,9 +28,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pidyn.baselines.realization import realization_params
 from pidyn.baselines.registry import estimator
 from pidyn.reporting import nrmse
 from pidyn.signals import dominant_peak, transfer_function, transmissibility
+from pidyn.systems.modes import ModesOnSupports
 
 Z95 = 1.959963984540054
 
@@ -162,56 +164,6 @@ def _realize(record, method: str, orders: Sequence[int], options: dict) -> PeerR
     )
 
 
-def realization_params(system, realization: tuple, dt: float) -> dict[str, float]:
-    """An order-2 realization of one output, mapped onto a single degree of freedom's parameters
-    (empty when the system is not one, or the realization does not map: a real pole pair, a
-    negative stiffness).
-
-    Continuous time through the first-order hold, the input linear between samples as the
-    package's integrator takes it: A_c = log(A) / dt, and B_c, D_c from inverting the hold's
-    B = (P1 - P2 + A P2) B_c, D = D_c + C P2 B_c (P1, P2 the hold's integrals of exp(A_c s)). Each
-    input's transfer function to the absolute acceleration is then
-    (n2 s^2 + n1 s + n0) / (s^2 + c s + k) with n2 = D_j, n1 = D_j c + C B_j and
-    n0 = D_j k + C (A_c - tr(A_c) I) B_j; the model's own is
-    (e_j s^2 + (g_j + (r_j + e_j) c) s + (r_j + e_j) k) / (s^2 + c s + k) per unit mass, which
-    gives e_j, r_j and g_j one to one. A model with one input keeps only c and k (its input
-    terms are fixed)."""
-    from scipy.linalg import logm
-
-    from pidyn.systems.modal import damping_params, stiffness_params
-    from pidyn.systems.sdof import feedthrough_name, influence_name, support_damping_name
-
-    A, B, C, D = (np.atleast_2d(np.asarray(x, float)) for x in realization)
-    stiff, damp = stiffness_params(system), damping_params(system)
-    if A.shape != (2, 2) or C.shape[0] != 1 or len(stiff) != 1 or len(damp) != 1:
-        return {}
-    eig = np.linalg.eigvals(A)
-    if np.any(np.abs(eig.imag) < 1e-12):  # real poles: no oscillator
-        return {}
-    Ac = np.real(logm(A)) / dt
-    P1, P2 = _hold_integrals(Ac, dt)
-    Bc = np.linalg.solve(P1 - P2 + A @ P2, B)
-    D = D - C @ P2 @ Bc
-    c, k = float(-np.trace(Ac)), float(np.linalg.det(Ac))
-    if not (k > 0 and c > 0):
-        return {}
-    m = next((s.init for s in system.param_specs() if s.name == "m"), 1.0)
-    out = {damp[0]: m * c, stiff[0]: m * k}
-    inputs = list(getattr(system, "inputs", []) or [])
-    if len(inputs) != B.shape[1]:
-        return out
-    shifted = Ac - np.trace(Ac) * np.eye(2)
-    for j, name in enumerate(inputs):
-        e = float(D[0, j])
-        n1 = e * c + float(C[0] @ Bc[:, j])
-        n0 = e * k + float(C[0] @ shifted @ Bc[:, j])
-        r = n0 / k - e
-        out[feedthrough_name(name)] = e
-        out[influence_name(name)] = r
-        out[support_damping_name(name)] = m * (n1 - (r + e) * c)
-    return out
-
-
 def _order_row(mdof, method: str, order: int, U, Y, fit, held, dt: float, options: dict) -> dict:
     """One order's realization on the fitting part: stability, modes, and the simulated
     outputs' error on the fitting and held-out parts (or the error the method raised)."""
@@ -337,23 +289,13 @@ def _transfer_function_row(record, system, settings: dict, noise: float) -> dict
     return transfer_function_estimate(record, **settings).to_row()
 
 
-def _hold_integrals(Ac: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """The first-order hold's integrals of exp(A_c s) over a step (scipy's ``cont2discrete``
-    'foh' blocks with B = I): P1 = int_0^dt exp(A_c s) ds, P2 its ramp-weighted part."""
-    from scipy.linalg import expm
-
-    n = Ac.shape[0]
-    em = np.zeros((3 * n, 3 * n))
-    em[:n, :n], em[:n, n : 2 * n], em[n : 2 * n, 2 * n :] = Ac * dt, np.eye(n) * dt, np.eye(n)
-    ms = expm(em)
-    return ms[:n, n : 2 * n], ms[:n, 2 * n :]
-
-
 def _with_start(result: PeerResult, system, dt: float) -> dict:
-    """The peer's row, carrying its stable order-2 realization as the model's parameters (a start
-    of the refinement) when it maps onto the system."""
-    if 2 in result.stable_realizations:
-        result.params = realization_params(system, result.stable_realizations[2], dt)
+    """The peer's row, carrying its stable realization of twice the model's modes (order 2 for a
+    single degree of freedom) as the model's parameters (a start of the refinement) when it maps
+    onto the system."""
+    order = 2 * (system.n_dof if isinstance(system, ModesOnSupports) else 1)
+    if order in result.stable_realizations:
+        result.params = realization_params(system, result.stable_realizations[order], dt)
     return result.to_row()
 
 

@@ -288,19 +288,15 @@ def _measured(
     channel, NaN where a floor has no sensor. An accelerometer reads the absolute acceleration;
     with one ground it is kept relative to it, with several supports absolute."""
     several = system.n_inputs > 1
-    if system.excitation != "ground":
-        ground = 0.0
-    else:  # the ground acceleration each floor feels (several supports: weighted by their influence)
-        ground = (
-            system.acceleration_output(np.zeros((len(clean.t), system.n_dof)), clean.f, truth)
-            if several
-            else clean.f[:, None]
-        )
-    if several:
-        ground = ground[:, [s - 1 for s in floors]]
-    sensed = {c: getattr(clean, c)[:, [s - 1 for s in floors]] for c in channels}
-    if "a" in sensed:
-        sensed["a"] = sensed["a"] + ground  # an accelerometer measures the absolute acceleration
+    cols = [s - 1 for s in floors]
+    sensed = {c: getattr(clean, c)[:, cols] for c in channels}
+    ground = 0.0
+    if "a" in sensed and system.excitation == "ground":
+        # an accelerometer measures the absolute acceleration: the model's reading (several supports:
+        # already absolute; a modal model's sensor: the sum of its modes) plus the one ground
+        reading = system.acceleration_output(clean.a, clean.f, truth)[:, cols]
+        ground = 0.0 if several else np.asarray(clean.f, float)[:, None]
+        sensed["a"] = reading + ground
     meas = add_noise(sensed, levels, data_seed)
     if "a" in meas and not several:  # one ground: kept relative; several: no single ground, kept absolute
         meas["a"] = meas["a"] - ground

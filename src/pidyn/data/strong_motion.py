@@ -113,7 +113,8 @@ def csmip_record(
     split, the first share for fitting, the rest held out (``meta['split']``)."""
     if not 0.1 <= fit_share <= 0.95:
         raise DataError(f"data.fit_share must lie in [0.1, 0.95], got {fit_share}")
-    limit = max_outputs if max_outputs is not None else (None if system is None else system.n_dof)
+    sensors = None if system is None else getattr(system, "n_outputs", system.n_dof)
+    limit = max_outputs if max_outputs is not None else sensors
     archive, station, ins, outs, notes = _channels_used(
         path, station, direction, inputs, outputs, on_missing, limit
     )
@@ -129,6 +130,7 @@ def csmip_record(
     else:
         f = acc_in[i0:i1, 0]
         a = a - f[:, None]  # one ground: accelerations relative to it, as every record keeps them
+    a = _unmeasured_columns(a, system)
     for text in notes:
         log.info("%s: %s", archive.path.name, text)
     meta = {
@@ -149,6 +151,13 @@ def csmip_record(
     meta["split"] = {"fit": [0.0, cut], "heldout": [cut, float(t[-1])]}
     name = Path(path).name.split(".")[0]
     return Record(name=name, t=t, f=f, a=a, excitation="ground", meta=meta)
+
+
+def _unmeasured_columns(a: np.ndarray, system) -> np.ndarray:
+    """A modal model's further degrees of freedom are modes no sensor reads on its own: NaN columns."""
+    if system is None or not hasattr(system, "n_outputs") or a.shape[1] >= system.n_dof:
+        return a
+    return np.concatenate([a, np.full((len(a), system.n_dof - a.shape[1]), np.nan)], axis=1)
 
 
 def _channels_used(

@@ -82,6 +82,16 @@ STEP_EVIDENCE = (
 )
 
 
+def check_diagnosable(system) -> None:
+    """A named refusal for a model the diagnosis cannot extend (before any record is read)."""
+    if getattr(system, "modal_coordinates", False):
+        raise ValueError(
+            f"system '{system.name}': the diagnosis extends force laws in physical coordinates (a single "
+            "degree of freedom or a shear building's storeys), and modes have none; diagnose with "
+            "system=linear, identify the modes with train.py"
+        )
+
+
 def split_spans(record: Record, fit_share: float) -> tuple[tuple[float, float], tuple[float, float]]:
     """Fitting and held-out time spans: the record's own split if it has one, else a share."""
     sp = (record.meta or {}).get("split")

@@ -33,9 +33,7 @@ def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
     """What the nominal model ``cfg.system`` misses on ``record`` (default: built from
     ``cfg.data``); writes diagnosis.json, report.md and figures to the run folder."""
     done = Path(cfg.paths.output_dir) / "diagnosis.json"
-    if (
-        record is None and cfg.get("skip_done", False) and done.exists()
-    ):  # a sweep resumed: this run is finished
+    if record is None and cfg.get("skip_done", False) and done.exists():  # a sweep resumed: finished
         log.info("%s holds this diagnosis (skip_done): not run again", done.parent)
         return json.loads(done.read_text())
     t_wall = time.perf_counter()
@@ -106,6 +104,7 @@ def compose_case(cfg: DictConfig, record: Record | None = None) -> pipeline.Case
     """The settings, the nominal system, the record and the identification the pipeline calls."""
     settings = DiagnosisSettings.from_mapping(OmegaConf.to_container(cfg.diagnosis, resolve=True))  # type: ignore[arg-type]
     base = hydra.utils.instantiate(cfg.system)
+    pipeline.check_diagnosable(base)
     record = build_record(cfg, base) if record is None else record
     if record.excitation != base.excitation:
         base = hydra.utils.instantiate(cfg.system, excitation=record.excitation)
