@@ -50,6 +50,7 @@ def summarize_building(
         "extended_parameters": d.extended["params"] if d.extended else None,
         "extended_intervals": d.extended["intervals"] if d.extended else None,
         "gain": d.gain,
+        "learned": d.learned,
         "split": {"fit": list(fit), "heldout": list(held)},
         "record": record.name,
         "measured_floors": d.views[0].measured_floors if d.views else [],
@@ -173,6 +174,13 @@ def report_lines(d: dict) -> list[str]:
     lines += _storey_table(d)
     for note in d["notes"]:
         lines.append(f"\nNote: {note}.")
+    learned = d.get("learned")
+    if learned:
+        lines.append(
+            f"\nLearned force f_NN(d, d') in storey {learned['storey']} (storeys tried: {learned['storeys_tried']}, "
+            f"the best fit of the fitting part taken): held-out NRMSE {learned['heldout_before']:.4g} -> "
+            f"{learned['heldout_after']:.4g}, {'kept' if learned['kept'] else 'not kept (it does not predict better)'}."
+        )
     for s in d["steps"]:
         lines.append(
             f"\nStep: {s['effect']} in storey {s['storey']} (score {s['score']:.1f}): held-out NRMSE "

@@ -31,6 +31,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -40,6 +41,7 @@ from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.pipeline import split_spans
 from pidyn.discrepancy.screening import Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
+from pidyn.discrepancy.storey_learned import learned_storey_force
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.notes import note
 from pidyn.reporting import nrmse
@@ -104,6 +106,7 @@ class BuildingDiagnosis:
     corner_hz: float
     seconds: float
     notes: list[str] = field(default_factory=list)
+    learned: dict | None = None  # the learned storey force of an unexplained verdict (storey_learned)
 
 
 def floor_accelerations(
@@ -455,9 +458,11 @@ def diagnose_building(
     settings: DiagnosisSettings,
     refine_settings: Any,
     start: dict | None = None,
+    run_dir: Path | None = None,
 ) -> BuildingDiagnosis:
     """The loop of the module's docstring; ``system``: the nominal (linear) building; ``start``:
-    its starting values (default: read from the data)."""
+    its starting values (default: read from the data); ``run_dir``: where a learned storey
+    force's weights go."""
     t_wall = time.perf_counter()
     fit, held = split_spans(record, float(settings.fit_share))
     log.info("building diagnosis of '%s': fit %.4g-%.4g s, held out %.4g-%.4g s", record.name, *fit, *held)
@@ -481,12 +486,19 @@ def diagnose_building(
     verdict, unexplained, notes, test = building_verdict(study, current, found, screenings)
     nominal["heldout_test"] = test
     notes = refusal_notes(refused) + notes
+    learned = None
+    if verdict == Verdict.UNEXPLAINED and settings.learn_unexplained:
+        period = 1.0 / fundamental_hz(current["system"], current["values"])
+        learned = learned_storey_force(study, current, unexplained, run_dir, period, heldout_nrmse)
+        if learned is not None and learned["kept"]:  # its storey: learned["storey"]
+            current = {**current, "system": learned["system"], "values": learned["values"]}
+            current["heldout"] = learned["heldout"]
     extended = None
-    if found:
+    if found or (learned and learned["kept"]):
         extended = {
             "system": current["system"].name,
             "params": current["values"],
-            "intervals": current["result"].intervals,
+            "intervals": current["result"].intervals if found else {},
             "storey_equations": current["system"].storey_equations(current["values"]),
         }
     return BuildingDiagnosis(
@@ -495,7 +507,7 @@ def diagnose_building(
         nominal,
         extended,
         steps,
-        building_gain(nominal, current, bool(found)),
+        building_gain(nominal, current, extended is not None),
         unexplained,
         views,
         screenings,
@@ -503,6 +515,9 @@ def diagnose_building(
         study.corner,
         time.perf_counter() - t_wall,
         notes,
+        None
+        if learned is None
+        else {k: v for k, v in learned.items() if k not in ("system", "values", "heldout")},
     )
 
 

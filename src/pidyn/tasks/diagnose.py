@@ -82,7 +82,7 @@ def diagnose_building_task(cfg: DictConfig, record: Record | None = None) -> dic
         from pidyn.baselines.data_start import start_from_run
 
         start = start_from_run(chosen, system).values
-    d = diagnose_building(record, system, settings, refine_settings, start)
+    d = diagnose_building(record, system, settings, refine_settings, start, run_dir)
     fit, held = split_spans(record, float(settings.fit_share))
     out = summarize_building(record, system, d, fit, held, settings.thresholds)
     write_json(run_dir / "diagnosis.json", out)

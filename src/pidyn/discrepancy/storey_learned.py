@@ -1,0 +1,134 @@
+"""A learned storey force: what the building diagnosis adds when something is missing and no
+library effect earns its place (``unexplained``).
+
+A small network f(d, d') on one storey's drift and drift velocity (``LearnedForce`` inside the
+shear building's equations), trained with the building's physical parameters on the simulated
+floor accelerations of the fitting part (``pidyn.discrepancy.learned_fit``). The storey is the
+one the screening found structured, else each storey is tried and the one whose trained model
+fits the fitting part best is taken: the held-out part decides nothing but whether the learned
+force is kept, which it is only when it predicts the held-out floor accelerations better than
+the model it extends (as the single-degree-of-freedom diagnosis keeps its learned force).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from pidyn.discrepancy.learned_fit import fit_learned_force
+from pidyn.simulate import simulate_response
+from pidyn.systems.shear_building import ShearBuilding
+from pidyn.systems.terms import LearnedForce
+
+log = logging.getLogger(__name__)
+
+
+def with_learned_force(
+    system: ShearBuilding, values: dict[str, float], storey: int, drift: np.ndarray, velocity: np.ndarray
+) -> ShearBuilding:
+    """The linear building at ``values`` with a learned force on ``storey``'s drift, its scales
+    the nominal model's drift and drift velocity there (it starts as the nominal model)."""
+    n = system.n_dof
+    k = float(values[f"k{storey}"])
+    d_scale = max(float(np.std(drift)), 1e-12)
+    term = LearnedForce(x_scale=d_scale, v_scale=max(float(np.std(velocity)), 1e-12), f_scale=k * d_scale)
+    return ShearBuilding(
+        n_storeys=n,
+        masses=[values[f"m{i + 1}"] for i in range(n)],
+        dampings=[values[f"c{i + 1}"] for i in range(n)],
+        stiffnesses=[values[f"k{i + 1}"] for i in range(n)],
+        storey_terms={storey: [term]},
+        excitation=system.excitation,
+        name=f"{system.name}+learned_force@{storey}",
+    )
+
+
+def _drift(x: np.ndarray, v: np.ndarray, storey: int) -> tuple[np.ndarray, np.ndarray]:
+    """A storey's drift and drift velocity from the floors' motion (floor 0: the ground)."""
+    if storey == 1:
+        return x[:, 0], v[:, 0]
+    return x[:, storey - 1] - x[:, storey - 2], v[:, storey - 1] - v[:, storey - 2]
+
+
+def _train(ext, start: dict, record, fit, period: float, settings, evaluations: int):
+    return fit_learned_force(
+        ext,
+        start,
+        record,
+        fit,
+        period,
+        periods_per_segment=float(settings.periods_per_segment),
+        max_evaluations=evaluations,
+    )
+
+
+def learned_storey_force(
+    study: Any, current: dict, storey: int | None, folder: Path | None, period: float, heldout: Callable
+) -> dict | None:
+    """Train a learned force on ``storey`` (None: every storey, the best fit on the fitting part
+    taken) from the current model, in segments of a few ``period`` s (the fundamental's);
+    ``heldout(record, system, values, span)`` scores it as the diagnosis scores every model.
+    Its held-out gain, and whether it is kept; None when no storey's network can be trained
+    (a fitting part shorter than one segment)."""
+    record, system, values = study.record, current["system"], current["values"]
+    sim = simulate_response(system, values, record)
+    x, v = sim["x"], sim["v"]
+    settings = study.settings.learned
+    storeys = [storey] if storey else list(range(1, system.n_dof + 1))
+    # several storeys: each trained briefly, the one whose fit falls most trained in full
+    brief = int(settings.max_evaluations) if len(storeys) == 1 else max(1, int(settings.max_evaluations) // 4)
+    tried = []
+    for i in storeys:
+        ext = with_learned_force(system, values, i, *_drift(x, v, i))
+        start = {k: val for k, val in values.items() if k in {s.name for s in ext.param_specs()}}
+        res = _train(ext, start, record, study.fit, period, settings, brief)
+        if res is not None:
+            tried.append((res.loss_after / max(res.loss_before, 1e-300), i, ext, start, res))
+    if not tried:
+        return None
+    _, chosen, ext, start, res = min(tried, key=lambda r: r[0])
+    seconds = sum(r.seconds for *_, r in tried)
+    if brief < int(settings.max_evaluations):  # the chosen storey's network trained on to the full budget
+        more = _train(
+            ext, res.values, record, study.fit, period, settings, int(settings.max_evaluations) - brief
+        )
+        if more is not None:
+            res, seconds = more, seconds + more.seconds
+    held = heldout(record, ext, res.values, study.held)
+    before = current["heldout"]["mean"]
+    kept = bool(np.isfinite(held["mean"]) and held["mean"] < before)
+    out = {
+        "storey": chosen,
+        "storeys_tried": [i for _, i, *_ in tried],
+        "fit_loss_ratio": {str(i): r for r, i, *_ in tried},  # after the brief training of each
+        "heldout_before": before,
+        "heldout_after": held["mean"],
+        "heldout_per_floor": held["per_floor"],
+        "kept": kept,
+        "note": res.note,
+        "seconds": seconds,
+        "system": ext,
+        "values": res.values,
+        "heldout": held,
+    }
+    if folder is not None:
+        term = next(t.term for t in ext.storeys[chosen - 1] if isinstance(t.term, LearnedForce))
+        torch.save(
+            {"storey": chosen, "values": res.values, "network": term.net.state_dict()},
+            folder / "learned_force.pt",
+        )
+        out["file"] = "learned_force.pt"
+    log.info(
+        "learned force in storey %d (of %s tried): held-out NRMSE %.4g -> %.4g (%s)",
+        chosen,
+        out["storeys_tried"],
+        before,
+        held["mean"],
+        "kept" if kept else "not kept: it does not predict the held-out part better",
+    )
+    return out
