@@ -55,6 +55,11 @@ def _drift(x: np.ndarray, v: np.ndarray, storey: int) -> tuple[np.ndarray, np.nd
     return x[:, storey - 1] - x[:, storey - 2], v[:, storey - 1] - v[:, storey - 2]
 
 
+def _own(ext: ShearBuilding, values: dict[str, float]) -> dict[str, float]:
+    names = {s.name for s in ext.param_specs()}
+    return {k: v for k, v in values.items() if k in names}
+
+
 def _train(ext, start: dict, record, fit, period: float, settings, evaluations: int):
     return fit_learned_force(
         ext,
@@ -65,6 +70,14 @@ def _train(ext, start: dict, record, fit, period: float, settings, evaluations: 
         periods_per_segment=float(settings.periods_per_segment),
         max_evaluations=evaluations,
     )
+
+
+def _save(folder: Path, ext: ShearBuilding, storey: int, values: dict[str, float]) -> str:
+    term = next(t.term for t in ext.storeys[storey - 1] if isinstance(t.term, LearnedForce))
+    torch.save(
+        {"storey": storey, "values": values, "network": term.net.state_dict()}, folder / "learned_force.pt"
+    )
+    return "learned_force.pt"
 
 
 def learned_storey_force(
@@ -85,13 +98,12 @@ def learned_storey_force(
     tried = []
     for i in storeys:
         ext = with_learned_force(system, values, i, *_drift(x, v, i))
-        start = {k: val for k, val in values.items() if k in {s.name for s in ext.param_specs()}}
-        res = _train(ext, start, record, study.fit, period, settings, brief)
+        res = _train(ext, _own(ext, values), record, study.fit, period, settings, brief)
         if res is not None:
-            tried.append((res.loss_after / max(res.loss_before, 1e-300), i, ext, start, res))
+            tried.append((res.loss_after / max(res.loss_before, 1e-300), i, ext, res))
     if not tried:
         return None
-    _, chosen, ext, start, res = min(tried, key=lambda r: r[0])
+    _, chosen, ext, res = min(tried, key=lambda r: r[0])
     seconds = sum(r.seconds for *_, r in tried)
     if brief < int(settings.max_evaluations):  # the chosen storey's network trained on to the full budget
         more = _train(
@@ -117,12 +129,7 @@ def learned_storey_force(
         "heldout": held,
     }
     if folder is not None:
-        term = next(t.term for t in ext.storeys[chosen - 1] if isinstance(t.term, LearnedForce))
-        torch.save(
-            {"storey": chosen, "values": res.values, "network": term.net.state_dict()},
-            folder / "learned_force.pt",
-        )
-        out["file"] = "learned_force.pt"
+        out["file"] = _save(folder, ext, chosen, res.values)
     log.info(
         "learned force in storey %d (of %s tried): held-out NRMSE %.4g -> %.4g (%s)",
         chosen,

@@ -488,19 +488,8 @@ def diagnose_building(
     notes = refusal_notes(refused) + notes
     learned = None
     if verdict == Verdict.UNEXPLAINED and settings.learn_unexplained:
-        period = 1.0 / fundamental_hz(current["system"], current["values"])
-        learned = learned_storey_force(study, current, unexplained, run_dir, period, heldout_nrmse)
-        if learned is not None and learned["kept"]:  # its storey: learned["storey"]
-            current = {**current, "system": learned["system"], "values": learned["values"]}
-            current["heldout"] = learned["heldout"]
-    extended = None
-    if found or (learned and learned["kept"]):
-        extended = {
-            "system": current["system"].name,
-            "params": current["values"],
-            "intervals": current["result"].intervals if found else {},
-            "storey_equations": current["system"].storey_equations(current["values"]),
-        }
+        current, learned = _learned(study, current, unexplained, run_dir)
+    extended = _extended(current, found, bool(learned and learned["kept"]))
     return BuildingDiagnosis(
         verdict,
         found,
@@ -519,6 +508,30 @@ def diagnose_building(
         if learned is None
         else {k: v for k, v in learned.items() if k not in ("system", "values", "heldout")},
     )
+
+
+def _learned(
+    study: Study, current: dict, storey: int | None, run_dir: Path | None
+) -> tuple[dict, dict | None]:
+    """The current model with a learned storey force when it is kept (``storey_learned``), and the report."""
+    period = 1.0 / fundamental_hz(current["system"], current["values"])
+    learned = learned_storey_force(study, current, storey, run_dir, period, heldout_nrmse)
+    if learned is not None and learned["kept"]:  # its storey: learned["storey"]
+        current = {**current, "system": learned["system"], "values": learned["values"]}
+        current["heldout"] = learned["heldout"]
+    return current, learned
+
+
+def _extended(current: dict, found: list[Found], learned_kept: bool) -> dict | None:
+    """The extended model's entry: the named effects', or a kept learned force's."""
+    if not found and not learned_kept:
+        return None
+    return {
+        "system": current["system"].name,
+        "params": current["values"],
+        "intervals": current["result"].intervals if found else {},
+        "storey_equations": current["system"].storey_equations(current["values"]),
+    }
 
 
 def building_verdict(
