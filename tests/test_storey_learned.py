@@ -38,7 +38,11 @@ def test_a_learned_force_goes_to_the_storey_the_linear_model_misses(tmp_path):
         held=(10.0, 15.0),
         settings=SimpleNamespace(learned=LearnedSettings(max_evaluations=32)),
     )
-    current = {"system": linear, "values": values, "heldout": heldout_nrmse(record, linear, values, study.held)}
+    current = {
+        "system": linear,
+        "values": values,
+        "heldout": heldout_nrmse(record, linear, values, study.held),
+    }
     out = learned_storey_force(
         study, current, None, tmp_path, 1.0 / fundamental_hz(linear, values), heldout_nrmse
     )
