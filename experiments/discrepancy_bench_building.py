@@ -111,13 +111,17 @@ def score(case: dict, d: dict) -> dict:
     """Top-1 and storey scores of one diagnosis against what was hidden."""
     hidden, causes, storeys = case["hidden"], d.get("causes") or [], d.get("storeys") or []
     named = list(zip(causes, storeys))
-    out = {"verdict": d["verdict"], "named": " + ".join(f"{c}@{s}" for c, s in named) or d["verdict"]}
+    learned = d.get("learned") or {}
+    label = " + ".join(f"{c}@{s}" for c, s in named) or d["verdict"]
+    if learned:  # an unexplained building's learned storey force
+        label += f" (learned force @{learned['storey']}{'' if learned['kept'] else ', not kept'})"
+    out = {"verdict": d["verdict"], "named": label, "learned_storey": learned.get("storey")}
     if not hidden:
         out.update(hit=d["verdict"] == "none", storey_error=False, false_discovery=d["verdict"] != "none")
         return out
     if case["kind"] == "trilinear_spring":
         st = hidden[0]["storey"]
-        ok = d["verdict"] == "unexplained" and d.get("unexplained_storey") == st
+        ok = d["verdict"] == "unexplained" and st in (d.get("unexplained_storey"), learned.get("storey"))
         ok = ok or (bool(named) and named[0][0] in EQUIVALENT["trilinear_spring"] and named[0][1] == st)
         wrong_storey = bool(named) and named[0][0] in EQUIVALENT["trilinear_spring"] and named[0][1] != st
         out.update(hit=ok, storey_error=wrong_storey, false_discovery=False)
@@ -130,6 +134,16 @@ def score(case: dict, d: dict) -> dict:
     effects_right = bool(named) and named[0][0] in {h["effect"] for h in hidden}
     out.update(hit=hit, storey_error=effects_right and not hit, false_discovery=False)
     return out
+
+
+def _rescored(row_path: Path) -> dict:
+    row = json.loads(row_path.read_text())
+    diag = row_path.parent / "run" / "diagnosis.json"
+    if diag.exists():
+        case = draw_case(int(row["case"]))  # seeded: the same case again
+        case.pop("rec")
+        row.update(score(case, json.loads(diag.read_text())))
+    return row
 
 
 def run_case(i: int, out: Path) -> dict:
@@ -238,8 +252,8 @@ def main() -> None:
     ap.add_argument("--aggregate", action="store_true", help="only rewrite the table from the finished cases")
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
-    if a.aggregate:
-        rows = [json.loads(f.read_text()) for f in sorted(a.out.glob("case_*/row.json"))]
+    if a.aggregate:  # each finished case scored again from its diagnosis (the scorer may have changed)
+        rows = [_rescored(f) for f in sorted(a.out.glob("case_*/row.json"))]
         write_results(rows, a.results, a.name, a.cases)
         return
     rows: list[dict] = []
