@@ -77,27 +77,36 @@ class ModesOnSupports(StructuralSystem):
         specs: list[ParamSpec] = []
         for r, period in enumerate(periods, 1):
             w = 2 * np.pi / period
-            specs += [
-                ParamSpec(f"c{r}", init=2 * zeta * w, scale=2 * zeta * w, unit="1/s"),
-                ParamSpec(f"k{r}", init=w**2, scale=w**2, unit="1/s^2"),
+            specs += [  # the config's modes are also the truth a simulated record is drawn from
+                ParamSpec(f"c{r}", init=2 * zeta * w, scale=2 * zeta * w, true=2 * zeta * w, unit="1/s"),
+                ParamSpec(f"k{r}", init=w**2, scale=w**2, true=w**2, unit="1/s^2"),
             ]
         share = 1.0 / max(len(ins), 1)
         for r in range(1, n + 1):
             gamma = 1.0 if r == 1 else 0.3  # higher modes start with a smaller share
             if not ins:
-                specs.append(ParamSpec(f"r{r}", init=gamma, scale=gamma, transform="identity", unit="-"))
+                specs.append(
+                    ParamSpec(f"r{r}", init=gamma, scale=gamma, transform="identity", true=gamma, unit="-")
+                )
                 continue
             c_r = next(s.init for s in specs if s.name == f"c{r}")
             for i in ins:
                 specs += [
-                    ParamSpec(f"r{r}_{i}", init=gamma * share, scale=share, transform="identity", unit="-"),
+                    ParamSpec(
+                        f"r{r}_{i}",
+                        init=gamma * share,
+                        scale=share,
+                        transform="identity",
+                        true=gamma * share,
+                        unit="-",
+                    ),
                     ParamSpec(
                         f"g{r}_{i}", init=0.0, scale=c_r * share, transform="identity", true=0.0, unit="1/s"
                     ),
                 ]
         for o in range(2, self.n_outputs + 1):
             specs += [
-                ParamSpec(f"phi{o}_{r}", init=1.0, scale=1.0, transform="identity", unit="-")
+                ParamSpec(f"phi{o}_{r}", init=1.0, scale=1.0, transform="identity", true=1.0, unit="-")
                 for r in range(1, n + 1)
             ]
         for o in range(1, self.n_outputs + 1):
