@@ -32,7 +32,6 @@ from pidyn.baselines.realization import realization_params
 from pidyn.baselines.registry import estimator
 from pidyn.reporting import nrmse
 from pidyn.signals import dominant_peak, transfer_function, transmissibility
-from pidyn.systems.modes import ModesOnSupports
 
 Z95 = 1.959963984540054
 
@@ -293,7 +292,7 @@ def _with_start(result: PeerResult, system, dt: float) -> dict:
     """The peer's row, carrying its stable realization of twice the model's modes (order 2 for a
     single degree of freedom) as the model's parameters (a start of the refinement) when it maps
     onto the system."""
-    order = 2 * (system.n_dof if isinstance(system, ModesOnSupports) else 1)
+    order = 2 * system.n_dof  # realization_params refuses a system it does not map onto
     if order in result.stable_realizations:
         result.params = realization_params(system, result.stable_realizations[order], dt)
     return result.to_row()

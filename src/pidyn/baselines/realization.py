@@ -64,10 +64,9 @@ def realization_params(system, realization: tuple, dt: float) -> dict[str, float
     from pidyn.systems.modes import ModesOnSupports
 
     modal = isinstance(system, ModesOnSupports)
-    n_modes = system.n_dof if modal else 1
     if not modal and not _plain_sdof(system):
         return {}
-    if np.atleast_2d(np.asarray(realization[0])).shape[0] != 2 * n_modes:
+    if np.atleast_2d(np.asarray(realization[0])).shape[0] != 2 * system.n_dof:
         return {}
     found = continuous_modes(realization, dt)
     if found is None:

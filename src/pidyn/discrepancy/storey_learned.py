@@ -33,26 +33,10 @@ def with_learned_force(
 ) -> ShearBuilding:
     """The linear building at ``values`` with a learned force on ``storey``'s drift, its scales
     the nominal model's drift and drift velocity there (it starts as the nominal model)."""
-    n = system.n_dof
     k = float(values[f"k{storey}"])
     d_scale = max(float(np.std(drift)), 1e-12)
     term = LearnedForce(x_scale=d_scale, v_scale=max(float(np.std(velocity)), 1e-12), f_scale=k * d_scale)
-    return ShearBuilding(
-        n_storeys=n,
-        masses=[values[f"m{i + 1}"] for i in range(n)],
-        dampings=[values[f"c{i + 1}"] for i in range(n)],
-        stiffnesses=[values[f"k{i + 1}"] for i in range(n)],
-        storey_terms={storey: [term]},
-        excitation=system.excitation,
-        name=f"{system.name}+learned_force@{storey}",
-    )
-
-
-def _drift(x: np.ndarray, v: np.ndarray, storey: int) -> tuple[np.ndarray, np.ndarray]:
-    """A storey's drift and drift velocity from the floors' motion (floor 0: the ground)."""
-    if storey == 1:
-        return x[:, 0], v[:, 0]
-    return x[:, storey - 1] - x[:, storey - 2], v[:, storey - 1] - v[:, storey - 2]
+    return system.linear_at(values, {storey: [term]}, f"{system.name}+learned_force@{storey}")
 
 
 def _own(ext: ShearBuilding, values: dict[str, float]) -> dict[str, float]:
@@ -90,14 +74,14 @@ def learned_storey_force(
     (a fitting part shorter than one segment)."""
     record, system, values = study.record, current["system"], current["values"]
     sim = simulate_response(system, values, record)
-    x, v = sim["x"], sim["v"]
+    drifts, velocities = system._drifts(sim["x"], sim["v"])  # per storey, as the equations take them
     settings = study.settings.learned
     storeys = [storey] if storey else list(range(1, system.n_dof + 1))
     # several storeys: each trained briefly, the one whose fit falls most trained in full
     brief = int(settings.max_evaluations) if len(storeys) == 1 else max(1, int(settings.max_evaluations) // 4)
     tried = []
     for i in storeys:
-        ext = with_learned_force(system, values, i, *_drift(x, v, i))
+        ext = with_learned_force(system, values, i, drifts[i - 1], velocities[i - 1])
         res = _train(ext, _own(ext, values), record, study.fit, period, settings, brief)
         if res is not None:
             tried.append((res.loss_after / max(res.loss_before, 1e-300), i, ext, res))

@@ -215,15 +215,8 @@ def building_with(
         terms.setdefault(f.storey, []).append(term)
         for s in term.specs():
             start[storey_param(s.name, f.storey)] = float(s.init)
-    n = system.n_dof
-    ext = ShearBuilding(
-        n_storeys=n,
-        masses=[values[f"m{i + 1}"] for i in range(n)],
-        dampings=[values[f"c{i + 1}"] for i in range(n)],
-        stiffnesses=[values[f"k{i + 1}"] for i in range(n)],
-        storey_terms=terms,
-        excitation=system.excitation,
-        name=f"{system.name}+" + "+".join(f"{f.effect}@{f.storey}" for f in found),
+    ext = system.linear_at(
+        values, terms, f"{system.name}+" + "+".join(f"{f.effect}@{f.storey}" for f in found)
     )
     names = {s.name for s in ext.param_specs()}
     return ext, {k: v for k, v in start.items() if k in names}

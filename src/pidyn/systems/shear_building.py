@@ -394,6 +394,22 @@ class ShearBuilding(StructuralSystem):
         )
         return eq + "; " + "; ".join(s.strip() for s in self.storey_equations(p))
 
+    def linear_at(
+        self, values: Mapping[str, float], storey_terms: Mapping[int, list], name: str
+    ) -> ShearBuilding:
+        """A building with this one's masses, dampers and springs at ``values`` and ``storey_terms``
+        (term objects) added: how the diagnosis extends a nominal building."""
+        n = self.n_dof
+        return ShearBuilding(
+            n_storeys=n,
+            masses=[values[f"m{i + 1}"] for i in range(n)],
+            dampings=[values[f"c{i + 1}"] for i in range(n)],
+            stiffnesses=[values[f"k{i + 1}"] for i in range(n)],
+            storey_terms=dict(storey_terms),
+            excitation=self.excitation,
+            name=name,
+        )
+
     def linear_matrices(self, p: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """M, C, K of the linear part about rest: the viscous dampers and each storey's
         initial stiffness (a Bouc-Wen storey's k, since dz/dd = 1 at z = 0)."""
