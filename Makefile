@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # the default index would serve a CUDA build.
 TORCH_INDEX ?=
 
-.PHONY: install train test test-fast lint format bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench discrepancy-bench-building heldout-calibration basin robustness efficiency benchmarks real
+.PHONY: install train test test-fast lint format bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench discrepancy-bench-building heldout-calibration fit-test-calibration basin robustness efficiency benchmarks real
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -67,6 +67,9 @@ discrepancy-bench-building: $(STAMP)
 
 heldout-calibration: $(STAMP)
 	$(PY) experiments/heldout_calibration.py $(ARGS)
+
+fit-test-calibration: $(STAMP)
+	$(PY) experiments/fit_test_calibration.py $(ARGS)
 
 basin: $(STAMP)
 	$(PY) experiments/basin.py --cell duffing $(ARGS)

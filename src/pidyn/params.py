@@ -19,6 +19,15 @@ from torch import nn
 
 Transform = Literal["log", "box", "identity"]
 
+#: a positive (log-transformed) estimate that ran to zero, its exp underflowing, restarts here when
+#: a model is built from it: a friction damper can take a storey's whole viscous damping
+POSITIVE_FLOOR = 1e-12
+
+
+def positive(value: float) -> float:
+    """``value`` as the start of a log-transformed parameter: at least ``POSITIVE_FLOOR``."""
+    return max(float(value), POSITIVE_FLOOR)
+
 
 @dataclass(frozen=True)
 class ParamSpec:

@@ -25,6 +25,22 @@ class ConfirmSettings:
     """The output-error check of effects the weak form leans to without deciding (0: off)."""
 
     max_candidates: int = 3
+    #: a building whose model fails the fit test (``fit_test``) with nothing named: this many of each
+    #: storey's best-scored effects are fitted by output error, whatever the weak form scored them
+    misfit_per_storey: int = 2
+    #: and such an effect is named only when it removes this share of the fitting part's squared
+    #: excess over the noise (summed over the floors)
+    misfit_share: float = 0.5
+
+
+@dataclass
+class FitTestSettings:
+    """Whether the model fits its fitting part down to the sensors' noise (``pidyn.discrepancy.fit_test``)."""
+
+    #: a channel fails when its residual RMS is this many times its noise floor
+    rms_ratio: float = 2.0
+    #: and exceeds it by this share of the channel's signal (NRMSE above the noise)
+    min_excess: float = 0.02
 
 
 @dataclass
@@ -57,6 +73,7 @@ class DiagnosisSettings:
     learned: LearnedSettings = field(default_factory=LearnedSettings)
     confirm: ConfirmSettings = field(default_factory=ConfirmSettings)
     changes: ChangeSettings = field(default_factory=ChangeSettings)
+    fit_test: FitTestSettings = field(default_factory=FitTestSettings)
     thresholds: Thresholds = field(default_factory=Thresholds)
 
     def __post_init__(self) -> None:
@@ -73,6 +90,7 @@ class DiagnosisSettings:
             "learned": LearnedSettings,
             "confirm": ConfirmSettings,
             "changes": ChangeSettings,
+            "fit_test": FitTestSettings,
             "thresholds": Thresholds,
         }
         known = {f.name for f in dataclasses.fields(cls)}

@@ -40,6 +40,7 @@ def summarize_building(
             "heldout": d.nominal["heldout"],
             "test": d.nominal.get("heldout_test"),
         },
+        "fit_test": d.nominal.get("fit_test"),
         "change": None if t_change is None else {"t_change": t_change, "ci95": t_ci},
         "structure": [dict(sc.structure) for sc in d.screenings],
         "ranking": [_ranking_row(i, sc) for i, sc in enumerate(d.screenings, start=1)],
@@ -171,6 +172,7 @@ def report_lines(d: dict) -> list[str]:
     ]
     if g["extended"] is not None:
         lines.append(f"| extended | {g['extended']:.4g} |")
+    lines += _fit_test_lines(d.get("fit_test"))
     lines += _storey_table(d)
     for note in d["notes"]:
         lines.append(f"\nNote: {note}.")
@@ -191,6 +193,28 @@ def report_lines(d: dict) -> list[str]:
         "Figure: `figures/storey_residuals.png` (each storey's unexplained force against drift and drift velocity).",
     ]
     return lines
+
+
+def _fit_test_lines(test: dict | None) -> list[str]:
+    """The nominal building's fitting part against the sensors' noise, floor by floor."""
+    if not test:
+        return []
+    cells = ", ".join(
+        f"{ch} {v['nrmse']:.3g} / {v['noise']:.3g}"
+        if v["noise"] is not None
+        else f"{ch} {v['nrmse']:.3g} / -"
+        for ch, v in test["channels"].items()
+    )
+    verdict = (
+        f"not fitted down to the noise on {test['failed_channels']}"
+        if test["failed"]
+        else "fitted down to the noise"
+    )
+    return [
+        "",
+        f"Fitting part against the sensors' noise (NRMSE / noise read above the structural band): {cells}; {verdict} "
+        f"(fails at {test['rms_ratio']:g} times the noise and {test['min_excess']:g} above it).",
+    ]
 
 
 def _storey_table(d: dict) -> list[str]:

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from pidyn.params import ParamSpec
+from pidyn.params import ParamSpec, positive
 from pidyn.systems.base import ExcitationKind, Kinematics, StructuralSystem, merge_specs, stack_last
 from pidyn.systems.terms import TERMS, BoucWenHysteresis, ForceTerm, LinearStiffness, ViscousDamping
 
@@ -403,8 +403,8 @@ class ShearBuilding(StructuralSystem):
         return ShearBuilding(
             n_storeys=n,
             masses=[values[f"m{i + 1}"] for i in range(n)],
-            dampings=[values[f"c{i + 1}"] for i in range(n)],
-            stiffnesses=[values[f"k{i + 1}"] for i in range(n)],
+            dampings=[positive(values[f"c{i + 1}"]) for i in range(n)],
+            stiffnesses=[positive(values[f"k{i + 1}"]) for i in range(n)],
             storey_terms=dict(storey_terms),
             excitation=self.excitation,
             name=name,
