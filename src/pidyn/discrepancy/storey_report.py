@@ -199,12 +199,15 @@ def _fit_test_lines(test: dict | None) -> list[str]:
     """The nominal building's fitting part against the sensors' noise, floor by floor."""
     if not test:
         return []
-    cells = ", ".join(
-        f"{ch} {v['nrmse']:.3g} / {v['noise']:.3g}"
-        if v["noise"] is not None
-        else f"{ch} {v['nrmse']:.3g} / -"
-        for ch, v in test["channels"].items()
-    )
+
+    def cell(ch: str, v: dict) -> str:
+        if v["noise"] is None:
+            return f"{ch} {v['nrmse']:.3g} / -"
+        # no band above the modes: the second difference, an upper bound on the noise
+        bound = " (second-difference bound)" if v.get("noise_method") == "second_difference" else ""
+        return f"{ch} {v['nrmse']:.3g} / {v['noise']:.3g}{bound}"
+
+    cells = ", ".join(cell(ch, v) for ch, v in test["channels"].items())
     verdict = (
         f"not fitted down to the noise on {test['failed_channels']}"
         if test["failed"]
@@ -212,7 +215,7 @@ def _fit_test_lines(test: dict | None) -> list[str]:
     )
     return [
         "",
-        f"Fitting part against the sensors' noise (NRMSE / noise read above the structural band): {cells}; {verdict} "
+        f"Fitting part against the sensors' noise (NRMSE / noise, read above the structural band): {cells}; {verdict} "
         f"(fails at {test['rms_ratio']:g} times the noise and {test['min_excess']:g} above it).",
     ]
 
