@@ -42,6 +42,24 @@ KINDS = ["none", *SINGLE, "pair", "trilinear_spring"]
 PAIRABLE = [e for e in SINGLE if not EFFECTS[e].step_in_time]
 
 
+def draw_building(rng: np.random.Generator) -> tuple[int, list[float], list[float], list[float]]:
+    """Storeys, masses, stiffnesses and dashpots of a seeded building (the module's docstring)."""
+    n = int(rng.integers(3, 6))
+    masses = [round(float(m), 3) for m in rng.uniform(0.8, 1.2, n)]
+    k0 = float(rng.uniform(150.0, 250.0))
+    stiff = [round(k0 * (1 - 0.5 * j / max(n - 1, 1)), 2) for j in range(n)]
+    damp = [round(0.02 * 2 * np.sqrt(k * m), 4) for k, m in zip(stiff, masses)]
+    return n, masses, stiff, damp
+
+
+def draw_sensors(rng: np.random.Generator, n: int) -> list[int]:
+    """Every floor, or, one building in three, every floor but one between the first and the top."""
+    sensors = list(range(1, n + 1))
+    if rng.random() < 1 / 3:
+        sensors.remove(int(rng.integers(2, n)))
+    return sensors
+
+
 def draw_case(i: int) -> dict:
     """The building, record, noise, sensors and hidden effects of case ``i`` (seeded)."""
     from pidyn.data.sources import synthetic_from_motion
@@ -50,16 +68,10 @@ def draw_case(i: int) -> dict:
 
     rng = np.random.default_rng(5000 + i)
     kind = KINDS[i % len(KINDS)]
-    n = int(rng.integers(3, 6))
-    masses = [round(float(m), 3) for m in rng.uniform(0.8, 1.2, n)]
-    k0 = float(rng.uniform(150.0, 250.0))
-    stiff = [round(k0 * (1 - 0.5 * j / max(n - 1, 1)), 2) for j in range(n)]
-    damp = [round(0.02 * 2 * np.sqrt(k * m), 4) for k, m in zip(stiff, masses)]
+    n, masses, stiff, damp = draw_building(rng)
     record = str(rng.choice(RECORDS))
     noise = float(rng.uniform(0.0, 0.05))
-    sensors = list(range(1, n + 1))
-    if rng.random() < 1 / 3:
-        sensors.remove(int(rng.integers(2, n)))
+    sensors = draw_sensors(rng, n)
     gm = prepare(record, scale=1.0, duration=20.0, dt=0.02)
     gm_scale = 3.0 / float(np.max(np.abs(gm.acc)))
     gm = prepare(record, scale=gm_scale, duration=20.0, dt=0.02)

@@ -34,6 +34,8 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from discrepancy_bench_building import draw_building, draw_sensors  # noqa: E402
+
 from pidyn.excitation.ground_motion import SHIPPED  # noqa: E402
 
 GRID = [(0.0, 0.65), (0.01, 0.65), (0.025, 0.65), (0.05, 0.65), (0.03, 0.5), (0.03, 0.8)]
@@ -51,14 +53,8 @@ def one(args: tuple[int, str, float, float]) -> dict:
 
     i, record, noise, share = args
     rng = np.random.default_rng(9000 + i)
-    n = int(rng.integers(3, 6))
-    masses = [round(float(m), 3) for m in rng.uniform(0.8, 1.2, n)]
-    k0 = float(rng.uniform(150.0, 250.0))
-    stiff = [round(k0 * (1 - 0.5 * j / max(n - 1, 1)), 2) for j in range(n)]
-    damp = [round(0.02 * 2 * np.sqrt(k * m), 4) for k, m in zip(stiff, masses)]
-    sensors = list(range(1, n + 1))
-    if rng.random() < 1 / 3:
-        sensors.remove(int(rng.integers(2, n)))
+    n, masses, stiff, damp = draw_building(rng)  # as the building benchmark draws them
+    sensors = draw_sensors(rng, n)
     gm = prepare(record, scale=1.0, duration=20.0, dt=0.02)
     gm = prepare(record, scale=3.0 / float(np.max(np.abs(gm.acc))), duration=20.0, dt=0.02)
     true = ShearBuilding(n, masses, damp, stiff)
