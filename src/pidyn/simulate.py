@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.integrate import odeint, solve_ivp
 
-from pidyn.integrate import rk4
+from pidyn.integrate import rk4, stage_excitation
 from pidyn.systems.base import StructuralSystem
 
 if TYPE_CHECKING:
@@ -141,12 +141,15 @@ def simulate_states(
     f: np.ndarray,
     state0: np.ndarray | None = None,
     substeps: int = 4,
+    hold: str = "linear",
 ) -> tuple[np.ndarray, np.ndarray]:
     """One model's states Y (N, n_state) and their rates R (N, n_state) under the excitation ``f``
-    from ``state0`` (the full state, default rest); a model that blows up gives NaNs."""
+    (read between samples by ``hold``, see ``pidyn.integrate``) from ``state0`` (the full state,
+    default rest); a model that blows up gives NaNs."""
     y0 = np.zeros(system.n_state) if state0 is None else np.asarray(state0, float)
+    stages = stage_excitation(f, substeps, hold)
     with np.errstate(all="ignore"):
-        Y, R = rk4(system, dict(values), t, f, y0[None, :], substeps=substeps)
+        Y, R = rk4(system, dict(values), t, f, y0[None, :], substeps=substeps, stages=stages)
     return Y[:, 0], R[:, 0]
 
 
@@ -160,12 +163,18 @@ def simulate_response(
     """The identified model's response over the record: ``x, v`` (relative, (N, n_dof)) and
     ``a`` in the record's convention (relative to the one ground; absolute for several inputs)
     by the fixed-step batched RK4 (bounded cost: a model that blows up gives NaNs rather
-    than an adaptive integrator crawling) from ``state0`` (the full state, default rest)."""
+    than an adaptive integrator crawling) from ``state0`` (the full state, default rest), the
+    excitation read between samples as the record says (``meta["input_hold"]``, default linear)."""
     n = system.n_dof
-    Y, R = simulate_states(system, values, record.t, record.f, state0, substeps)
+    Y, R = simulate_states(system, values, record.t, record.f, state0, substeps, input_hold(record))
     with np.errstate(all="ignore"):
         a = system.acceleration_output(R[:, n : 2 * n], np.asarray(record.f, float), dict(values))
     return {"x": Y[:, :n], "v": Y[:, n : 2 * n], "a": a}
+
+
+def input_hold(record: Record) -> str:
+    """How the record's excitation is read between samples: ``meta["input_hold"]``, else linear."""
+    return str(record.meta.get("input_hold", "linear"))
 
 
 def simulate_batch(
@@ -175,8 +184,10 @@ def simulate_batch(
     f: np.ndarray,
     substeps: int = 4,
     state0: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    hold: str = "linear",
 ) -> dict[str, np.ndarray]:
-    """Simulate P parameter sets; ``params[name]`` has shape (P,) (or scalar).
+    """Simulate P parameter sets; ``params[name]`` has shape (P,) (or scalar); the excitation
+    read between samples by ``hold``.
 
     ``state0`` = (x0, v0, z0) with shapes (P,) or (P, n_dof), and (P, n_latent).
     Returns ``x``, ``v``, ``a`` of shape (N, P) for one degree of freedom, (N, P, n_dof)
@@ -191,6 +202,8 @@ def simulate_batch(
         y0[:, n : 2 * n] = np.asarray(state0[1], float).reshape(P, n)
         if nz:
             y0[:, 2 * n :] = np.asarray(state0[2], float).reshape(P, nz)
-    Y, R = rk4(system, p, np.asarray(t, float), np.asarray(f, float), y0, substeps=substeps)
+    ff = np.asarray(f, float)
+    stages = stage_excitation(ff, substeps, hold)
+    Y, R = rk4(system, p, np.asarray(t, float), ff, y0, substeps=substeps, stages=stages)
     sq = (lambda a: a[..., 0]) if n == 1 else (lambda a: a)
     return {"x": sq(Y[..., :n]), "v": sq(Y[..., n : 2 * n]), "a": sq(R[..., n : 2 * n]), "z": Y[..., 2 * n :]}

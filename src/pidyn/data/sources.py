@@ -330,6 +330,7 @@ def from_csv(
     t_end: float | None = None,
     at2: str | Path | None = None,
     acceleration: str = "absolute",
+    input_hold: str = "linear",
 ) -> Record:
     """Read a measured record: columns ``t`` (s), the excitation as ``ag`` (m/s^2, ground) or
     ``u`` (N, force), and any response channels: ``x`` (m), ``v`` (m/s), ``a`` (m/s^2) for a
@@ -341,8 +342,12 @@ def from_csv(
     ``units`` multiplies columns into SI (e.g. ``{"x": 0.001}`` for millimetres). ``at2``
     takes the ground acceleration from a PEER AT2 record (a path or a shipped record's
     name) instead of a column: interpolated at the CSV's times, which start with the record.
+    ``input_hold``: how models read the excitation between samples, ``linear`` (a record
+    simulated from a piecewise-linear input) or ``bandlimited`` (a measured input, low-pass
+    filtered before sampling; see ``pidyn.integrate``).
     """
     path = Path(path)
+    checked_hold(input_hold, f"{path}: input_hold")
     df = _read_table(path, units)
     if at2 is not None:
         _ground_from_at2(path, df, time_col, at2)
@@ -372,8 +377,18 @@ def from_csv(
             "dt": float(np.mean(np.diff(t))),
             "acceleration": acceleration,
             "sensors": {k: sorted(c) for k, c in layout.items()},
+            "input_hold": input_hold,
         },
     )
+
+
+def checked_hold(hold: str, what: str) -> str:
+    """``hold`` if the integrator knows it, else a DataError naming ``what``."""
+    from pidyn.integrate import HOLDS
+
+    if hold not in HOLDS:
+        raise DataError(f"{what} must be one of {', '.join(HOLDS)}, got '{hold}'")
+    return hold
 
 
 def _read_table(path: Path, units: dict[str, float] | None) -> pd.DataFrame:

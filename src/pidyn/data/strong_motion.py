@@ -35,7 +35,7 @@ import yaml
 from scipy.signal import resample_poly
 
 from pidyn.data.csmip import Archive, CsmipFormatError, MissingChannelError, read_archive
-from pidyn.data.sources import DataError, Record
+from pidyn.data.sources import DataError, Record, checked_hold
 from pidyn.notes import note
 
 log = logging.getLogger(__name__)
@@ -105,12 +105,14 @@ def csmip_record(
     max_outputs: int | None = None,
     fit_share: float = 0.65,
     system=None,
+    input_hold: str = "linear",
 ) -> Record:
     """The record of one event at one station (see the module's docstring).
 
-    ``max_outputs``: keep the first this many outputs (default: the model's degrees of
-    freedom when ``system`` is given, which the train task passes). ``fit_share``: the record's
-    split, the first share for fitting, the rest held out (``meta['split']``)."""
+    ``max_outputs``: keep the first this many outputs (default: the model's degrees of freedom
+    when ``system`` is given, which the train task passes). ``fit_share``: the first share is
+    fitted, the rest held out (``meta['split']``). ``input_hold``: how models read the inputs
+    between samples (``pidyn.integrate``)."""
     if not 0.1 <= fit_share <= 0.95:
         raise DataError(f"data.fit_share must lie in [0.1, 0.95], got {fit_share}")
     sensors = None if system is None else getattr(system, "n_outputs", system.n_dof)
@@ -122,10 +124,7 @@ def csmip_record(
     i0, i1, pre_rms = shaking_span(acc_in, acc_out, step, span, pre, post)
     t = np.arange(i1 - i0) * step
     a = acc_out[i0:i1]
-    several = len(ins) > 1
-    if (
-        several
-    ):  # the supports' accelerations, then their velocities (a support's dashpot acts on its velocity)
+    if several := len(ins) > 1:  # supports' accelerations, then velocities (for their dashpots)
         f = np.concatenate([acc_in[i0:i1], vel_in[i0:i1]], axis=1)
     else:
         f = acc_in[i0:i1, 0]
@@ -133,6 +132,7 @@ def csmip_record(
     a = _unmeasured_columns(a, system)
     for text in notes:
         log.info("%s: %s", archive.path.name, text)
+    cut = float(t[-1]) * fit_share
     meta = {
         "path": str(path),
         "station": station,
@@ -146,9 +146,9 @@ def csmip_record(
         "acceleration": "absolute" if several else "relative",
         "units": {"a": "m/s^2", "ag": "m/s^2"},
         "pga": float(np.max(np.abs(acc_in[i0:i1]))),
+        "input_hold": checked_hold(input_hold, "data.input_hold"),
+        "split": {"fit": [0.0, cut], "heldout": [cut, float(t[-1])]},
     }
-    cut = float(t[-1]) * fit_share
-    meta["split"] = {"fit": [0.0, cut], "heldout": [cut, float(t[-1])]}
     name = Path(path).name.split(".")[0]
     return Record(name=name, t=t, f=f, a=a, excitation="ground", meta=meta)
 

@@ -114,14 +114,14 @@ def _starts(
     displacement smoothed over a tenth of the period, else from the model's simulation; latent
     states from the model's simulation. They are trained with the rest; this is only where
     they start."""
-    from pidyn.simulate import simulate_states
+    from pidyn.simulate import input_hold, simulate_states
 
     n = system.n_dof
     width = max(5, int(round(0.1 * period / record.dt)) | 1)
     measured = record.x is not None and bool(np.all(np.isfinite(record.x))) and width < len(record.t)
     y0 = np.zeros((len(idx), system.n_state))
     if system.n_latent or (smoothed is None and not measured):
-        Y, _ = simulate_states(system, values, record.t, record.f, substeps=2)
+        Y, _ = simulate_states(system, values, record.t, record.f, substeps=2, hold=input_hold(record))
         y0 = np.array(Y[idx, :])
     if smoothed is not None:
         y0[:, :n] = np.reshape(smoothed[0], (len(record.t), -1))[idx]

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pidyn.autodiff import Dual
-from pidyn.integrate import rk4
+from pidyn.integrate import rk4, stage_excitation
 from pidyn.params import ParamSpec, fixed_values, from_theta, to_theta, trainable_specs
 from pidyn.reporting import BLOWN_UP, diverged
 from pidyn.systems.base import StructuralSystem
@@ -111,8 +111,10 @@ class ShootingProblem:
         fixed_state0: np.ndarray | None = None,
         state_scale: np.ndarray | None = None,
         fixed: dict[str, float] | None = None,
+        hold: str = "linear",
     ) -> None:
-        """``fixed``: values of the known (non-trainable) parameters, default their specs' init."""
+        """``fixed``: values of the known (non-trainable) parameters, default their specs' init;
+        ``hold``: how the excitation is read between samples (``pidyn.integrate``)."""
         self.system = system
         self.t, self.f = np.asarray(t, float), np.asarray(f, float)
         self.channels = channels
@@ -140,6 +142,14 @@ class ShootingProblem:
         self.t_local = self.t[: self.L + 1] - self.t[0]
         self.t0 = self.t[self.bounds[:-1]]
         self.F = np.swapaxes(self.f[self.idx], 0, 1)  # (L+1, S), or (L+1, S, n_inputs)
+        self.hold = hold
+        stages = stage_excitation(self.f, substeps, hold)  # of the whole record, then cut
+        self.record_stages = stages
+        self.stages = (
+            None
+            if stages is None
+            else np.moveaxis(stages[np.minimum(self.idx[:, :-1], len(self.t) - 2)], 0, 2)
+        )  # (L, 2 substeps + 1, S, ...)
 
     # ------------------------------------------------------------------ unknowns
     @property
@@ -165,6 +175,7 @@ class ShootingProblem:
             substeps,
             fixed_state0=np.zeros(system.n_state),
             fixed=fixed,
+            hold=str(record.meta.get("input_hold", "linear")),
         )
 
     def pack(self, values: dict[str, float], states: np.ndarray) -> np.ndarray:
@@ -209,7 +220,9 @@ class ShootingProblem:
             y0 = Dual(states, d)
         p = self._params(theta, dual)
         with np.errstate(all="ignore"):
-            Y, R = rk4(self.system, p, self.t_local, self.F, y0, self.substeps, t0=self.t0)
+            Y, R = rk4(
+                self.system, p, self.t_local, self.F, y0, self.substeps, t0=self.t0, stages=self.stages
+            )
             return Y, R, self._accelerations(R, p, self.F)
 
     def _accelerations(self, R, p: dict, F: np.ndarray):
@@ -307,7 +320,10 @@ class ShootingProblem:
         p.update({k: np.full(nt + 1, v) for k, v in self.fixed.items()})
         y0 = np.repeat(self.fixed_state0[None, :], nt + 1, axis=0)
         with np.errstate(all="ignore"):
-            Y, R = rk4(self.system, p, self.t_local, self.F[:, 0], y0, self.substeps, t0=float(self.t0[0]))
+            st = None if self.stages is None else self.stages[:, :, 0]
+            Y, R = rk4(
+                self.system, p, self.t_local, self.F[:, 0], y0, self.substeps, t0=float(self.t0[0]), stages=st
+            )
             A = self._accelerations(
                 R, p, np.broadcast_to(self.F[:, :1], (self.F.shape[0], nt + 1) + self.F.shape[2:])
             )
@@ -336,6 +352,7 @@ class ShootingProblem:
                 np.asarray(y0, float)[None, :],
                 self.substeps,
                 t0=float(self.t[i0]),
+                stages=None if self.record_stages is None else self.record_stages[i0:i1],
             )
         return Y[:, 0], R[:, 0]
 

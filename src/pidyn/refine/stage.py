@@ -177,7 +177,14 @@ def build_problem(
     bounds = segment_bounds(record.t, settings.segment_length, t_start, t_end)
     state0 = np.zeros(system.n_state) if settings.initial_state == "rest" else None
     return ShootingProblem(
-        system, record.t, record.f, channels, bounds, settings.substeps, fixed_state0=state0
+        system,
+        record.t,
+        record.f,
+        channels,
+        bounds,
+        settings.substeps,
+        fixed_state0=state0,
+        hold=str(record.meta.get("input_hold", "linear")),
     )
 
 
@@ -322,6 +329,7 @@ def _solved_at_rest(problem: ShootingProblem, u: np.ndarray, settings: RefineSet
         fixed_state0=np.zeros(ns),
         state_scale=problem.state_scale,
         fixed=problem.fixed,
+        hold=problem.hold,
     )
     run, _ = rest.free_run(theta, np.zeros(ns))
     states = np.nan_to_num(run[rest.bounds[:-1] - rest.bounds[0]])
