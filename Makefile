@@ -91,6 +91,7 @@ benchmarks: $(STAMP)
 	$(PY) experiments/benchmark_test_signals.py bouc_wen outputs/bouc_wen_benchmark
 	$(PY) diagnose.py data=silverbox system=linear hydra.run.dir=outputs/silverbox
 	$(PY) experiments/benchmark_test_signals.py silverbox outputs/silverbox
+	$(PY) experiments/silverbox_models.py --run outputs/silverbox
 
 # the real-structure studies: every shipped Painter Street event as a Hydra multirun, the strong ones
 # diagnosed; the three shake-table buildings (IMUs), each run identified and the others predicted ->
