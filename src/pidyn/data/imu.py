@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pidyn.data.sources import DataError, Record
+from pidyn.data.sources import DataError, Record, checked_hold
 from pidyn.notes import note
 
 NOMINAL_STEP_US = 1e6 / 120.0
@@ -425,6 +425,7 @@ def xsens_record(
     post: float = 3.0,
     fit_share: float | None = None,
     system=None,
+    input_hold: str = "linear",
 ) -> Record:
     """The run ``run`` of the model in ``path`` as a building record: the table's acceleration along
     the shaking axis as ``ag`` and each floor's acceleration (relative to the table, as every
@@ -432,7 +433,8 @@ def xsens_record(
     low-band lag against the table reported) or ``lag`` (each floor moved by that lag); sensors
     without a shared clock are placed by StartTime and moved by their lag whatever ``align`` says.
     ``dt``: resample (s). ``span``/``pre``/``post``: the shaking, as for strong-motion records.
-    ``fit_share``: the first share of the span is for fitting, the rest held out (``meta['split']``)."""
+    ``fit_share``: the first share of the span is for fitting, the rest held out (``meta['split']``).
+    ``input_hold``: how models read the table's motion between samples (``pidyn.integrate``)."""
     files = checked_run(
         path, run, n_storeys if n_storeys is not None else getattr(system, "n_dof", None), align, fit_share
     )
@@ -456,6 +458,7 @@ def xsens_record(
         "dt": step,
         "span": [i0 * step, (i1 - 1) * step],
         "pga": float(np.max(np.abs(ag))),
+        "input_hold": checked_hold(input_hold, "data.input_hold"),
     }
     if fit_share is not None:
         cut = float(t[-1]) * fit_share
