@@ -26,7 +26,7 @@ import numpy as np
 from pidyn.baselines.common import BaselineResult, from_theta, starting_point
 from pidyn.baselines.registry import estimator, row
 from pidyn.data.sources import Record
-from pidyn.integrate import rk4
+from pidyn.integrate import rk4, stage_excitation
 from pidyn.refine.problem import record_channels
 
 #: the q_param grid searched by default (``baselines.ukf.tune`` in the config mirrors it)
@@ -77,7 +77,8 @@ def unscented_kalman_filter(
     )
     m, P, Q = _prior(record, system, theta0, init_param_std, q_state, q_param)
     lam, wm, wc = _weights(ns + npar, alpha, beta, kappa)
-    flt = _Filter(system, specs, fixed, lam, wm, wc, Q, R, chans, substeps)
+    hold = stage_excitation(record.f, substeps, str(record.meta.get("input_hold", "linear")))
+    flt = _Filter(system, specs, fixed, lam, wm, wc, Q, R, chans, substeps, hold)
     traj: list[dict] = []
     loglik = 0.0
     t, f = record.t, record.f
@@ -108,6 +109,7 @@ class _Filter:
     R: np.ndarray
     chans: list
     substeps: int
+    stages: np.ndarray | None = None  # the excitation at the RK4 stages (a band-limited record), or linear
 
 
 def _step(flt: _Filter, m: np.ndarray, P: np.ndarray, t: np.ndarray, f: np.ndarray, i: int):
@@ -126,7 +128,8 @@ def _step(flt: _Filter, m: np.ndarray, P: np.ndarray, t: np.ndarray, f: np.ndarr
     p = from_theta(specs, X[ns:])
     p.update({k: np.full(X.shape[1], v) for k, v in fixed.items()})
     with np.errstate(all="ignore"):
-        Ys, Rs = rk4(system, p, t[i : i + 2], f[i : i + 2], X[:ns].T.copy(), substeps=substeps)
+        st = None if flt.stages is None else flt.stages[i : i + 1]
+        Ys, Rs = rk4(system, p, t[i : i + 2], f[i : i + 2], X[:ns].T.copy(), substeps=substeps, stages=st)
         A = system.acceleration_output(Rs[1][:, nd : 2 * nd], f[i + 1], p)  # as the accelerometers read
         # a filter that diverges says so by its likelihood (-inf), not by floating-point warnings
         m, P, D = _predicted_belief(X, Ys[1], ns, wm, wc, Q)
