@@ -20,6 +20,7 @@ from scipy.optimize import least_squares
 
 from pidyn.params import to_theta
 from pidyn.refine.problem import ShootingProblem, record_channels
+from pidyn.simulate import input_hold
 from pidyn.systems.base import merge_specs
 from pidyn.systems.modal import damping_params, stiffness_params
 
@@ -63,7 +64,7 @@ def running_modes(
         rows["t"][i] = 0.5 * (t[i0] + t[i1])
         rows["peak"][i] = float(np.nanmax(np.abs(channels[0].data[i0 : i1 + 1])))
         try:
-            res = _window_fit(local, t, record.f, channels, i0, i1, theta, substeps)
+            res = _window_fit(local, t, record.f, channels, i0, i1, theta, substeps, input_hold(record))
         except (ValueError, np.linalg.LinAlgError, FloatingPointError):
             continue
         if res is None:
@@ -90,14 +91,22 @@ def running_modes(
     return rows
 
 
-def _window_fit(system, t, f, channels, i0: int, i1: int, theta0: np.ndarray, substeps: int):
+def _window_fit(
+    system, t, f, channels, i0: int, i1: int, theta0: np.ndarray, substeps: int, hold: str = "linear"
+):
     """(k, c) and their covariance in log coordinates on samples i0..i1, the window's initial state free."""
     seg_channels = [
         type(ch)(ch.kind, ch.dof, ch.data[i0 : i1 + 1], max(float(np.nanstd(ch.data[i0 : i1 + 1])), 1e-300))
         for ch in channels
     ]
     problem = ShootingProblem(
-        system, t[i0 : i1 + 1], np.asarray(f)[i0 : i1 + 1], seg_channels, np.array([0, i1 - i0]), substeps
+        system,
+        t[i0 : i1 + 1],
+        np.asarray(f)[i0 : i1 + 1],
+        seg_channels,
+        np.array([0, i1 - i0]),
+        substeps,
+        hold=hold,  # read from the window alone: the interpolation filter touches a few samples at its ends
     )
     u0 = np.concatenate([theta0, np.zeros(problem.ns)])
 
