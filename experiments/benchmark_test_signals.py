@@ -191,17 +191,25 @@ SILVERBOX_SIGNALS = {
 }
 
 
-def silverbox_errors(system, values: dict, hold: str = HOLD) -> dict[str, dict]:
-    """Signal -> RMS error (mV), NRMS % and samples of one model simulated from rest on each
-    Silverbox test signal (the first 50 samples left out, as the benchmark's loader does)."""
+def silverbox_arrays() -> tuple[np.ndarray, np.ndarray]:
+    """The whole Silverbox record, input and output (V), offsets removed as the diagnosis removes
+    them (means of the estimation part)."""
     from scipy.io import loadmat
 
-    from pidyn.data.measured.silverbox import ESTIMATION, FS
+    from pidyn.data.measured.silverbox import ESTIMATION
 
     mat = loadmat(ROOT / "src" / "pidyn" / "data" / "measured" / "silverbox" / "SNLS80mV.mat")
     u, y = np.ravel(mat["V1"]).astype(float), np.ravel(mat["V2"]).astype(float)
     e = slice(*ESTIMATION)
-    u, y = u - u[e].mean(), y - y[e].mean()
+    return u - u[e].mean(), y - y[e].mean()
+
+
+def silverbox_errors(system, values: dict, hold: str = HOLD) -> dict[str, dict]:
+    """Signal -> RMS error (mV), NRMS % and samples of one model simulated from rest on each
+    Silverbox test signal (the first 50 samples left out, as the benchmark's loader does)."""
+    from pidyn.data.measured.silverbox import FS
+
+    u, y = silverbox_arrays()
     out = {}
     for name, (lo, hi) in SILVERBOX_SIGNALS.items():
         err = (simulate(system, values, u[lo:hi], FS, hold=hold) - y[lo:hi])[50:]

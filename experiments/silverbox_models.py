@@ -195,13 +195,13 @@ def _intervals(m: dict) -> list[str]:
 def arrow_lines(model: dict) -> list[str]:
     """Where on the arrow-head record the final model's error lies: per eighth of it, the RMS and
     mean error and the signal's spread, against the largest output of the estimation part."""
-    from benchmark_test_signals import SILVERBOX_SIGNALS, simulate
+    from benchmark_test_signals import SILVERBOX_SIGNALS, silverbox_arrays, simulate
 
     from pidyn.data.measured.silverbox import FS, load_silverbox
 
     rec = load_silverbox()
     fit_peak = float(np.max(np.abs(rec.segment(*rec.meta["split"]["fit"]).x[:, 0])))
-    u, y = _raw()
+    u, y = silverbox_arrays()
     lo, hi = SILVERBOX_SIGNALS["arrow (full)"]
     system = _terms(model["params"], model["added"], _scales(rec))
     err = (simulate(system, model["params"], u[lo:hi], FS, hold="bandlimited") - y[lo:hi])[SKIP:]
@@ -221,17 +221,6 @@ def arrow_lines(model: dict) -> list[str]:
             f"{1e3 * yy[sl].std():.1f} | {1e3 * np.max(np.abs(yy[sl])):.0f} |"
         )
     return out
-
-
-def _raw() -> tuple[np.ndarray, np.ndarray]:
-    from scipy.io import loadmat
-
-    from pidyn.data.measured.silverbox import ESTIMATION
-
-    mat = loadmat(ROOT / "src" / "pidyn" / "data" / "measured" / "silverbox" / "SNLS80mV.mat")
-    u, y = np.ravel(mat["V1"]).astype(float), np.ravel(mat["V2"]).astype(float)
-    e = slice(*ESTIMATION)
-    return u - u[e].mean(), y - y[e].mean()
 
 
 def _published() -> list[dict]:

@@ -27,6 +27,11 @@ from pidyn.systems.base import StructuralSystem
 HOLDS = ("linear", "bandlimited")
 
 
+def input_hold(record: Any) -> str:
+    """How a record's excitation is read between samples: ``meta["input_hold"]``, else linear."""
+    return str(record.meta.get("input_hold", "linear"))
+
+
 def stage_excitation(f: np.ndarray, substeps: int, hold: str = "linear") -> np.ndarray | None:
     """The excitation at every RK4 stage time, (N-1, 2*substeps+1, ...) for N samples: entry
     [i, q] is at t_i + q*h/2 with h = dt/substeps. ``None`` for the linear hold, which ``rk4``

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.integrate import odeint, solve_ivp
 
-from pidyn.integrate import rk4, stage_excitation
+from pidyn.integrate import input_hold, rk4, stage_excitation
 from pidyn.systems.base import StructuralSystem
 
 if TYPE_CHECKING:
@@ -170,11 +170,6 @@ def simulate_response(
     with np.errstate(all="ignore"):
         a = system.acceleration_output(R[:, n : 2 * n], np.asarray(record.f, float), dict(values))
     return {"x": Y[:, :n], "v": Y[:, n : 2 * n], "a": a}
-
-
-def input_hold(record: Record) -> str:
-    """How the record's excitation is read between samples: ``meta["input_hold"]``, else linear."""
-    return str(record.meta.get("input_hold", "linear"))
 
 
 def simulate_batch(

@@ -26,7 +26,7 @@ import numpy as np
 from pidyn.baselines.common import BaselineResult, from_theta, starting_point
 from pidyn.baselines.registry import estimator, row
 from pidyn.data.sources import Record
-from pidyn.integrate import rk4, stage_excitation
+from pidyn.integrate import input_hold, rk4, stage_excitation
 from pidyn.refine.problem import record_channels
 
 #: the q_param grid searched by default (``baselines.ukf.tune`` in the config mirrors it)
@@ -77,7 +77,7 @@ def unscented_kalman_filter(
     )
     m, P, Q = _prior(record, system, theta0, init_param_std, q_state, q_param)
     lam, wm, wc = _weights(ns + npar, alpha, beta, kappa)
-    hold = stage_excitation(record.f, substeps, str(record.meta.get("input_hold", "linear")))
+    hold = stage_excitation(record.f, substeps, input_hold(record))
     flt = _Filter(system, specs, fixed, lam, wm, wc, Q, R, chans, substeps, hold)
     traj: list[dict] = []
     loglik = 0.0

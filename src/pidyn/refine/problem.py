@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pidyn.autodiff import Dual
-from pidyn.integrate import rk4, stage_excitation
+from pidyn.integrate import input_hold, rk4, stage_excitation
 from pidyn.params import ParamSpec, fixed_values, from_theta, to_theta, trainable_specs
 from pidyn.reporting import BLOWN_UP, diverged
 from pidyn.systems.base import StructuralSystem
@@ -175,7 +175,7 @@ class ShootingProblem:
             substeps,
             fixed_state0=np.zeros(system.n_state),
             fixed=fixed,
-            hold=str(record.meta.get("input_hold", "linear")),
+            hold=input_hold(record),
         )
 
     def pack(self, values: dict[str, float], states: np.ndarray) -> np.ndarray:

@@ -19,6 +19,7 @@ from typing import Literal
 
 import numpy as np
 
+from pidyn.integrate import input_hold
 from pidyn.notes import note
 from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
 from pidyn.refine.solve import solve, solve_constrained
@@ -184,7 +185,7 @@ def build_problem(
         bounds,
         settings.substeps,
         fixed_state0=state0,
-        hold=str(record.meta.get("input_hold", "linear")),
+        hold=input_hold(record),
     )
 
 
