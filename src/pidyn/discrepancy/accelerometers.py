@@ -67,6 +67,7 @@ def motion_view(record: Record, system, fit: tuple[float, float], corner_share: 
     x, v = (integrate(relative, dt, k, corner) for k in (2, 1))
     g = integrate(drive, dt, 0, corner)  # the weak form's excitation, filtered as x and v are
     influence = {k: v for k, v in values.items() if k.startswith(("r_", "g_", "e_"))}
+    nominal = {k: float(v) for k, v in values.items() if k not in influence}
     meta = {
         **(record.meta or {}),
         "inputs": [],
@@ -74,6 +75,7 @@ def motion_view(record: Record, system, fit: tuple[float, float], corner_share: 
         "motion": {"x": x, "v": v, "f": g},
         "accelerometers": {
             "influence": influence,
+            "nominal": nominal,
             "highpass_hz": corner,
             "resonance_hz": fn,
             "note": note,
