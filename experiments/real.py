@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 from launch import run_logged
+from real_final import final_lines
 from real_modes import two_modes_lines
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -91,17 +92,15 @@ def run_sweeps(
                 ],
             )
         )
-    if diagnose:
-        strong = [e for e in chosen if e in DIAGNOSED]
-        if strong:
-            todo.append(
-                (
-                    "diagnose",
-                    "diagnose.py",
-                    "painter_street_diagnose",
-                    ["data=csmip", f"data.event={','.join(strong)}"],
-                )
+    if diagnose:  # every event in both directions: the final model of each (the strong ones' table too)
+        todo.append(
+            (
+                "diagnose",
+                "diagnose.py",
+                "painter_street_diagnose",
+                ["data=csmip", f"data.event={sweep}", "data.direction=transverse,longitudinal"],
             )
+        )
     for name, script, experiment, extra in todo:
         cmd = [
             sys.executable,
@@ -115,8 +114,8 @@ def run_sweeps(
         run_logged(cmd, name, ROOT, launcher)
 
 
-#: the events the diagnosis sweep takes (conf/experiment/painter_street_diagnose.yaml): the strong ones
-#: and two weak ones where nothing should be missing
+#: the events whose transverse diagnosis is shown with its running period
+#: (conf/experiment/painter_street_diagnose.yaml's own sweep): the strong ones and two weak ones
 DIAGNOSED = (
     "petrolia_25apr1992",
     "petroliaaftershock1_26apr1992",
@@ -378,9 +377,11 @@ def diagnosis_rows(folder: Path) -> list[dict]:
     for cfg, run in _runs(folder):
         event = cfg["data"]["event"]
         d = _load(run / "diagnosis.json")
+        direction = cfg["data"].get("direction", "transverse")
         failed = _load(run / "failed.json")
         row = {
             "event": event,
+            "direction": direction,
             "role": "tuning" if event in TUNING else "untouched",
             "pga_catalogue_g": float(cat.get(event, {}).get("pga_str_g") or "nan"),
             "run": run,
@@ -494,7 +495,9 @@ def aggregate(base: Path) -> None:
     two = identification_rows(base / "two_modes") if (base / "two_modes").exists() else []
     lines += two_modes_lines(rows, two, judge)
     pga = {r["event"]: r["pga_g"] for r in rows if r["direction"] == "transverse" and r["status"] == "ok"}
-    lines += _diagnosis_lines(base, pga)
+    diag = diagnosis_rows(base / "diagnose") if (base / "diagnose").exists() else []
+    lines += _diagnosis_lines(diag, pga)
+    lines += final_lines(rows, diag, lambda r: " *(t)*" if r["role"] == "tuning" else "")
     lines += [
         "## Buildings on a shake table, measured by wearable IMUs",
         "",
@@ -570,9 +573,9 @@ def _held_out_own_fit(cfg: dict, metrics: dict) -> tuple[dict, dict, float]:
     return ident, own, own_nrmse
 
 
-def _diagnosis_lines(base: Path, pga: dict[str, float]) -> list[str]:
+def _diagnosis_lines(rows: list[dict], pga: dict[str, float]) -> list[str]:
     """The strong events' diagnosis table and their running-period figures (copied beside it)."""
-    diag = diagnosis_rows(base / "diagnose") if (base / "diagnose").exists() else []
+    diag = [r for r in rows if r["event"] in DIAGNOSED and r["direction"] == "transverse"]
     if not diag:
         return []
     lines: list[str] = []

@@ -39,18 +39,50 @@ def set_noise(problem: ShootingProblem, sigma: dict[str, float], floor_rel: floa
         ch.sigma = max(sigma[ch.name], floor_rel * float(np.std(ch.data)) + 1e-300)
 
 
-def covariance(problem: ShootingProblem, J: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, float]:
+def covariance(
+    problem: ShootingProblem, J: np.ndarray, C: np.ndarray, r: np.ndarray | None = None, lags: int = 0
+) -> tuple[np.ndarray, float]:
     """Covariance of the parameters' unconstrained coordinates, and the condition number of
-    the information matrix (continuity eliminated)."""
+    the information matrix (continuity eliminated). With the residuals ``r`` and ``lags`` > 0 it
+    is the sandwich for correlated residuals (``sandwich``), in the residuals' own units; else
+    the inverse information in noise units."""
     N = null_space(C) if C.shape[0] else np.eye(J.shape[1])
     JN = J @ N
     info = JN.T @ JN
     w = np.linalg.eigvalsh(info)
     cond = float(w[-1] / max(w[0], 1e-300)) if w[-1] > 0 else float("inf")
     cov_red = np.linalg.pinv(info, rcond=1e-15, hermitian=True)
+    if r is not None and lags > 0:
+        cov_red = cov_red @ sandwich(JN, r, problem.channel_slices(), lags) @ cov_red
     cov_u = N @ cov_red @ N.T
     nt = problem.n_theta
     return cov_u[:nt, :nt], cond
+
+
+def sandwich(JN: np.ndarray, r: np.ndarray, slices: list[slice], lags: int) -> np.ndarray:
+    """The score's long-run covariance, sum over |l| <= lags of (1 - |l| / (lags + 1)) G_l with
+    G_l = sum_t g_t g_(t+l)^T (Newey and West 1987), where g_t sums every channel's J_t r_t at
+    sample t. Residuals that are a model's smooth error rather than white noise are correlated
+    over several periods; the inverse information then understates the spread of the estimate,
+    and this is what it leaves out. For white residuals it equals r^T r / n times the information."""
+    g = sum(JN[sl] * r[sl, None] for sl in slices)  # (M, p): the channels share the samples
+    B = g.T @ g
+    for lag in range(1, min(lags, len(g) - 1) + 1):
+        G = g[:-lag].T @ g[lag:]
+        B += (1.0 - lag / (lags + 1.0)) * (G + G.T)
+    return B
+
+
+def bandwidth(rho: float, n: int) -> int:
+    """Lags of the sandwich for residuals of lag-1 correlation ``rho`` over ``n`` samples: the
+    plug-in rule for an AR(1) (Andrews 1991, Bartlett kernel), at most n / 4; 0 where the
+    residuals are white within their sampling spread (|rho| below 3 / sqrt(n)), so a record
+    with white noise keeps the inverse information."""
+    if n < 8 or rho <= 3.0 / np.sqrt(n):
+        return 0
+    rho = min(rho, 0.99)
+    alpha = 4 * rho**2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
+    return int(min(np.ceil(1.1447 * (alpha * n) ** (1 / 3)), n // 4))
 
 
 def intervals(specs: list[ParamSpec], theta: np.ndarray, cov: np.ndarray) -> dict[str, dict]:
