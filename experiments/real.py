@@ -1,8 +1,9 @@
 """The Painter Street study (CSMIP station CE89324): every shipped event identified, transverse
-and longitudinal, as one Hydra multirun; the strong events diagnosed as another; the tables and
-figures in experiments/results/real/.
+and longitudinal, as one Hydra multirun; every event diagnosed in both directions as another (the
+final model of each against SRIM, and the strong events' running period); the tables and figures
+in experiments/results/real/.
 
-    python experiments/real.py                       # make real (about an hour on two cores)
+    python experiments/real.py                       # make real (about two hours on two cores)
     python experiments/real.py --aggregate outputs/real/<stamp>   # the tables again from finished runs
     python experiments/real.py --events riodell82 petrolia_25apr1992 --skip-diagnosis
     python experiments/real.py --resume outputs/real/<stamp>    # finish an interrupted study

@@ -61,11 +61,13 @@ def final_lines(ident: list[dict], diag: list[dict], tag: Callable[[dict], str])
     rows = final_rows(ident, diag)
     if not rows:
         return []
+    n_ident = sum(r["status"] == "ok" for r in ident)
     lines = [
         "## The final model on every event",
         "",
-        "Every event and direction diagnosed (`python diagnose.py experiment=painter_street_diagnose "
-        "data=csmip`, the sweep over all events and both directions). The diagnosis starts from the "
+        f"{len(rows)} of the {n_ident} identified events and directions have a finished diagnosis in this study "
+        "(`python diagnose.py experiment=painter_street_diagnose data=csmip`, the sweep over all events and both "
+        "directions; an interrupted sweep resumes with `--resume`). The diagnosis starts from the "
         "accelerations' own fit, fits its nominal model by PIDynNet and output error, and ends with it or "
         "with the extension it keeps. It keeps an extension only when that predicts the held-out part "
         "better, so the final column has looked at the held-out part once; the nominal column has not. "

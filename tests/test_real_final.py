@@ -1,0 +1,65 @@
+"""The Painter Street study's final-model table: what the diagnosis ends with, against SRIM."""
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+
+from real_final import final_error, final_lines, final_rows  # noqa: E402
+
+
+def _diag(event, direction, verdict, nominal, extended, role="untouched"):
+    return {
+        "event": event,
+        "direction": direction,
+        "role": role,
+        "status": "ok",
+        "verdict": verdict,
+        "causes": [],
+        "learned": verdict == "unexplained",
+        "gain": {"metric": "heldout_nrmse_a", "nominal": nominal, "extended": extended},
+        "wall_s": 100.0,
+    }
+
+
+def _ident(event, direction, held, srim, role="untouched"):
+    return {
+        "event": event,
+        "direction": direction,
+        "role": role,
+        "status": "ok",
+        "pga_g": 0.05,
+        "heldout_nrmse_a": held,
+        "srim_heldout_nrmse_a": srim,
+    }
+
+
+def test_the_final_model_is_the_kept_extension_or_the_nominal():
+    assert final_error(_diag("a", "transverse", "unexplained", 0.6, 0.4)) == 0.4
+    assert final_error(_diag("a", "transverse", "none", 0.6, None)) == 0.6
+    # a learned force that was not kept leaves no extended error: the nominal model is final
+    assert final_error(_diag("a", "transverse", "unexplained", 0.6, None)) == 0.6
+
+
+def test_the_table_pairs_each_diagnosis_with_its_own_direction_and_counts_against_srim():
+    ident = [
+        _ident("a", "transverse", 0.62, 0.52),
+        _ident("a", "longitudinal", 0.30, 0.90),
+        _ident("b", "transverse", 0.50, None),
+    ]
+    diag = [
+        _diag("a", "transverse", "unexplained", 0.62, 0.39),
+        _diag("a", "longitudinal", "none", 0.31, None),
+        _diag("b", "transverse", "none", 0.5, None),
+    ]
+    rows = {(r["event"], r["direction"]): r for r in final_rows(ident, diag)}
+    assert rows[("a", "transverse")]["final"] == 0.39 and rows[("a", "transverse")]["srim"] == 0.52
+    assert rows[("a", "longitudinal")]["final"] == 0.31
+    text = "\n".join(final_lines(ident, diag, lambda r: ""))
+    assert text.count("3 of the 3 identified events and directions") == 1
+    assert (
+        "transverse, events kept out of all tuning (1 with a stable SRIM model): at or below SRIM's held-out "
+        in text
+    )
+    assert "the final model on 1, the diagnosis' nominal model on 0, the identification on 0" in text
+    assert "| b | transverse | 0.050 | none | 0.500 / 0.500 / 0.500 / - | - |" in text
