@@ -10,8 +10,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-WEAK_G = 0.1
-
 
 def _f(v, fmt=".3f") -> str:
     return "-" if v is None else format(v, fmt)
