@@ -100,30 +100,53 @@ def motion_view(record: Record, system, fit: tuple[float, float], corner_share: 
 
 
 def _nominal_influence(record: Record, system, fit: tuple[float, float]) -> tuple[Any, dict[str, float], str]:
-    """The nominal model's values from the data's start and, with several inputs, the supports'
-    influence by output error on the fitting part; with a sentence that says where they came from."""
+    """The nominal model's values from the best start and, with several inputs, the supports'
+    influence by output error on the fitting part; with a sentence that says where they came from.
+    Starts: the data's, and the peers' realizations mapped onto the model (``peer_start``); the one
+    that simulates the fitting part best is fitted, as the identification's refinement chooses."""
     from pidyn.baselines.data_start import start_from_data, with_start
     from pidyn.refine.output_error import fit_output_error
 
-    start = start_from_data(record, system)
+    seg = record.segment(*fit)
     values = {s.name: float(s.init) for s in system.param_specs()}
-    note = "nominal influence: the config's"
+    start = start_from_data(record, system)
+    name = "the config's"
     if start is not None:
         values.update(start.values)
-        system = with_start(system, start.values)
-        note = f"start from the data ({start.method})"
+        name = f"the data ({start.method})"
+    name, values = _best_start(seg, system, name, values)
+    system = with_start(system, values)
+    note = f"start from {name}"
     if system.n_inputs > 1:
-        seg = record.segment(*fit)
+        trainable = {s.name for s in system.param_specs() if s.trainable}
         res = fit_output_error(
-            seg,
-            system,
-            init={
-                k: v for k, v in values.items() if k in {s.name for s in system.param_specs() if s.trainable}
-            },
+            seg, system, init={k: v for k, v in values.items() if k in trainable}, max_nfev=100
         )
         values.update(res.params)
         note += f", then output error on the accelerations of {fit[0]:.4g}-{fit[1]:.4g} s ({res.note})"
     return system, values, note
+
+
+def _best_start(seg: Record, system, name: str, values: dict[str, float]) -> tuple[str, dict[str, float]]:
+    """``values`` or a peer's realization on ``seg`` (its other parameters from ``values``),
+    whichever has the lower output-error cost on ``seg``."""
+    from pidyn.baselines.peer_start import peer_starts
+    from pidyn.refine.output_error import output_error_cost
+
+    options = {
+        name: values,
+        **{f"{k}'s realization": {**values, **v} for k, v in peer_starts(seg, system).items()},
+    }
+    if len(options) == 1:
+        return name, values
+    costs = {k: output_error_cost(seg, system, v) for k, v in options.items()}
+    best = min(costs, key=costs.get)
+    log.info(
+        "starts for the nominal model (output-error cost on the fitting part): %s; from %s",
+        ", ".join(f"{k} {c:.4g}" for k, c in costs.items()),
+        best,
+    )
+    return best, options[best]
 
 
 def acceleration_gain(record: Record, sims: dict[str, dict | None], held: np.ndarray) -> dict:

@@ -64,3 +64,18 @@ def fit_output_error(
         gtol=1e-12,
     )
     return OutputErrorFit(problem.values(sol.x), time.perf_counter() - t0, int(sol.nfev), float(sol.cost))
+
+
+def output_error_cost(record, system, values: dict[str, float], substeps: int = 4) -> float:
+    """``fit_output_error``'s cost at ``values`` (no fit): how well a start simulates the record
+    from rest, on the same scale as the fit's own cost; inf where the simulation is not finite."""
+    specs = trainable_specs(system)
+    start = {s.name: s.init for s in specs}
+    start.update({k: v for k, v in values.items() if k in start})
+    problem = ShootingProblem.from_rest(system, record, substeps)
+    for ch in problem.channels:
+        ch.sigma = max(float(np.std(ch.data)), 1e-300)
+    with np.errstate(all="ignore"):
+        res = problem.residuals(to_theta(specs, start))[0]
+    cost = 0.5 * float(res @ res)
+    return cost if np.isfinite(cost) else float("inf")
