@@ -340,3 +340,25 @@ def test_an_accelerometer_diagnosis_starts_from_the_accelerations_when_the_weak_
     wrong = {"m": 1.0, "c": fitted["c"], "k": 0.5 * fitted["k"]}
     assert pipeline._accelerometer_start(case, wrong, 1.0)[0]["k"] == pytest.approx(fitted["k"])
     assert pipeline._fit_error(case, good) < 0.5 * pipeline._fit_error(case, wrong)
+
+
+def test_the_nominal_model_of_an_accelerometer_record_starts_from_the_better_of_data_and_peers(monkeypatch):
+    """A real record can hold two linear optima far apart; the diagnosis fits its nominal model
+    from the data's start or a peer's realization, whichever simulates the fitting part better
+    (the data's start is kept when the peer's is worse)."""
+    from pidyn.baselines import peer_start
+    from pidyn.discrepancy import accelerometers
+    from pidyn.systems import LinearSDOF
+
+    rec, p = _two_support_record(noise=0.02)
+    seg = rec.segment(0.0, 13.0)
+    system = LinearSDOF(inputs=["a", "b"])
+    truth = {"c": p["c"], "k": p["k"], "r_a": p["r_a"], "r_b": p["r_b"]}
+    far = {**truth, "k": 0.9 * p["k"]}  # off the optimum
+    for peer, expect in ((truth, "srim's realization"), ({**truth, "k": 0.8 * p["k"]}, "the data")):
+        monkeypatch.setattr(peer_start, "peer_starts", lambda record, system, v=peer: {"srim": v})
+        name, values = accelerometers._best_start(seg, system, "the data", far)
+        assert name == expect
+        assert values["k"] == (peer["k"] if expect != "the data" else far["k"])
+    monkeypatch.setattr(peer_start, "peer_starts", lambda record, system: {})
+    assert accelerometers._best_start(seg, system, "the data", far) == ("the data", far)

@@ -20,6 +20,7 @@ from scipy.optimize import least_squares
 
 from pidyn.params import to_theta
 from pidyn.refine.problem import ShootingProblem, record_channels
+from pidyn.refine.uncertainty import residual_covariance
 from pidyn.simulate import input_hold
 from pidyn.systems.base import merge_specs
 from pidyn.systems.modal import damping_params, stiffness_params
@@ -94,7 +95,8 @@ def running_modes(
 def _window_fit(
     system, t, f, channels, i0: int, i1: int, theta0: np.ndarray, substeps: int, hold: str = "linear"
 ):
-    """(k, c) and their covariance in log coordinates on samples i0..i1, the window's initial state free."""
+    """(k, c) and their covariance in log coordinates on samples i0..i1, the window's initial state free
+    (the sandwich where the residuals are a model's smooth error, as a measured record's are)."""
     seg_channels = [
         type(ch)(ch.kind, ch.dof, ch.data[i0 : i1 + 1], max(float(np.nanstd(ch.data[i0 : i1 + 1])), 1e-300))
         for ch in channels
@@ -117,9 +119,8 @@ def _window_fit(
         return problem.linearize(u)[1]
 
     sol = least_squares(fun, u0, jac=jac, method="lm", max_nfev=60)
-    r, J, _, _ = problem.linearize(sol.x)
-    dof = max(len(r) - len(sol.x), 1)
-    cov = np.linalg.pinv(J.T @ J) * float(r @ r) / dof
+    r, J, _, C = problem.linearize(sol.x)
+    cov = residual_covariance(problem, r, J, C)[0]  # the sandwich where the window's residuals are correlated
     names = problem.names
     vals = problem.values(sol.x[: problem.n_theta])
     ik, ic = names.index(_name(system, "k")), names.index(_name(system, "c"))

@@ -24,13 +24,13 @@ from pidyn.notes import note
 from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
 from pidyn.refine.solve import solve, solve_constrained
 from pidyn.refine.uncertainty import (
-    bandwidth,
     bound_notes,
     correlation,
-    covariance,
     estimate_noise,
     identifiability_notes,
     intervals,
+    residual_correlation,
+    residual_covariance,
     set_noise,
 )
 
@@ -362,18 +362,6 @@ def _rest_sentence(test: dict, settings: RefineSettings) -> str:
     )
 
 
-def residual_correlation(problem: ShootingProblem, r: np.ndarray, cap: float = 0.9999) -> float:
-    """Lag-1 autocorrelation of the measured-channel residuals in time order, averaged over
-    the channels and floored at 0 (about 0 for white noise, near 1 for a smooth model error)."""
-    rhos = []
-    for sl in problem.channel_slices():
-        e = r[sl] - np.mean(r[sl])
-        denom = float(e @ e)
-        if denom > 0 and len(e) > 2:
-            rhos.append(float(e[1:] @ e[:-1]) / denom)
-    return float(np.clip(np.mean(rhos), 0.0, cap)) if rhos else 0.0
-
-
 def _uncertainty(problem: ShootingProblem, r: np.ndarray, J: np.ndarray, C: np.ndarray, theta: np.ndarray):
     """Intervals, correlation and condition number at the solution, and the lags the covariance
     took. The covariance is scaled by the residuals' own variance (the weights' noise unit may
@@ -381,15 +369,7 @@ def _uncertainty(problem: ShootingProblem, r: np.ndarray, J: np.ndarray, C: np.n
     record, not white noise) it is the sandwich over that many lags (``uncertainty.sandwich``):
     on Painter Street the white-noise interval of the period was a few tenths of a percent wide
     while the peers' estimates of the same event spread over several percent."""
-    n_free = problem.n_theta + (problem.ns if problem.free_state0 else 0)
-    dof = max(len(r) - n_free, 1)
-    lags = bandwidth(residual_correlation(problem, r), len(r) // max(len(problem.channels), 1))
-    if lags:
-        cov, cond = covariance(problem, J, C, r, lags)
-        cov = cov * len(r) / dof
-    else:
-        cov, cond = covariance(problem, J, C)
-        cov = cov * float(r @ r) / dof
+    cov, cond, lags = residual_covariance(problem, r, J, C)
     return intervals(problem.specs, theta, cov), correlation(cov), cond, cov, lags
 
 

@@ -182,3 +182,31 @@ def identifiability_notes(
             )
         )
     return notes
+
+
+def residual_correlation(problem: ShootingProblem, r: np.ndarray, cap: float = 0.9999) -> float:
+    """Lag-1 autocorrelation of the measured-channel residuals in time order, averaged over
+    the channels and floored at 0 (about 0 for white noise, near 1 for a smooth model error)."""
+    rhos = []
+    for sl in problem.channel_slices():
+        e = r[sl] - np.mean(r[sl])
+        denom = float(e @ e)
+        if denom > 0 and len(e) > 2:
+            rhos.append(float(e[1:] @ e[:-1]) / denom)
+    return float(np.clip(np.mean(rhos), 0.0, cap)) if rhos else 0.0
+
+
+def residual_covariance(
+    problem: ShootingProblem, r: np.ndarray, J: np.ndarray, C: np.ndarray
+) -> tuple[np.ndarray, float, int]:
+    """The parameters' covariance scaled by the residuals' own variance, its condition number, and
+    the lags it took: the sandwich where the residuals are correlated (``sandwich``, ``bandwidth``),
+    else the inverse information."""
+    n_free = problem.n_theta + (problem.ns if problem.free_state0 else 0)
+    dof = max(len(r) - n_free, 1)
+    lags = bandwidth(residual_correlation(problem, r), len(r) // max(len(problem.channels), 1))
+    if lags:
+        cov, cond = covariance(problem, J, C, r, lags)
+        return cov * len(r) / dof, cond, lags
+    cov, cond = covariance(problem, J, C)
+    return cov * float(r @ r) / dof, cond, lags
