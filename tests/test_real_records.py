@@ -343,9 +343,9 @@ def test_an_accelerometer_diagnosis_starts_from_the_accelerations_when_the_weak_
 
 
 def test_the_nominal_model_of_an_accelerometer_record_starts_from_the_better_of_data_and_peers(monkeypatch):
-    """A real record can hold two linear optima far apart; the diagnosis fits its nominal model
-    from the data's start or a peer's realization, whichever simulates the fitting part better
-    (the data's start is kept when the peer's is worse)."""
+    """A real record can hold linear optima far apart: the diagnosis fits its nominal model from the
+    data's start and from the peer's realization that simulates the fitting part best, and keeps
+    the lower fitted cost (without mdof, from the data's start alone)."""
     from pidyn.baselines import peer_start
     from pidyn.discrepancy import accelerometers
     from pidyn.systems import LinearSDOF
@@ -354,11 +354,24 @@ def test_the_nominal_model_of_an_accelerometer_record_starts_from_the_better_of_
     seg = rec.segment(0.0, 13.0)
     system = LinearSDOF(inputs=["a", "b"])
     truth = {"c": p["c"], "k": p["k"], "r_a": p["r_a"], "r_b": p["r_b"]}
-    far = {**truth, "k": 0.9 * p["k"]}  # off the optimum
-    for peer, expect in ((truth, "srim's realization"), ({**truth, "k": 0.8 * p["k"]}, "the data")):
-        monkeypatch.setattr(peer_start, "peer_starts", lambda record, system, v=peer: {"srim": v})
-        name, values = accelerometers._best_start(seg, system, "the data", far)
-        assert name == expect
-        assert values["k"] == (peer["k"] if expect != "the data" else far["k"])
+    near, worse = {**truth, "k": 0.9 * p["k"]}, {**truth, "k": 0.8 * p["k"]}
+    assert accelerometers._cheapest(seg, system, {"near": near, "worse": worse, "truth": truth}) == "truth"
+    monkeypatch.setattr(peer_start, "peer_starts", lambda record, system: {"srim": worse, "okid_era": truth})
+    assert accelerometers._peer_options(seg, system, near) == {"okid_era's realization": truth}
+    calls = []
+    real_fit = accelerometers._influence_fit
+
+    def spy(seg, system, values):
+        out = real_fit(seg, system, values)
+        calls.append((values["k"], out[1].cost))
+        return out
+
+    monkeypatch.setattr(accelerometers, "_influence_fit", spy)
+    _, values, note = accelerometers._nominal_influence(rec, LinearSDOF(inputs=["a", "b"]), (0.0, 13.0))
+    assert len(calls) == 2 and values["k"] == pytest.approx(p["k"], rel=0.02)
+    kept = min(calls, key=lambda c: c[1])
+    assert ("okid_era" in note) == (kept[0] == truth["k"])
     monkeypatch.setattr(peer_start, "peer_starts", lambda record, system: {})
-    assert accelerometers._best_start(seg, system, "the data", far) == ("the data", far)
+    calls.clear()
+    note = accelerometers._nominal_influence(rec, LinearSDOF(inputs=["a", "b"]), (0.0, 13.0))[2]
+    assert len(calls) == 1 and note.startswith("start from the data")
