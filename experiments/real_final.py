@@ -66,9 +66,10 @@ def final_lines(ident: list[dict], diag: list[dict], tag: Callable[[dict], str])
         f"{len(rows)} of the {n_ident} identified events and directions have a finished diagnosis in this study "
         "(`python diagnose.py experiment=painter_street_diagnose data=csmip`, the sweep over all events and both "
         "directions; an interrupted sweep resumes with `--resume`). The diagnosis fits its nominal "
-        "model by output error to the accelerations from the data's start or a peer's (SRIM's or OKID-ERA's "
-        "order-2 model mapped onto it), whichever simulates the fitting part better, then by PIDynNet and "
-        "output error, and ends with it or with the extension it keeps. It keeps an extension only when that predicts the held-out part "
+        "model by output error to the fitting part's accelerations from the data's start and from a peer's "
+        "(SRIM's or OKID-ERA's order-2 model mapped onto it, the one that simulates that part better) and "
+        "keeps the lower fitted cost, then refits it by PIDynNet and output error, and ends with it or with "
+        "the extension it keeps. It keeps an extension only when that predicts the held-out part "
         "better, so the final column has looked at the held-out part once; the nominal column has not. "
         "SRIM: mdof's, on the same channels and span (from the identification table).",
         "",
