@@ -375,3 +375,37 @@ def test_the_nominal_model_of_an_accelerometer_record_starts_from_the_better_of_
     calls.clear()
     note = accelerometers._nominal_influence(rec, LinearSDOF(inputs=["a", "b"]), (0.0, 13.0))[2]
     assert len(calls) == 1 and note.startswith("start from the data")
+
+
+def test_the_running_period_widens_its_intervals_for_a_model_error_and_not_for_white_noise(monkeypatch):
+    """A linear window fitted to a hardening spring leaves a smooth, correlated residual: its
+    intervals are the sandwich, wider than white-noise ones; on a linear structure with white
+    noise they are the white-noise ones."""
+    from pidyn.data.sources import synthetic
+    from pidyn.discrepancy import running
+    from pidyn.refine import uncertainty
+    from pidyn.systems import LinearSDOF, SDOFSystem
+    from pidyn.systems.terms import CubicStiffness, LinearStiffness, ViscousDamping
+
+    k, c = 400.0, 1.0
+    nominal = LinearSDOF(c=c, k=k)
+    values = {"m": 1.0, "c": c, "k": k}
+
+    def white(problem, r, J, C):
+        cov, cond = uncertainty.covariance(problem, J, C)
+        return cov * float(r @ r) / max(len(r) - problem.n_theta - problem.ns, 1), cond, 0
+
+    def widths(rec):
+        run = running.running_modes(rec, nominal, values, width=4.0, step=4.0)
+        ok = np.isfinite(run["period"])
+        return np.asarray(run["period_hi"])[ok] - np.asarray(run["period_lo"])[ok]
+
+    hard = SDOFSystem([ViscousDamping(c), LinearStiffness(k), CubicStiffness(4e6)])
+    for system, noise, wider in ((hard, 0.002, True), (nominal, 0.02, False)):
+        rec = synthetic(system, "el_centro", noise=noise, channels=("a",), duration=20.0, dt=0.02)
+        sandwich = widths(rec)
+        with monkeypatch.context() as m:
+            m.setattr(running, "residual_covariance", white)
+            plain = widths(rec)
+        ratio = float(np.median(sandwich / plain))
+        assert (ratio > 1.5) if wider else ratio == pytest.approx(1.0, abs=0.05), ratio
