@@ -18,18 +18,16 @@ def peer_starts(record, system) -> dict[str, dict[str, float]]:
         import mdof  # noqa: F401
     except ImportError:
         return {}
-    from pidyn.baselines.peers import okid_era, srim
-    from pidyn.baselines.realization import realization_params
+    from pidyn.baselines.peers import okid_era, realization_start, srim
 
     order = 2 * int(system.n_dof)
     out: dict[str, dict[str, float]] = {}
     for name, method in (("srim", srim), ("okid_era", okid_era)):
         try:
-            real = method(record, orders=(order,)).stable_realizations.get(order)
+            params = realization_start(method(record, orders=(order,)), system, record.dt)
         except (ValueError, RuntimeError, ArithmeticError, IndexError) as exc:
             log.info("no %s start (%s)", name, exc)
             continue
-        params = realization_params(system, real, record.dt) if real is not None else {}
         if params:
             out[name] = params
     return out

@@ -292,10 +292,15 @@ def _with_start(result: PeerResult, system, dt: float) -> dict:
     """The peer's row, carrying its stable realization of twice the model's modes (order 2 for a
     single degree of freedom) as the model's parameters (a start of the refinement) when it maps
     onto the system."""
-    order = 2 * system.n_dof  # realization_params refuses a system it does not map onto
-    if order in result.stable_realizations:
-        result.params = realization_params(system, result.stable_realizations[order], dt)
+    result.params = realization_start(result, system, dt)
     return result.to_row()
+
+
+def realization_start(result: PeerResult, system, dt: float) -> dict[str, float]:
+    """The peer's stable realization of twice the model's modes mapped onto ``system``'s
+    parameters; empty when there is none or it does not map (``realization_params``)."""
+    real = result.stable_realizations.get(2 * system.n_dof)
+    return realization_params(system, real, dt) if real is not None else {}
 
 
 @estimator("srim", srim, "SRIM", order=11, starts=True)

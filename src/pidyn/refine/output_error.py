@@ -37,13 +37,7 @@ def fit_output_error(
     """The trainable parameters (from their specs' starts, overridden by ``init``) fitted to the
     record's channels simulated from rest, each channel's residual relative to its spread."""
     t0 = time.perf_counter()
-    specs = trainable_specs(system)
-    start = {s.name: s.init for s in specs}
-    start.update(init or {})
-    th0 = to_theta(specs, start)
-    problem = ShootingProblem.from_rest(system, record, substeps)
-    for ch in problem.channels:  # residuals relative to each channel's spread, as a practitioner scales them
-        ch.sigma = max(float(np.std(ch.data)), 1e-300)
+    problem, th0 = _problem(record, system, init, substeps)
     cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
     def evaluate(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -69,13 +63,22 @@ def fit_output_error(
 def output_error_cost(record, system, values: dict[str, float], substeps: int = 4) -> float:
     """``fit_output_error``'s cost at ``values`` (no fit): how well a start simulates the record
     from rest, on the same scale as the fit's own cost; inf where the simulation is not finite."""
+    problem, th = _problem(record, system, values, substeps)
+    with np.errstate(all="ignore"):
+        res = problem.residuals(th)[0]
+    cost = 0.5 * float(res @ res)
+    return cost if np.isfinite(cost) else float("inf")
+
+
+def _problem(
+    record, system, init: dict[str, float] | None, substeps: int
+) -> tuple[ShootingProblem, np.ndarray]:
+    """The single-shooting problem from rest, each channel's residual relative to its spread (as a
+    practitioner scales them), and the trainable parameters' start (their specs', overridden by ``init``)."""
     specs = trainable_specs(system)
     start = {s.name: s.init for s in specs}
-    start.update({k: v for k, v in values.items() if k in start})
+    start.update({k: v for k, v in (init or {}).items() if k in start})
     problem = ShootingProblem.from_rest(system, record, substeps)
     for ch in problem.channels:
         ch.sigma = max(float(np.std(ch.data)), 1e-300)
-    with np.errstate(all="ignore"):
-        res = problem.residuals(to_theta(specs, start))[0]
-    cost = 0.5 * float(res @ res)
-    return cost if np.isfinite(cost) else float("inf")
+    return problem, to_theta(specs, start)
