@@ -60,19 +60,20 @@ def running_modes(
     }
     m = float(values.get("m", 1.0))
     theta = to_theta([s for s in local.param_specs() if s.trainable], values)
+    warm: tuple[int, np.ndarray, np.ndarray] | None = None  # the last fitted window: start, u, trajectory
     for i, i0 in enumerate(starts):
         i1 = i0 + n_win
         rows["t"][i] = 0.5 * (t[i0] + t[i1])
         rows["peak"][i] = float(np.nanmax(np.abs(channels[0].data[i0 : i1 + 1])))
+        u0 = _warm_start(warm, i0, theta, local.n_state)
         try:
-            res = _window_fit(local, t, record.f, channels, i0, i1, theta, substeps, input_hold(record))
+            res = _window_fit(local, t, record.f, channels, i0, i1, u0, substeps, input_hold(record))
         except (ValueError, np.linalg.LinAlgError, FloatingPointError):
             continue
-        if res is None:
-            continue
-        (k, c), cov = res
+        (k, c), cov, u, states = res
         if not (k > 0 and np.all(np.isfinite(cov))):
             continue
+        warm = (int(i0), u, states) if np.all(np.isfinite(states)) else None
         # log coordinates (the specs' log transforms): the intervals map monotonically
         sk, sc = np.sqrt(max(cov[0, 0], 0.0)), np.sqrt(max(cov[1, 1], 0.0))
         rho = cov[0, 1] / max(sk * sc, 1e-300)
@@ -92,11 +93,23 @@ def running_modes(
     return rows
 
 
+def _warm_start(warm, i0: int, theta0: np.ndarray, n_state: int) -> np.ndarray:
+    """A window's unknowns (log k, log c, initial state): the previous window's fit and its
+    simulated state at this window's start where they overlap (windows step a quarter width,
+    so the fit starts next to its end and takes a few evaluations, not tens); else the whole
+    record's values from rest."""
+    if warm is not None and 0 <= i0 - warm[0] < len(warm[2]):
+        j0, u, states = warm
+        return np.concatenate([u[: len(theta0)], states[i0 - j0]])
+    return np.concatenate([theta0, np.zeros(n_state)])
+
+
 def _window_fit(
-    system, t, f, channels, i0: int, i1: int, theta0: np.ndarray, substeps: int, hold: str = "linear"
+    system, t, f, channels, i0: int, i1: int, u0: np.ndarray, substeps: int, hold: str = "linear"
 ):
-    """(k, c) and their covariance in log coordinates on samples i0..i1, the window's initial state free
-    (the sandwich where the residuals are a model's smooth error, as a measured record's are)."""
+    """(k, c), their covariance in log coordinates, the fitted unknowns and the simulated states on
+    samples i0..i1, the window's initial state free (the sandwich where the residuals are a
+    model's smooth error, as a measured record's are)."""
     seg_channels = [
         type(ch)(ch.kind, ch.dof, ch.data[i0 : i1 + 1], max(float(np.nanstd(ch.data[i0 : i1 + 1])), 1e-300))
         for ch in channels
@@ -110,7 +123,6 @@ def _window_fit(
         substeps,
         hold=hold,  # read from the window alone: the interpolation filter touches a few samples at its ends
     )
-    u0 = np.concatenate([theta0, np.zeros(problem.ns)])
 
     def fun(u):
         return problem.residuals(u)[0]
@@ -125,7 +137,8 @@ def _window_fit(
     vals = problem.values(sol.x[: problem.n_theta])
     ik, ic = names.index(_name(system, "k")), names.index(_name(system, "c"))
     cov_kc = cov[np.ix_([ik, ic], [ik, ic])]
-    return (vals[names[ik]], vals[names[ic]]), cov_kc
+    states = np.asarray(problem.simulate(sol.x)[0])[:, 0, :]
+    return (vals[names[ik]], vals[names[ic]]), cov_kc, sol.x, states
 
 
 def _name(system, which: str) -> str:
