@@ -40,9 +40,12 @@ def needs_view(record: Record) -> bool:
     return "motion" not in (record.meta or {}) and (record.x is None or bool(np.isnan(record.x[:, 0]).all()))
 
 
-def motion_view(record: Record, system, fit: tuple[float, float], corner_share: float = 0.1) -> Record:
+def motion_view(
+    record: Record, system, fit: tuple[float, float], corner_share: float = 0.1, ftol: float = 1e-6
+) -> Record:
     """The record as the relative motion of an accelerometer-measured structure (see the module's
-    docstring); ``system``: the nominal model with the record's inputs (influence coefficients)."""
+    docstring); ``system``: the nominal model with the record's inputs (influence coefficients);
+    ``ftol``: the supports' output-error fits stop there (``DiagnosisSettings.polish_ftol``)."""
     from pidyn.baselines.data_start import fundamental
 
     if record.a is None:
@@ -51,7 +54,7 @@ def motion_view(record: Record, system, fit: tuple[float, float], corner_share: 
     if peak is None:
         raise ValueError(f"record '{record.name}': the accelerations show no resonance to integrate around")
     fn = peak[0]
-    system, values, note = _nominal_influence(record, system, fit)
+    system, values, note = _nominal_influence(record, system, fit, ftol)
     f = np.asarray(record.f, float)
     several = system.n_inputs > 1
     # the motion relative to the supports weighted by their influence (what the sensor reads of them
@@ -99,7 +102,9 @@ def motion_view(record: Record, system, fit: tuple[float, float], corner_share: 
     return replace(record, f=drive, x=None, v=None, a=relative[:, None], meta=meta, clean=None)
 
 
-def _nominal_influence(record: Record, system, fit: tuple[float, float]) -> tuple[Any, dict[str, float], str]:
+def _nominal_influence(
+    record: Record, system, fit: tuple[float, float], ftol: float = 1e-6
+) -> tuple[Any, dict[str, float], str]:
     """The nominal model's values from the best start and, with several inputs, the supports'
     influence by output error on the fitting part; with a sentence that says where they came from.
     Starts: the data's, and the peers' realizations mapped onto the model (``peer_start``). The
@@ -119,7 +124,7 @@ def _nominal_influence(record: Record, system, fit: tuple[float, float]) -> tupl
     if system.n_inputs == 1:
         best = _cheapest(seg, system, options)
         return with_start(system, options[best]), options[best], f"start from {best}"
-    fits = {k: _influence_fit(seg, system, v) for k, v in options.items()}
+    fits = {k: _influence_fit(seg, system, v, ftol) for k, v in options.items()}
     best = min(fits, key=lambda k: fits[k][1].cost)
     if len(fits) > 1:
         log.info(
@@ -132,13 +137,13 @@ def _nominal_influence(record: Record, system, fit: tuple[float, float]) -> tupl
     return with_start(system, options[best]), values, note
 
 
-def _influence_fit(seg: Record, system, values: dict[str, float]):
+def _influence_fit(seg: Record, system, values: dict[str, float], ftol: float = 1e-6):
     """Output error on ``seg`` from ``values``: (the fitted values, the fit)."""
     from pidyn.refine.output_error import fit_output_error
 
     trainable = {s.name for s in system.param_specs() if s.trainable}
     res = fit_output_error(
-        seg, system, init={k: v for k, v in values.items() if k in trainable}, max_nfev=100
+        seg, system, init={k: v for k, v in values.items() if k in trainable}, max_nfev=100, ftol=ftol
     )
     return {**values, **res.params}, res
 

@@ -116,6 +116,7 @@ def confirm(
     substeps: int = 4,
     max_nfev: int = 30,
     polish_seconds: float | None = None,
+    ftol: float = 1e-12,
 ) -> Confirmation:
     """Fit ``system`` + each candidate effect by output error and name the best that the
     simulated channels decide for (see the module's notes). ``build(row)`` returns the
@@ -126,14 +127,14 @@ def confirm(
     seg_end = fit[1] if polish_seconds is None else min(fit[1], fit[0] + float(polish_seconds))
     seg = record.segment(fit[0], seg_end)
     values, base, out.nominal = _refit_nominal(
-        record, seg, system, values, (fit, held), th, substeps, max_nfev
+        record, seg, system, values, (fit, held), th, substeps, (max_nfev, ftol)
     )
     for row in candidates:
         t0 = time.perf_counter()
         ext = build(row)
         specs = [s for s in ext.param_specs() if s.trainable]
         try:
-            res = _fit(seg, ext, values, substeps, max_nfev)
+            res = _fit(seg, ext, values, substeps, (max_nfev, ftol))
         except (ValueError, FloatingPointError) as err:  # a start the effect's bounds refuse
             out.tested.append({"effect": row["effect"], "weak_form_score": row["score"], "error": str(err)})
             continue
@@ -166,11 +167,12 @@ def _rivals(best: dict, passing: list[dict], th: Thresholds) -> list[dict]:
     ]
 
 
-def _fit(seg: Record, system, values: dict[str, float], substeps: int, max_nfev: int):
+def _fit(seg: Record, system, values: dict[str, float], substeps: int, budget: tuple[int, float]):
     """Output error of ``system``'s trainable parameters on ``seg``, started at ``values`` (the
-    specs' starts where it has none): every fit of the check, the nominal's refit included."""
+    specs' starts where it has none): every fit of the check, the nominal's refit included;
+    ``budget``: (max_nfev, ftol)."""
     init = {s.name: values.get(s.name, s.init) for s in system.param_specs() if s.trainable}
-    return fit_output_error(seg, system, init=init, substeps=substeps, max_nfev=max_nfev)
+    return fit_output_error(seg, system, init=init, substeps=substeps, max_nfev=budget[0], ftol=budget[1])
 
 
 def _refit_nominal(
@@ -181,7 +183,7 @@ def _refit_nominal(
     spans: tuple[tuple[float, float], tuple[float, float]],
     th: Thresholds,
     substeps: int,
-    max_nfev: int,
+    budget: tuple[int, float],
 ) -> tuple[dict[str, float], _Nominal, dict]:
     """The nominal model refitted by the candidates' own output error (same span, same start,
     same budget), kept when it simulates the fitting part better than ``values``: the reference
@@ -189,7 +191,7 @@ def _refit_nominal(
     fit, held = spans
     base = _nominal_misfit(record, system, values, fit, held, substeps, th)
     try:
-        res = _fit(seg, system, values, substeps, max_nfev)
+        res = _fit(seg, system, values, substeps, budget)
     except (ValueError, FloatingPointError) as err:
         return values, base, {"refit": False, "error": str(err), "rss_fit": base.rss0}
     refit = {**values, **res.params}

@@ -536,6 +536,7 @@ def polish(case: Case, system: SDOFSystem, values: dict[str, float]) -> tuple[di
         init={k: v for k, v in values.items() if k in trainable},
         substeps=int(st.substeps),
         max_nfev=fit_budget(case),
+        ftol=float(st.polish_ftol),
     )
     out = dict(values)
     out.update(res.params)
@@ -877,6 +878,7 @@ def confirm_undecided(
         substeps=int(st.substeps),
         max_nfev=nfev,
         polish_seconds=st.polish_seconds,
+        ftol=float(st.polish_ftol),
     )
 
 

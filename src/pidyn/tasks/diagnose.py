@@ -110,7 +110,8 @@ def compose_case(cfg: DictConfig, record: Record | None = None) -> pipeline.Case
         base = hydra.utils.instantiate(cfg.system, excitation=record.excitation)
     if needs_view(record):  # accelerometers: the relative motion the screening needs, from the accelerations
         full = hydra.utils.instantiate(cfg.system, inputs=record.inputs) if record.n_inputs > 1 else base
-        record = motion_view(record, full, pipeline.split_spans(record, float(settings.fit_share))[0])
+        fit = pipeline.split_spans(record, float(settings.fit_share))[0]
+        record = motion_view(record, full, fit, ftol=float(settings.polish_ftol))
     node = OmegaConf.to_container(cfg.system, resolve=True)
     assert isinstance(node, dict)
 
