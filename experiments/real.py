@@ -609,6 +609,40 @@ def write_csv(rows: list[dict], path: Path) -> None:
             w.writerow({k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in r.items()})
 
 
+def read_csv(path: Path) -> list[dict]:
+    """``write_csv``'s rows back: JSON where a cell parses as JSON, text otherwise, None for empty."""
+
+    def cell(v: str):
+        if v == "":
+            return None
+        try:
+            return json.loads(v)
+        except json.JSONDecodeError:
+            return v
+
+    with path.open(newline="") as fh:
+        return [{k: cell(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+
+
+def aggregate_diagnosis(folder: Path) -> None:
+    """The diagnosis' sections of the README again from a new diagnosis sweep, beside the committed
+    identification (``painter_street.csv``): what it writes between the strong events' diagnosis
+    and the shake-table section is replaced, the rest kept."""
+    rows = read_csv(RESULTS / "painter_street.csv")
+    diag = diagnosis_rows(folder)
+    if not diag:
+        raise SystemExit(f"{folder}: no diagnosis run folders to aggregate")
+    pga = {r["event"]: r["pga_g"] for r in rows if r["direction"] == "transverse" and r["status"] == "ok"}
+    new = _diagnosis_lines(diag, pga) + final_lines(
+        rows, diag, lambda r: " *(t)*" if r["role"] == "tuning" else ""
+    )
+    readme = (RESULTS / "README.md").read_text().split("\n")
+    start = next(i for i, line in enumerate(readme) if line.startswith("## Diagnosis of the strong events"))
+    end = next(i for i, line in enumerate(readme) if line.startswith("## Buildings on a shake table"))
+    (RESULTS / "README.md").write_text("\n".join(readme[:start] + new + readme[end:]))
+    print(f"wrote the diagnosis' sections of {RESULTS / 'README.md'} from {folder}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--aggregate", type=Path, help="only aggregate this study folder (outputs/real/<stamp>)")
@@ -622,7 +656,15 @@ def main() -> None:
         help="also every event with two modes (about 45 min more on 2 cores)",
     )
     ap.add_argument("--resume", type=Path, help="an interrupted study's folder: its finished runs are kept")
+    ap.add_argument(
+        "--diagnosis",
+        type=Path,
+        help="only the diagnosis' sections again, from this diagnosis sweep and the committed identification",
+    )
     a = ap.parse_args()
+    if a.diagnosis:
+        aggregate_diagnosis(a.diagnosis)
+        return
     if a.aggregate:
         aggregate(a.aggregate)
         return

@@ -361,8 +361,8 @@ def test_the_nominal_model_of_an_accelerometer_record_starts_from_the_better_of_
     calls = []
     real_fit = accelerometers._influence_fit
 
-    def spy(seg, system, values, ftol):
-        out = real_fit(seg, system, values, ftol)
+    def spy(seg, system, values, tol):
+        out = real_fit(seg, system, values, tol)
         calls.append((values["k"], out[1].cost))
         return out
 

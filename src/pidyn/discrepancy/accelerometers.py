@@ -41,11 +41,11 @@ def needs_view(record: Record) -> bool:
 
 
 def motion_view(
-    record: Record, system, fit: tuple[float, float], corner_share: float = 0.1, ftol: float = 1e-6
+    record: Record, system, fit: tuple[float, float], corner_share: float = 0.1, tol: float = 1e-6
 ) -> Record:
     """The record as the relative motion of an accelerometer-measured structure (see the module's
     docstring); ``system``: the nominal model with the record's inputs (influence coefficients);
-    ``ftol``: the supports' output-error fits stop there (``DiagnosisSettings.polish_ftol``)."""
+    ``tol``: the supports' output-error fits stop there (``DiagnosisSettings.polish_tol``)."""
     from pidyn.baselines.data_start import fundamental
 
     if record.a is None:
@@ -54,7 +54,7 @@ def motion_view(
     if peak is None:
         raise ValueError(f"record '{record.name}': the accelerations show no resonance to integrate around")
     fn = peak[0]
-    system, values, note = _nominal_influence(record, system, fit, ftol)
+    system, values, note = _nominal_influence(record, system, fit, tol)
     f = np.asarray(record.f, float)
     several = system.n_inputs > 1
     # the motion relative to the supports weighted by their influence (what the sensor reads of them
@@ -103,7 +103,7 @@ def motion_view(
 
 
 def _nominal_influence(
-    record: Record, system, fit: tuple[float, float], ftol: float = 1e-6
+    record: Record, system, fit: tuple[float, float], tol: float = 1e-6
 ) -> tuple[Any, dict[str, float], str]:
     """The nominal model's values from the best start and, with several inputs, the supports'
     influence by output error on the fitting part; with a sentence that says where they came from.
@@ -124,7 +124,7 @@ def _nominal_influence(
     if system.n_inputs == 1:
         best = _cheapest(seg, system, options)
         return with_start(system, options[best]), options[best], f"start from {best}"
-    fits = {k: _influence_fit(seg, system, v, ftol) for k, v in options.items()}
+    fits = {k: _influence_fit(seg, system, v, tol) for k, v in options.items()}
     best = min(fits, key=lambda k: fits[k][1].cost)
     if len(fits) > 1:
         log.info(
@@ -137,13 +137,13 @@ def _nominal_influence(
     return with_start(system, options[best]), values, note
 
 
-def _influence_fit(seg: Record, system, values: dict[str, float], ftol: float = 1e-6):
+def _influence_fit(seg: Record, system, values: dict[str, float], tol: float = 1e-6):
     """Output error on ``seg`` from ``values``: (the fitted values, the fit)."""
     from pidyn.refine.output_error import fit_output_error
 
     trainable = {s.name for s in system.param_specs() if s.trainable}
     res = fit_output_error(
-        seg, system, init={k: v for k, v in values.items() if k in trainable}, max_nfev=100, ftol=ftol
+        seg, system, init={k: v for k, v in values.items() if k in trainable}, max_nfev=100, tol=tol
     )
     return {**values, **res.params}, res
 

@@ -116,7 +116,7 @@ def confirm(
     substeps: int = 4,
     max_nfev: int = 30,
     polish_seconds: float | None = None,
-    ftol: float = 1e-12,
+    tol: float = 1e-12,
 ) -> Confirmation:
     """Fit ``system`` + each candidate effect by output error and name the best that the
     simulated channels decide for (see the module's notes). ``build(row)`` returns the
@@ -127,29 +127,31 @@ def confirm(
     seg_end = fit[1] if polish_seconds is None else min(fit[1], fit[0] + float(polish_seconds))
     seg = record.segment(fit[0], seg_end)
     values, base, out.nominal = _refit_nominal(
-        record, seg, system, values, (fit, held), th, substeps, (max_nfev, ftol)
+        record, seg, system, values, (fit, held), th, substeps, (max_nfev, tol)
     )
     for row in candidates:
         t0 = time.perf_counter()
         ext = build(row)
         specs = [s for s in ext.param_specs() if s.trainable]
         try:
-            res = _fit(seg, ext, values, substeps, (max_nfev, ftol))
+            res = _fit(seg, ext, values, substeps, (max_nfev, tol))
         except (ValueError, FloatingPointError) as err:  # a start the effect's bounds refuse
             out.tested.append({"effect": row["effect"], "weak_form_score": row["score"], "error": str(err)})
             continue
         tested = _judge(row, ext, specs, values, res, base)
-        tested["seconds"] = time.perf_counter() - t0
+        tested["seconds"], tested["nfev"] = time.perf_counter() - t0, res.nfev
         out.tested.append(tested)
         log.info(
             "output-error check of %s (weak-form score %.1f): dBIC %.1f over %.0f independent samples, "
-            "held-out gain %s%s",
+            "held-out gain %s%s (%d evaluations, %.0f s)",
             row["effect"],
             row["score"],
             tested["delta_bic"],
             tested["independent_samples"],
             "n/a" if tested["heldout_gain"] is None else f"{tested['heldout_gain']:.2f}",
             ": named" if tested["passes"] else "",
+            res.nfev,
+            tested["seconds"],
         )
     passing = [r for r in out.tested if r.get("passes")]
     if passing:
@@ -170,9 +172,9 @@ def _rivals(best: dict, passing: list[dict], th: Thresholds) -> list[dict]:
 def _fit(seg: Record, system, values: dict[str, float], substeps: int, budget: tuple[int, float]):
     """Output error of ``system``'s trainable parameters on ``seg``, started at ``values`` (the
     specs' starts where it has none): every fit of the check, the nominal's refit included;
-    ``budget``: (max_nfev, ftol)."""
+    ``budget``: (max_nfev, tol)."""
     init = {s.name: values.get(s.name, s.init) for s in system.param_specs() if s.trainable}
-    return fit_output_error(seg, system, init=init, substeps=substeps, max_nfev=budget[0], ftol=budget[1])
+    return fit_output_error(seg, system, init=init, substeps=substeps, max_nfev=budget[0], tol=budget[1])
 
 
 def _refit_nominal(

@@ -72,7 +72,7 @@ class DiagnosisSettings:
     #: every output-error fit of the diagnosis stops when a step lowers its cost by less than this
     #: share: a model choice by BIC over ~1000 independent samples moves by less than 0.01 then,
     #: where a fit of a located change crawled on at 1e-7 a step through its whole budget (66 s)
-    polish_ftol: float = 1e-6
+    polish_tol: float = 1e-6
     substeps: int = 4
     learned: LearnedSettings = field(default_factory=LearnedSettings)
     confirm: ConfirmSettings = field(default_factory=ConfirmSettings)

@@ -37,13 +37,14 @@ def fit_output_error(
     init: dict[str, float] | None = None,
     substeps: int = 4,
     max_nfev: int = 60,
-    ftol: float = 1e-12,
+    tol: float = 1e-12,
 ) -> OutputErrorFit:
     """The trainable parameters (from their specs' starts, overridden by ``init``) fitted to the
     record's channels simulated from rest, each channel's residual relative to its spread.
-    ``ftol``: stop when a step that the local model predicted well lowers the cost by less than
-    this share (the default runs the whole budget; a model choice needs far less, see
-    ``DiagnosisSettings.polish_ftol``)."""
+    ``tol``: stop when a step that the local model predicted well lowers the cost by less than
+    this share, or when the trust region has shrunk below this share of the parameters (the
+    default runs the whole budget; a model choice needs far less, see
+    ``DiagnosisSettings.polish_tol``)."""
     t0 = time.perf_counter()
     problem, th0 = _problem(record, system, init, substeps)
     cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
@@ -61,8 +62,8 @@ def fit_output_error(
         jac=lambda th: evaluate(th)[1],
         method="trf",
         max_nfev=max_nfev,
-        xtol=1e-12,
-        ftol=ftol,
+        xtol=tol,
+        ftol=tol,
         gtol=1e-12,
     )
     return OutputErrorFit(problem.values(sol.x), time.perf_counter() - t0, int(sol.nfev), float(sol.cost))

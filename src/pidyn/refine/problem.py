@@ -308,27 +308,31 @@ class ShootingProblem:
     def residuals_and_fd_jacobian(self, u: np.ndarray, step: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
         """Residuals and their forward-difference Jacobian from one batched plain simulation.
 
-        Single shooting from a fixed state only: the unperturbed and every perturbed parameter
-        set are members of one batch, so both cost about one simulation (the classical
-        output-error recipe; the refinement uses the exact ``linearize``)."""
-        if self.S != 1 or self.free_state0:
-            raise ValueError("the finite-difference Jacobian is for single shooting from a fixed state")
-        nt = self.n_theta
-        thetas = np.repeat(u[:nt, None], nt + 1, axis=1)
-        thetas[np.arange(nt), np.arange(1, nt + 1)] += step
-        p = dict(from_theta(self.specs, thetas))
-        p.update({k: np.full(nt + 1, v) for k, v in self.fixed.items()})
-        y0 = np.repeat(self.fixed_state0[None, :], nt + 1, axis=0)
+        Single shooting only (from a fixed state, or from a free one: a window of the running
+        period): the unperturbed and every perturbed unknown are members of one batch, so both
+        cost about one simulation (the classical output-error recipe; the refinement uses the
+        exact ``linearize``)."""
+        if self.S != 1:
+            raise ValueError("the finite-difference Jacobian is for single shooting")
+        nt, n_u = self.n_theta, self.n_unknowns
+        us = np.repeat(np.asarray(u, float)[:, None], n_u + 1, axis=1)
+        us[np.arange(n_u), np.arange(1, n_u + 1)] += step
+        p = dict(from_theta(self.specs, us[:nt]))
+        p.update({k: np.full(n_u + 1, v) for k, v in self.fixed.items()})
+        if self.free_state0:
+            y0 = (us[nt:] * self.state_scale[:, None]).T
+        else:
+            y0 = np.repeat(self.fixed_state0[None, :], n_u + 1, axis=0)
         with np.errstate(all="ignore"):
             st = None if self.stages is None else self.stages[:, :, 0]
             Y, R = rk4(
                 self.system, p, self.t_local, self.F[:, 0], y0, self.substeps, t0=float(self.t0[0]), stages=st
             )
             A = self._accelerations(
-                R, p, np.broadcast_to(self.F[:, :1], (self.F.shape[0], nt + 1) + self.F.shape[2:])
+                R, p, np.broadcast_to(self.F[:, :1], (self.F.shape[0], n_u + 1) + self.F.shape[2:])
             )
-        res = [self._data_res(Y[:, j : j + 1], A[:, j : j + 1]) for j in range(nt + 1)]
-        return res[0], np.stack([(res[j + 1] - res[0]) / step for j in range(nt)], axis=1)
+        res = [self._data_res(Y[:, j : j + 1], A[:, j : j + 1]) for j in range(n_u + 1)]
+        return res[0], np.stack([(res[j + 1] - res[0]) / step for j in range(n_u)], axis=1)
 
     # ------------------------------------------------------------------ helpers
     def channel_slices(self) -> list[slice]:

@@ -111,7 +111,7 @@ def compose_case(cfg: DictConfig, record: Record | None = None) -> pipeline.Case
     if needs_view(record):  # accelerometers: the relative motion the screening needs, from the accelerations
         full = hydra.utils.instantiate(cfg.system, inputs=record.inputs) if record.n_inputs > 1 else base
         fit = pipeline.split_spans(record, float(settings.fit_share))[0]
-        record = motion_view(record, full, fit, ftol=float(settings.polish_ftol))
+        record = motion_view(record, full, fit, tol=float(settings.polish_tol))
     node = OmegaConf.to_container(cfg.system, resolve=True)
     assert isinstance(node, dict)
 
