@@ -80,6 +80,23 @@ def test_shooting_jacobian_is_exact():
         np.testing.assert_allclose(C[:, k], (cp - cm) / (2 * h), rtol=1e-4, atol=1e-7)
 
 
+def test_the_batched_finite_difference_jacobian_matches_the_exact_one_from_a_free_state():
+    """One segment with its initial state free (a window of the running period): the batched
+    forward differences over parameters and state against ``linearize``."""
+    s = Duffing()
+    r = synthetic(s, "el_centro", duration=3.0, noise=0.02, data_seed=5)
+    prob = _problem(s, r, None)
+    assert prob.S == 1 and prob.free_state0
+    u = prob.pack({"c": 0.45, "k1": 14.0, "k3": 110.0}, np.array([[0.01, -0.02]]))
+    r_fd, J_fd = prob.residuals_and_fd_jacobian(u)
+    r_ex, J_ex, _, _ = prob.linearize(u)
+    np.testing.assert_allclose(r_fd, r_ex, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(J_fd, J_ex, rtol=1e-3, atol=1e-4 * np.abs(J_ex).max())
+    fun, jac = prob.fd_fun_and_jac()
+    np.testing.assert_array_equal(fun(u), r_fd)
+    np.testing.assert_array_equal(jac(u), J_fd)
+
+
 @pytest.mark.parametrize(
     "system,record,start",
     [

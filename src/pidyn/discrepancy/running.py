@@ -95,9 +95,8 @@ def running_modes(
 
 def _warm_start(warm, i0: int, theta0: np.ndarray, n_state: int) -> np.ndarray:
     """A window's unknowns (log k, log c, initial state): the previous window's fit and its
-    simulated state at this window's start where they overlap (windows step a quarter width,
-    so the fit starts next to its end and takes a few evaluations, not tens); else the whole
-    record's values from rest."""
+    simulated state at this window's start where they overlap (the windows overlap by half or
+    more, so the fit starts next to its end); else the whole record's values from rest."""
     if warm is not None and 0 <= i0 - warm[0] < len(warm[2]):
         j0, u, states = warm
         return np.concatenate([u[: len(theta0)], states[i0 - j0]])
@@ -124,18 +123,10 @@ def _window_fit(
         hold=hold,  # read from the window alone: the interpolation filter touches a few samples at its ends
     )
 
-    cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
-
-    def evaluate(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        # the iterations' Jacobian by forward differences from one batched plain simulation (a
-        # quarter of the exact dual-number one's cost); the covariance below from the exact one
-        key = u.tobytes()
-        if key not in cache:
-            cache.clear()
-            cache[key] = problem.residuals_and_fd_jacobian(u)
-        return cache[key]
-
-    sol = least_squares(lambda u: evaluate(u)[0], u0, jac=lambda u: evaluate(u)[1], method="lm", max_nfev=60)
+    # the iterations on a forward-difference Jacobian from one batched plain simulation (a quarter
+    # of the exact dual-number one's cost); the covariance below from the exact one
+    fun, jac = problem.fd_fun_and_jac()
+    sol = least_squares(fun, u0, jac=jac, method="lm", max_nfev=60)
     r, J, _, C = problem.linearize(sol.x)
     cov = residual_covariance(problem, r, J, C)[0]  # the sandwich where the window's residuals are correlated
     names = problem.names

@@ -47,19 +47,11 @@ def fit_output_error(
     ``DiagnosisSettings.polish_tol``)."""
     t0 = time.perf_counter()
     problem, th0 = _problem(record, system, init, substeps)
-    cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
-
-    def evaluate(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        key = th.tobytes()
-        if key not in cache:  # residuals and Jacobian come from the same batch: one simulation for both
-            cache.clear()
-            cache[key] = problem.residuals_and_fd_jacobian(th)
-        return cache[key]
-
+    fun, jac = problem.fd_fun_and_jac()
     sol = least_squares(
-        lambda th: evaluate(th)[0],
+        fun,
         th0,
-        jac=lambda th: evaluate(th)[1],
+        jac=jac,
         method="trf",
         max_nfev=max_nfev,
         xtol=tol,

@@ -334,6 +334,20 @@ class ShootingProblem:
         res = [self._data_res(Y[:, j : j + 1], A[:, j : j + 1]) for j in range(n_u + 1)]
         return res[0], np.stack([(res[j + 1] - res[0]) / step for j in range(n_u)], axis=1)
 
+    def fd_fun_and_jac(self):
+        """(fun, jac) for ``scipy.optimize.least_squares`` on ``residuals_and_fd_jacobian``: the
+        residuals and the Jacobian at one point come from the same batch, one simulation for both."""
+        cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+        def evaluate(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            key = np.asarray(u, float).tobytes()
+            if key not in cache:
+                cache.clear()
+                cache[key] = self.residuals_and_fd_jacobian(u)
+            return cache[key]
+
+        return (lambda u: evaluate(u)[0]), (lambda u: evaluate(u)[1])
+
     # ------------------------------------------------------------------ helpers
     def channel_slices(self) -> list[slice]:
         m = len(self.sel_s)
