@@ -36,18 +36,7 @@ def running_modes(
     """Windows of ``width`` s every ``step`` s (default a quarter width): their centre ``t``,
     ``period`` and ``damping`` with ``period_lo/hi`` and ``damping_lo/hi`` (95 %), and the peak
     of the first measured channel there (``peak``). A window whose fit fails gives NaN."""
-    ks, cs = stiffness_params(system), damping_params(system)
-    if len(ks) != 1 or len(cs) != 1:
-        raise ValueError(f"{system.name}: a running period needs one stiffness and one damping parameter")
-    k_name, c_name = ks[0], cs[0]
-    local = copy.copy(system)
-    local._specs = merge_specs(
-        system.param_specs(),
-        {
-            n: {"trainable": n in (k_name, c_name), **({"init": float(values[n])} if n in values else {})}
-            for n in (s.name for s in system.param_specs())
-        },
-    )
+    local = _window_system(system, values)
     step = width / 4 if step is None else step
     t = record.t
     dt = float(t[1] - t[0])
@@ -91,6 +80,22 @@ def running_modes(
             zeta * np.exp(Z95 * s_log_zeta),
         )
     return rows
+
+
+def _window_system(system, values: dict[str, float]):
+    """``system`` with its one stiffness and one damping trainable, everything else held at ``values``."""
+    ks, cs = stiffness_params(system), damping_params(system)
+    if len(ks) != 1 or len(cs) != 1:
+        raise ValueError(f"{system.name}: a running period needs one stiffness and one damping parameter")
+    local = copy.copy(system)
+    local._specs = merge_specs(
+        system.param_specs(),
+        {
+            n: {"trainable": n in (ks[0], cs[0]), **({"init": float(values[n])} if n in values else {})}
+            for n in (s.name for s in system.param_specs())
+        },
+    )
+    return local
 
 
 def _warm_start(warm, i0: int, theta0: np.ndarray, n_state: int) -> np.ndarray:
