@@ -175,3 +175,96 @@ def test_a_learned_force_is_kept_only_when_it_predicts_the_held_out_part_better(
         if name == "truth":
             assert errors["with"] < 0.1 * errors["without"], errors
     assert kept == {"truth": True, "softening": False, "spring": False}
+
+
+def _located_change(rec, fit_end: float, drop: float, t_d: float) -> tuple[dict, object]:
+    """A located change as the diagnosis passes it to the check, and the check's output."""
+    from types import SimpleNamespace
+
+    from pidyn.discrepancy.pipeline import _change_candidate
+
+    nominal = LinearSDOF(c=0.5, k=15.0)
+    s = Signals(rec.t, rec.x[:, 0], rec.v[:, 0], 1.0, 15.0, "k", t_fit_end=fit_end)
+    fitted = output_error(rec.segment(0.0, fit_end), nominal, substeps=4, max_nfev=30).params
+    located = {"t_change": t_d, "t_change_ci95": [t_d - 1.5, t_d + 1.0], "fraction": -drop}
+    change = SimpleNamespace(to_dict=lambda: located)
+    row = _change_candidate(
+        {
+            "effect": "stiffness_loss",
+            "score": 40.0,
+            "parameters": {"drop": drop, "t_d": t_d},
+            "change": change,
+        }
+    )
+    out = confirm(
+        rec,
+        nominal,
+        {"m": 1.0, **fitted},
+        [row],
+        lambda r: extended_system(nominal, r["effect"], r["parameters"], s.context()),
+        (0.0, fit_end),
+        (fit_end, float(rec.t[-1])),
+        Thresholds(),
+        max_nfev=60,
+        tol=1e-6,
+    )
+    return row, out
+
+
+def test_a_located_change_is_one_candidate_of_the_check_with_its_time_free():
+    """On an accelerometer record the weak form can locate a change that is not there (a 73 % loss
+    on a Painter Street record): the check fits it by output error from where it was located, its
+    time free, and names it only where the simulated response decides for it."""
+    clean = hidden_case(None, 12, noise=0.03)
+    row, out = _located_change(clean.record, clean.fit_end, 0.5, 8.0)
+    assert "change" not in row and row["located"]["t_change"] == 8.0  # nothing held
+    (tested,) = out.tested
+    assert out.row is None and not tested["passes"], tested
+    assert tested["located"]["t_change"] == 8.0 and tested["located"]["fraction"] == -0.5
+    damaged = hidden_case("stiffness_loss", 3, noise=0.03, params={"t_d": 9.0})
+    truth = damaged.truth
+    _, out = _located_change(damaged.record, damaged.fit_end, 0.7 * truth["drop"], 10.0)
+    assert out.row is not None and out.row["effect"] == "stiffness_loss", out.tested
+    assert out.row["parameters"]["t_d"] == pytest.approx(9.0, abs=0.3)
+
+
+def test_the_first_cause_keeps_a_located_change_only_when_the_check_names_it(monkeypatch):
+    """While the nominal model holds on the held-out part, a change the weak form located on an
+    accelerometer record is passed to the output-error check with the other candidates; where the
+    check names something else, or nothing, no change is reported."""
+    from types import SimpleNamespace
+
+    from pidyn.discrepancy import pipeline
+    from pidyn.discrepancy.confirm import Confirmation
+
+    seen = {}
+
+    def fake(case, system, values, node, sc, s, k, everything=False, extra=None):
+        seen["extra"], seen["everything"] = extra, everything
+        return Confirmation(row=named)
+
+    monkeypatch.setattr(pipeline, "confirm_undecided", fake)
+    case = SimpleNamespace(from_accelerometers=True)
+    nom = SimpleNamespace(system=None, values={}, node={}, s=None)
+    sc = SimpleNamespace(cause="stiffness_loss", verdict="discrepancy")
+    change = SimpleNamespace(to_dict=lambda: {"t_change": 5.0})
+    row = {
+        "effect": "stiffness_loss",
+        "score": 30.0,
+        "parameters": {"drop": 0.4, "t_d": 5.0},
+        "change": change,
+    }
+    holds, fails = SimpleNamespace(failed=False), SimpleNamespace(failed=True)
+    named = {"effect": "cubic_stiffness"}
+    assert pipeline._first_cause(case, nom, sc, holds, row, None) == (
+        "cubic_stiffness",
+        Confirmation(row=named),
+        None,
+    )
+    assert seen["everything"] and [r["effect"] for r in seen["extra"]] == ["stiffness_loss"]
+    named = {"effect": "stiffness_loss"}
+    cause, _, kept = pipeline._first_cause(case, nom, sc, holds, row, None)
+    assert cause == "stiffness_loss" and kept is row
+    seen.clear()  # the nominal model failed on the held-out part: the located change stands
+    assert pipeline._first_cause(case, nom, sc, fails, row, None) == ("stiffness_loss", None, row)
+    assert seen == {}

@@ -327,7 +327,7 @@ def test_an_accelerometer_diagnosis_starts_from_the_accelerations_when_the_weak_
     rec, p = _two_support_record(noise=0.02)
     settings = DiagnosisSettings()
     fit = pipeline.split_spans(rec, settings.fit_share)[0]
-    view = motion_view(rec, LinearSDOF(inputs=["a", "b"]), fit)
+    view = motion_view(rec, LinearSDOF(inputs=["a", "b"]), fit, tol=settings.polish_tol)
     base = LinearSDOF(c=0.5, k=15.0)
     case = pipeline.prepare(view, base, {}, settings, 1.0, tmp_path, identify=None)
     fitted = view.meta["accelerometers"]["nominal"]
@@ -367,13 +367,13 @@ def test_the_nominal_model_of_an_accelerometer_record_starts_from_the_better_of_
         return out
 
     monkeypatch.setattr(accelerometers, "_influence_fit", spy)
-    _, values, note = accelerometers._nominal_influence(rec, LinearSDOF(inputs=["a", "b"]), (0.0, 13.0))
+    _, values, note = accelerometers._nominal_influence(rec, LinearSDOF(inputs=["a", "b"]), (0.0, 13.0), 1e-6)
     assert len(calls) == 2 and values["k"] == pytest.approx(p["k"], rel=0.02)
     kept = min(calls, key=lambda c: c[1])
     assert ("okid_era" in note) == (kept[0] == truth["k"])
     monkeypatch.setattr(peer_start, "peer_starts", lambda record, system: {})
     calls.clear()
-    note = accelerometers._nominal_influence(rec, LinearSDOF(inputs=["a", "b"]), (0.0, 13.0))[2]
+    note = accelerometers._nominal_influence(rec, LinearSDOF(inputs=["a", "b"]), (0.0, 13.0), 1e-6)[2]
     assert len(calls) == 1 and note.startswith("start from the data")
 
 

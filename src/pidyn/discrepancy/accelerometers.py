@@ -41,7 +41,7 @@ def needs_view(record: Record) -> bool:
 
 
 def motion_view(
-    record: Record, system, fit: tuple[float, float], corner_share: float = 0.1, tol: float = 1e-6
+    record: Record, system, fit: tuple[float, float], *, tol: float, corner_share: float = 0.1
 ) -> Record:
     """The record as the relative motion of an accelerometer-measured structure (see the module's
     docstring); ``system``: the nominal model with the record's inputs (influence coefficients);
@@ -103,7 +103,7 @@ def motion_view(
 
 
 def _nominal_influence(
-    record: Record, system, fit: tuple[float, float], tol: float = 1e-6
+    record: Record, system, fit: tuple[float, float], tol: float
 ) -> tuple[Any, dict[str, float], str]:
     """The nominal model's values from the best start and, with several inputs, the supports'
     influence by output error on the fitting part; with a sentence that says where they came from.
@@ -137,7 +137,7 @@ def _nominal_influence(
     return with_start(system, options[best]), values, note
 
 
-def _influence_fit(seg: Record, system, values: dict[str, float], tol: float = 1e-6):
+def _influence_fit(seg: Record, system, values: dict[str, float], tol: float):
     """Output error on ``seg`` from ``values``: (the fitted values, the fit)."""
     from pidyn.refine.output_error import fit_output_error
 

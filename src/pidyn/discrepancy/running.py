@@ -49,7 +49,9 @@ def running_modes(
     }
     m = float(values.get("m", 1.0))
     theta = to_theta([s for s in local.param_specs() if s.trainable], values)
-    warm: tuple[int, np.ndarray, np.ndarray] | None = None  # the last fitted window: start, u, trajectory
+    # the last fitted window: start, u, trajectory (the whole window's: a failed window's successor starts
+    # further on, still inside it)
+    warm: tuple[int, np.ndarray, np.ndarray] | None = None
     for i, i0 in enumerate(starts):
         i1 = i0 + n_win
         rows["t"][i] = 0.5 * (t[i0] + t[i1])

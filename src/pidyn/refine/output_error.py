@@ -71,6 +71,21 @@ def output_error_cost(record, system, values: dict[str, float], substeps: int = 
     return cost if np.isfinite(cost) else float("inf")
 
 
+def output_error_costs(record, system, starts: list[dict[str, float]], substeps: int = 4) -> np.ndarray:
+    """``output_error_cost`` of every start in ``starts`` (values of ``system``'s trainable
+    parameters), all from one batched simulation; inf where one is not finite."""
+    problem, _ = _problem(record, system, starts[0], substeps)
+    specs = trainable_specs(system)
+    us = np.stack([_problem_theta(specs, start) for start in starts], axis=1)
+    res = problem.batch_residuals(us)
+    costs = np.array([0.5 * float(r @ r) for r in res])
+    return np.where(np.isfinite(costs), costs, np.inf)
+
+
+def _problem_theta(specs, values: dict[str, float]) -> np.ndarray:
+    return to_theta(specs, {s.name: values.get(s.name, s.init) for s in specs})
+
+
 def _problem(
     record, system, init: dict[str, float] | None, substeps: int
 ) -> tuple[ShootingProblem, np.ndarray]:

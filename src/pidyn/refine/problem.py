@@ -312,27 +312,33 @@ class ShootingProblem:
         period): the unperturbed and every perturbed unknown are members of one batch, so both
         cost about one simulation (the classical output-error recipe; the refinement uses the
         exact ``linearize``)."""
-        if self.S != 1:
-            raise ValueError("the finite-difference Jacobian is for single shooting")
-        nt, n_u = self.n_theta, self.n_unknowns
+        n_u = self.n_unknowns
         us = np.repeat(np.asarray(u, float)[:, None], n_u + 1, axis=1)
         us[np.arange(n_u), np.arange(1, n_u + 1)] += step
+        res = self.batch_residuals(us)
+        return res[0], np.stack([(res[j + 1] - res[0]) / step for j in range(n_u)], axis=1)
+
+    def batch_residuals(self, us: np.ndarray) -> list[np.ndarray]:
+        """The residuals of every column of ``us`` (unknowns x batch) from one batched plain
+        simulation (single shooting only)."""
+        if self.S != 1:
+            raise ValueError("a batch of unknowns is simulated for single shooting only")
+        nt, B = self.n_theta, us.shape[1]
         p = dict(from_theta(self.specs, us[:nt]))
-        p.update({k: np.full(n_u + 1, v) for k, v in self.fixed.items()})
+        p.update({k: np.full(B, v) for k, v in self.fixed.items()})
         if self.free_state0:
             y0 = (us[nt:] * self.state_scale[:, None]).T
         else:
-            y0 = np.repeat(self.fixed_state0[None, :], n_u + 1, axis=0)
+            y0 = np.repeat(self.fixed_state0[None, :], B, axis=0)
         with np.errstate(all="ignore"):
             st = None if self.stages is None else self.stages[:, :, 0]
             Y, R = rk4(
                 self.system, p, self.t_local, self.F[:, 0], y0, self.substeps, t0=float(self.t0[0]), stages=st
             )
             A = self._accelerations(
-                R, p, np.broadcast_to(self.F[:, :1], (self.F.shape[0], n_u + 1) + self.F.shape[2:])
+                R, p, np.broadcast_to(self.F[:, :1], (self.F.shape[0], B) + self.F.shape[2:])
             )
-        res = [self._data_res(Y[:, j : j + 1], A[:, j : j + 1]) for j in range(n_u + 1)]
-        return res[0], np.stack([(res[j + 1] - res[0]) / step for j in range(n_u)], axis=1)
+        return [self._data_res(Y[:, j : j + 1], A[:, j : j + 1]) for j in range(B)]
 
     def fd_fun_and_jac(self):
         """(fun, jac) for ``scipy.optimize.least_squares`` on ``residuals_and_fd_jacobian``: the
