@@ -221,6 +221,12 @@ def test_a_located_change_is_one_candidate_of_the_check_with_its_time_free():
     (tested,) = out.tested
     assert out.row is None and not tested["passes"], tested
     assert tested["located"]["t_change"] == 8.0 and tested["located"]["fraction"] == -0.5
+    from pidyn.discrepancy.report import _confirmation_lines
+
+    assert any(
+        "stiffness_loss (located at 8.00 s)" in line
+        for line in _confirmation_lines({"confirmation": out.tested})
+    )
     damaged = hidden_case("stiffness_loss", 3, noise=0.03, params={"t_d": 9.0})
     truth = damaged.truth
     _, out = _located_change(damaged.record, damaged.fit_end, 0.7 * truth["drop"], 10.0)

@@ -547,7 +547,8 @@ def _confirmation_lines(d: dict) -> list[str]:
     lines = [
         "## Output-error check",
         "",
-        "Effects the weak-form screening leaned to (0 < score < threshold) without deciding, fitted by output error "
+        "Effects the weak-form screening leaned to (0 < score < threshold) without deciding (on an accelerometer "
+        "record every effect it could fit, and a change it located in time), fitted by output error "
         "with the model and compared on the simulated response: -dBIC over the residual's independent samples, "
         "held-out gain = share of the held-out simulation error removed; of those that pass, the best is named.",
         "",
@@ -557,8 +558,10 @@ def _confirmation_lines(d: dict) -> list[str]:
     for where, rows in checks:
         for r in rows:
             est = ", ".join(f"{k}={v:.4g}" for k, v in (r.get("parameters") or {}).items())
+            loc = r.get("located")  # a change the weak form located in time: where it put it
+            effect = r["effect"] if not loc else f"{r['effect']} (located at {loc['t_change']:.2f} s)"
             lines.append(
-                f"| {where} | {r['effect']} | {_num(r.get('weak_form_score'))} | {_num(r.get('score'))} | "
+                f"| {where} | {effect} | {_num(r.get('weak_form_score'))} | {_num(r.get('score'))} | "
                 f"{_num(r.get('independent_samples'))} | {_num(r.get('heldout_gain'))} | "
                 f"{'yes' if r.get('passes') else 'no'} | {est or r.get('error', '')} |"
             )
