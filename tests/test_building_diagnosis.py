@@ -200,3 +200,18 @@ def test_an_extension_restarts_a_damper_the_nominal_fit_ran_to_zero():
     assert [start[f"c{i}"] for i in range(1, 5)] == pytest.approx([0.04, 0.04, 0.5, 0.3])
     assert {s.name: s.init for s in ext.param_specs()}["c1"] == pytest.approx(0.04)
     assert values["c1"] == 1e-12  # the caller's values are not touched
+
+
+def test_the_configs_guesses_are_refined_only_when_their_modes_are_far_from_the_datas_start():
+    """Two starts whose modal frequencies lie within a quarter of each other end at the same optimum:
+    only the data's is refined. A guess at a quarter of the stiffness (half the frequencies) is
+    refined too."""
+    from pidyn.discrepancy.storeys import close_modes
+
+    system = ShearBuilding(3, MASSES, DAMPINGS, [120.0] * 3)
+    config = {s.name: float(s.init) for s in system.param_specs()}
+    data = {**config, "k1": 185.0, "k2": 198.4, "k3": 108.7}  # a data start of the tests' building
+    assert close_modes(system, config, data)
+    far = {**config, **{f"k{i}": 0.25 * data[f"k{i}"] for i in (1, 2, 3)}}
+    assert not close_modes(system, far, data) and not close_modes(system, data, far)
+    assert not close_modes(system, {**data, "k3": 0.0}, data)  # a storey with no spring: no basin to share

@@ -409,7 +409,8 @@ def nominal_fit(
 ) -> tuple[dict[str, float], Any]:
     """The linear building on the fitting part, refined (intervals for every parameter) from the
     start read from the data and from ``start`` (an earlier run's values) or else the config's
-    guesses, each refined on its own: the one whose model simulates the fitting part's
+    guesses, each refined on its own (the config's only when its modes are not close to the
+    data start's, ``close_modes``): the one whose model simulates the fitting part's
     floor accelerations better is kept. Scoring the starts by a free simulation before refining
     them misleads: a guess far below the structure's frequencies barely responds, and its small
     misfit beat a start at the right frequencies but off in phase (a shake-table building ended
@@ -428,6 +429,12 @@ def nominal_fit(
         data = None
     if data is not None:
         starts["data"] = {**config, **data.values}
+        if start is None and close_modes(system, config, starts["data"]):
+            log.info(
+                "the config's guesses not refined: every modal frequency within %.0f %% of the data start's",
+                100 * CLOSE_MODES,
+            )
+            del starts["config"]
     best = None
     for label, values in starts.items():
         try:
@@ -447,6 +454,25 @@ def nominal_fit(
             f"record '{record.name}': the nominal building could not be refined from any start"
         )
     return best[1], best[2]
+
+
+#: relative distance of two starts' modal frequencies below which they share a basin (``close_modes``)
+CLOSE_MODES = 0.25
+
+
+def close_modes(system: ShearBuilding, a: dict[str, float], b: dict[str, float]) -> bool:
+    """Whether every modal frequency of start ``a`` lies within ``CLOSE_MODES`` of ``b``'s: the
+    refinement then ends at the same optimum from either, and refining both only costs time. On
+    seven simulated 3-4 storey buildings the config's guesses (frequencies 4-18 % off the data
+    start's) and the data start reached the same fitting-part NRMSE to four digits, the config's
+    taking up to 104 s against 23 s; a shake-table building far from the config's guesses still
+    gets both starts (there the data's won, 0.26 against 0.89 held out)."""
+    from pidyn.systems.modal import linear_matrices, modal_properties
+
+    fa, fb = (np.sort(modal_properties(*linear_matrices(system, v))["frequency_hz"]) for v in (a, b))
+    if len(fa) != len(fb) or not (np.all(fa > 0) and np.all(fb > 0)):
+        return False
+    return bool(np.all(np.abs(fa / fb - 1.0) <= CLOSE_MODES))
 
 
 def fundamental_hz(system: ShearBuilding, values: dict[str, float]) -> float:
