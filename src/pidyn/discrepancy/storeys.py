@@ -467,19 +467,21 @@ def close_modes(system: ShearBuilding, a: dict[str, float], b: dict[str, float])
     start's) and the data start reached the same fitting-part NRMSE to four digits, the config's
     taking up to 104 s against 23 s; a shake-table building far from the config's guesses still
     gets both starts (there the data's won, 0.26 against 0.89 held out)."""
-    from pidyn.systems.modal import linear_matrices, modal_properties
-
-    fa, fb = (np.sort(modal_properties(*linear_matrices(system, v))["frequency_hz"]) for v in (a, b))
+    fa, fb = (modal_frequencies(system, v) for v in (a, b))
     if len(fa) != len(fb) or not (np.all(fa > 0) and np.all(fb > 0)):
         return False
     return bool(np.all(np.abs(fa / fb - 1.0) <= CLOSE_MODES))
 
 
-def fundamental_hz(system: ShearBuilding, values: dict[str, float]) -> float:
+def modal_frequencies(system: ShearBuilding, values: dict[str, float]) -> np.ndarray:
+    """The linear building's modal frequencies (Hz), ascending."""
     from pidyn.systems.modal import linear_matrices, modal_properties
 
-    modes = modal_properties(*linear_matrices(system, values))
-    return float(min(f for f in modes["frequency_hz"] if f > 0))
+    return np.sort(modal_properties(*linear_matrices(system, values))["frequency_hz"])
+
+
+def fundamental_hz(system: ShearBuilding, values: dict[str, float]) -> float:
+    return float(min(f for f in modal_frequencies(system, values) if f > 0))
 
 
 @dataclass

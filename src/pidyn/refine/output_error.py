@@ -64,11 +64,7 @@ def fit_output_error(
 def output_error_cost(record, system, values: dict[str, float], substeps: int = 4) -> float:
     """``fit_output_error``'s cost at ``values`` (no fit): how well a start simulates the record
     from rest, on the same scale as the fit's own cost; inf where the simulation is not finite."""
-    problem, th = _problem(record, system, values, substeps)
-    with np.errstate(all="ignore"):
-        res = problem.residuals(th)[0]
-    cost = 0.5 * float(res @ res)
-    return cost if np.isfinite(cost) else float("inf")
+    return float(output_error_costs(record, system, [values], substeps)[0])
 
 
 def output_error_costs(record, system, starts: list[dict[str, float]], substeps: int = 4) -> np.ndarray:
@@ -83,6 +79,7 @@ def output_error_costs(record, system, starts: list[dict[str, float]], substeps:
 
 
 def _problem_theta(specs, values: dict[str, float]) -> np.ndarray:
+    """The trainable parameters' unconstrained vector: ``values`` where given, the specs' starts elsewhere."""
     return to_theta(specs, {s.name: values.get(s.name, s.init) for s in specs})
 
 
@@ -91,10 +88,7 @@ def _problem(
 ) -> tuple[ShootingProblem, np.ndarray]:
     """The single-shooting problem from rest, each channel's residual relative to its spread (as a
     practitioner scales them), and the trainable parameters' start (their specs', overridden by ``init``)."""
-    specs = trainable_specs(system)
-    start = {s.name: s.init for s in specs}
-    start.update({k: v for k, v in (init or {}).items() if k in start})
     problem = ShootingProblem.from_rest(system, record, substeps)
     for ch in problem.channels:
         ch.sigma = max(float(np.std(ch.data)), 1e-300)
-    return problem, to_theta(specs, start)
+    return problem, _problem_theta(trainable_specs(system), init or {})
