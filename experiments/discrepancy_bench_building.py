@@ -187,6 +187,7 @@ def run_case(i: int, out: Path) -> dict:
     row = {k: v for k, v in case.items() if k != "hidden"}
     row["hidden"] = " + ".join(f"{h['effect']}@{h['storey']}" for h in case["hidden"]) or "none"
     row["seconds"] = seconds
+    row["code"] = code_commit()  # a resumed benchmark may span several commits
     if proc.returncode != 0 or not diag.exists():
         row.update(
             verdict="failed", named=proc.stderr.strip().splitlines()[-1][:200] if proc.stderr else "failed"

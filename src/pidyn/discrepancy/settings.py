@@ -25,9 +25,10 @@ class ConfirmSettings:
     """The output-error check of effects the weak form leans to without deciding (0: off)."""
 
     max_candidates: int = 3
-    #: a building whose model fails the fit test (``fit_test``) with nothing named: this many of each
-    #: storey's best-scored effects are fitted by output error, whatever the weak form scored them
-    misfit_per_storey: int = 2
+    #: a building whose model fails the fit test (``fit_test``) with nothing named: this many
+    #: (effect, storey) pairs are fitted by output error, in the order of the score test on the
+    #: simulated floor accelerations (``storey_ranking``), whatever the weak form scored them
+    misfit_candidates: int = 3
     #: and such an effect is named only when it removes this share of the fitting part's squared
     #: excess over the noise (summed over the floors)
     misfit_share: float = 0.5

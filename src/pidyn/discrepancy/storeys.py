@@ -301,17 +301,36 @@ def leaning_rows(screenings: list[Screening], settings: DiagnosisSettings) -> li
 
 
 def misfit_rows(
-    screenings: list[Screening], settings: DiagnosisSettings, leaning: list[tuple[int, dict]]
+    study: Study,
+    current: dict,
+    found: list[Found],
+    views: list[StoreyView],
+    screenings: list[Screening],
+    leaning: list[tuple[int, dict]],
 ) -> list[tuple[int, dict]]:
-    """Each storey's ``confirm.misfit_per_storey`` best-scored effects whatever their score, the
-    leaning ones left out: for a model that fails the fit test, where the weak form on
-    twice-integrated drifts has lost the effect (a friction in a top storey scored -2.3 there)."""
-    out: list[tuple[int, dict]] = []
-    per = int(settings.confirm.misfit_per_storey)
-    for i, sc in enumerate(screenings, start=1):
-        rows = sorted((r for r in sc.ranking if r.get("score") is not None), key=lambda r: -r["score"])
-        out += [(i, r) for r in rows[:per] if not any(j == i and q is r for j, q in leaning)]
-    return out
+    """For a model that fails the fit test: every storey's effects (the leaning ones, already
+    tried, left out) ranked by the score test on the simulated floor accelerations
+    (``storey_ranking``), the best ``confirm.misfit_candidates``. The weak form on
+    twice-integrated drifts loses effects the floors still show (a friction in a top storey
+    scored -2.3 there), so its own scores are no order for them."""
+    from pidyn.discrepancy.storey_ranking import rank_candidates
+
+    rows = [
+        (i, r)
+        for i, sc in enumerate(screenings, start=1)
+        for r in sc.ranking
+        if r.get("score") is not None and not any(j == i and q is r for j, q in leaning)
+    ]
+    ranked = [c for c in rank_candidates(study, current, found, views, rows) if c.chi2 > 0]
+    for c in ranked[:6]:
+        log.info(
+            "score test: %s in storey %d removes %.0f (%.0f%% of the squared residual), linearised",
+            c.row["effect"],
+            c.storey,
+            c.chi2,
+            100 * c.share,
+        )
+    return [(c.storey, c.row) for c in ranked[: int(study.settings.confirm.misfit_candidates)]]
 
 
 def excess2(test: dict) -> float:
@@ -751,36 +770,47 @@ def next_step(
 ) -> dict | None:
     """The next extension: the strongest named cause (and its close rivals, the fitting part's
     output error choosing), or, where the weak form names nothing, a leaning effect the output
-    error confirms, or, for a nominal building that fails the fit test, one of each storey's
-    best-scored effects; None when there is none."""
+    error confirms; then, with nothing named yet and nothing so accepted, for a building that
+    fails the fit test, the score test's best (effect, storey) pairs (``misfit_rows``). None
+    when there is nothing to try; a refused step when all were refused."""
     pick = best_row(screenings)
     if pick is None:  # the weak form names nothing: the effects it leans to are fitted by output error
-        rows = leaning_rows(screenings, study.settings)
-        step = confirm_leaning(study, current, found, views, rows)
-        if step is not None or found:
-            # after a named effect the remaining misfit is mostly that effect's own law, imperfectly
-            # fitted: a friction in storey 3 left floor 2 at 0.089 against noise 0.028, and none of
-            # six effects tried removed a tenth of it
-            return step
-        misfit = study.fit_check(current)
-        if not misfit["failed"]:
-            return None
-        # the model misses something the weak form does not see: each storey's best-scored effects
-        worst = misfit["channels"][misfit["worst"]]
-        log.info(
-            "the current model fails the fit test (%s: NRMSE %.3g against noise %.3g): trying each storey's "
-            "best-scored effects by output error",
-            misfit["worst"],
-            worst["nrmse"],
-            worst["noise"] or 0.0,
-        )
-        return confirm_leaning(
-            study, current, found, views, misfit_rows(screenings, study.settings, rows), misfit
-        )
-    storey, row = pick
+        tried = leaning_rows(screenings, study.settings)
+        step = confirm_leaning(study, current, found, views, tried)
+    else:
+        tried = [(pick[0], r) for r in close_rivals(screenings[pick[0] - 1], pick[1], study.settings)]
+        step = named_step(study, current, found, views, tried)
+    if (step is not None and step["accepted"]) or found:
+        # after a named effect the remaining misfit is mostly that effect's own law, imperfectly
+        # fitted: a friction in storey 3 left floor 2 at 0.089 against noise 0.028, and none of
+        # six effects tried removed a tenth of it
+        return step
+    misfit = study.fit_check(current)
+    if not misfit["failed"]:
+        return step
+    # the model misses something the weak form does not see, or names wrongly (a quadratic damper
+    # in storey 3 refused where a friction in storey 1 with floor 2 unmeasured was hidden)
+    worst = misfit["channels"][misfit["worst"]]
+    log.info(
+        "the current model fails the fit test (%s: NRMSE %.3g against noise %.3g): trying the effects the "
+        "score test on the floor accelerations ranks first, by output error",
+        misfit["worst"],
+        worst["nrmse"],
+        worst["noise"] or 0.0,
+    )
+    rows = misfit_rows(study, current, found, views, screenings, tried)
+    return confirm_leaning(study, current, found, views, rows, misfit) or step
+
+
+def named_step(
+    study: Study, current: dict, found: list[Found], views: list[StoreyView], rivals: list[tuple[int, dict]]
+) -> dict:
+    """The weak form's named cause and its close rivals in the same storey, each extended and
+    refined; the fitting part's output error chooses (``better``)."""
+    storey = rivals[0][0]
     sig, _ = storey_signals(views[storey - 1], current["values"][f"k{storey}"], study.period, study.fit[1])
     step = None
-    for rival in close_rivals(screenings[storey - 1], row, study.settings):
+    for _, rival in rivals:
         cand = Found(rival["effect"], storey, dict(rival["parameters"]), rival, sig.context())
         trial = study.extend(current, found, cand)
         if step is not None:

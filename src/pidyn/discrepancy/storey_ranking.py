@@ -1,0 +1,145 @@
+"""Which (effect, storey) a building's failed fit is tried with first: a score test on the
+simulated floor accelerations.
+
+The weak form scores a storey's effects on twice-integrated drifts. Where it loses an effect
+(a damping change of a lightly damped storey, a friction in a storey with an unmeasured floor
+above it), its best-scored rows are no guide, and each output-error fit of a wrong guess costs a
+refinement. Here every candidate is simulated once at the weak form's parameters (a step in
+time over a grid of its times): its change of the floor accelerations is the direction it adds
+to the current model. With the current model's own parameters profiled out (the projection off
+their sensitivities), the share of the fitting part's misfit (in noise units) that one step
+along that direction removes is the candidate's score (the residual's noise units are the
+nominal refinement's, so the scores compare candidates, not models): the Lagrange-multiplier test of adding
+the effect, without fitting it. The candidates are tried by output error in this order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pidyn.data.sources import Record
+from pidyn.discrepancy.effects import EFFECTS
+from pidyn.simulate import simulate_batch
+
+#: effects whose size may take either sign (a spring that hardens or softens, a damping that
+#: rises or falls): the projected step may run against the weak form's sign
+SIGNED = frozenset({"cubic_stiffness", "quadratic_stiffness", "damping_change"})
+#: a step in time is tried at this many times over its search span
+STEP_TIMES = 16
+
+
+@dataclass
+class Ranked:
+    storey: int
+    row: dict  # the weak form's row, its parameters at the best grid point
+    chi2: float  # the misfit (noise units) one linearised step removes
+    share: float  # ... as a share of the current model's squared residual there
+
+
+def measured_floors(record: Record) -> list[int]:
+    return [j for j in range(record.a.shape[1]) if not np.isnan(record.a[:, j]).all()]
+
+
+def floor_noise(record: Record, noise: dict, mask: np.ndarray) -> np.ndarray:
+    """Each measured floor's noise level: the nominal refinement's (floor 1 is its channel "a",
+    the others "a2", "a3", ...), or the floor's RMS where it has none."""
+    out = []
+    for j in measured_floors(record):
+        sd = noise.get(f"a{j + 1}", noise.get("a") if j == 0 else None) or np.std(record.a[mask, j])
+        out.append(max(float(sd), 1e-300))
+    return np.array(out)
+
+
+def _simulate(system, sets: list[dict[str, float]], record: Record, floors: list[int], mask) -> np.ndarray:
+    """The measured floors' relative accelerations on ``mask`` for each parameter set, (P, rows)."""
+    names = sorted(set().union(*sets))
+    params = {n: np.array([s[n] for s in sets], float) for n in names}
+    with np.errstate(all="ignore"):  # a candidate at the weak form's size may blow up: not finite, not ranked
+        a = simulate_batch(system, params, record.t, record.f, hold=_hold(record))["a"]
+    a = a.reshape(len(record.t), len(sets), -1)[mask][:, :, floors]  # (rows, P, floors)
+    return np.transpose(a, (1, 0, 2)).reshape(len(sets), -1)
+
+
+def _hold(record: Record) -> str:
+    from pidyn.simulate import input_hold
+
+    return input_hold(record)
+
+
+def _profiled(system, values: dict[str, float], record, floors, mask, scale) -> np.ndarray:
+    """An orthonormal basis of how the floors' accelerations move with the current model's
+    trainable parameters (central differences, in noise units)."""
+    names = [s.name for s in system.param_specs() if s.trainable and s.name in values]
+    sets, steps = [], []
+    for n in names:
+        h = 1e-6 * max(abs(float(values[n])), 1e-12)
+        sets += [{**values, n: values[n] + h}, {**values, n: values[n] - h}]
+        steps.append(2 * h)
+    if not sets:
+        return np.zeros((int(mask.sum()) * len(floors), 0))
+    sim = _simulate(system, sets, record, floors, mask)
+    jac = ((sim[0::2] - sim[1::2]) / np.array(steps)[:, None]).T / scale[:, None]
+    jac = jac[:, np.all(np.isfinite(jac), axis=0)]
+    q, r = np.linalg.qr(jac)
+    keep = np.abs(np.diag(r)) > 1e-10 * max(np.abs(np.diag(r)).max(initial=0.0), 1e-300)
+    return q[:, keep]
+
+
+def _trials(row: dict, span: tuple[float, float]) -> list[dict]:
+    """The row's parameters, and for a step in time the same size at every grid time."""
+    params = dict(row["parameters"])
+    if not EFFECTS[row["effect"]].step_in_time:
+        return [params]
+    lo = span[0] + 0.05 * (span[1] - span[0])
+    return [{**params, "t_d": float(t)} for t in np.linspace(lo, span[1], STEP_TIMES + 2)[1:-1]]
+
+
+def rank_candidates(
+    study, current: dict, found: list, views: list, rows: list[tuple[int, dict]]
+) -> list[Ranked]:
+    """``rows`` (storey, weak-form row) scored and sorted, best first (the module's docstring)."""
+    from pidyn.discrepancy.storeys import Found, building_with, storey_signals
+
+    record, fit = study.record, study.fit
+    mask = (record.t >= fit[0]) & (record.t <= fit[1])
+    floors = measured_floors(record)
+    scale = np.tile(floor_noise(record, current["noise"], mask), int(mask.sum()))
+    meas = record.a[mask][:, floors].reshape(-1) / scale
+    base_sys, base_vals = building_with(study.system, current["values"], found)
+    resid = meas - _simulate(current["system"], [current["values"]], record, floors, mask)[0] / scale
+    q = _profiled(current["system"], current["values"], record, floors, mask, scale)
+    r = resid - q @ (q.T @ resid)
+    total = max(float(r @ r), 1e-300)
+    base = _simulate(base_sys, [base_vals], record, floors, mask)[0] / scale
+    out = []
+    for storey, row in rows:
+        if not row.get("parameters"):
+            continue
+        sig, _ = storey_signals(views[storey - 1], current["values"][f"k{storey}"], study.period, fit[1])
+        best = None
+        trials = _trials(row, fit)
+        systems = [
+            building_with(
+                study.system, current["values"], [*found, Found(row["effect"], storey, p, row, sig.context())]
+            )
+            for p in trials
+        ]
+        sims = _simulate(systems[0][0], [s[1] for s in systems], record, floors, mask) / scale
+        for p, sim in zip(trials, sims):
+            d = sim - base
+            if not np.all(np.isfinite(d)):
+                continue
+            pd_ = d - q @ (q.T @ d)
+            dd = float(pd_ @ pd_)
+            if dd <= 0:
+                continue
+            step = float(r @ pd_) / dd
+            chi2 = step * float(r @ pd_) if (step > 0 or row["effect"] in SIGNED) else 0.0
+            if best is None or chi2 > best.chi2:
+                best = Ranked(storey, {**row, "parameters": p, "linear_step": step}, chi2, chi2 / total)
+        if best is not None:
+            out.append(best)
+    out.sort(key=lambda c: -c.chi2)
+    return out
