@@ -52,3 +52,30 @@ def test_the_hidden_effect_in_its_storey_ranks_first(effect):
     if effect == "damping_change":  # the step's time comes from the grid, not the weak form
         assert top.row["parameters"]["t_d"] == pytest.approx(7.0, abs=1.0)
     assert np.isfinite([c.chi2 for c in ranked]).all()
+
+
+def test_a_force_outside_the_library_puts_its_storey_first():
+    """A trilinear spring (softening beyond x1, hardening beyond x2: no library shape) in storey 3
+    of four: the storey whose candidates together explain most of the misfit is storey 3, where
+    the learned storey force is then tried first."""
+    from pidyn.discrepancy.storey_ranking import storey_order
+    from pidyn.simulate import simulate_response
+    from pidyn.systems.terms import TrilinearSpring
+
+    masses, dampings, stiff = [1.0, 1.1, 0.9, 1.0], [0.5] * 4, [220.0, 180.0, 150.0, 110.0]
+    linear = ShearBuilding(4, masses, dampings, stiff)
+    values = {s.name: float(s.init) for s in linear.param_specs()}
+    probe = synthetic(linear, "kobe", duration=20.0, dt=0.02, channels=("a",))
+    x = simulate_response(linear, values, probe)["x"]
+    peak = float(np.max(np.abs(x[:, 2] - x[:, 1])))
+    term = TrilinearSpring(-0.5 * stiff[2], 0.4 * peak, 1.5 * stiff[2], 0.7 * peak)
+    true = ShearBuilding(4, masses, dampings, stiff, storey_terms={3: [term]})
+    rec = synthetic(true, "kobe", duration=20.0, dt=0.02, noise=0.02, channels=("a",), data_seed=7)
+    study = Study(rec, linear, DiagnosisSettings(), None, (0.0, 13.0), (13.0, 20.0))
+    f1 = fundamental_hz(linear, values)
+    study.period, study.corner = WINDOW_SHARE / f1, CORNER_SHARE * f1
+    current = {"system": linear, "values": values, "noise": {}}
+    views, screenings = study.screen(current, [])
+    rows = [(i, r) for i, sc in enumerate(screenings, start=1) for r in sc.ranking]
+    order = storey_order(study, current, [], views, rows)
+    assert sorted(order) == [1, 2, 3, 4] and order[0] == 3, order

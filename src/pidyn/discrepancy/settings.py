@@ -18,6 +18,9 @@ class LearnedSettings:
     output_error: bool = True
     periods_per_segment: float = 3.0
     max_evaluations: int = 60
+    #: a building with no structured storey: the learned force is tried in this many storeys, those
+    #: whose library candidates together explain most of the misfit (``storey_ranking.storey_order``)
+    storeys: int = 2
 
 
 @dataclass

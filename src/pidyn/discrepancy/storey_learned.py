@@ -4,8 +4,9 @@ library effect earns its place (``unexplained``).
 A small network f(d, d') on one storey's drift and drift velocity (``LearnedForce`` inside the
 shear building's equations), trained with the building's physical parameters on the simulated
 floor accelerations of the fitting part (``pidyn.discrepancy.learned_fit``). The storey is the
-one the screening found structured, else each storey is tried and the one whose trained model
-fits the fitting part best is taken: the held-out part decides nothing but whether the learned
+one the screening found structured, else the storeys the score test on the floor accelerations
+puts first (``storey_ranking.storey_order``) are each trained briefly and the one whose trained
+model fits the fitting part best is taken: the held-out part decides nothing but whether the learned
 force is kept, which it is only when it predicts the held-out floor accelerations better than
 the model it extends (as the single-degree-of-freedom diagnosis keeps its learned force).
 """
@@ -64,20 +65,10 @@ def _save(folder: Path, ext: ShearBuilding, storey: int, values: dict[str, float
     return "learned_force.pt"
 
 
-def learned_storey_force(
-    study: Any, current: dict, storey: int | None, folder: Path | None, period: float, heldout: Callable
-) -> dict | None:
-    """Train a learned force on ``storey`` (None: every storey, the best fit on the fitting part
-    taken) from the current model, in segments of a few ``period`` s (the fundamental's);
-    ``heldout(record, system, values, span)`` scores it as the diagnosis scores every model.
-    Its held-out gain, and whether it is kept; None when no storey's network can be trained
-    (a fitting part shorter than one segment)."""
-    record, system, values = study.record, current["system"], current["values"]
-    sim = simulate_response(system, values, record)
-    drifts, velocities = system._drifts(sim["x"], sim["v"])  # per storey, as the equations take them
-    settings = study.settings.learned
-    storeys = [storey] if storey else list(range(1, system.n_dof + 1))
-    # several storeys: each trained briefly, the one whose fit falls most trained in full
+def _train_best(study, system, values, storeys: list[int], drifts, velocities, period: float):
+    """Each of several storeys trained briefly, the one whose fit falls most trained on to the full
+    budget (one storey: trained in full): (storey, system, result, seconds, tried), or None."""
+    record, settings = study.record, study.settings.learned
     brief = int(settings.max_evaluations) if len(storeys) == 1 else max(1, int(settings.max_evaluations) // 4)
     tried = []
     for i in storeys:
@@ -89,12 +80,36 @@ def learned_storey_force(
         return None
     _, chosen, ext, res = min(tried, key=lambda r: r[0])
     seconds = sum(r.seconds for *_, r in tried)
-    if brief < int(settings.max_evaluations):  # the chosen storey's network trained on to the full budget
+    if brief < int(settings.max_evaluations):
         more = _train(
             ext, res.values, record, study.fit, period, settings, int(settings.max_evaluations) - brief
         )
         if more is not None:
             res, seconds = more, seconds + more.seconds
+    return chosen, ext, res, seconds, tried
+
+
+def learned_storey_force(
+    study: Any,
+    current: dict,
+    storeys: list[int] | None,
+    folder: Path | None,
+    period: float,
+    heldout: Callable,
+) -> dict | None:
+    """Train a learned force on one of ``storeys`` (None: every storey; several: the best fit on
+    the fitting part taken) from the current model, in segments of a few ``period`` s (the fundamental's);
+    ``heldout(record, system, values, span)`` scores it as the diagnosis scores every model.
+    Its held-out gain, and whether it is kept; None when no storey's network can be trained
+    (a fitting part shorter than one segment)."""
+    record, system, values = study.record, current["system"], current["values"]
+    sim = simulate_response(system, values, record)
+    drifts, velocities = system._drifts(sim["x"], sim["v"])  # per storey, as the equations take them
+    storeys = list(storeys or range(1, system.n_dof + 1))
+    picked = _train_best(study, system, values, storeys, drifts, velocities, period)
+    if picked is None:
+        return None
+    chosen, ext, res, seconds, tried = picked
     held = heldout(record, ext, res.values, study.held)
     before = current["heldout"]["mean"]
     kept = bool(np.isfinite(held["mean"]) and held["mean"] < before)

@@ -36,6 +36,7 @@ class Ranked:
     row: dict  # the weak form's row, its parameters at the best grid point
     chi2: float  # the misfit (noise units) one linearised step removes
     share: float  # ... as a share of the current model's squared residual there
+    direction: np.ndarray  # its change of the floor accelerations, the profiled parameters' part removed
 
 
 def measured_floors(record: Record) -> list[int]:
@@ -100,6 +101,29 @@ def rank_candidates(
     study, current: dict, found: list, views: list, rows: list[tuple[int, dict]]
 ) -> list[Ranked]:
     """``rows`` (storey, weak-form row) scored and sorted, best first (the module's docstring)."""
+    ranked, _ = _scored(study, current, found, views, rows)
+    return ranked
+
+
+def storey_order(study, current: dict, found: list, views: list, rows: list[tuple[int, dict]]) -> list[int]:
+    """The storeys, the one whose candidates together remove most of the fitting part's misfit
+    first: the projection of the residual on the span of all its candidates' directions (a
+    force outside the library is in no single one of them, but its storey's springs and
+    dampers of every shape come close). Where a learned storey force is tried first."""
+    ranked, r = _scored(study, current, found, views, rows)
+    joint = {}
+    for storey in sorted({c.storey for c in ranked}):
+        d = np.stack([c.direction for c in ranked if c.storey == storey], axis=1)
+        coef, *_ = np.linalg.lstsq(d, r, rcond=1e-8)
+        fitted = d @ coef
+        joint[storey] = float(fitted @ fitted)
+    return sorted(joint, key=lambda i: -joint[i])
+
+
+def _scored(
+    study, current: dict, found: list, views: list, rows: list[tuple[int, dict]]
+) -> tuple[list[Ranked], np.ndarray]:
+    """The candidates scored (best first) and the current model's residual, its parameters profiled out."""
     from pidyn.discrepancy.storeys import Found, building_with, storey_signals
 
     record, fit = study.record, study.fit
@@ -118,7 +142,6 @@ def rank_candidates(
         if not row.get("parameters"):
             continue
         sig, _ = storey_signals(views[storey - 1], current["values"][f"k{storey}"], study.period, fit[1])
-        best = None
         trials = _trials(row, fit)
         systems = [
             building_with(
@@ -127,19 +150,25 @@ def rank_candidates(
             for p in trials
         ]
         sims = _simulate(systems[0][0], [s[1] for s in systems], record, floors, mask) / scale
+        best = None
         for p, sim in zip(trials, sims):
-            d = sim - base
-            if not np.all(np.isfinite(d)):
-                continue
-            pd_ = d - q @ (q.T @ d)
-            dd = float(pd_ @ pd_)
-            if dd <= 0:
-                continue
-            step = float(r @ pd_) / dd
-            chi2 = step * float(r @ pd_) if (step > 0 or row["effect"] in SIGNED) else 0.0
-            if best is None or chi2 > best.chi2:
-                best = Ranked(storey, {**row, "parameters": p, "linear_step": step}, chi2, chi2 / total)
+            cand = _one(storey, row, p, sim - base, q, r, total)
+            if cand is not None and (best is None or cand.chi2 > best.chi2):
+                best = cand
         if best is not None:
             out.append(best)
     out.sort(key=lambda c: -c.chi2)
-    return out
+    return out, r
+
+
+def _one(storey: int, row: dict, params: dict, d: np.ndarray, q: np.ndarray, r: np.ndarray, total: float):
+    """One candidate's linearised score from its change ``d`` of the floor accelerations."""
+    if not np.all(np.isfinite(d)):
+        return None
+    pd_ = d - q @ (q.T @ d)
+    dd = float(pd_ @ pd_)
+    if dd <= 0:
+        return None
+    step = float(r @ pd_) / dd
+    chi2 = step * float(r @ pd_) if (step > 0 or row["effect"] in SIGNED) else 0.0
+    return Ranked(storey, {**row, "parameters": params, "linear_step": step}, chi2, chi2 / total, pd_)

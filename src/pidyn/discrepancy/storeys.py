@@ -573,7 +573,7 @@ def diagnose_building(
     notes = refusal_notes(refused) + notes
     learned = None
     if verdict == Verdict.UNEXPLAINED and settings.learn_unexplained:
-        current, learned = _learned(study, current, unexplained, run_dir)
+        current, learned = _learned(study, current, found, (views, screenings), unexplained, run_dir)
     extended = _extended(current, found, bool(learned and learned["kept"]))
     return BuildingDiagnosis(
         verdict,
@@ -596,11 +596,26 @@ def diagnose_building(
 
 
 def _learned(
-    study: Study, current: dict, storey: int | None, run_dir: Path | None
+    study: Study,
+    current: dict,
+    found: list[Found],
+    screened: tuple[list[StoreyView], list[Screening]],
+    storey: int | None,
+    run_dir: Path | None,
 ) -> tuple[dict, dict | None]:
-    """The current model with a learned storey force when it is kept (``storey_learned``), and the report."""
+    """The current model with a learned storey force when it is kept (``storey_learned``), and the
+    report. Its storey: the structured one, else the ``learned.storeys`` the score test puts first."""
+    from pidyn.discrepancy.storey_ranking import storey_order
+
     period = 1.0 / fundamental_hz(current["system"], current["values"])
-    learned = learned_storey_force(study, current, storey, run_dir, period, heldout_nrmse)
+    storeys = [storey] if storey else None
+    if storey is None and current["system"].n_dof > int(study.settings.learned.storeys):
+        views, screenings = screened
+        rows = [(i, r) for i, sc in enumerate(screenings, start=1) for r in sc.ranking]
+        order = storey_order(study, current, found, views, rows)
+        log.info("score test: the storeys in the order their candidates explain the misfit: %s", order)
+        storeys = order[: int(study.settings.learned.storeys)] or None
+    learned = learned_storey_force(study, current, storeys, run_dir, period, heldout_nrmse)
     if learned is not None and learned["kept"]:  # its storey: learned["storey"]
         current = {**current, "system": learned["system"], "values": learned["values"]}
         current["heldout"] = learned["heldout"]
