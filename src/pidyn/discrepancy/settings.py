@@ -35,6 +35,8 @@ class ConfirmSettings:
     #: and such an effect is named only when it removes this share of the fitting part's squared
     #: excess over the noise (summed over the floors)
     misfit_share: float = 0.5
+    #: ... and the search stops at one that removes this share (the candidates come best first)
+    misfit_done: float = 0.9
 
 
 @dataclass

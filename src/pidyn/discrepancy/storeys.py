@@ -379,6 +379,12 @@ def confirm_leaning(
         )
         if ok and (best is None or gain > best["report"]["delta_bic_fit"]):
             best = trial
+        if (
+            ok
+            and misfit is not None
+            and trial["report"]["misfit_explained"] >= float(settings.confirm.misfit_done)
+        ):
+            break  # the rows come best first (the score test): what is left is too little for another
     return best
 
 
