@@ -34,3 +34,33 @@ def test_a_building_with_a_floor_unmeasured_starts_at_its_fundamental():
         assert values[f"k{i}"] == pytest.approx(k, rel=0.15)
     peak = fundamental(rec.segment(0.0, 13.0))
     assert peak is not None and peak[0] > 1.5 * truth  # the transmissibility alone was a mode off
+
+
+def test_a_poor_fit_from_the_data_start_brings_the_config_start_back(monkeypatch):
+    """The config's guesses are skipped when their modes are close to the data start's, but a
+    model that misses half of the fitting part from the data's start is no optimum to keep alone
+    (a clean 5-storey building, benchmark case 33, ended at NRMSE 0.97 and then 2e18 from it; its
+    config start gave 0.031): the config's start is then refined too, and the better kept."""
+    from dataclasses import replace
+
+    import pidyn.refine.stage as stage
+    from pidyn.data.sources import synthetic
+    from pidyn.discrepancy import storeys
+    from pidyn.systems.shear_building import ShearBuilding
+
+    truth = ShearBuilding(2, [1.0, 1.0], [0.4, 0.4], [150.0, 100.0])
+    rec = synthetic(truth, "el_centro", duration=12.0, dt=0.02, noise=0.01, channels=("a",), data_seed=1)
+    model = ShearBuilding(2, [1.0, 1.0], [0.4, 0.4], [140.0, 95.0])  # the config's guesses, close
+    real_refine, labels = stage.refine, []
+
+    def spoiled(system, record, start, *args, **kwargs):
+        res = real_refine(system, record, start, *args, **kwargs)
+        labels.append(next(iter(start)))
+        if "data" in start:  # the data start's optimum made poor: the stiffnesses a third of the truth
+            res = replace(res, params={k: v / 3 if k.startswith("k") else v for k, v in res.params.items()})
+        return res
+
+    monkeypatch.setattr(stage, "refine", spoiled)
+    values, _ = storeys.nominal_fit(rec, model, (0.0, 9.0), None)
+    assert labels == ["data", "config"], labels
+    assert values["k1"] == pytest.approx(150.0, rel=0.05) and values["k2"] == pytest.approx(100.0, rel=0.05)

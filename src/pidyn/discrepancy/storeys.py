@@ -434,14 +434,13 @@ def nominal_fit(
 ) -> tuple[dict[str, float], Any]:
     """The linear building on the fitting part, refined (intervals for every parameter) from the
     start read from the data and from ``start`` (an earlier run's values) or else the config's
-    guesses, each refined on its own (the config's only when its modes are not close to the
-    data start's, ``close_modes``): the one whose model simulates the fitting part's
+    guesses, each refined on its own (the config's, when its modes are close to the data
+    start's, ``close_modes``, only if the data start's model fits poorly, ``POOR_FIT``): the one whose model simulates the fitting part's
     floor accelerations better is kept. Scoring the starts by a free simulation before refining
     them misleads: a guess far below the structure's frequencies barely responds, and its small
     misfit beat a start at the right frequencies but off in phase (a shake-table building ended
     at held-out NRMSE 0.89 from the config's guess, 0.26 from the data's start)."""
     from pidyn.baselines.data_start import start_from_data
-    from pidyn.refine.stage import refine
 
     config = {s.name: float(s.init) for s in system.param_specs()}
     # an earlier run's estimate replaces the config's guesses, not the data's start: refined again
@@ -452,14 +451,42 @@ def nominal_fit(
     except Exception as exc:  # a start that cannot be read leaves the others
         log.info("no start from the data (%s)", exc)
         data = None
+    deferred = {}
     if data is not None:
         starts["data"] = {**config, **data.values}
         if start is None and close_modes(system, config, starts["data"]):
             log.info(
-                "the config's guesses not refined: every modal frequency within %.0f %% of the data start's",
+                "the config's guesses refined only if the data start's model fits poorly: every modal "
+                "frequency within %.0f %% of the data start's",
                 100 * CLOSE_MODES,
             )
-            del starts["config"]
+            deferred = {"config": starts.pop("config")}
+    best = _refined_best(record, system, starts, settings, fit, config)
+    if deferred and (best is None or best[0] > POOR_FIT):
+        # a clean 5-storey building (benchmark case 33) ended at NRMSE 0.97 from the data's start
+        best = min(
+            (b for b in (best, _refined_best(record, system, deferred, settings, fit, config)) if b),
+            key=lambda b: b[0],
+            default=None,
+        )
+    if best is None:
+        raise RuntimeError(
+            f"record '{record.name}': the nominal building could not be refined from any start"
+        )
+    return best[1], best[2]
+
+
+#: a nominal model whose simulation misses this share of the fitting part (NRMSE) is no optimum to
+#: keep without trying the config's start as well
+POOR_FIT = 0.5
+
+
+def _refined_best(
+    record: Record, system: ShearBuilding, starts: dict, settings: Any, fit: tuple[float, float], config: dict
+) -> tuple[float, dict, Any] | None:
+    """Each start refined on its own; (fitting-part NRMSE, values, result) of the best, or None."""
+    from pidyn.refine.stage import refine
+
     best = None
     for label, values in starts.items():
         try:
@@ -474,11 +501,7 @@ def nominal_fit(
         log.info("nominal model from the %s start: NRMSE %.4g on the fitting part", label, score)
         if best is None or score < best[0]:
             best = (score, est, res)
-    if best is None:
-        raise RuntimeError(
-            f"record '{record.name}': the nominal building could not be refined from any start"
-        )
-    return best[1], best[2]
+    return best
 
 
 #: relative distance of two starts' modal frequencies below which they share a basin (``close_modes``)
