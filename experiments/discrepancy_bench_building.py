@@ -148,13 +148,30 @@ def score(case: dict, d: dict) -> dict:
     return out
 
 
+def _from_label(row: dict) -> dict:
+    """What scoring needs of a diagnosis, read back from a row's label ("gap_contact@1 + ...",
+    "unexplained (learned force @3, not kept)") where its diagnosis.json is not kept."""
+    label, learned = str(row["named"]), {}
+    if " (learned force @" in label:
+        label, rest = label.split(" (learned force @")
+        learned = {"storey": int(rest.split(",")[0].rstrip(")")), "kept": "not kept" not in rest}
+    named = [part.split("@") for part in label.split(" + ") if "@" in part]
+    return {
+        "verdict": row["verdict"],
+        "causes": [c for c, _ in named],
+        "storeys": [int(st) for _, st in named],
+        "learned": learned,
+    }
+
+
 def _rescored(row_path: Path) -> dict:
     row = json.loads(row_path.read_text())
     diag = row_path.parent / "run" / "diagnosis.json"
-    if diag.exists():
-        case = draw_case(int(row["case"]))  # seeded: the same case again
-        case.pop("rec")
-        row.update(score(case, json.loads(diag.read_text())))
+    if row.get("verdict") == "failed":
+        return row
+    case = draw_case(int(row["case"]))  # seeded: the same case again
+    case.pop("rec")
+    row.update(score(case, json.loads(diag.read_text()) if diag.exists() else _from_label(row)))
     return row
 
 
@@ -215,7 +232,7 @@ def write_results(rows: list[dict], results: Path, name: str, planned: int | Non
         "",
         "`python experiments/discrepancy_bench_building.py` (`make discrepancy-bench-building`); "
         "every case diagnosed by `diagnose.py system=shear_building ... data=csv`, two at a time on 2 cores "
-        f"(other work beside them for part of the time); code {code_commit()}; "
+        "(other work beside them for part of the time); each case's code in its row; "
         f"{len(df)} cases finished"
         + (f" of {planned} planned (the run resumes where it stopped)" if planned else "")
         + ".",
@@ -236,8 +253,8 @@ def write_results(rows: list[dict], results: Path, name: str, planned: int | Non
         "",
         f"All: top-1 {df.hit.mean():.2f} ({int(df.hit.sum())}/{len(df)}), median {df.seconds.median():.0f} s.",
         "",
-        "| case | kind | storeys | sensors | record | noise | hidden | named | held-out NRMSE nominal -> extended | s |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| case | kind | storeys | sensors | record | noise | hidden | named | held-out NRMSE nominal -> extended | s | code |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in df.to_dict("records"):
         ext = r.get("heldout_extended")
@@ -249,7 +266,8 @@ def write_results(rows: list[dict], results: Path, name: str, planned: int | Non
         )
         lines.append(
             f"| {r['case']} | {r['kind']} | {r['n_storeys']} | {r['sensors']} | {r['record']} | {r['noise']:.3f} | "
-            f"{r['hidden']} | {r['named']}{'' if r['hit'] else ' **(miss)**'} | {gain} | {r['seconds']:.0f} |"
+            f"{r['hidden']} | {r['named']}{'' if r['hit'] else ' **(miss)**'} | {gain} | {r['seconds']:.0f} | "
+            f"{r.get('code') or '-'} |"
         )
     (results / f"{name}.md").write_text("\n".join(lines) + "\n")
 
