@@ -21,7 +21,7 @@ import numpy as np
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS
-from pidyn.simulate import simulate_batch
+from pidyn.simulate import input_hold, simulate_batch
 
 #: effects whose size may take either sign (a spring that hardens or softens, a damping that
 #: rises or falls): the projected step may run against the weak form's sign
@@ -40,6 +40,7 @@ class Ranked:
 
 
 def measured_floors(record: Record) -> list[int]:
+    """The floors (0-based columns of ``record.a``) that carry a sensor."""
     return [j for j in range(record.a.shape[1]) if not np.isnan(record.a[:, j]).all()]
 
 
@@ -58,15 +59,9 @@ def _simulate(system, sets: list[dict[str, float]], record: Record, floors: list
     names = sorted(set().union(*sets))
     params = {n: np.array([s[n] for s in sets], float) for n in names}
     with np.errstate(all="ignore"):  # a candidate at the weak form's size may blow up: not finite, not ranked
-        a = simulate_batch(system, params, record.t, record.f, hold=_hold(record))["a"]
+        a = simulate_batch(system, params, record.t, record.f, hold=input_hold(record))["a"]
     a = a.reshape(len(record.t), len(sets), -1)[mask][:, :, floors]  # (rows, P, floors)
     return np.transpose(a, (1, 0, 2)).reshape(len(sets), -1)
-
-
-def _hold(record: Record) -> str:
-    from pidyn.simulate import input_hold
-
-    return input_hold(record)
 
 
 def _profiled(system, values: dict[str, float], record, floors, mask, scale) -> np.ndarray:

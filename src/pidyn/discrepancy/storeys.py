@@ -43,6 +43,7 @@ from pidyn.discrepancy.pipeline import split_spans
 from pidyn.discrepancy.screening import Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_learned import learned_storey_force
+from pidyn.discrepancy.storey_ranking import floor_noise, measured_floors
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.notes import note
 from pidyn.params import positive
@@ -409,15 +410,9 @@ def fit_bic(
     residual in units of that floor's noise (the nominal refinement's), and its parameter count."""
     sim = simulate_response(system, values, record)["a"]
     mask = (record.t >= span[0]) & (record.t <= span[1])
-    chi2, n = 0.0, 0
-    for j in range(record.a.shape[1]):
-        if np.isnan(record.a[:, j]).all():
-            continue
-        # the refinement names floor 1's channel "a", the others "a2", "a3", ...
-        sd = noise.get(f"a{j + 1}", noise.get("a") if j == 0 else None) or np.std(record.a[mask, j])
-        sd = max(float(sd), 1e-300)
-        r = (sim[mask, j] - record.a[mask, j]) / sd
-        chi2, n = chi2 + float(np.sum(r**2)), n + int(mask.sum())
+    floors = measured_floors(record)
+    r = (sim[mask][:, floors] - record.a[mask][:, floors]) / floor_noise(record, noise, mask)
+    chi2, n = float(np.sum(r**2)), int(mask.sum()) * len(floors)
     k = sum(1 for s in system.param_specs() if s.trainable)
     return chi2 + k * float(np.log(max(n, 1))) if np.isfinite(chi2) else float("inf")
 
@@ -719,7 +714,7 @@ def building_heldout_test(study: Study, current: dict) -> dict:
     from pidyn.discrepancy.changes import HELDOUT_BAND, SETTLE_PERIODS, heldout_check, simulation_sensitivity
 
     record, system, values = study.record, current["system"], current["values"]
-    floors = [j for j in range(record.a.shape[1]) if not np.isnan(record.a[:, j]).all()]
+    floors = measured_floors(record)
     names = [s.name for s in system.param_specs() if s.trainable and s.name in values]
 
     def simulate(p: dict[str, float]) -> np.ndarray:
@@ -768,7 +763,7 @@ def building_fit_test(
     sim = simulate_response(system, values, record)["a"]
     ag = np.asarray(record.f, float)
     mask = (record.t >= span[0]) & (record.t <= span[1])
-    floors = [j for j in range(record.a.shape[1]) if not np.isnan(record.a[:, j]).all()]
+    floors = measured_floors(record)
     meas = {f"a{j + 1}": record.a[mask, j] + ag[mask] for j in floors}
     pred = {f"a{j + 1}": sim[mask, j] + ag[mask] for j in floors}
     f_top = float(max(modal_properties(*linear_matrices(system, values))["frequency_hz"]))
