@@ -33,6 +33,8 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from discrepancy_bench import code_commit  # noqa: E402  (the checkout's commit, "+dirty" for changed code)
+
 from pidyn.discrepancy.effects import EFFECTS, Signals  # noqa: E402
 from pidyn.discrepancy.hidden import EQUIVALENT, OUTSIDE, RECORDS, _outside_term  # noqa: E402
 
@@ -197,6 +199,7 @@ def run_case(i: int, out: Path) -> dict:
         "logger=none",
         f"hydra.run.dir={folder / 'run'}",
     ]
+    code = code_commit()  # at the start: a resumed benchmark may span several commits
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
     seconds = time.perf_counter() - t0
@@ -204,7 +207,7 @@ def run_case(i: int, out: Path) -> dict:
     row = {k: v for k, v in case.items() if k != "hidden"}
     row["hidden"] = " + ".join(f"{h['effect']}@{h['storey']}" for h in case["hidden"]) or "none"
     row["seconds"] = seconds
-    row["code"] = code_commit()  # a resumed benchmark may span several commits
+    row["code"] = code
     if proc.returncode != 0 or not diag.exists():
         row.update(
             verdict="failed", named=proc.stderr.strip().splitlines()[-1][:200] if proc.stderr else "failed"
@@ -216,11 +219,6 @@ def run_case(i: int, out: Path) -> dict:
         row["heldout_nominal"], row["heldout_extended"] = d["gain"]["nominal"], d["gain"]["extended"]
     done.write_text(json.dumps(row, indent=1, default=str))
     return row
-
-
-def code_commit() -> str:
-    out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
-    return out.stdout.strip() or "unknown"
 
 
 def write_results(rows: list[dict], results: Path, name: str, planned: int | None = None) -> None:

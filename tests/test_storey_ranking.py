@@ -77,5 +77,10 @@ def test_a_force_outside_the_library_puts_its_storey_first():
     current = {"system": linear, "values": values, "noise": {}}
     views, screenings = study.screen(current, [])
     rows = [(i, r) for i, sc in enumerate(screenings, start=1) for r in sc.ranking]
+    ranked = rank_candidates(study, current, [], views, rows)  # the search before it, on the same model
+    (memo,) = study.scores.values()
+    simulated = dict(memo["rows"])
     order = storey_order(study, current, [], views, rows)
     assert sorted(order) == [1, 2, 3, 4] and order[0] == 3, order
+    assert len(study.scores) == 1 and memo["rows"] == simulated  # its simulations reused, none added
+    assert {(c.storey, c.row["effect"]) for c in ranked} == {(k[0], k[1]) for k, v in simulated.items() if v}

@@ -37,6 +37,10 @@ class ConfirmSettings:
     misfit_share: float = 0.5
     #: ... and the search stops at one that removes this share (the candidates come best first)
     misfit_done: float = 0.9
+    #: after a named effect, a building that still fails the fit test: the score test's candidates
+    #: in the other storeys are fitted when the best removes this share of the squared residual
+    #: (linearised); 0 turns the search after a named effect off
+    after_named_share: float = 0.3
 
 
 @dataclass
@@ -91,6 +95,10 @@ class DiagnosisSettings:
             raise ValueError(f"diagnosis.fit_share must lie in [0.1, 0.95], got {self.fit_share}")
         if int(self.max_effects) < 1:
             raise ValueError(f"diagnosis.max_effects must be >= 1, got {self.max_effects}")
+        if not 0.0 <= float(self.confirm.after_named_share) <= 1.0:
+            raise ValueError(
+                f"diagnosis.confirm.after_named_share must lie in [0, 1], got {self.confirm.after_named_share}"
+            )
 
     @classmethod
     def from_mapping(cls, node: Mapping[str, Any] | None) -> DiagnosisSettings:

@@ -132,16 +132,24 @@ def _scored(
     mask = (record.t >= fit[0]) & (record.t <= fit[1])
     floors = measured_floors(record)
     scale = np.tile(floor_noise(record, current["noise"], mask), int(mask.sum()))
-    meas = record.a[mask][:, floors].reshape(-1) / scale
-    base_sys, base_vals = building_with(study.system, current["values"], found)
-    resid = meas - _simulate(current["system"], [current["values"]], record, floors, mask)[0] / scale
-    q = _profiled(current["system"], current["values"], record, floors, mask, scale)
-    r = resid - q @ (q.T @ resid)
+    memo = _memo(study, current, found)
+    if "r" not in memo:
+        meas = record.a[mask][:, floors].reshape(-1) / scale
+        base_sys, base_vals = building_with(study.system, current["values"], found)
+        resid = meas - _simulate(current["system"], [current["values"]], record, floors, mask)[0] / scale
+        q = _profiled(current["system"], current["values"], record, floors, mask, scale)
+        memo.update(q=q, r=resid - q @ (q.T @ resid), rows={})
+        memo["base"] = _simulate(base_sys, [base_vals], record, floors, mask)[0] / scale
+    q, r, base = memo["q"], memo["r"], memo["base"]
     total = max(float(r @ r), 1e-300)
-    base = _simulate(base_sys, [base_vals], record, floors, mask)[0] / scale
     out = []
     for storey, row in rows:
         if not row.get("parameters"):
+            continue
+        key = (storey, row["effect"], repr(sorted(row["parameters"].items())))
+        if key in memo["rows"]:
+            if memo["rows"][key] is not None:
+                out.append(memo["rows"][key])
             continue
         sig, _ = storey_signals(views[storey - 1], current["values"][f"k{storey}"], study.period, fit[1])
         view = views[storey - 1]
@@ -158,10 +166,25 @@ def _scored(
             cand = _one(storey, row, p, sim - base, q, r, total)
             if cand is not None and (best is None or cand.chi2 > best.chi2):
                 best = cand
+        memo["rows"][key] = best
         if best is not None:
             out.append(best)
     out.sort(key=lambda c: -c.chi2)
     return out, r
+
+
+def _memo(study, current: dict, found: list) -> dict:
+    """The score test's store for one model (its system, parameter values and named effects)."""
+    store = getattr(study, "scores", None)
+    if store is None:
+        return {}
+    model = (
+        current["system"].name,
+        repr(sorted(current["values"].items())),
+        tuple((f.effect, f.storey) for f in found),
+        repr(sorted(current["noise"].items())),
+    )
+    return store.setdefault(model, {})
 
 
 def _one(storey: int, row: dict, params: dict, d: np.ndarray, q: np.ndarray, r: np.ndarray, total: float):

@@ -308,21 +308,35 @@ def misfit_rows(
     views: list[StoreyView],
     screenings: list[Screening],
     leaning: list[tuple[int, dict]],
+    min_share: float = 0.0,
 ) -> list[tuple[int, dict]]:
     """For a model that fails the fit test: every storey's effects (the leaning ones, already
     tried, left out) ranked by the score test on the simulated floor accelerations
     (``storey_ranking``), the best ``confirm.misfit_candidates``. The weak form on
     twice-integrated drifts loses effects the floors still show (a friction in a top storey
-    scored -2.3 there), so its own scores are no order for them."""
+    scored -2.3 there), so its own scores are no order for them. After a named effect only the
+    other storeys' effects, and none when the best removes less than ``min_share`` of the
+    squared residual (linearised)."""
     from pidyn.discrepancy.storey_ranking import rank_candidates
 
+    named = {f.storey for f in found}
     rows = [
         (i, r)
         for i, sc in enumerate(screenings, start=1)
         for r in sc.ranking
-        if r.get("score") is not None and not any(j == i and q is r for j, q in leaning)
+        if r.get("score") is not None and i not in named and not any(j == i and q is r for j, q in leaning)
     ]
     ranked = [c for c in rank_candidates(study, current, found, views, rows) if c.chi2 > 0]
+    if ranked and ranked[0].share < min_share:
+        log.info(
+            "score test: the best candidate (%s in storey %d) removes %.0f%% of the squared residual, below "
+            "%.0f%%: no effect searched beside the named ones",
+            ranked[0].row["effect"],
+            ranked[0].storey,
+            100 * ranked[0].share,
+            100 * min_share,
+        )
+        return []
     for c in ranked[:6]:
         log.info(
             "score test: %s in storey %d removes %.0f (%.0f%% of the squared residual), linearised",
@@ -539,6 +553,9 @@ class Study:
     held: tuple[float, float]
     period: float = 0.0  # the weak form's window
     corner: float = 0.0  # the drifts' high-pass (Hz)
+    #: the score test's simulations per model (``storey_ranking``): the learned force's storey
+    #: order reuses those of the search that failed before it
+    scores: dict = field(default_factory=dict)
 
     def screen(self, current: dict, found: list[Found]) -> tuple[list[StoreyView], list[Screening]]:
         views = storey_views(self.record, current["system"], current["values"], self.corner)
@@ -809,10 +826,11 @@ def next_step(
 ) -> dict | None:
     """The next extension: the strongest named cause (and its close rivals, the fitting part's
     output error choosing), or, where the weak form names nothing, a leaning effect the output
-    error confirms; then, with nothing named yet and the weak form's name refused (or none
-    given), for a building that fails the fit test, the score test's best (effect, storey)
-    pairs (``misfit_rows``), a confirmed leaning effect kept only if it gains more BIC than
-    they do. None when there is nothing to try; a refused step when all were refused."""
+    error confirms; then, with the weak form's name refused (or none given), for a building that
+    fails the fit test, the score test's best (effect, storey) pairs (``misfit_rows``; after a
+    named effect, in the other storeys and only when the best is strong), a confirmed leaning
+    effect kept only if it gains more BIC than they do. None when there is nothing to try; a
+    refused step when all were refused."""
     pick = best_row(screenings)
     if pick is None:  # the weak form names nothing: the effects it leans to are fitted by output error
         tried = leaning_rows(screenings, study.settings)
@@ -820,10 +838,8 @@ def next_step(
     else:
         tried = [(pick[0], r) for r in close_rivals(screenings[pick[0] - 1], pick[1], study.settings)]
         step = named_step(study, current, found, views, tried)
-    if (step is not None and step["accepted"] and pick is not None) or found:
-        # after a named effect the remaining misfit is mostly that effect's own law, imperfectly
-        # fitted: a friction in storey 3 left floor 2 at 0.089 against noise 0.028, and none of
-        # six effects tried removed a tenth of it
+    after = float(study.settings.confirm.after_named_share)
+    if (step is not None and step["accepted"] and (pick is not None or found)) or (found and after <= 0):
         return step
     # a leaning effect the output error confirmed competes with the fit test's candidates (a
     # friction in storey 3 at 4.9 % noise: a damping change there, weak-form score 0.1, gained 16
@@ -841,7 +857,11 @@ def next_step(
         worst["nrmse"],
         worst["noise"] or 0.0,
     )
-    rows = misfit_rows(study, current, found, views, screenings, tried)
+    # after a named effect, the remaining misfit is mostly that effect's own law imperfectly
+    # fitted (a friction in storey 3 left floor 2 at 0.089 against noise 0.028, and none of six
+    # effects tried removed a tenth of it): only another storey's effect that the score test
+    # finds strong is tried (a quadratic damper in storey 1 beside a named cubic spring in storey 2)
+    rows = misfit_rows(study, current, found, views, screenings, tried, after if found else 0.0)
     other = confirm_leaning(study, current, found, views, rows, misfit)
     if other is None or (step is not None and step["accepted"] and _gain(step) >= _gain(other)):
         return step
