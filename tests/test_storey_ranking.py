@@ -52,6 +52,17 @@ def test_the_hidden_effect_in_its_storey_ranks_first(effect):
     if effect == "damping_change":  # the step's time comes from the grid, not the weak form
         assert top.row["parameters"]["t_d"] == pytest.approx(7.0, abs=1.0)
     assert np.isfinite([c.chi2 for c in ranked]).all()
+    # where the weak form found no physical fit (a wrong sign beside an inflated damper: benchmark
+    # case 56), the effect is still scored, at a typical size against the storey's drift
+    unfit = [
+        (i, {**r, "parameters": None, "score": None, "note": "no physical fit (wrong sign)"})
+        if (r["effect"], i) == (effect, storey)
+        else (i, r)
+        for i, r in rows
+    ]
+    again = rank_candidates(study, current, [], views, unfit)
+    assert (again[0].row["effect"], again[0].storey) == (effect, storey)
+    assert again[0].row["score"] is None and again[0].row["parameters"]
 
 
 def test_a_force_outside_the_library_puts_its_storey_first():

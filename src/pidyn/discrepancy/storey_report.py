@@ -12,7 +12,7 @@ import numpy as np
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy.screening import Thresholds
-from pidyn.discrepancy.storeys import BuildingDiagnosis, StoreyView, storey_system
+from pidyn.discrepancy.storeys import BuildingDiagnosis, StoreyView, score_text, storey_system
 from pidyn.systems.shear_building import ShearBuilding
 
 
@@ -185,7 +185,7 @@ def report_lines(d: dict) -> list[str]:
         )
     for s in d["steps"]:
         lines.append(
-            f"\nStep: {s['effect']} in storey {s['storey']} (score {s['score']:.1f}): held-out NRMSE "
+            f"\nStep: {s['effect']} in storey {s['storey']} (score {score_text(s.get('score'))}): held-out NRMSE "
             f"{s['heldout_before']:.4g} -> {s['heldout_after']:.4g}, {'named' if s['accepted'] else 'refused (no held-out gain)'}."
         )
     lines += [

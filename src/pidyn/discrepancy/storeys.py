@@ -324,7 +324,7 @@ def misfit_rows(
         (i, r)
         for i, sc in enumerate(screenings, start=1)
         for r in sc.ranking
-        if r.get("score") is not None and i not in named and not any(j == i and q is r for j, q in leaning)
+        if i not in named and not any(j == i and q is r for j, q in leaning)
     ]
     ranked = [c for c in rank_candidates(study, current, found, views, rows) if c.chi2 > 0]
     if ranked and ranked[0].share < min_share:
@@ -385,10 +385,10 @@ def confirm_leaning(
             trial["report"].update(source="fit_test", misfit_explained=explained)
             ok = ok and explained >= float(settings.confirm.misfit_share)
         log.info(
-            "output-error check of %s in storey %d (weak-form score %.1f): BIC gain %.1f on the fitting part%s",
+            "output-error check of %s in storey %d (weak-form score %s): BIC gain %.1f on the fitting part%s",
             cand.effect,
             storey,
-            row["score"],
+            score_text(row.get("score")),
             gain,
             "" if misfit is None else f", {trial['report']['misfit_explained']:.0%} of the misfit explained",
         )
@@ -913,13 +913,18 @@ def building_gain(nominal: dict, current: dict, extended: bool) -> dict:
     }
 
 
+def score_text(score: float | None) -> str:
+    """A weak-form score for people; None where the weak form found no physical fit."""
+    return "none (no physical fit)" if score is None else f"{score:.1f}"
+
+
 def refusal_notes(refused: dict | None) -> list[str]:
     if refused is None:
         return []
     return [
         note(
             "refused_no_heldout_gain",
-            f"{refused['effect']} in storey {refused['storey']} passed the screening (score {refused['score']:.1f}) "
+            f"{refused['effect']} in storey {refused['storey']} passed the screening (score {score_text(refused.get('score'))}) "
             f"but did not predict the held-out floor accelerations better ({refused['heldout_before']:.4g} -> "
             f"{refused['heldout_after']:.4g}): not named",
         )
