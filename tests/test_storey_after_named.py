@@ -19,6 +19,7 @@ from pidyn.discrepancy.storeys import (
     fundamental_hz,
     misfit_rows,
     storey_signals,
+    storey_views,
 )
 from pidyn.simulate import simulate_response
 from pidyn.systems.shear_building import ShearBuilding
@@ -52,7 +53,7 @@ def _state(hidden: dict[int, list], named_k3: float):
     study = Study(rec, linear, DiagnosisSettings(), None, (0.0, 13.0), (13.0, 20.0))
     f1 = fundamental_hz(linear, values)
     study.period, study.corner = WINDOW_SHARE / f1, CORNER_SHARE * f1
-    views, _ = study.screen({"system": linear, "values": values, "noise": {}}, [])
+    views = storey_views(rec, linear, values, study.corner)
     sig, _ = storey_signals(views[1], values["k2"], study.period, study.fit[1])
     named = Found("cubic_stiffness", 2, {"k3": named_k3}, {"score": 60.0}, sig.context())
     system, vals = building_with(linear, values, [named])
