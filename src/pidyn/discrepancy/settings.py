@@ -40,7 +40,7 @@ class ConfirmSettings:
     #: after a named effect, a building that still fails the fit test: the score test's candidates
     #: in the other storeys are fitted when the best removes this share of the squared residual
     #: (linearised); 0 turns the search after a named effect off
-    after_named_share: float = 0.2
+    after_named_share: float = 0.4
 
 
 @dataclass
