@@ -69,8 +69,8 @@ def test_a_poor_fit_from_the_data_start_brings_the_config_start_back(monkeypatch
 @pytest.mark.parametrize("record, winner", [("kobe", "frequency_scan"), ("el_centro", "equation_error")])
 def test_the_equation_error_start_is_checked_against_the_frequency_scan(record, winner):
     """Every floor measured, 4.9 % noise (benchmark case 56's building): under Kobe the equation
-    error on twice-integrated accelerations puts the storeys at a quarter to a half of the truth
-    and the scan's start, which simulates the record better, is taken; under El Centro the
+    error on twice-integrated accelerations puts the storeys far below the truth and the scan's
+    start, which simulates the record better, is taken; under El Centro the
     equation error is the better start and stays."""
     masses, stiff = [0.991, 0.954, 0.869, 1.154], [208.38, 173.65, 138.92, 104.19]
     true = ShearBuilding(4, masses, [0.57, 0.51, 0.44, 0.44], stiff)
