@@ -66,17 +66,16 @@ def test_a_poor_fit_from_the_data_start_brings_the_config_start_back(monkeypatch
     assert values["k1"] == pytest.approx(150.0, rel=0.05) and values["k2"] == pytest.approx(100.0, rel=0.05)
 
 
-@pytest.mark.parametrize("record, winner", [("kobe", "frequency_scan"), ("el_centro", "equation_error")])
-def test_the_equation_error_start_is_checked_against_the_frequency_scan(record, winner):
-    """Every floor measured, 4.9 % noise (benchmark case 56's building): under Kobe the equation
-    error on twice-integrated accelerations puts the storeys far below the truth and the scan's
-    start, which simulates the record better, is taken; under El Centro the
-    equation error is the better start and stays."""
+def test_the_equation_error_start_is_checked_against_the_frequency_scan():
+    """Every floor measured, 4.9 % noise, Kobe (benchmark case 56's building): the equation error
+    on twice-integrated accelerations puts the storeys far below the truth and the scan's start,
+    which simulates the record better, is taken. Where the equation error is the better start it
+    stays (El Centro, ``test_imu.py``'s building with its masses unknown)."""
     masses, stiff = [0.991, 0.954, 0.869, 1.154], [208.38, 173.65, 138.92, 104.19]
     true = ShearBuilding(4, masses, [0.57, 0.51, 0.44, 0.44], stiff)
-    rec = synthetic(true, record, duration=20.0, dt=0.02, noise=0.049, channels=("a",), data_seed=1)
+    rec = synthetic(true, "kobe", duration=20.0, dt=0.02, noise=0.049, channels=("a",), data_seed=1)
     nominal = ShearBuilding(4, masses, guess={"c": 1.0, "k": 120.0})  # the config's guesses
     start = start_from_data(rec.segment(0.0, 13.0), nominal)
-    assert start is not None and start.method == winner, start
+    assert start is not None and start.method == "frequency_scan", start
     values = {**{s.name: float(s.init) for s in nominal.param_specs()}, **start.values}
     assert f1(nominal, values) == pytest.approx(f1(true, true.true_values()), rel=0.1)

@@ -76,6 +76,7 @@ def _terms(cubic: dict, quad: dict | None) -> dict[int, list]:
     return terms
 
 
+@pytest.mark.slow
 def test_the_other_storeys_effect_of_a_pair_comes_first(sizes):
     cubic, quad = sizes
     study, current, found, views, screenings = _state(_terms(cubic, quad), cubic["k3"])
@@ -85,6 +86,7 @@ def test_the_other_storeys_effect_of_a_pair_comes_first(sizes):
     assert all(i != 2 for i, _ in rows)  # the named effect's storey is not searched again
 
 
+@pytest.mark.slow
 def test_an_effect_alone_named_with_an_imperfect_law_leaves_nothing_to_search(sizes):
     """The named cubic spring 30 % too soft (its other parameters at the truth): what its law leaves
     is in its own storey, which is not searched; the other storeys' best candidate, a damping

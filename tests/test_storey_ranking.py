@@ -26,6 +26,7 @@ CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("effect", sorted(CASES))
 def test_the_hidden_effect_in_its_storey_ranks_first(effect):
     storey, term = CASES[effect]
@@ -65,6 +66,7 @@ def test_the_hidden_effect_in_its_storey_ranks_first(effect):
     assert again[0].row["score"] is None and again[0].row["parameters"]
 
 
+@pytest.mark.slow
 def test_a_force_outside_the_library_puts_its_storey_first():
     """A trilinear spring (softening beyond x1, hardening beyond x2: no library shape) in storey 3
     of four: the storey whose candidates together explain most of the misfit is storey 3, where
