@@ -88,7 +88,7 @@ def start_from_data(record, system) -> DataStart | None:
         except (np.linalg.LinAlgError, RuntimeError, ValueError) as exc:
             log.info("equation-error start failed (%s); the transfer function's peak is used", exc)
     if _scan_applies(record, system):
-        out = _checked_by_scan(record, system, out, fn, zeta)
+        out = _from_scan(record, system, fn, zeta, rival=out) or out
     if out is None:
         out = _from_peak(system, fn, zeta)
     out.seconds = time.perf_counter() - t0
@@ -304,26 +304,9 @@ def _scan_applies(record, system) -> bool:
     )
 
 
-def _checked_by_scan(record, system, out: DataStart | None, fn: float, zeta: float) -> DataStart | None:
-    """A building's equation-error start against its frequency scan: the one whose linear part
-    simulates the measured channels better. Twice-integrated accelerations high-passed at a fifth
-    of the fundamental put the storeys 13-58 % below the truth on Kobe records of the building
-    benchmark (misfit 0.42-0.95 against the scan's 0.13-0.22), and the refinement from there
-    diverged; under El Centro the equation error was within 1 % (misfit 0.011 against 0.24)."""
-    scan = _from_scan(record, system, fn, zeta)
-    if out is None or scan is None:
-        return out or scan
-    measured = {k: [j - 1 for j in v] for k, v in record.sensors().items() if v}
-    init = {s.name: float(s.init) for s in system.param_specs()}
-    own, other = (_linear_misfit(record, system, {**init, **d.values}, measured) for d in (out, scan))
-    if other < own:
-        log.info("equation-error start (misfit %.3g) replaced by the frequency scan's (%.3g)", own, other)
-        scan.note += f"; the equation-error start simulated the record worse (misfit {own:.3g})"
-        return scan
-    return out
-
-
-def _from_scan(record, system, peak_hz: float, peak_zeta: float) -> DataStart | None:
+def _from_scan(
+    record, system, peak_hz: float, peak_zeta: float, rival: DataStart | None = None
+) -> DataStart | None:
     """A building the equation error cannot take (floors without a sensor): the config's
     stiffness profile scaled to each fundamental frequency of a grid (``SCAN_PER_OCTAVE`` per
     octave, from the record's lowest resolvable frequency to a fifth of the sampling rate) and
@@ -331,7 +314,13 @@ def _from_scan(record, system, peak_hz: float, peak_zeta: float) -> DataStart | 
     freely (an exact discretization, milliseconds), and the best fit of the measured channels
     taken. A 20 s record resolves its transmissibility to 0.2 Hz: on the building benchmark's
     sparse-sensor cases the peak sat on the second mode, 2.3-2.9 times the fundamental, and a
-    4-storey start there ended at a fifth of the fundamental's stiffness elsewhere."""
+    4-storey start there ended at a fifth of the fundamental's stiffness elsewhere.
+
+    ``rival`` (the equation error's start, every floor measured) is returned instead when it
+    simulates the record at least as well. Twice-integrated accelerations high-passed at a fifth
+    of the fundamental put the storeys 13-58 % below the truth on Kobe records of the building
+    benchmark (misfit 0.42-0.95 against the scan's 0.13-0.22), and the refinement from there
+    diverged; under El Centro the equation error was within 1 % (misfit 0.011 against 0.24)."""
     duration = float(record.t[-1] - record.t[0])
     lo, hi = max(2.0 / max(duration, 1e-9), 0.05), 0.2 / record.dt
     if not lo < hi:
@@ -349,14 +338,15 @@ def _from_scan(record, system, peak_hz: float, peak_zeta: float) -> DataStart | 
     if best is None or not np.isfinite(best[0]):
         return None
     score, cand, fn, zeta = best
-    return DataStart(
-        cand.values,
-        "frequency_scan",
-        float(fn),
-        float(zeta),
-        note=f"free-simulation scan: fundamental {fn:.4g} Hz, damping {100 * zeta:.2g} % (misfit {score:.3g}); "
-        f"transmissibility peak {peak_hz:.4g} Hz",
-    )
+    note = f"free-simulation scan: fundamental {fn:.4g} Hz, damping {100 * zeta:.2g} % (misfit {score:.3g}); "
+    note += f"transmissibility peak {peak_hz:.4g} Hz"
+    if rival is not None:
+        own = _linear_misfit(record, system, {**init, **rival.values}, measured)
+        if own <= score:
+            return rival
+        log.info("equation-error start (misfit %.3g) replaced by the frequency scan's (%.3g)", own, score)
+        note += f"; the equation-error start simulated the record worse (misfit {own:.3g})"
+    return DataStart(cand.values, "frequency_scan", float(fn), float(zeta), note=note)
 
 
 def _linear_misfit(record, system, values: dict[str, float], measured: dict[str, list[int]]) -> float:

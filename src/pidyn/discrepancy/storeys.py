@@ -43,7 +43,7 @@ from pidyn.discrepancy.pipeline import split_spans
 from pidyn.discrepancy.screening import Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_learned import learned_storey_force
-from pidyn.discrepancy.storey_ranking import floor_noise, measured_floors
+from pidyn.discrepancy.storey_ranking import floor_noise, measured_floors, rank_candidates, storey_order
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.notes import note
 from pidyn.params import positive
@@ -317,8 +317,6 @@ def misfit_rows(
     scored -2.3 there), so its own scores are no order for them. After a named effect only the
     other storeys' effects, and none when the best removes less than ``min_share`` of the
     squared residual (linearised)."""
-    from pidyn.discrepancy.storey_ranking import rank_candidates
-
     named = {f.storey for f in found}
     rows = [
         (i, r)
@@ -646,8 +644,6 @@ def _learned(
 ) -> tuple[dict, dict | None]:
     """The current model with a learned storey force when it is kept (``storey_learned``), and the
     report. Its storey: the structured one, else the ``learned.storeys`` the score test puts first."""
-    from pidyn.discrepancy.storey_ranking import storey_order
-
     period = 1.0 / fundamental_hz(current["system"], current["values"])
     storeys = [storey] if storey else None
     if storey is None and current["system"].n_dof > int(study.settings.learned.storeys):
