@@ -34,6 +34,7 @@ import numpy as np
 import torch
 
 from pidyn.params import ParamSpec, positive
+from pidyn.systems import shear_rate
 from pidyn.systems.base import ExcitationKind, Kinematics, StructuralSystem, merge_specs, stack_last
 from pidyn.systems.terms import TERMS, BoucWenHysteresis, ForceTerm, LinearStiffness, ViscousDamping
 
@@ -354,6 +355,23 @@ class ShearBuilding(StructuralSystem):
         return out
 
     def state_rate(self, t, y, p, f):
+        if self.excitation == "ground" and not isinstance(y, torch.Tensor):  # the integrator's path
+            return shear_rate.state_rate(self, *self._layout(), t, y, p, f)
+        return self._state_rate_by_term(t, y, p, f)
+
+    def _layout(self) -> tuple[shear_rate.Layout, shear_rate.Vectors]:
+        """The terms' split for ``shear_rate`` and its parameter store, rebuilt when the terms change."""
+        slices = self._latent_slices()
+        cached = getattr(self, "_lay", None)
+        if cached is not None and cached[0] is slices:
+            return cached[1]
+        lay = (shear_rate.layout(self.storeys, slices), shear_rate.Vectors())
+        self._lay = (slices, lay)
+        return lay
+
+    def _state_rate_by_term(self, t, y, p, f):
+        """The state rate term by term: torch tensors (a learned force trained through it) and
+        any excitation; ``shear_rate`` is the same on whole floor vectors."""
         n = self.n_dof
         x, v, z = y[..., :n], y[..., n : 2 * n], y[..., 2 * n :]
         d, dv = drifts = self._drifts(x, v)
