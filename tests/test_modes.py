@@ -119,7 +119,7 @@ def test_two_modes_on_two_supports_are_recovered_from_one_sensor(tmp_path):
     from pidyn.data.sources import synthetic_from_motion
 
     truth = ModesOnSupports(n_modes=2, inputs=["a", "b"], params={k: {"true": v} for k, v in TRUTH.items()})
-    rec = synthetic_from_motion(truth, _motions(30.0), noise=0.02, channels=["a"], sensors=[1])
+    rec = synthetic_from_motion(truth, _motions(20.0), noise=0.02, channels=["a"], sensors=[1])
     from dataclasses import replace
 
     measured = replace(rec, truth=None, clean=None)  # as a measured record: the start comes from the data

@@ -303,7 +303,16 @@ def test_the_diagnosis_of_an_accelerometer_record_names_a_hidden_cubic_spring(tm
     from pidyn.tasks.diagnose import diagnose
 
     cfg = make_cfg(
-        ["data.source.channels=[a]", "noise=0.02", "diagnosis.max_effects=1", "model.schedule.max_windows=3"],
+        [
+            "data.source.channels=[a]",
+            "noise=0.02",
+            "diagnosis.max_effects=1",
+            "model.schedule.max_windows=3",
+            # a short PIDynNet stage: the refinement from the accelerations' start decides
+            "model.schedule.pretrain_iters=150",
+            "model.schedule.pretrain_iters_window=150",
+            "model.schedule.max_iters=200",
+        ],
         tmp_path,
         config_name="diagnose",
     )
