@@ -79,14 +79,15 @@ def _net(u: np.ndarray, axis: int) -> np.ndarray:
     return out
 
 
-def _vector(p: dict, names: tuple[str | None, ...], like: Any) -> Any:
-    """The parameters ``names`` on a last axis (0 where None), broadcast against ``like``'s
-    leading axes only when a parameter varies by trajectory."""
+def _vector(p: dict, names: tuple[str | None, ...]) -> Any:
+    """The parameters ``names`` on a last axis (0 where None); scalars beside per-trajectory
+    values (an output-error step's perturbed copies) are broadcast to the trajectories."""
     vals = [0.0 if n is None else p[n] for n in names]
-    shapes = {v.shape if hasattr(v, "shape") else () for v in vals}
-    if len(shapes) > 1:  # scalars beside per-trajectory arrays: every one to the same shape
-        ref = like[..., 0]
-        vals = [v + 0.0 * ref for v in vals]
+    shapes = [v.shape if hasattr(v, "shape") else () for v in vals]
+    widest = max(shapes, key=len)
+    if any(sh != widest for sh in shapes):
+        zeros = np.zeros(widest)
+        vals = [v if sh == widest else v + zeros for v, sh in zip(vals, shapes)]
     return np.stack(vals, axis=-1)
 
 
@@ -98,16 +99,14 @@ class Vectors:
         self.key: tuple = ()
         self.value: tuple = ()
 
-    def get(self, p: dict, lay: Layout, n: int, like: Any) -> tuple:
+    def get(self, p: dict, lay: Layout, n: int) -> tuple:
         masses = tuple(f"m{i + 1}" for i in range(n))
         names = lay.dampers + lay.springs + masses
         key = (p, *(None if k is None else p[k] for k in names))
         if len(key) == len(self.key) and all(a is b for a, b in zip(key, self.key)):
             return self.value
-        value = (_vector(p, lay.dampers, like), _vector(p, lay.springs, like), _vector(p, masses, like))
-        if not any(hasattr(v, "shape") and v.shape for v in key[1:] if v is not None):
-            self.key, self.value = key, value  # scalars only: per-trajectory values follow ``like``
-        return value
+        self.key, self.value = key, (_vector(p, lay.dampers), _vector(p, lay.springs), _vector(p, masses))
+        return self.value
 
 
 def state_rate(building: Any, lay: Layout, cache: Vectors, t: Any, y: Any, p: dict, f: Any) -> Any:
@@ -115,7 +114,7 @@ def state_rate(building: Any, lay: Layout, cache: Vectors, t: Any, y: Any, p: di
     n = building.n_dof
     x, v, z = y[..., :n], y[..., n : 2 * n], y[..., 2 * n :]
     d, dv = _along_last(x, _drift), _along_last(v, _drift)
-    damp, spring, masses = cache.get(p, lay, n, d)
+    damp, spring, masses = cache.get(p, lay, n)
     force = damp * dv + spring * d
     latent = []
     if lay.others:
