@@ -37,6 +37,7 @@ sys.path.insert(0, str(ROOT / "src"))
 from pidyn.discrepancy.effects import EFFECTS  # noqa: E402
 from pidyn.discrepancy.hidden import EQUIVALENT  # noqa: E402
 from pidyn.errors import error_pct  # noqa: E402
+from pidyn.runs import provenance  # noqa: E402
 
 NAMES = ["none", *sorted(EFFECTS)]
 #: the benchmark's PIDynNet schedule, stated in every row's table; diagnose's default since db7a6c1
@@ -172,20 +173,7 @@ def summarise(df: pd.DataFrame) -> dict:
 
 def code_commit() -> str:
     """The checkout's commit (with ``+dirty`` for uncommitted changes), stamped on every row."""
-    try:
-        head = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT, check=True
-        ).stdout.strip()
-        # the code only: the study rewrites its own table under experiments/results as it goes
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no", "--", "src", "*.py", "conf"],
-            capture_output=True,
-            text=True,
-            cwd=ROOT,
-        ).stdout.strip()
-        return head + ("+dirty" if dirty else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
+    return provenance.code_commit(ROOT)
 
 
 def committed_rows(path: Path, kinds: list[Kind]) -> dict[int, dict]:

@@ -226,10 +226,9 @@ def write(df: pd.DataFrame, out: Path, command: str) -> None:
 
 
 def _commit() -> str:
-    import subprocess
+    from pidyn.runs.provenance import code_commit
 
-    out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
-    return out.stdout.strip() or "unknown"
+    return code_commit(ROOT)
 
 
 def main() -> None:
