@@ -47,8 +47,10 @@ class ConfirmSettings:
 class FitTestSettings:
     """Whether the model fits its fitting part down to the sensors' noise (``pidyn.discrepancy.fit_test``)."""
 
-    #: a channel fails when its residual RMS is this many times its noise floor
-    rms_ratio: float = 2.0
+    #: a channel fails when its residual RMS is this many times its noise floor (clean buildings
+    #: with noise stay at or below 1.18 times, experiments/results/fit_test_calibration.md; at 2.0
+    #: a damping change that left floor 1 at 1.90 times went unsearched)
+    rms_ratio: float = 1.5
     #: and exceeds it by this share of the channel's signal (NRMSE above the noise)
     min_excess: float = 0.02
 
