@@ -93,7 +93,9 @@ def _vector(p: dict, names: tuple[str | None, ...]) -> Any:
 
 class Vectors:
     """The dampers', springs' and masses' parameters as floor vectors, kept while the
-    integrator passes the same parameter values (every call of a simulation)."""
+    integrator passes the same parameter values (every call of a simulation). The values are
+    told apart by identity: a value changed in place (an array written into) would be missed;
+    the refinement and output error build new values for every iterate."""
 
     def __init__(self) -> None:
         self.key: tuple = ()
