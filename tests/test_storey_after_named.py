@@ -136,3 +136,34 @@ def test_the_misfit_search_stops_at_a_candidate_that_removes_nearly_all_of_it(mo
     tried.clear()
     best = st.confirm_leaning(FakeStudy(), current, [], [None], [(1, dict(rows[0][1], effect="D"))], misfit)
     assert tried == ["D"] and best is None  # a BIC gain of 1000, but 36 % of the squared excess removed
+
+
+def test_a_first_name_that_leaves_most_of_the_misfit_is_challenged(monkeypatch):
+    """The weak form's first name competes with the score test's candidates only when the building
+    fails the fit test and the name removes less than ``misfit_share`` of its excess over the
+    noise (a quadratic spring named a cubic one removed 23 %); a name that removes most of it,
+    or a building that passes the test, is kept without a search."""
+    import pidyn.discrepancy.storeys as st
+
+    def test_of(excess: float, failed: bool = True) -> dict:
+        return {"failed": failed, "channels": {"a1": {"excess": excess}}}
+
+    before, after = {"model": "before"}, {"model": "after"}
+    study = Study(None, None, DiagnosisSettings(), None, (0.0, 13.0), (13.0, 20.0))  # type: ignore[arg-type]
+    monkeypatch.setattr(st, "fit_bic", lambda *a: 1000.0)
+
+    def step() -> dict:
+        report = {"effect": "cubic_stiffness", "storey": 3, "fit_bic": 700.0}
+        return {"accepted": True, "report": report, "current": after}
+
+    for excess_after, weak in ((0.9, True), (0.6, False)):  # 19 % and 64 % of the excess removed
+        tests = {"before": test_of(1.0), "after": test_of(excess_after)}
+        study.fit_check = lambda current: tests[current["model"]]  # type: ignore[method-assign]
+        s = step()
+        assert st.weak_first_name(study, {**before, "system": None, "values": {}, "noise": {}}, s) is weak
+        assert s["report"]["delta_bic_fit"] == pytest.approx(300.0)
+        assert s["report"]["misfit_explained"] == pytest.approx(1 - excess_after**2)
+    study.fit_check = lambda current: test_of(1.0, failed=False)  # type: ignore[method-assign]
+    s = step()
+    assert not st.weak_first_name(study, {**before, "system": None, "values": {}, "noise": {}}, s)
+    assert "delta_bic_fit" not in s["report"]  # nothing to compete with: no search, no gain computed
