@@ -33,10 +33,10 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from discrepancy_bench import code_commit  # noqa: E402  (the checkout's commit, "+dirty" for changed code)
 
 from pidyn.discrepancy.effects import EFFECTS, Signals  # noqa: E402
 from pidyn.discrepancy.hidden import EQUIVALENT, OUTSIDE, RECORDS, _outside_term  # noqa: E402
+from pidyn.runs.provenance import code_commit  # noqa: E402  (the checkout's commit, "+dirty" for changed code)
 
 SINGLE = sorted(EFFECTS)
 KINDS = ["none", *SINGLE, "pair", "trilinear_spring"]
@@ -199,7 +199,7 @@ def run_case(i: int, out: Path) -> dict:
         "logger=none",
         f"hydra.run.dir={folder / 'run'}",
     ]
-    code = code_commit()  # at the start: a resumed benchmark may span several commits
+    code = code_commit(ROOT)  # at the start: a resumed benchmark may span several commits
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
     seconds = time.perf_counter() - t0

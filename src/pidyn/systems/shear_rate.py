@@ -28,6 +28,7 @@ class Layout:
     dampers: tuple[str | None, ...]
     springs: tuple[str | None, ...]
     others: tuple[tuple[int, Any, slice | None], ...]
+    masses: tuple[str, ...]
 
 
 def layout(storeys: list, slices: list) -> Layout:
@@ -48,7 +49,8 @@ def layout(storeys: list, slices: list) -> Layout:
                 others.append((i, term, sl))
         dampers.append(c)
         springs.append(k)
-    return Layout(tuple(dampers), tuple(springs), tuple(others))
+    masses = tuple(f"m{i + 1}" for i in range(len(storeys)))
+    return Layout(tuple(dampers), tuple(springs), tuple(others), masses)
 
 
 def _along_last(u: Any, op) -> Any:
@@ -59,24 +61,24 @@ def _along_last(u: Any, op) -> Any:
     return op(np.asarray(u, dtype=float), -1)
 
 
-def _drift(u: np.ndarray, axis: int) -> np.ndarray:
-    """u_i - u_{i-1} along ``axis``, u_0 itself: the storeys' drifts from the floors'."""
+def _minus_neighbour(u: np.ndarray, axis: int, below: bool) -> np.ndarray:
+    """u_i - u_{i-1} along ``axis`` (``below``: the storeys' drifts from the floors', u_0 itself),
+    or u_i - u_{i+1} (the floors' net force from their storeys', the top's own)."""
     out = u.copy()
     lo = [slice(None)] * u.ndim
     hi = list(lo)
-    lo[axis], hi[axis] = slice(1, None), slice(None, -1)
+    inner, outer = slice(1, None), slice(None, -1)
+    lo[axis], hi[axis] = (inner, outer) if below else (outer, inner)
     out[tuple(lo)] -= u[tuple(hi)]
     return out
+
+
+def _drift(u: np.ndarray, axis: int) -> np.ndarray:
+    return _minus_neighbour(u, axis, below=True)
 
 
 def _net(u: np.ndarray, axis: int) -> np.ndarray:
-    """F_i - F_{i+1} along ``axis``, the top's own: each floor's net force from its storeys'."""
-    out = u.copy()
-    lo = [slice(None)] * u.ndim
-    hi = list(lo)
-    lo[axis], hi[axis] = slice(None, -1), slice(1, None)
-    out[tuple(lo)] -= u[tuple(hi)]
-    return out
+    return _minus_neighbour(u, axis, below=False)
 
 
 def _vector(p: dict, names: tuple[str | None, ...]) -> Any:
@@ -101,13 +103,12 @@ class Vectors:
         self.key: tuple = ()
         self.value: tuple = ()
 
-    def get(self, p: dict, lay: Layout, n: int) -> tuple:
-        masses = tuple(f"m{i + 1}" for i in range(n))
-        names = lay.dampers + lay.springs + masses
-        key = (p, *(None if k is None else p[k] for k in names))
+    def get(self, p: dict, lay: Layout) -> tuple:
+        key = (p, *(None if k is None else p[k] for k in lay.dampers + lay.springs + lay.masses))
         if len(key) == len(self.key) and all(a is b for a, b in zip(key, self.key)):
             return self.value
-        self.key, self.value = key, (_vector(p, lay.dampers), _vector(p, lay.springs), _vector(p, masses))
+        self.key = key
+        self.value = (_vector(p, lay.dampers), _vector(p, lay.springs), _vector(p, lay.masses))
         return self.value
 
 
@@ -116,7 +117,7 @@ def state_rate(building: Any, lay: Layout, cache: Vectors, t: Any, y: Any, p: di
     n = building.n_dof
     x, v, z = y[..., :n], y[..., n : 2 * n], y[..., 2 * n :]
     d, dv = _along_last(x, _drift), _along_last(v, _drift)
-    damp, spring, masses = cache.get(p, lay, n)
+    damp, spring, masses = cache.get(p, lay)
     force = damp * dv + spring * d
     latent = []
     if lay.others:
