@@ -78,7 +78,7 @@ def main() -> None:
         data_seed=5,
         logger="none",
         out_dir=out / "diagnosis",
-        **{k: v for k, v in fast.items() if k != "model__schedule__max_windows"},
+        **fast,
     )
     print(f"verdict: {diagnosis.verdict}, causes {diagnosis.causes}; extended model: {diagnosis.extended}")
     print(
