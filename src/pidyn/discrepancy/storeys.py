@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -813,6 +813,10 @@ def nominal_state(study: Study, start: dict | None) -> tuple[dict, dict]:
         "fit": heldout_nrmse(record, system, values, study.fit),
         "fit_test": building_fit_test(record, system, values, study.fit, study.settings),
     }
+    if getattr(study.refine_settings, "initial_state", None) == "auto" and res.rest_test.get("at_rest"):
+        # the nominal building accepted rest: every extension starts from rest too, instead of
+        # testing it again (a refinement more each: 27 of 175 s of a two-effect diagnosis)
+        study.refine_settings = replace(study.refine_settings, initial_state="rest")
     f1 = fundamental_hz(system, values)
     study.period = WINDOW_SHARE / f1
     study.corner = max(CORNER_SHARE * f1, 2.0 / float(record.t[-1] - record.t[0]))

@@ -53,32 +53,29 @@ def layout(storeys: list, slices: list) -> Layout:
     return Layout(tuple(dampers), tuple(springs), tuple(others), masses)
 
 
-def _along_last(u: Any, op) -> Any:
-    """``op`` on a plain array's last axis, or on a dual array's values and derivatives (whose
-    floor axis is the one before the directions)."""
+def _drift(u: Any) -> Any:
+    """The storeys' drifts from the floors' displacements (or velocities): u_i - u_{i-1}, u_0
+    itself; plain arrays on their last axis, dual arrays' derivatives on the one before."""
     if isinstance(u, Dual):
-        return Dual(op(u.v, -1), op(u.d, -2))
-    return op(np.asarray(u, dtype=float), -1)
-
-
-def _minus_neighbour(u: np.ndarray, axis: int, below: bool) -> np.ndarray:
-    """u_i - u_{i-1} along ``axis`` (``below``: the storeys' drifts from the floors', u_0 itself),
-    or u_i - u_{i+1} (the floors' net force from their storeys', the top's own)."""
-    out = u.copy()
-    lo = [slice(None)] * u.ndim
-    hi = list(lo)
-    inner, outer = slice(1, None), slice(None, -1)
-    lo[axis], hi[axis] = (inner, outer) if below else (outer, inner)
-    out[tuple(lo)] -= u[tuple(hi)]
+        v, d = u.v.copy(), u.d.copy()
+        v[..., 1:] -= u.v[..., :-1]
+        d[..., 1:, :] -= u.d[..., :-1, :]
+        return Dual(v, d)
+    out = np.array(u, dtype=float)
+    out[..., 1:] -= u[..., :-1]
     return out
 
 
-def _drift(u: np.ndarray, axis: int) -> np.ndarray:
-    return _minus_neighbour(u, axis, below=True)
-
-
-def _net(u: np.ndarray, axis: int) -> np.ndarray:
-    return _minus_neighbour(u, axis, below=False)
+def _net(u: Any) -> Any:
+    """The floors' net force from their storeys': F_i - F_{i+1}, the top's own."""
+    if isinstance(u, Dual):
+        v, d = u.v.copy(), u.d.copy()
+        v[..., :-1] -= u.v[..., 1:]
+        d[..., :-1, :] -= u.d[..., 1:, :]
+        return Dual(v, d)
+    out = np.array(u, dtype=float)
+    out[..., :-1] -= u[..., 1:]
+    return out
 
 
 def _vector(p: dict, names: tuple[str | None, ...]) -> Any:
@@ -94,7 +91,7 @@ def _vector(p: dict, names: tuple[str | None, ...]) -> Any:
 
 
 class Vectors:
-    """The dampers', springs' and masses' parameters as floor vectors, kept while the
+    """The dampers' and springs' parameters and the masses' reciprocals as floor vectors, kept while the
     integrator passes the same parameter values (every call of a simulation). The values are
     told apart by identity: a value changed in place (an array written into) would be missed;
     the refinement and output error build new values for every iterate."""
@@ -108,7 +105,7 @@ class Vectors:
         if len(key) == len(self.key) and all(a is b for a, b in zip(key, self.key)):
             return self.value
         self.key = key
-        self.value = (_vector(p, lay.dampers), _vector(p, lay.springs), _vector(p, lay.masses))
+        self.value = (_vector(p, lay.dampers), _vector(p, lay.springs), 1.0 / _vector(p, lay.masses))
         return self.value
 
 
@@ -116,8 +113,8 @@ def state_rate(building: Any, lay: Layout, cache: Vectors, t: Any, y: Any, p: di
     """(x', v', z') of a ground-driven shear building: NumPy or dual arrays, ``y`` (..., n_state)."""
     n = building.n_dof
     x, v, z = y[..., :n], y[..., n : 2 * n], y[..., 2 * n :]
-    d, dv = _along_last(x, _drift), _along_last(v, _drift)
-    damp, spring, masses = cache.get(p, lay)
+    d, dv = _drift(x), _drift(v)
+    damp, spring, per_mass = cache.get(p, lay)
     force = damp * dv + spring * d
     latent = []
     if lay.others:
@@ -131,5 +128,5 @@ def state_rate(building: Any, lay: Layout, cache: Vectors, t: Any, y: Any, p: di
         zero = 0.0 * d[..., 0]
         extra = [cols[i] + zero if i in cols else zero for i in range(n)]
         force = force + np.stack(extra, axis=-1)
-    acc = (-(masses * np.asarray(f)[..., None]) - _along_last(force, _net)) / masses
+    acc = -np.asarray(f)[..., None] - _net(force) * per_mass
     return np.concatenate([v, acc, *latent], axis=-1)
