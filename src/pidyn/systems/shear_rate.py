@@ -53,28 +53,23 @@ def layout(storeys: list, slices: list) -> Layout:
     return Layout(tuple(dampers), tuple(springs), tuple(others), masses)
 
 
-def _drift(u: Any) -> Any:
-    """The storeys' drifts from the floors' displacements (or velocities): u_i - u_{i-1}, u_0
-    itself; plain arrays on their last axis, dual arrays' derivatives on the one before."""
-    if isinstance(u, Dual):
-        v, d = u.v.copy(), u.d.copy()
-        v[..., 1:] -= u.v[..., :-1]
-        d[..., 1:, :] -= u.d[..., :-1, :]
-        return Dual(v, d)
-    out = np.array(u, dtype=float)
-    out[..., 1:] -= u[..., :-1]
-    return out
+#: (written, subtracted) floor slices: a storey's drift takes the floor below from its own
+#: floor (floor 1's drift is itself); a floor's net force takes the storey above from its own
+_BELOW = (slice(1, None), slice(None, -1))
+_ABOVE = (slice(None, -1), slice(1, None))
 
 
-def _net(u: Any) -> Any:
-    """The floors' net force from their storeys': F_i - F_{i+1}, the top's own."""
+def _minus_neighbour(u: Any, sides: tuple[slice, slice]) -> Any:
+    """u_i - u_{i-1} (``_BELOW``) or u_i - u_{i+1} (``_ABOVE``) along the floors: a plain
+    array's last axis, a dual array's values and its derivatives' axis before the directions."""
+    put, take = sides
     if isinstance(u, Dual):
         v, d = u.v.copy(), u.d.copy()
-        v[..., :-1] -= u.v[..., 1:]
-        d[..., :-1, :] -= u.d[..., 1:, :]
+        v[..., put] -= u.v[..., take]
+        d[..., put, :] -= u.d[..., take, :]
         return Dual(v, d)
     out = np.array(u, dtype=float)
-    out[..., :-1] -= u[..., 1:]
+    out[..., put] -= u[..., take]
     return out
 
 
@@ -113,7 +108,7 @@ def state_rate(building: Any, lay: Layout, cache: Vectors, t: Any, y: Any, p: di
     """(x', v', z') of a ground-driven shear building: NumPy or dual arrays, ``y`` (..., n_state)."""
     n = building.n_dof
     x, v, z = y[..., :n], y[..., n : 2 * n], y[..., 2 * n :]
-    d, dv = _drift(x), _drift(v)
+    d, dv = _minus_neighbour(x, _BELOW), _minus_neighbour(v, _BELOW)
     damp, spring, per_mass = cache.get(p, lay)
     force = damp * dv + spring * d
     latent = []
@@ -128,5 +123,5 @@ def state_rate(building: Any, lay: Layout, cache: Vectors, t: Any, y: Any, p: di
         zero = 0.0 * d[..., 0]
         extra = [cols[i] + zero if i in cols else zero for i in range(n)]
         force = force + np.stack(extra, axis=-1)
-    acc = -np.asarray(f)[..., None] - _net(force) * per_mass
+    acc = -np.asarray(f)[..., None] - _minus_neighbour(force, _ABOVE) * per_mass
     return np.concatenate([v, acc, *latent], axis=-1)
