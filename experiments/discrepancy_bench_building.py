@@ -33,7 +33,6 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-
 from pidyn.discrepancy.effects import EFFECTS, Signals  # noqa: E402
 from pidyn.discrepancy.hidden import EQUIVALENT, OUTSIDE, RECORDS, _outside_term  # noqa: E402
 from pidyn.runs.provenance import code_commit  # noqa: E402  (the checkout's commit, "+dirty" for changed code)

@@ -813,7 +813,7 @@ def nominal_state(study: Study, start: dict | None) -> tuple[dict, dict]:
         "fit": heldout_nrmse(record, system, values, study.fit),
         "fit_test": building_fit_test(record, system, values, study.fit, study.settings),
     }
-    if getattr(study.refine_settings, "initial_state", None) == "auto" and res.rest_test.get("at_rest"):
+    if study.refine_settings.initial_state == "auto" and res.rest_test.get("at_rest"):
         # the nominal building accepted rest: every extension starts from rest too, instead of
         # testing it again (a refinement more each: 27 of 175 s of a two-effect diagnosis)
         study.refine_settings = replace(study.refine_settings, initial_state="rest")
