@@ -53,3 +53,19 @@ def test_a_learned_force_goes_to_the_storey_the_linear_model_misses(tmp_path):
         out["heldout_after"],
     )
     assert (tmp_path / "learned_force.pt").exists()
+
+
+@pytest.mark.parametrize(
+    ("ratios", "ordered", "expected"),
+    [
+        ((0.822, 0.803), True, 0),  # within the margin: the score test's first stays
+        ((0.822, 0.70), True, 1),  # clearly lower: the brief fit decides
+        ((0.822, 0.803), False, 1),  # no order given (every storey): the lowest
+        ((0.40, 0.70), True, 0),
+    ],
+)
+def test_a_brief_fit_overrules_the_score_tests_order_only_by_the_margin(ratios, ordered, expected):
+    from pidyn.discrepancy.storey_learned import _chosen
+
+    tried = [(r, i + 1, None, None) for i, r in enumerate(ratios)]
+    assert _chosen(tried, ordered, 0.1) is tried[expected]

@@ -21,6 +21,9 @@ class LearnedSettings:
     #: a building with no structured storey: the learned force is tried in this many storeys, those
     #: whose library candidates together explain most of the misfit (``storey_ranking.storey_order``)
     storeys: int = 2
+    #: ... the first of them is trained on unless another's brief fit ends lower by this share of
+    #: the first's fit ratio (loss after / before)
+    choice_margin: float = 0.1
 
 
 @dataclass
@@ -100,6 +103,10 @@ class DiagnosisSettings:
         if not 0.0 <= float(self.confirm.after_named_share) <= 1.0:
             raise ValueError(
                 f"diagnosis.confirm.after_named_share must lie in [0, 1], got {self.confirm.after_named_share}"
+            )
+        if not 0.0 <= float(self.learned.choice_margin) < 1.0:
+            raise ValueError(
+                f"diagnosis.learned.choice_margin must lie in [0, 1), got {self.learned.choice_margin}"
             )
 
     @classmethod
