@@ -97,3 +97,22 @@ def test_a_force_outside_the_library_puts_its_storey_first():
     assert sorted(order) == [1, 2, 3, 4] and order[0] == 3, order
     assert len(study.scores) == 1 and memo["rows"] == simulated  # its simulations reused, none added
     assert {(c.storey, c.row["effect"]) for c in ranked} == {(k[0], k[1]) for k, v in simulated.items() if v}
+
+
+def test_a_spring_at_rest_is_tried_on_the_storey_spring_its_weak_form_fit_kept():
+    """A hysteresis row starts its trial from the storey spring its weak-form fit kept beside it
+    (a share of the storey's own law's); other effects start from the current spring."""
+    from types import SimpleNamespace
+
+    from pidyn.discrepancy.storey_ranking import spring_shares, trial_values
+
+    rows = [
+        {"effect": "hysteresis", "nominal_refit": {"c": 0.4, "k": 60.0}},
+        {"effect": "cubic_stiffness", "nominal_refit": {"c": 0.4, "k": 90.0}},
+        {"effect": "hysteresis", "nominal_refit": {}},
+    ]
+    spring_shares(SimpleNamespace(nominal_params={"c": 0.5, "k": 120.0}, ranking=rows))
+    values = {"k1": 200.0, "k2": 150.0, "c2": 0.5}
+    assert trial_values(values, 2, rows[0]) == {**values, "k2": pytest.approx(75.0)}
+    assert trial_values(values, 2, rows[1]) is values
+    assert trial_values(values, 2, rows[2]) is values

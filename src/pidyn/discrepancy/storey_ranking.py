@@ -30,6 +30,10 @@ from pidyn.simulate import input_hold, simulate_batch
 SIGNED = frozenset({"cubic_stiffness", "quadratic_stiffness", "damping_change"})
 #: a step in time is tried at this many times over its search span
 STEP_TIMES = 16
+#: effects that are a spring at small amplitude (Bouc-Wen's z follows the drift there): the weak
+#: form fits one beside a softer storey spring, and a trial of it on the current model's spring
+#: is as much stiffer at once (a hysteresis in storey 5 of five, every loop shape: a negative step)
+SPRING_AT_REST = frozenset({"hysteresis"})
 
 
 @dataclass
@@ -83,6 +87,25 @@ def _profiled(system, values: dict[str, float], record, floors, mask, scale) -> 
     q, r = np.linalg.qr(jac)
     keep = np.abs(np.diag(r)) > 1e-10 * max(np.abs(np.diag(r)).max(initial=0.0), 1e-300)
     return q[:, keep]
+
+
+def spring_shares(screening) -> None:
+    """Marks each ``SPRING_AT_REST`` row of a storey's screening with ``spring_share``: the storey
+    spring its weak-form fit kept beside the effect, as a share of the storey's own law's."""
+    own = float(screening.nominal_params.get("k", 0.0))
+    for row in screening.ranking:
+        refit = float((row.get("nominal_refit") or {}).get("k", 0.0))
+        if row["effect"] in SPRING_AT_REST and own > 0 and refit > 0:
+            row["spring_share"] = float(np.clip(refit / own, 0.05, 1.0))
+
+
+def trial_values(values: dict[str, float], storey: int, row: dict) -> dict[str, float]:
+    """The current model's values with the storey's spring taken down to the row's
+    ``spring_share`` (``SPRING_AT_REST``): where a trial of the row's effect starts."""
+    share = row.get("spring_share")
+    if not share:
+        return values
+    return {**values, f"k{storey}": float(values[f"k{storey}"]) * float(share)}
 
 
 def _trials(row: dict, span: tuple[float, float], drift_peak: float, k: float) -> list[dict]:
@@ -156,10 +179,9 @@ def _scored(
             row = {**row, "parameters": EFFECTS[row["effect"]].sample(np.random.default_rng(0), sig)}
         view = views[storey - 1]
         trials = _trials(row, fit, float(np.max(np.abs(view.drift))), float(current["values"][f"k{storey}"]))
+        start = trial_values(current["values"], storey, row)
         systems = [
-            building_with(
-                study.system, current["values"], [*found, Found(row["effect"], storey, p, row, sig.context())]
-            )
+            building_with(study.system, start, [*found, Found(row["effect"], storey, p, row, sig.context())])
             for p in trials
         ]
         sims = _simulate(systems[0][0], [s[1] for s in systems], record, floors, mask) / scale

@@ -43,7 +43,14 @@ from pidyn.discrepancy.pipeline import split_spans
 from pidyn.discrepancy.screening import Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_learned import learned_storey_force
-from pidyn.discrepancy.storey_ranking import floor_noise, measured_floors, rank_candidates, storey_order
+from pidyn.discrepancy.storey_ranking import (
+    floor_noise,
+    measured_floors,
+    rank_candidates,
+    spring_shares,
+    storey_order,
+    trial_values,
+)
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.notes import note
 from pidyn.params import positive
@@ -190,20 +197,20 @@ def screen_storeys(
             for n, e in EFFECTS.items()
             if (not settings.effects or n in settings.effects) and n not in {f.effect for f in here}
         }
-        out.append(
-            screen(
-                system,
-                sv,
-                s,
-                view.excitation,
-                view.drift,
-                weak,
-                fit_end,
-                True,
-                effects=effects,
-                thresholds=settings.thresholds,
-            )
+        sc = screen(
+            system,
+            sv,
+            s,
+            view.excitation,
+            view.drift,
+            weak,
+            fit_end,
+            True,
+            effects=effects,
+            thresholds=settings.thresholds,
         )
+        spring_shares(sc)
+        out.append(sc)
     return out
 
 
@@ -983,7 +990,9 @@ def try_extension(
     the held-out floor accelerations better than the current model by ``storey_min_gain``."""
     from pidyn.refine.stage import refine
 
-    ext, start = building_with(nominal_system, current["values"], [*found, cand])
+    ext, start = building_with(
+        nominal_system, trial_values(current["values"], cand.storey, cand.row), [*found, cand]
+    )
     log.info(
         "storey %d: %s (score %.1f), extending and refining",
         cand.storey,
