@@ -221,3 +221,22 @@ def test_the_configs_guesses_are_refined_only_when_their_modes_are_far_from_the_
     far = {**config, **{f"k{i}": 0.25 * data[f"k{i}"] for i in (1, 2, 3)}}
     assert not close_modes(system, far, data) and not close_modes(system, data, far)
     assert not close_modes(system, {**data, "k3": 0.0}, data)  # a storey with no spring: no basin to share
+
+
+def test_a_named_effect_needs_a_determined_size():
+    """The refinement's interval of the effect's size (its key parameter) decides whether a
+    building's extension may be named: two standard deviations from zero (``storey_max_rel_std``)."""
+    from pidyn.discrepancy.settings import DiagnosisSettings
+    from pidyn.discrepancy.storeys import Found, refusal_notes, size_spread
+
+    cand = Found("quadratic_damping", 1, {"c2": 25.0}, {"score": 2.8}, {})
+    loose = {"intervals": {"c2_1": {"value": 1.23, "std": 1.30, "rel_std_pct": 106.0}}}
+    tight = {"intervals": {"c2_1": {"value": 1.23, "std": 0.10, "rel_std_pct": 8.1}}}
+    limit = DiagnosisSettings().storey_max_rel_std
+    assert size_spread(cand, loose) == pytest.approx(1.06) and size_spread(cand, loose) > limit
+    assert size_spread(cand, tight) < limit
+    assert size_spread(cand, {"intervals": {}}) == 0.0  # no interval: nothing to refuse on
+    refused = {"effect": "quadratic_damping", "storey": 1, "heldout_before": 0.135, "heldout_after": 0.104}
+    text = refusal_notes({**refused, "size_rel_std": 1.06})[0]
+    assert "not determined" in text and "106 %" in text
+    assert "did not predict" in refusal_notes(refused)[0]

@@ -80,6 +80,9 @@ class DiagnosisSettings:
     #: a building: a storey effect is named only when the extended model predicts the held-out
     #: floor accelerations better than the model it extends by this share (NRMSE)
     storey_min_gain: float = 0.01
+    #: a building: a named effect's size (its key parameter) must be determined, its standard
+    #: deviation at most this share of it (two standard deviations from zero)
+    storey_max_rel_std: float = 0.5
     ls_init: str | None = "none"
     polish: bool = True
     polish_seconds: float | None = None

@@ -186,7 +186,7 @@ def report_lines(d: dict) -> list[str]:
     for s in d["steps"]:
         lines.append(
             f"\nStep: {s['effect']} in storey {s['storey']} (score {score_text(s.get('score'))}): held-out NRMSE "
-            f"{s['heldout_before']:.4g} -> {s['heldout_after']:.4g}, {'named' if s['accepted'] else 'refused (no held-out gain)'}."
+            f"{s['heldout_before']:.4g} -> {s['heldout_after']:.4g}, {_outcome(s)}."
         )
     lines += [
         "",
@@ -247,3 +247,11 @@ def _storey_table(d: dict) -> list[str]:
         "stiffness or damping in another storey than the model does.",
     ]
     return lines
+
+
+def _outcome(step: dict) -> str:
+    if step["accepted"]:
+        return "named"
+    if step.get("size_rel_std") is not None:
+        return f"refused (its size not determined: std {100 * step['size_rel_std']:.0f} % of it)"
+    return "refused (no held-out gain)"

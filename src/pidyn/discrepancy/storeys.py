@@ -965,6 +965,15 @@ def score_text(score: float | None) -> str:
 def refusal_notes(refused: dict | None) -> list[str]:
     if refused is None:
         return []
+    if refused.get("size_rel_std") is not None:
+        return [
+            note(
+                "refused_undetermined",
+                f"{refused['effect']} in storey {refused['storey']} predicted the held-out floor accelerations "
+                f"better ({refused['heldout_before']:.4g} -> {refused['heldout_after']:.4g}) but its size is not "
+                f"determined (std {100 * refused['size_rel_std']:.0f} % of it): not named",
+            )
+        ]
     return [
         note(
             "refused_no_heldout_gain",
@@ -1008,13 +1017,19 @@ def try_extension(
     bic = fit_bic(record, ext, values, fit, current["noise"])
     accepted = bool(np.isfinite(ho["mean"]) and ho["mean"] < before * (1.0 - float(settings.storey_min_gain)))
     params, report = _step_report(cand, values, res, bic, before, ho["mean"], accepted)
+    why = "refused: no held-out gain"
+    if accepted and (spread := size_spread(cand, report)) > float(settings.storey_max_rel_std):
+        # a size the data do not fix: a quadratic damper in storey 1 (c2 1.23, 95 % 0.15-9.8) stood
+        # in for the storey's collapsed linear damper beside a friction named in storey 2
+        accepted, why = False, f"refused: its size is not determined (std {100 * spread:.0f} % of it)"
+        report.update(accepted=False, size_rel_std=spread)
     log.info(
         "storey %d %s: held-out NRMSE %.4g -> %.4g (%s)",
         cand.storey,
         cand.effect,
         before,
         ho["mean"],
-        "named" if accepted else "refused: no held-out gain",
+        "named" if accepted else why,
     )
     done = Found(cand.effect, cand.storey, params, cand.row, cand.ctx)
     return {
@@ -1023,6 +1038,14 @@ def try_extension(
         "found": done,
         "current": {"system": ext, "values": values, "heldout": ho, "result": res, "noise": current["noise"]},
     }
+
+
+def size_spread(cand: Found, report: dict) -> float:
+    """The standard deviation of the effect's size (its key parameter) as a share of it, from the
+    refinement's interval; 0 where it has none."""
+    iv = report["intervals"].get(storey_param(EFFECTS[cand.effect].key, cand.storey)) or {}
+    rel = iv.get("rel_std_pct")
+    return float(rel) / 100.0 if rel is not None and np.isfinite(rel) else 0.0
 
 
 def _step_report(
