@@ -107,6 +107,8 @@ class DiagnosisSettings:
             raise ValueError(
                 f"diagnosis.confirm.after_named_share must lie in [0, 1], got {self.confirm.after_named_share}"
             )
+        if float(self.storey_max_rel_std) <= 0.0:
+            raise ValueError(f"diagnosis.storey_max_rel_std must be > 0, got {self.storey_max_rel_std}")
         if not 0.0 <= float(self.learned.choice_margin) < 1.0:
             raise ValueError(
                 f"diagnosis.learned.choice_margin must lie in [0, 1), got {self.learned.choice_margin}"

@@ -110,7 +110,8 @@ def learned_storey_force(
     heldout: Callable,
 ) -> dict | None:
     """Train a learned force on one of ``storeys`` (None: every storey, the best fit on the
-    fitting part taken; several: in the score test's order, ``_chosen``) from the current model, in segments of a few ``period`` s (the fundamental's);
+    fitting part taken; several: in the score test's order, ``_chosen``) from the current model,
+    in segments of a few ``period`` s (the fundamental's);
     ``heldout(record, system, values, span)`` scores it as the diagnosis scores every model.
     Its held-out gain, and whether it is kept; None when no storey's network can be trained
     (a fitting part shorter than one segment)."""

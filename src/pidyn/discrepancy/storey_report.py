@@ -250,6 +250,7 @@ def _storey_table(d: dict) -> list[str]:
 
 
 def _outcome(step: dict) -> str:
+    """A step's end for people: named, or which rule refused it."""
     if step["accepted"]:
         return "named"
     if step.get("size_rel_std") is not None:
