@@ -103,6 +103,10 @@ class Effect(ABC):
     n_grid: int = 0  # parameters found by the grid (they count in the information criterion)
     #: a step in time: what changed stays changed, so it must not fit the held-out part worse
     step_in_time: bool = False
+    #: a spring at small amplitude (Bouc-Wen's z follows the drift there): the weak form fits it
+    #: beside a softer storey spring, and a building's trial of it starts from that spring
+    #: (``storey_ranking.trial_values``)
+    spring_at_rest: bool = False
 
     @abstractmethod
     def candidates(self, s: Signals) -> Iterator[Candidate]:
@@ -217,6 +221,7 @@ class Hysteresis(Effect):
 
     name, key, tolerance = "hysteresis", "kh", 0.3
     n_grid = 2
+    spring_at_rest = True
     yield_shares = (0.15, 0.3, 0.6)  # z's ceiling (beta + gamma)^(-1/n) over the peak |x|
     shapes = (0.5, 0.75)  # gamma / (beta + gamma)
     exponents = (1.0, 2.0)

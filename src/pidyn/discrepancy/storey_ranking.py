@@ -30,10 +30,6 @@ from pidyn.simulate import input_hold, simulate_batch
 SIGNED = frozenset({"cubic_stiffness", "quadratic_stiffness", "damping_change"})
 #: a step in time is tried at this many times over its search span
 STEP_TIMES = 16
-#: effects that are a spring at small amplitude (Bouc-Wen's z follows the drift there): the weak
-#: form fits one beside a softer storey spring, and a trial of it on the current model's spring
-#: is as much stiffer at once (a hysteresis in storey 5 of five, every loop shape: a negative step)
-SPRING_AT_REST = frozenset({"hysteresis"})
 
 
 @dataclass
@@ -90,18 +86,21 @@ def _profiled(system, values: dict[str, float], record, floors, mask, scale) -> 
 
 
 def spring_shares(screening) -> None:
-    """Marks each ``SPRING_AT_REST`` row of a storey's screening with ``spring_share``: the storey
-    spring its weak-form fit kept beside the effect, as a share of the storey's own law's."""
+    """Marks each row of a storey's screening whose effect is a spring at rest
+    (``Effect.spring_at_rest``) with ``spring_share``: the storey spring its weak-form fit kept
+    beside the effect, as a share of the storey's own law's. On the current model's whole spring
+    a trial is as much stiffer at once (a hysteresis in storey 5 of five: a negative step at
+    every loop shape)."""
     own = float(screening.nominal_params.get("k", 0.0))
     for row in screening.ranking:
         refit = float((row.get("nominal_refit") or {}).get("k", 0.0))
-        if row["effect"] in SPRING_AT_REST and own > 0 and refit > 0:
+        if getattr(EFFECTS.get(row["effect"]), "spring_at_rest", False) and own > 0 and refit > 0:
             row["spring_share"] = float(np.clip(refit / own, 0.05, 1.0))
 
 
 def trial_values(values: dict[str, float], storey: int, row: dict) -> dict[str, float]:
     """The current model's values with the storey's spring taken down to the row's
-    ``spring_share`` (``SPRING_AT_REST``): where a trial of the row's effect starts."""
+    ``spring_share`` (``spring_shares``): where a trial of the row's effect starts."""
     share = row.get("spring_share")
     if not share:
         return values
