@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+import torch
 import yaml
 
 from pidyn.baselines.sindy import library, param_terms
@@ -74,6 +75,7 @@ def test_an_effect_without_its_sampler_cannot_be_made():
         (GapContact(5.0, 0.02), {"kg": 7.0, "gap": 0.02}),
         (QuadraticDamping(0.4), {"c2": 0.4}),
         (CoulombFriction(0.3, eps=1e-2), {"Fc": 0.3}),
+        (CoulombFriction(0.3, eps=1e-2, eps_range=(5e-3, 3e-2)), {"Fc": 0.3, "eps": 2e-2}),
         (TrilinearSpring(-2.0, 0.01, 4.0, 0.03), {"dk1": -2.0, "x1": 0.01, "dk2": 4.0, "x2": 0.03}),
         (Monomial(2, 1), {"p21": 1.7}),
     ],
@@ -86,6 +88,28 @@ def test_the_columns_rebuild_the_force(term, p):
     assert set(cols) == set(term.linear)
     rebuilt = sum(p[n] * cols[n] for n in term.linear)
     np.testing.assert_allclose(rebuilt, term.force(None, x, v, None, p), rtol=1e-12, atol=1e-15)
+
+
+def test_a_friction_width_can_be_identified_within_its_range():
+    """With ``eps_range`` the smoothed sign's width is a bounded parameter whose value the force
+    reads; the effect library makes it so for a refinement (``free_width``) and keeps an
+    identified width when it rebuilds the term."""
+    term = CoulombFriction(0.3, eps=1e-2, eps_range=(5e-3, 3e-2))
+    spec = {s.name: s for s in term.specs()}["eps"]
+    assert spec.transform == "box" and (spec.lower, spec.upper) == (5e-3, 3e-2)
+    v = torch.tensor([0.01], dtype=torch.float64)
+    eps = torch.tensor(2e-2, dtype=torch.float64, requires_grad=True)
+    f = term.force(None, None, v, None, {"Fc": torch.tensor(0.3, dtype=torch.float64), "eps": eps})
+    f.sum().backward()
+    assert float(f.detach()) == pytest.approx(0.3 * np.tanh(0.5)) and float(eps.grad) < 0
+    assert [s.name for s in CoulombFriction(0.3, eps=1e-2).specs()] == ["Fc"]
+    with pytest.raises(ValueError, match="inside eps_range"):
+        CoulombFriction(0.3, eps=1e-2, eps_range=(2e-2, 3e-2))
+    ctx = {"friction_eps": 1e-2}
+    free = EFFECTS["coulomb_friction"].term({"Fc": 0.3}, {**ctx, "free_width": True})
+    assert [s.name for s in free.specs()] == ["Fc", "eps"] and free.eps == 1e-2
+    again = EFFECTS["coulomb_friction"].term({"Fc": 0.3, "eps": 1.7e-2}, ctx)
+    assert again.eps == 1.7e-2 and [s.name for s in again.specs()] == ["Fc"]
 
 
 def test_the_sindy_library_and_the_parameters_it_reads_come_from_the_terms():

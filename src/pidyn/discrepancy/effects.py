@@ -184,6 +184,12 @@ class Quadratic(Effect):
         return {"k2": sign * self._size(rng, s) / s.x_peak**2}
 
 
+#: the range of a friction's identified transition width, in shares of the record's (2 % of the
+#: RMS drift velocity); narrower than half would make the sticking friction a damper too stiff
+#: for the integrator's step
+WIDTH_RANGE = (0.5, 3.0)
+
+
 class Coulomb(Effect):
     name, key, tolerance = "coulomb_friction", "Fc", 0.25
 
@@ -195,7 +201,12 @@ class Coulomb(Effect):
         yield Candidate(self.name, col[:, None], ("Fc",), positive=(True,))
 
     def term(self, p, s):
-        return CoulombFriction(p["Fc"], eps=s["friction_eps"])
+        eps = float(p.get("eps", s["friction_eps"]))
+        if not s.get("free_width"):
+            return CoulombFriction(p["Fc"], eps=eps)
+        # the width identified too (``CoulombFriction``), within a range about the record's
+        lo, hi = (f * float(s["friction_eps"]) for f in WIDTH_RANGE)
+        return CoulombFriction(p["Fc"], eps=float(np.clip(eps, 1.01 * lo, 0.99 * hi)), eps_range=(lo, hi))
 
     def sample(self, rng, s, sign=None):
         return {"Fc": self._size(rng, s, 0.04, 0.1)}
