@@ -38,6 +38,8 @@ from pidyn.discrepancy.hidden import EQUIVALENT, OUTSIDE, RECORDS, _outside_term
 from pidyn.runs.provenance import code_commit  # noqa: E402  (the checkout's commit, "+dirty" for changed code)
 
 SINGLE = sorted(EFFECTS)
+#: seconds of each record, and the share the diagnosis fits (its default ``diagnosis.fit_share``)
+DURATION, FIT_SHARE = 20.0, 0.65
 KINDS = ["none", *SINGLE, "pair", "trilinear_spring"]
 #: effects a pair draws from (a change in time has its own kind)
 PAIRABLE = [e for e in SINGLE if not EFFECTS[e].step_in_time]
@@ -61,8 +63,10 @@ def draw_sensors(rng: np.random.Generator, n: int) -> list[int]:
     return sensors
 
 
-def draw_case(i: int) -> dict:
-    """The building, record, noise, sensors and hidden effects of case ``i`` (seeded)."""
+def draw_case(i: int, duration: float = DURATION) -> dict:
+    """The building, record, noise, sensors and hidden effects of case ``i`` (seeded), on the
+    first ``duration`` seconds of its record (the same seeded draws at any length; the
+    hidden effects are sized against the longer response)."""
     from pidyn.data.sources import synthetic_from_motion
     from pidyn.excitation.ground_motion import prepare
     from pidyn.systems.shear_building import ShearBuilding
@@ -73,9 +77,9 @@ def draw_case(i: int) -> dict:
     record = str(rng.choice(RECORDS))
     noise = float(rng.uniform(0.0, 0.05))
     sensors = draw_sensors(rng, n)
-    gm = prepare(record, scale=1.0, duration=20.0, dt=0.02)
+    gm = prepare(record, scale=1.0, duration=duration, dt=0.02)
     gm_scale = 3.0 / float(np.max(np.abs(gm.acc)))
-    gm = prepare(record, scale=gm_scale, duration=20.0, dt=0.02)
+    gm = prepare(record, scale=gm_scale, duration=duration, dt=0.02)
     linear = ShearBuilding(n, masses, damp, stiff)
     ref = synthetic_from_motion(linear, gm, noise=0.0, channels=("a",))
     effects = {"none": [], "pair": None, "trilinear_spring": ["trilinear_spring"]}.get(kind, [kind])
@@ -85,7 +89,7 @@ def draw_case(i: int) -> dict:
     terms: dict[int, list] = {}
     hidden = []
     for eff, st in zip(effects, storeys):
-        s = storey_signals(ref, st, stiff[st - 1])
+        s = storey_signals(ref, st, stiff[st - 1], FIT_SHARE * duration)
         if eff in OUTSIDE:
             p = OUTSIDE[eff](rng, s)
             term = _outside_term(eff, p)
@@ -110,14 +114,14 @@ def draw_case(i: int) -> dict:
     }
 
 
-def storey_signals(rec, storey: int, k: float) -> Signals:
+def storey_signals(rec, storey: int, k: float, fit_end: float) -> Signals:
     """The storey's drift in the linear building's response (the size of a hidden effect)."""
     x = rec.clean.x if rec.clean is not None else rec.x
     v = rec.clean.v if rec.clean is not None else rec.v
     below_x = x[:, storey - 2] if storey > 1 else 0.0
     below_v = v[:, storey - 2] if storey > 1 else 0.0
     d, dv = x[:, storey - 1] - below_x, v[:, storey - 1] - below_v
-    return Signals(rec.t, d, dv, 1.0, k, stiffness=f"k{storey}", t_fit_end=13.0, damping=f"c{storey}")
+    return Signals(rec.t, d, dv, 1.0, k, stiffness=f"k{storey}", t_fit_end=fit_end, damping=f"c{storey}")
 
 
 def score(case: dict, d: dict) -> dict:
@@ -176,12 +180,12 @@ def _rescored(row_path: Path) -> dict:
     return row
 
 
-def run_case(i: int, out: Path) -> dict:
+def run_case(i: int, out: Path, duration: float = DURATION) -> dict:
     folder = out / f"case_{i:03d}"
     done = folder / "row.json"
     if done.exists():
         return json.loads(done.read_text())
-    case = draw_case(i)
+    case = draw_case(i, duration)
     rec = case.pop("rec")
     folder.mkdir(parents=True, exist_ok=True)
     cols = {"t": rec.t, "ag": rec.f, **{f"a{j}": rec.a[:, j - 1] + rec.f for j in case["sensors"]}}
@@ -207,6 +211,8 @@ def run_case(i: int, out: Path) -> dict:
     row["hidden"] = " + ".join(f"{h['effect']}@{h['storey']}" for h in case["hidden"]) or "none"
     row["seconds"] = seconds
     row["code"] = code
+    if duration != DURATION:
+        row["duration"] = duration
     if proc.returncode != 0 or not diag.exists():
         row.update(
             verdict="failed", named=proc.stderr.strip().splitlines()[-1][:200] if proc.stderr else "failed"
@@ -273,6 +279,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", type=int, default=66)  # 6 of each of the 11 kinds
     ap.add_argument("--first", type=int, default=0)
+    ap.add_argument("--only", type=int, nargs="+", help="run these cases only (their numbers)")
+    ap.add_argument(
+        "--duration", type=float, default=DURATION, help="seconds of each record (the draws stay the same)"
+    )
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=ROOT / "outputs" / "discrepancy_bench_building")
     ap.add_argument("--results", type=Path, default=ROOT / "experiments" / "results")
@@ -286,7 +296,8 @@ def main() -> None:
         return
     rows: list[dict] = []
     with ThreadPoolExecutor(a.jobs) as pool:
-        futures = {pool.submit(run_case, i, a.out): i for i in range(a.first, a.cases)}
+        cases = a.only or range(a.first, a.cases)
+        futures = {pool.submit(run_case, i, a.out, a.duration): i for i in cases}
         for fut in as_completed(futures):
             row = fut.result()
             rows.append(row)
