@@ -12,7 +12,7 @@ import numpy as np
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy.screening import Thresholds
-from pidyn.discrepancy.storeys import BuildingDiagnosis, StoreyView, score_text, storey_system
+from pidyn.discrepancy.storeys import BuildingDiagnosis, StoreyView, score_text, step_outcome, storey_system
 from pidyn.systems.shear_building import ShearBuilding
 
 
@@ -186,7 +186,7 @@ def report_lines(d: dict) -> list[str]:
     for s in d["steps"]:
         lines.append(
             f"\nStep: {s['effect']} in storey {s['storey']} (score {score_text(s.get('score'))}): held-out NRMSE "
-            f"{s['heldout_before']:.4g} -> {s['heldout_after']:.4g}, {_outcome(s)}."
+            f"{s['heldout_before']:.4g} -> {s['heldout_after']:.4g}, {step_outcome(s)}."
         )
     lines += [
         "",
@@ -247,12 +247,3 @@ def _storey_table(d: dict) -> list[str]:
         "stiffness or damping in another storey than the model does.",
     ]
     return lines
-
-
-def _outcome(step: dict) -> str:
-    """A step's end for people: named, or which rule refused it."""
-    if step["accepted"]:
-        return "named"
-    if step.get("size_rel_std") is not None:
-        return f"refused (its size not determined: std {100 * step['size_rel_std']:.0f} % of it)"
-    return "refused (no held-out gain)"

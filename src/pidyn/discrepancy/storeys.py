@@ -1020,11 +1020,10 @@ def try_extension(
     bic = fit_bic(record, ext, values, fit, current["noise"])
     accepted = bool(np.isfinite(ho["mean"]) and ho["mean"] < before * (1.0 - float(settings.storey_min_gain)))
     params, report = _step_report(cand, values, res, bic, before, ho["mean"], accepted)
-    why = "refused: no held-out gain"
     if accepted and (spread := size_spread(cand, report)) > float(settings.storey_max_rel_std):
         # a size the data do not fix: a quadratic damper in storey 1 (c2 1.23, 95 % 0.15-9.8) stood
         # in for the storey's collapsed linear damper beside a friction named in storey 2
-        accepted, why = False, f"refused: its size is not determined (std {100 * spread:.0f} % of it)"
+        accepted = False
         report.update(accepted=False, size_rel_std=spread)
     log.info(
         "storey %d %s: held-out NRMSE %.4g -> %.4g (%s)",
@@ -1032,7 +1031,7 @@ def try_extension(
         cand.effect,
         before,
         ho["mean"],
-        "named" if accepted else why,
+        step_outcome(report),
     )
     done = Found(cand.effect, cand.storey, params, cand.row, cand.ctx)
     return {
@@ -1041,6 +1040,15 @@ def try_extension(
         "found": done,
         "current": {"system": ext, "values": values, "heldout": ho, "result": res, "noise": current["noise"]},
     }
+
+
+def step_outcome(step: dict) -> str:
+    """A step's end for people (the log and the report): named, or which rule refused it."""
+    if step["accepted"]:
+        return "named"
+    if step.get("size_rel_std") is not None:
+        return f"refused: its size is not determined (std {100 * step['size_rel_std']:.0f} % of it)"
+    return "refused: no held-out gain"
 
 
 def size_spread(cand: Found, report: dict) -> float:

@@ -357,11 +357,7 @@ class CoulombFriction(ForceTerm):
 
     def measured_force(self, t, x, v, z, p, v_noise=0.0):
         # the expected sign of a noisy velocity is a smooth step about as wide as the noise
-        eps = self._eps(p)
-        wide = 2.0 * v_noise
-        if isinstance(eps, torch.Tensor):
-            return p["Fc"] * _tanh(v / eps.clamp_min(wide))
-        return p["Fc"] * _tanh(v / max(float(eps), wide))
+        return p["Fc"] * _tanh(v / _clamp_min(self._eps(p), 2.0 * v_noise))
 
     def formula(self, p):
         return f"{p['Fc']:.5g} sign(x')"
