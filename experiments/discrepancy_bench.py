@@ -34,12 +34,12 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from pidyn.discrepancy.effects import EFFECTS  # noqa: E402
+from pidyn.discrepancy.effects import EFFECTS, LIBRARY  # noqa: E402
 from pidyn.discrepancy.hidden import EQUIVALENT  # noqa: E402
 from pidyn.errors import error_pct  # noqa: E402
 from pidyn.runs import provenance  # noqa: E402
 
-NAMES = ["none", *sorted(EFFECTS)]
+NAMES = ["none", *sorted(LIBRARY)]
 #: the benchmark's PIDynNet schedule, stated in every row's table; diagnose's default since db7a6c1
 FAST = [
     "model.schedule.pretrain_iters=300",
@@ -81,7 +81,7 @@ class Kind:
 
 KINDS = (
     [Kind("none", "none")]
-    + [Kind(n, n, {n}) for n in sorted(EFFECTS)]
+    + [Kind(n, n, {n}) for n in sorted(LIBRARY)]
     + [
         Kind("softening_cubic", "cubic_stiffness", {"cubic_stiffness"}, ["data.source.sign=-1"]),
         Kind("negative_k2", "quadratic_stiffness", {"quadratic_stiffness"}, ["data.source.sign=-1"]),

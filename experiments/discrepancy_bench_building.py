@@ -33,11 +33,11 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from pidyn.discrepancy.effects import EFFECTS, Signals  # noqa: E402
+from pidyn.discrepancy.effects import EFFECTS, LIBRARY, Signals  # noqa: E402
 from pidyn.discrepancy.hidden import EQUIVALENT, OUTSIDE, RECORDS, _outside_term  # noqa: E402
 from pidyn.runs.provenance import code_commit  # noqa: E402  (the checkout's commit, "+dirty" for changed code)
 
-SINGLE = sorted(EFFECTS)
+SINGLE = sorted(LIBRARY)
 #: seconds of each record, and the share the diagnosis fits (its default ``diagnosis.fit_share``)
 DURATION, FIT_SHARE = 20.0, 0.65
 KINDS = ["none", *SINGLE, "pair", "trilinear_spring"]

@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 from helpers import make_cfg  # noqa: E402
 
-from pidyn.discrepancy.effects import EFFECTS, Signals, get_effect  # noqa: E402
+from pidyn.discrepancy.effects import EFFECTS, LIBRARY, Signals, get_effect  # noqa: E402
 from pidyn.discrepancy.hidden import EQUIVALENT, hidden_case  # noqa: E402
 from pidyn.discrepancy.screening import screen  # noqa: E402
 from pidyn.excitation import prepare  # noqa: E402
@@ -109,7 +109,7 @@ def test_information_count_is_calibrated_on_noise():
     assert 0.75 < np.mean(stats) < 1.5, np.mean(stats)
 
 
-@pytest.mark.parametrize("effect", [None, *EFFECTS])
+@pytest.mark.parametrize("effect", [None, *LIBRARY])
 @pytest.mark.parametrize("seed", [11, 12])
 def test_screening_names_the_hidden_effect(effect, seed):
     """Seeded record, magnitude and noise (seed 12: 5 % noise); the top effect must be the hidden one."""
@@ -526,7 +526,7 @@ def test_the_true_friction_model_screens_clean(seed):
         v_noise=velocity_noise(r.t, r.x[:, 0], r.v[:, 0], PERIOD),
     )
     found = LinearSDOF().with_term(CoulombFriction(case.truth["Fc"], eps=s.friction_eps))
-    rest = {n: e for n, e in EFFECTS.items() if n != "coulomb_friction"}
+    rest = {n: e for n, e in LIBRARY.items() if n != "coulomb_friction"}
     sc = screen(
         found,
         {"m": 1.0, "c": 0.5, "k": 15.0, "Fc": case.truth["Fc"]},

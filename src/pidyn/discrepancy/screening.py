@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pidyn.discrepancy.effects import EFFECTS, Candidate, Effect, Signals
+from pidyn.discrepancy.effects import LIBRARY, Candidate, Effect, Signals
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.systems.sdof import SDOFSystem
 from pidyn.systems.terms import latent_path
@@ -195,7 +195,7 @@ def screen(
     displacement (the inertia term uses it unsmoothed), rows with windows inside
     [0, fit_end] fit, rows wholly after it are held out.
     """
-    effects = EFFECTS if effects is None else effects
+    effects = LIBRARY if effects is None else effects
     th = thresholds or Thresholds()
     base = _nominal_fit(system, values, s, f, x_raw, weak, fit_end, mass_known)
     # every candidate's columns projected once: the single and the pair fits use them all

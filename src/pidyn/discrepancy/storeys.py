@@ -195,7 +195,8 @@ def screen_storeys(
         effects = {
             n: e
             for n, e in EFFECTS.items()
-            if (not settings.effects or n in settings.effects) and n not in {f.effect for f in here}
+            if (n in settings.effects if settings.effects else e.library)
+            and n not in {f.effect for f in here}
         }
         sc = screen(
             system,

@@ -174,14 +174,9 @@ def write_figures(case: Case, o: Outcome, d: dict) -> None:
         period,
     )
     explained = None
-    if cause is not None:
-        explained = explained_force(
-            nom.system,
-            nom.values,
-            o.change_row or next(r for r in sc.ranking if r["effect"] == cause),
-            nom.s,
-            o.pointwise,
-        )
+    row = _evidence_row(o, cause)
+    if row is not None:
+        explained = explained_force(nom.system, nom.values, row, nom.s, o.pointwise)
     pw = o.pointwise
     plot_residual(
         fig / "residual.png", record.t, pw["r"], pw["x"], pw["v"], fit, cause, explained, units, period
@@ -262,6 +257,20 @@ def plot_learned(
     edge = max(1, len(x) // 50)
     inner = slice(edge, len(x) - edge)  # the band-limited ends ring
     plot_learned_force(path, x[inner], v[inner], pw["r"][inner], dev[inner], {"x": X, "v": V, "f": F}, units)
+
+
+def _evidence_row(o: Outcome, cause: str | None) -> dict | None:
+    """The fit that named ``cause``: the located change, the screening's row, or the output-error
+    check's (an effect the weak form does not screen, the amplitude-dependent structure)."""
+    if cause is None:
+        return None
+    if o.change_row:
+        return o.change_row
+    row = next((r for r in o.screening.ranking if r["effect"] == cause), None)
+    checked = getattr(o.confirmation, "row", None)
+    if row is None and checked and checked.get("effect") == cause:
+        return checked
+    return row
 
 
 def explained_force(

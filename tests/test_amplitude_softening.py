@@ -1,0 +1,85 @@
+"""The amplitude-dependent structure: a stiffness and damping that follow the response's recent
+amplitude (a latent envelope), identified from accelerations, and tried by the diagnosis where
+the running period moves."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pidyn.data.sources import synthetic
+from pidyn.refine.output_error import fit_output_error
+from pidyn.simulate import simulate_response
+from pidyn.systems import LinearSDOF, SDOFSystem
+from pidyn.systems.terms import AmplitudeSoftening, LinearStiffness, ViscousDamping
+
+
+def test_an_amplitude_dependent_structure_is_recovered_from_its_accelerations():
+    """A 20 s accelerometer record whose stiffness falls by 40 % of its envelope (time constant
+    1.5 s): the linear fit is 12 % soft; the extension started at 10 % and 1 s recovers the
+    softening, the damping's gain, the time constant and the stiffness at rest."""
+    k, c = 400.0, 2.0
+    lin = LinearSDOF(c=c, k=k)
+    calm = synthetic(lin, "el_centro", channels=("a",), duration=20.0, dt=0.02)
+    a_ref = float(np.max(np.abs(simulate_response(lin, {"m": 1.0, "c": c, "k": k}, calm, 4)["x"])))
+    true = SDOFSystem(
+        [ViscousDamping(c), LinearStiffness(k), AmplitudeSoftening(0.4, 0.8, 1.5, a_ref=a_ref, w0=20.0)]
+    )
+    seg = synthetic(true, "el_centro", noise=0.02, channels=("a",), duration=20.0, dt=0.02).segment(0, 13.0)
+    nominal = fit_output_error(seg, lin, init={"c": c, "k": k}, max_nfev=100, tol=1e-8)
+    assert nominal.params["k"] < 0.92 * k  # the linear model takes a softer spring
+    w0 = float(np.sqrt(nominal.params["k"]))  # as the diagnosis builds it: at the nominal frequency
+    ext = lin.with_term(AmplitudeSoftening(0.1, 0.1, 1.0, a_ref=a_ref, w0=w0))
+    fit = fit_output_error(
+        seg, ext, init={**nominal.params, "soft": 0.1, "gain": 0.1, "tau": 1.0}, max_nfev=100, tol=1e-8
+    )
+    p = fit.params
+    assert fit.cost < 0.1 * nominal.cost
+    assert p["k"] == pytest.approx(k, rel=0.01)
+    assert p["soft"] == pytest.approx(0.4, rel=0.1)
+    assert p["gain"] == pytest.approx(0.8, rel=0.15)
+    assert p["tau"] == pytest.approx(1.5, rel=0.1)
+
+
+def test_the_term_softens_with_the_envelope_and_recovers_as_it_decays():
+    """The latent envelope rises towards A / a_ref with the time constant and falls back after
+    the motion stops; the force is the stiffness and damping changed by its shares."""
+    term = AmplitudeSoftening(0.5, 1.0, 2.0, a_ref=0.01, w0=10.0)
+    p = {"k": 100.0, "c": 1.0, "soft": 0.5, "gain": 1.0, "tau": 2.0}
+    z = np.array([[0.5]])
+    rate = term.latent_rate(0.0, np.array([0.01]), np.array([0.0]), z, p)
+    assert rate[0, 0] == pytest.approx((1.0 - 0.5) / 2.0)  # amplitude 0.01 = a_ref: towards 1
+    assert term.latent_rate(0.0, np.array([0.0]), np.array([0.0]), z, p)[0, 0] < 0  # at rest: recovers
+    f = term.force(0.0, np.array([0.01]), np.array([0.1]), z, p)
+    assert f[0] == pytest.approx(-0.5 * 100.0 * 0.5 * 0.01 + 1.0 * 1.0 * 0.5 * 0.1)
+
+
+def test_a_moving_period_adds_the_amplitude_dependent_structure_to_the_check(monkeypatch):
+    """On an accelerometer record whose running period moves beyond its windows' intervals, the
+    output-error check also fits the amplitude-dependent structure; where the period holds, or
+    the user lists the effects to screen, it does not."""
+    from types import SimpleNamespace
+
+    from pidyn.discrepancy import pipeline
+    from pidyn.discrepancy.confirm import Confirmation
+
+    seen = {}
+
+    def fake(case, system, values, node, sc, s, k, everything=False, extra=None):
+        seen["extra"] = [r["effect"] for r in extra or []]
+        return Confirmation()
+
+    monkeypatch.setattr(pipeline, "confirm_undecided", fake)
+    nom = SimpleNamespace(system=None, values={}, node={}, s=None)
+    sc = SimpleNamespace(cause=None, verdict="none")
+    holds = SimpleNamespace(failed=False)
+    moves, still = {"variation": {"varies": True}}, {"variation": {"varies": False}}
+    for effects, running, expect in (
+        ([], moves, ["amplitude_softening"]),
+        ([], still, []),
+        ([], None, []),
+        (["cubic_stiffness"], moves, []),
+    ):
+        case = SimpleNamespace(from_accelerometers=True, settings=SimpleNamespace(effects=effects))
+        assert pipeline._first_cause(case, nom, sc, holds, None, None, running)[0] is None
+        assert seen["extra"] == expect
