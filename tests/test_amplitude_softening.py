@@ -83,3 +83,41 @@ def test_a_moving_period_adds_the_amplitude_dependent_structure_to_the_check(mon
         case = SimpleNamespace(from_accelerometers=True, settings=SimpleNamespace(effects=effects))
         assert pipeline._first_cause(case, nom, sc, holds, None, None, running)[0] is None
         assert seen["extra"] == expect
+
+
+def test_the_extension_draws_its_own_period_through_the_record(tmp_path):
+    """The amplitude-dependent model's period along its simulated response: the period at rest
+    at the start, longer in the strong shaking, shorter again in the quieter end, drawn beside
+    the windows' periods."""
+    from types import SimpleNamespace
+
+    from pidyn.discrepancy.report import plot_running_period
+    from pidyn.discrepancy.summary import amplitude_path
+
+    k, c = 400.0, 2.0
+    system = LinearSDOF(c=c, k=k).with_term(AmplitudeSoftening(0.4, 0.8, 1.5, a_ref=0.016, w0=20.0))
+    values = {"m": 1.0, "c": c, "k": k, "soft": 0.4, "gain": 0.8, "tau": 1.5}
+    rec = synthetic(system, "el_centro", channels=("a",), duration=20.0, dt=0.02)
+    n = len(rec.t)
+    case = SimpleNamespace(record=rec, x_raw=np.zeros(n), settings=SimpleNamespace(substeps=4))
+    o = SimpleNamespace(
+        extension={"system": system, "values": values},
+        nominal=SimpleNamespace(s=SimpleNamespace(v=np.zeros(n))),
+    )
+    t, period, zeta = amplitude_path(case, o)
+    rest = 2 * np.pi / np.sqrt(k)
+    assert period[0] == pytest.approx(rest, rel=1e-6) and zeta[0] == pytest.approx(c / (2 * np.sqrt(k)))
+    strong = int(np.argmax(period))
+    assert period[strong] > 1.1 * rest and zeta[strong] > 1.2 * zeta[0]
+    assert period[-1] < period[strong] - 0.5 * (period[strong] - rest)  # recovering in the coda
+    w = np.arange(1.0, 19.0, 1.0)
+    running = {
+        "t": w,
+        **{
+            f"{q}{s}": np.full(w.shape, v)
+            for q, v in (("period", rest), ("damping", 0.05))
+            for s in ("", "_lo", "_hi")
+        },
+    }
+    plot_running_period(tmp_path / "running_period.png", running, (0, 13), (13, 20), model=(t, period, zeta))
+    assert (tmp_path / "running_period.png").stat().st_size > 0

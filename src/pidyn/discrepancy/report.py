@@ -598,10 +598,17 @@ def _ranking_lines(d: dict) -> list[str]:
 
 
 def plot_running_period(
-    path: Path, running: dict, fit, held, signal: tuple | None = None, nominal_period: float | None = None
+    path: Path,
+    running: dict,
+    fit,
+    held,
+    signal: tuple | None = None,
+    nominal_period: float | None = None,
+    model: tuple | None = None,
 ) -> None:
     """Period and damping ratio window by window (output error on the sensors' readings), each with
-    its 95 % interval, over the motion's envelope."""
+    its 95 % interval, over the motion's envelope; ``model`` (t, period, zeta): an
+    amplitude-dependent model's own, along its simulated response."""
     import numpy as np
 
     plt = _plt()
@@ -630,6 +637,10 @@ def plot_running_period(
             b.set_ylabel("|measured| (sensor)", color="0.5")
     if nominal_period is not None:
         axes[0].axhline(nominal_period, color="k", lw=0.7, ls="--", label="one model for the fitting part")
+    if model is not None:
+        label = "amplitude-dependent model (its own response's envelope)"
+        axes[0].plot(model[0], model[1], color="tab:red", lw=1.0, label=label)
+        axes[1].plot(model[0], 100.0 * np.asarray(model[2]), color="tab:red", lw=1.0)
     axes[0].legend(fontsize=8, loc="upper right")
     axes[0].set_title("Natural period and damping through the record (windows fitted by output error)")
     axes[1].set_xlabel("t [s] (window centre)")

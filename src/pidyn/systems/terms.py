@@ -561,6 +561,11 @@ class AmplitudeSoftening(ForceTerm):
         e = z[..., 0]
         return -p["soft"] * p[self.stiffness] * e * x + p["gain"] * p[self.damping] * e * v
 
+    def at_envelope(self, p: dict, e: Array) -> tuple[Array, Array]:
+        """The structure's stiffness and damping where the envelope is ``e``: k (1 - soft e) and
+        c (1 + gain e), what an equivalent-linear model at that amplitude would have."""
+        return p[self.stiffness] * (1 - p["soft"] * e), p[self.damping] * (1 + p["gain"] * e)
+
     def latent_rate(self, t, x, v, z, p):
         amp = (x * x + (v / self.w0) ** 2 + (1e-9 * self.a_ref) ** 2) ** 0.5
         return ((amp / self.a_ref - z[..., 0]) / p["tau"])[..., None]
