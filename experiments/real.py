@@ -585,8 +585,12 @@ def _diagnosis_lines(rows: list[dict], pga: dict[str, float]) -> list[str]:
         "",
         "`python diagnose.py experiment=painter_street_diagnose`: the accelerations decide (output error "
         "of every library effect), the period and damping are fitted window by window; a period that moves "
-        "beyond its windows' intervals refutes one linear model (verdict `unexplained`, a learned force "
-        "tried and kept only when it predicts the held-out part better).",
+        "beyond its windows' intervals refutes one linear model. There the amplitude-dependent structure "
+        "(`amplitude_softening`: a stiffness and a damping that follow a latent envelope of the response, "
+        "with its time constant) is one more candidate of the check, named like the library's effects when "
+        "it passes it and earns its place on the held-out part; the figures draw its own period along its "
+        "simulated response in red. Where nothing is named the verdict is `unexplained`, a learned force "
+        "tried and kept only when it predicts the held-out part better.",
         "",
         *diagnosis_table(diag, pga),
     ]
