@@ -600,7 +600,27 @@ def _diagnosis_lines(rows: list[dict], pga: dict[str, float]) -> list[str]:
             shutil.copy(fig, RESULTS / "figures" / f"running_period_{r['event']}.png")
             lines.append(f"![{r['event']}](figures/running_period_{r['event']}.png)")
     lines.append("")
-    return lines
+    return lines + _amplitude_figures(rows, diag)
+
+
+def _amplitude_figures(rows: list[dict], shown: list[dict]) -> list[str]:
+    """The running period of every other event-direction where the amplitude-dependent structure
+    was named: its own period beside the windows' (red)."""
+    named = [
+        r
+        for r in rows
+        if r["status"] == "ok" and "amplitude_softening" in (r.get("causes") or []) and r not in shown
+    ]
+    if not named:
+        return []
+    lines = ["The other event-directions where the amplitude-dependent structure is named:", ""]
+    for r in named:
+        fig = Path(r["run"]) / "figures" / "running_period.png"
+        if fig.exists():
+            name = f"running_period_{r['event']}_{r['direction']}.png"
+            shutil.copy(fig, RESULTS / "figures" / name)
+            lines.append(f"![{r['event']} {r['direction']}](figures/{name})")
+    return lines + [""]
 
 
 def write_csv(rows: list[dict], path: Path) -> None:
