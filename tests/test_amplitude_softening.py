@@ -100,9 +100,10 @@ def test_the_extension_draws_its_own_period_through_the_record(tmp_path):
     rec = synthetic(system, "el_centro", channels=("a",), duration=20.0, dt=0.02)
     n = len(rec.t)
     case = SimpleNamespace(record=rec, x_raw=np.zeros(n), settings=SimpleNamespace(substeps=4))
-    o = SimpleNamespace(
+    o = SimpleNamespace(  # the free run from rest the diagnosis measured its gain on
         extension={"system": system, "values": values},
         nominal=SimpleNamespace(s=SimpleNamespace(v=np.zeros(n))),
+        sims={"extended": simulate_response(system, values, rec, 4, np.zeros(system.n_state))},
     )
     t, period, zeta = amplitude_path(case, o)
     rest = 2 * np.pi / np.sqrt(k)

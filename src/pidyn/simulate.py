@@ -160,8 +160,8 @@ def simulate_response(
     substeps: int = 4,
     state0: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
-    """The identified model's response over the record: ``x, v`` (relative, (N, n_dof)) and
-    ``a`` in the record's convention (relative to the one ground; absolute for several inputs)
+    """The identified model's response over the record: ``x, v`` (relative, (N, n_dof)), its
+    latent states ``z`` ((N, n_latent)) and ``a`` in the record's convention (relative to the one ground; absolute for several inputs)
     by the fixed-step batched RK4 (bounded cost: a model that blows up gives NaNs rather
     than an adaptive integrator crawling) from ``state0`` (the full state, default rest), the
     excitation read between samples as the record says (``meta["input_hold"]``, default linear)."""
@@ -169,7 +169,7 @@ def simulate_response(
     Y, R = simulate_states(system, values, record.t, record.f, state0, substeps, input_hold(record))
     with np.errstate(all="ignore"):
         a = system.acceleration_output(R[:, n : 2 * n], np.asarray(record.f, float), dict(values))
-    return {"x": Y[:, :n], "v": Y[:, n : 2 * n], "a": a}
+    return {"x": Y[:, :n], "v": Y[:, n : 2 * n], "z": Y[:, 2 * n :], "a": a}
 
 
 def simulate_batch(

@@ -143,10 +143,10 @@ def confirm(
         tested["seconds"], tested["nfev"] = time.perf_counter() - t0, res.nfev
         out.tested.append(tested)
         log.info(
-            "output-error check of %s (weak-form score %.1f): dBIC %.1f over %.0f independent samples, "
+            "output-error check of %s (weak-form score %s): dBIC %.1f over %.0f independent samples, "
             "held-out gain %s%s (%d evaluations, %.0f s)",
             row["effect"],
-            row["score"],
+            "none" if row["score"] is None else f"{row['score']:.1f}",
             tested["delta_bic"],
             tested["independent_samples"],
             "n/a" if tested["heldout_gain"] is None else f"{tested['heldout_gain']:.2f}",
@@ -275,7 +275,7 @@ def _judge(row: dict, ext, specs: list, values: dict[str, float], res, base: _No
     passes = bool(delta_bic <= -th.min_delta_bic and (ho is None or ho >= th.min_heldout_gain))
     tested = {
         "effect": row["effect"],
-        "weak_form_score": float(row["score"]),
+        "weak_form_score": None if row["score"] is None else float(row["score"]),
         "score": float(-delta_bic),
         "delta_bic": float(delta_bic),
         "explained": float(1 - rss1 / rss0) if ok else None,

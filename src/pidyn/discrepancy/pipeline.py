@@ -404,10 +404,10 @@ AMPLITUDE = "amplitude_softening"
 def _amplitude_candidate() -> dict:
     """The amplitude-dependent structure as a candidate of the output-error check, started at a
     small softening and a time constant of a second (on the 1992 Petrolia records the fits from
-    0.5 and 2 s ended together; the weak form does not score it: ``score`` 0)."""
+    0.5 and 2 s ended together; the weak form does not score it: ``score`` None)."""
     return {
         "effect": AMPLITUDE,
-        "score": 0.0,
+        "score": None,
         "parameters": {"soft": 0.1, "gain": 0.1, "tau": 1.0},
         "nominal_refit": {},
     }

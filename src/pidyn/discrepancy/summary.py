@@ -263,26 +263,20 @@ def plot_learned(
 def amplitude_path(case: Case, o: Outcome) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """An amplitude-dependent extension's own period and damping ratio through the record (t,
     period, zeta): the equivalent-linear structure at the envelope its simulated response
-    carries, beside the windows' fits. None without such a term."""
-    from pidyn.integrate import input_hold
-    from pidyn.simulate import simulate_states
+    carries (the free run the gain was measured on), beside the windows' fits. None without
+    such a term."""
     from pidyn.systems.terms import AmplitudeSoftening
 
     system, values = o.extension.get("system"), o.extension.get("values")
     term = next((t for t in getattr(system, "terms", []) if isinstance(t, AmplitudeSoftening)), None)
     if term is None:
         return None
-    record, n = case.record, system.n_dof
-    y0 = np.zeros(system.n_state)
-    y0[0], y0[1] = float(case.x_raw[0]), float(o.nominal.s.v[0])
-    Y, _ = simulate_states(
-        system, values, record.t, record.f, y0, int(case.settings.substeps), input_hold(record)
-    )
-    e = Y[:, 2 * n + list(system.latent_names).index(term.name)]
+    run = (o.sims or {}).get("extended") or case.free_response(system, values, float(o.nominal.s.v[0]))
+    e = run["z"][:, list(system.latent_names).index(term.name)]
     k, c = term.at_envelope(values, e)
     m = float(values.get("m", 1.0))
     with np.errstate(invalid="ignore", divide="ignore"):
-        return record.t, 2 * np.pi * np.sqrt(m / k), c / (2 * np.sqrt(k * m))
+        return case.record.t, 2 * np.pi * np.sqrt(m / k), c / (2 * np.sqrt(k * m))
 
 
 def _evidence_row(o: Outcome, cause: str | None) -> dict | None:
