@@ -54,6 +54,7 @@ def run(tmp_path, path, masses_list: list[float] = MASSES, overrides: tuple[str,
 
 
 @pytest.mark.slow
+@pytest.mark.second_proof  # a storey's effect named: the stiffness loss and sparse-sensor tests
 def test_a_gap_in_storey_2_is_named_with_its_storey(tmp_path):
     path = building_csv(tmp_path, {2: [{"term": "gap_contact", "kg": 150.0, "gap": 0.02}]})
     d = run(tmp_path, path)
@@ -116,6 +117,7 @@ def test_floors_without_sensors_take_the_model_and_the_storey_is_still_found(tmp
 
 
 @pytest.mark.slow
+@pytest.mark.second_proof  # two effects named: test_discrepancy's pair; per storey: the tests above
 def test_two_effects_in_two_storeys_are_both_named(tmp_path):
     """A stiffness loss in storey 1 and a hardening spring in storey 3 (a quarter of that
     storey's force): both named, each in its storey, the second found by screening the

@@ -25,6 +25,9 @@ from pidyn.weak_form import WeakForm, smooth_signals, velocity_noise  # noqa: E4
 
 PERIOD = 2 * np.pi / np.sqrt(15.0)
 
+#: a second end-to-end case of a capability another test in `make test` already proves (`make test-all`)
+SECOND = pytest.mark.second_proof
+
 
 def _screen(case, effects=None):
     r = case.record
@@ -182,7 +185,7 @@ def test_diagnosis_finds_estimates_and_gains(effect, tmp_path):
     """End to end (PIDynNet, polish, screening, extension, held-out simulation) on a seeded
     hidden effect with 2 % noise: the diagnosis names it, estimates its key parameter within
     the effect's stated tolerance and lowers the held-out error; with nothing hidden: none.
-    Other effects end to end: a softening cubic and stiffness losses below, quadratic damping
+    Other effects end to end: stiffness losses below (a softening cubic with ``make test-all``), quadratic damping
     in the user's CSV file and in the API walkthrough (test_api), every kind in
     ``make discrepancy-bench``."""
     from pidyn.tasks.diagnose import diagnose
@@ -421,7 +424,14 @@ def test_a_step_found_over_the_whole_record_must_persist():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("case", ["softening_cubic", "change_after_split", "change_before_split"])
+@pytest.mark.parametrize(
+    "case",
+    [
+        pytest.param("softening_cubic", marks=SECOND),  # test_output_error_check names it too
+        "change_after_split",
+        pytest.param("change_before_split", marks=SECOND),  # located before and after the split below
+    ],
+)
 def test_diagnosis_of_signed_effects_and_changes_in_time(case, tmp_path):
     """End to end: a softening cubic (it used to crash the extension), a stiffness loss after
     the split (the nominal model is fine on the fitting part and fails after it: the verdict
@@ -455,7 +465,10 @@ def test_diagnosis_of_signed_effects_and_changes_in_time(case, tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("pair", ["quadratic_stiffness+quadratic_damping", "gap_contact+coulomb_friction"])
+@pytest.mark.parametrize(
+    "pair",
+    ["quadratic_stiffness+quadratic_damping", pytest.param("gap_contact+coulomb_friction", marks=SECOND)],
+)
 def test_diagnosis_names_two_hidden_effects_and_no_third(pair, tmp_path):
     """Two effects hidden together: diagnose, extend, diagnose the extended model again. Both
     are named (in either order), their parameters recovered, and the screening of the final
@@ -559,7 +572,9 @@ def test_ridge_fit_survives_a_column_silent_in_the_fitting_rows():
     assert np.all(np.isfinite(theta)) and theta[1] == 0.0
 
 
-@pytest.mark.parametrize("effect", list(EQUIVALENT))
+@pytest.mark.parametrize(
+    "effect", [pytest.param(e, marks=SECOND) if e == "stribeck_friction" else e for e in EQUIVALENT]
+)
 def test_screening_never_gives_an_outside_effect_a_wrong_name(effect):
     verdicts = {}
     for seed in range(1, 7):
@@ -595,7 +610,9 @@ def test_a_learned_force_term_starts_at_the_force_it_is_shown():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("effect", list(EQUIVALENT))
+@pytest.mark.parametrize(
+    "effect", [pytest.param(e, marks=SECOND) if e == "trilinear_spring" else e for e in EQUIVALENT]
+)
 def test_diagnosis_of_an_effect_outside_the_library(effect, tmp_path):
     """Hidden effects the library does not hold: the verdict is 'unexplained' (then a learned
     force f(x, x') in PIDynNet's physics loss) or a physically equivalent library name, never
