@@ -217,6 +217,7 @@ def test_diagnosis_finds_estimates_and_gains(effect, tmp_path):
 
 
 @pytest.mark.slow
+@SECOND  # quadratic damping end to end: test_api's walkthrough; a user's CSV: the building diagnoses
 def test_diagnosis_of_a_users_csv_file(tmp_path):
     """A CSV written by a user (t, x, ag), known mass, no split in the data: the fit_share split."""
     from pidyn.tasks.diagnose import diagnose

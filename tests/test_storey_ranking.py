@@ -67,6 +67,7 @@ def test_the_hidden_effect_in_its_storey_ranks_first(effect):
 
 
 @pytest.mark.slow
+@pytest.mark.second_proof  # the whole diagnosis of such a storey: test_storey_learned
 def test_a_force_outside_the_library_puts_its_storey_first():
     """A trilinear spring (softening beyond x1, hardening beyond x2: no library shape) in storey 3
     of four: the storey whose candidates together explain most of the misfit is storey 3, where

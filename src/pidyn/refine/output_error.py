@@ -7,6 +7,7 @@ confirmation of an effect (``pidyn.discrepancy.confirm``) both run it."""
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass
 
@@ -15,6 +16,11 @@ from scipy.optimize import least_squares
 
 from pidyn.params import to_theta, trainable_specs
 from pidyn.refine.problem import ShootingProblem
+
+log = logging.getLogger(__name__)
+
+#: seconds between the progress lines of a long fit
+PROGRESS_EVERY_S = 30.0
 
 
 @dataclass
@@ -49,7 +55,7 @@ def fit_output_error(
     problem, th0 = _problem(record, system, init, substeps)
     fun, jac = problem.fd_fun_and_jac()
     sol = least_squares(
-        fun,
+        _with_progress(fun, system, t0),
         th0,
         jac=jac,
         method="trf",
@@ -59,6 +65,29 @@ def fit_output_error(
         gtol=1e-12,
     )
     return OutputErrorFit(problem.values(sol.x), time.perf_counter() - t0, int(sol.nfev), float(sol.cost))
+
+
+def _with_progress(fun, system, t0: float):
+    """``fun`` that says, every ``PROGRESS_EVERY_S`` seconds, how far a long fit has come (a
+    model with a learned force can take minutes on a long record)."""
+    state = {"n": 0, "next": t0 + PROGRESS_EVERY_S}
+
+    def wrapped(theta: np.ndarray) -> np.ndarray:
+        r = fun(theta)
+        state["n"] += 1
+        now = time.perf_counter()
+        if now >= state["next"]:
+            state["next"] = now + PROGRESS_EVERY_S
+            log.info(
+                "output error of %s: %d evaluations, cost %.4g, %.0f s",
+                getattr(system, "name", "the model"),
+                state["n"],
+                0.5 * float(np.sum(np.square(r))),
+                now - t0,
+            )
+        return r
+
+    return wrapped
 
 
 def output_error_cost(record, system, values: dict[str, float], substeps: int = 4) -> float:
