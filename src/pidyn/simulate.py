@@ -161,10 +161,11 @@ def simulate_response(
     state0: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """The identified model's response over the record: ``x, v`` (relative, (N, n_dof)), its
-    latent states ``z`` ((N, n_latent)) and ``a`` in the record's convention (relative to the one ground; absolute for several inputs)
-    by the fixed-step batched RK4 (bounded cost: a model that blows up gives NaNs rather
-    than an adaptive integrator crawling) from ``state0`` (the full state, default rest), the
-    excitation read between samples as the record says (``meta["input_hold"]``, default linear)."""
+    latent states ``z`` ((N, n_latent)) and ``a`` in the record's convention (relative to the
+    one ground; absolute for several inputs) by the fixed-step batched RK4 (bounded cost: a
+    model that blows up gives NaNs rather than an adaptive integrator crawling) from
+    ``state0`` (the full state, default rest), the excitation read between samples as the
+    record says (``meta["input_hold"]``, default linear)."""
     n = system.n_dof
     Y, R = simulate_states(system, values, record.t, record.f, state0, substeps, input_hold(record))
     with np.errstate(all="ignore"):
