@@ -347,3 +347,23 @@ def test_the_sandwich_gives_the_spread_of_an_estimate_under_correlated_residuals
     assert np.median(white) < 0.4 * spread
     assert abs(np.median(hac) / spread - 1) < 0.25, (np.median(hac), spread)
     assert bandwidth(0.02, n) == 0 and bandwidth(0.9, n) > 10
+
+
+def test_a_long_output_error_fit_says_how_far_it_has_come(monkeypatch, caplog):
+    """A fit that runs past the progress interval logs its evaluations, cost and seconds (a
+    learned force's model can take minutes on a long record); a fit within it logs nothing."""
+    import logging
+
+    from pidyn.refine import output_error
+
+    s = LinearSDOF()
+    r = synthetic(s, "kobe", duration=6.0, noise=0.02, data_seed=4)
+    start = {"c": 0.5, "k": 20.0}
+    with caplog.at_level(logging.INFO, logger="pidyn.refine.output_error"):
+        output_error.fit_output_error(r, s, init=start, max_nfev=5)
+    assert not [m for m in caplog.messages if "evaluations, cost" in m]
+    monkeypatch.setattr(output_error, "PROGRESS_EVERY_S", 0.0)
+    with caplog.at_level(logging.INFO, logger="pidyn.refine.output_error"):
+        fit = output_error.fit_output_error(r, s, init=start, max_nfev=5)
+    lines = [m for m in caplog.messages if "evaluations, cost" in m]
+    assert len(lines) == fit.nfev and lines[0].startswith("output error of linear_sdof: 1 evaluations")
