@@ -226,6 +226,13 @@ class SDOFSystem(StructuralSystem):
         return out
 
     def state_rate(self, t, y, p, f):
+        if not self.n_latent and type(y) is np.ndarray and y.ndim == 2:  # an integrator's batch of plain
+            v = y[:, 1]  # states without latent ones (most of a diagnosis's time): no checks, no list
+            a = (self.forcing(f, p) - self._restoring(t, y[:, 0], v, None, p, self._latent_slices())) / p["m"]
+            if type(a) is np.ndarray:
+                out = np.empty(y.shape)
+                out[:, 0], out[:, 1] = v, a
+                return out
         plain = isinstance(y, np.ndarray) and y.ndim == 1
         if plain:  # one plain state (an integrator's step): scalars, not 0-d arrays, so the rate is built
             x, v, z = y[0], y[1], y[2:]  # without np.stack
