@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from pidyn import integrate_linear
 from pidyn.autodiff import Dual
 from pidyn.systems.base import StructuralSystem
 
@@ -104,16 +105,45 @@ def rk4(
     """
     N = len(t)
     D = _n_dir(p, y0)
-    y = y0 if (D == 0 or isinstance(y0, Dual)) else Dual(y0, np.zeros(np.shape(y0) + (D,)))
-    shape = y.shape
-    Yv = np.empty((N,) + shape)
-    Yd = np.empty((N,) + shape + (D,)) if D else None
     tt = (
         np.asarray(t0, float) + (np.asarray(t, float) - float(t[0]))[:, None]
         if np.ndim(t0)
         else float(t0) + np.asarray(t, float) - float(t[0])
     )
     ff, per_trajectory = _checked_excitation(system, f)
+
+    def loop(tl: np.ndarray, fl: np.ndarray, yl: Any) -> tuple[np.ndarray, np.ndarray | None]:
+        return _steps(system, p, tl, tl - tl[0], fl, None, yl, substeps, D)
+
+    if stages is None and integrate_linear.applies(system, p, t, y0):
+        Yv, Yd = integrate_linear.propagate(system, np.asarray(t, float), ff, per_trajectory, y0, loop)
+    else:
+        Yv, Yd = _steps(system, p, t, tt, ff, stages, y0, substeps, D)
+    shape = Yv.shape[1:]
+    Y: Any = Dual(Yv, Yd) if Yd is not None else Yv
+    T = tt if np.ndim(tt) == 2 else np.broadcast_to(np.asarray(tt)[:, None], (N, shape[0]))
+    F = ff if per_trajectory else np.broadcast_to(ff[:, None], (N, shape[0]) + ff.shape[1:])
+    R = system.state_rate(T, Y, p, F)
+    return Y, R
+
+
+def _steps(
+    system: StructuralSystem,
+    p: dict[str, Any],
+    t: np.ndarray,
+    tt: np.ndarray,
+    ff: np.ndarray,
+    stages: np.ndarray | None,
+    y0: Any,
+    substeps: int,
+    D: int,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The RK4 loop: states (N, B, n_state) and their derivatives (None without directions)."""
+    N = len(t)
+    y = y0 if (D == 0 or isinstance(y0, Dual)) else Dual(y0, np.zeros(np.shape(y0) + (D,)))
+    shape = y.shape
+    Yv = np.empty((N,) + shape)
+    Yd = np.empty((N,) + shape + (D,)) if D else None
 
     def store(i: int, yi: Any) -> None:
         if D:
@@ -134,8 +164,4 @@ def rk4(
             k4 = rate(ta + h, y + h * k3, p, fb)
             y = y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
         store(i + 1, y)
-    Y: Any = Dual(Yv, Yd) if D else Yv
-    T = tt if np.ndim(tt) == 2 else np.broadcast_to(np.asarray(tt)[:, None], (N, shape[0]))
-    F = ff if per_trajectory else np.broadcast_to(ff[:, None], (N, shape[0]) + ff.shape[1:])
-    R = rate(T, Y, p, F)
-    return Y, R
+    return Yv, Yd

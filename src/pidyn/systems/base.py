@@ -53,6 +53,10 @@ class StructuralSystem(ABC):
     #: names of several ground inputs (supports); empty: one input (``ag`` or ``u``)
     inputs: tuple[str, ...] = ()
 
+    #: linear in its state and excitation, with no time-dependent term: its RK4 scheme is a
+    #: one-sample affine map (``pidyn.integrate_linear``)
+    linear_time_invariant: bool = False
+
     @property
     def n_inputs(self) -> int:
         return max(1, len(self.inputs))

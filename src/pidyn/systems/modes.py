@@ -40,6 +40,7 @@ class ModesOnSupports(StructuralSystem):
 
     #: its degrees of freedom are modal coordinates: it has frequencies and damping, no mode shapes
     modal_coordinates = True
+    linear_time_invariant = True
 
     def __init__(
         self,

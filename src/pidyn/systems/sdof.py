@@ -121,6 +121,10 @@ class SDOFSystem(StructuralSystem):
         new._specs = merge_specs(list(self._specs) + merge_specs(term.specs(), None), params)
         return new
 
+    @property
+    def linear_time_invariant(self) -> bool:
+        return not self.n_latent and all(type(t) in (ViscousDamping, LinearStiffness) for t in self.terms)
+
     def linear_params(self) -> list[str]:
         # the influence coefficients are linear in the residual too, but a start from a network that
         # fits absolute accelerations pins them poorly: the data start and the refinement estimate them

@@ -264,6 +264,10 @@ class ShearBuilding(StructuralSystem):
     def terms(self) -> list[OnStorey]:
         return [t for s in self.storeys for t in s]
 
+    @property
+    def linear_time_invariant(self) -> bool:
+        return all(type(t.term) in (ViscousDamping, LinearStiffness) for t in self.terms)
+
     def linear_params(self) -> list[str]:
         """The parameters the motion residual is linear in: the terms' linear ones and, with the
         masses unknown, the mass ratios (m_i a_i enters linearly too)."""
