@@ -36,7 +36,8 @@ def _dual(p: dict, names: list[str], y0: np.ndarray) -> tuple[dict, Dual]:
     n_dir = len(names) + y0.shape[1]
     out = dict(p)
     for i, name in enumerate(names):
-        out[name] = Dual(np.float64(p[name]), np.eye(n_dir)[i])
+        v = np.asarray(p[name], float)
+        out[name] = Dual(v, np.broadcast_to(np.eye(n_dir)[i], v.shape + (n_dir,)).copy())
     d = np.zeros(y0.shape + (n_dir,))
     for j in range(y0.shape[1]):
         d[:, j, len(names) + j] = 1.0
@@ -80,6 +81,25 @@ def test_plain_values_and_a_plain_start_give_plain_states(monkeypatch):
     assert np.abs(y_fast - y_slow).max() < 1e-11 * np.abs(y_slow).max()
 
 
+@pytest.mark.parametrize("name", ["three supports", "building"])
+def test_one_parameter_set_per_trajectory_as_a_finite_difference_jacobian_simulates_them(monkeypatch, name):
+    system = SYSTEMS[name]()
+    rng = np.random.default_rng(5)
+    batch, w = 4, system.excitation_width
+    t = np.arange(300) * 0.01
+    f = rng.standard_normal((len(t), w) if w > 1 else len(t))
+    base = _values(system)
+    p = {k: v * (1 + 0.1 * rng.standard_normal(batch)) for k, v in base.items()}  # one set per trajectory
+    p[next(iter(p))] = base[next(iter(p))]  # and one parameter shared
+    y0 = 0.01 * rng.standard_normal((batch, system.n_state))
+    assert integrate_linear.applies(system, p, t, y0)
+    (y_fast, _), (y_slow, _) = _both(monkeypatch, system, p, t, f, y0)
+    assert np.abs(y_fast - y_slow).max() < 1e-11 * np.abs(y_slow).max()
+    dual, y0d = _dual(p, list(p)[1:4], y0)
+    (y_fast, _), (y_slow, _) = _both(monkeypatch, system, dual, t, f, y0d)
+    assert np.abs(y_fast.d - y_slow.d).max() < 1e-11 * np.abs(y_slow.d).max()
+
+
 def test_what_the_map_does_not_stand_for_takes_the_general_scheme():
     t = np.arange(50) * 0.01
     y0 = np.zeros((1, 2))
@@ -89,7 +109,8 @@ def test_what_the_map_does_not_stand_for_takes_the_general_scheme():
     assert not integrate_linear.applies(Duffing(), _values(Duffing()), t, y0)  # nonlinear
     loss = linear.with_term(StiffnessLoss(t_d=0.2, t_min=0.0, t_max=0.5, tau=0.05))
     assert not loss.linear_time_invariant  # a change in time
-    assert not integrate_linear.applies(linear, {**p, "k": np.array([15.0, 16.0])}, t, y0)  # per trajectory
+    two = {**p, "k": np.array([15.0, 16.0])}  # two values of k for one state
+    assert not integrate_linear.applies(linear, two, t, y0)
     uneven = t.copy()
     uneven[10] += 0.002
     assert not integrate_linear.applies(linear, p, uneven, y0)

@@ -112,11 +112,13 @@ def rk4(
     )
     ff, per_trajectory = _checked_excitation(system, f)
 
-    def loop(tl: np.ndarray, fl: np.ndarray, yl: Any) -> tuple[np.ndarray, np.ndarray | None]:
-        return _steps(system, p, tl, tl - tl[0], fl, None, yl, substeps, D)
+    def loop(
+        tl: np.ndarray, fl: np.ndarray, yl: Any, pl: dict[str, Any]
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        return _steps(system, pl, tl, tl - tl[0], fl, None, yl, substeps, D)
 
     if stages is None and integrate_linear.applies(system, p, t, y0):
-        Yv, Yd = integrate_linear.propagate(system, np.asarray(t, float), ff, per_trajectory, y0, loop)
+        Yv, Yd = integrate_linear.propagate(system, np.asarray(t, float), ff, per_trajectory, y0, p, loop)
     else:
         Yv, Yd = _steps(system, p, t, tt, ff, stages, y0, substeps, D)
     shape = Yv.shape[1:]

@@ -24,26 +24,30 @@ import numpy as np
 from pidyn.autodiff import Dual
 from pidyn.systems.base import StructuralSystem
 
-#: integrates (t, excitation per trajectory, initial states) by the general scheme; (values, derivatives)
-Loop = Callable[[np.ndarray, np.ndarray, Any], tuple[np.ndarray, np.ndarray | None]]
+#: integrates (t, excitation per trajectory, initial states, parameters) by the general scheme;
+#: (values, derivatives or None)
+Loop = Callable[[np.ndarray, np.ndarray, Any, dict[str, Any]], tuple[np.ndarray, np.ndarray | None]]
+
+
+def _values(v: Any) -> Any:
+    return v.v if isinstance(v, Dual) else v
 
 
 def applies(system: StructuralSystem, p: dict[str, Any], t: np.ndarray, y0: Any) -> bool:
-    """Whether the one-sample map stands for the scheme: a linear time-invariant system, one
-    value per parameter (not one per trajectory), a uniform grid and a batch of states."""
+    """Whether the one-sample map stands for the scheme: a linear time-invariant system, each
+    parameter one value or one per trajectory, a uniform grid and a batch of states."""
     shape = y0.shape if isinstance(y0, Dual) else np.shape(y0)
     if not getattr(system, "linear_time_invariant", False) or len(t) < 3 or len(shape) != 2:
         return False
-    for v in p.values():
-        if np.shape(v.v if isinstance(v, Dual) else v) != ():
-            return False
+    if any(np.shape(_values(v)) not in ((), shape[:1]) for v in p.values()):
+        return False
     dt = np.diff(np.asarray(t, float))
     return bool(dt[0] > 0 and np.all(np.abs(dt - dt[0]) <= 1e-9 * dt[0]))
 
 
-def _unit_probes(system: StructuralSystem, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Initial states and two-sample excitations, one trajectory each: rest, every unit state,
-    every unit sample at the interval's start, every unit sample at its end."""
+def _unit_probes(system: StructuralSystem, n: int, copies: int) -> tuple[np.ndarray, np.ndarray]:
+    """Initial states and two-sample excitations, one trajectory each, ``copies`` times over:
+    rest, every unit state, every unit sample at the interval's start, every one at its end."""
     w = system.excitation_width
     k = 1 + n + 2 * w
     y0 = np.zeros((k, n))
@@ -51,24 +55,48 @@ def _unit_probes(system: StructuralSystem, n: int) -> tuple[np.ndarray, np.ndarr
     f = np.zeros((2, k, w))
     f[0, 1 + n : 1 + n + w] = np.eye(w)
     f[1, 1 + n + w :] = np.eye(w)
+    y0, f = np.tile(y0, (copies, 1)), np.tile(f, (1, copies, 1))
     return y0, (f[..., 0] if system.n_inputs == 1 else f)
 
 
-def sample_map(system: StructuralSystem, t: np.ndarray, loop: Loop, n: int) -> tuple[np.ndarray, ...]:
-    """(M, G0, G1, g) and, with dual parameters, their derivatives (each with a trailing axis
-    of directions; None without): the columns of the one-interval response to the probes."""
-    y0, f = _unit_probes(system, n)
-    v, d = loop(np.asarray(t[:2], float), f, y0)
-    w = system.excitation_width
-    end = v[1] - v[1][0]
-    maps = (end[1 : 1 + n].T, end[1 + n : 1 + n + w].T, end[1 + n + w :].T, v[1][0])
+def _repeated(p: dict[str, Any], each: int) -> dict[str, Any]:
+    """Per-trajectory parameters, each value repeated for ``each`` probes in a row."""
+    out = {}
+    for name, v in p.items():
+        if np.shape(_values(v)) == ():
+            out[name] = v
+        elif isinstance(v, Dual):
+            out[name] = Dual(np.repeat(v.v, each), np.repeat(v.d, each, axis=0))
+        else:
+            out[name] = np.repeat(np.asarray(v), each)
+    return out
+
+
+def sample_map(
+    system: StructuralSystem, t: np.ndarray, loop: Loop, p: dict[str, Any], n: int, batch: int
+) -> tuple[Any, ...]:
+    """(M, G0, G1, g), each with a leading axis of one entry or one per trajectory (``batch``
+    with per-trajectory parameters), and with dual parameters their derivatives (a trailing
+    axis of directions; None without): the one-interval response to the unit probes."""
+    per = any(np.shape(_values(v)) != () for v in p.values())
+    copies = batch if per else 1
+    k = 1 + n + 2 * system.excitation_width
+    y0, f = _unit_probes(system, n, copies)
+    v, d = loop(np.asarray(t[:2], float), f, y0, _repeated(p, k) if per else p)
+    maps = _columns(v[1].reshape(copies, k, n), n)
     if d is None:
         return maps + (None,) * 4
-    dend = d[1] - d[1][0]
-    dmaps = tuple(
-        np.transpose(x, (1, 0, 2)) for x in (dend[1 : 1 + n], dend[1 + n : 1 + n + w], dend[1 + n + w :])
-    )
-    return maps + dmaps + (d[1][0],)
+    return maps + _columns(d[1].reshape(copies, k, n, -1), n)
+
+
+def _columns(end: np.ndarray, n: int) -> tuple[np.ndarray, ...]:
+    """(M, G0, G1, g) from the probes' states at the interval's end, (copies, probes, n, ...):
+    column j of M is the response to unit state j less the response at rest."""
+    rest = end[:, :1]
+    less = end - rest
+    w = (end.shape[1] - 1 - n) // 2
+    parts = (less[:, 1 : 1 + n], less[:, 1 + n : 1 + n + w], less[:, 1 + n + w :])
+    return tuple(np.swapaxes(x, 1, 2) for x in parts) + (rest[:, 0],)
 
 
 def _as_columns(system: StructuralSystem, ff: np.ndarray, per_trajectory: bool) -> np.ndarray:
@@ -84,19 +112,19 @@ def propagate(
     ff: np.ndarray,
     per_trajectory: bool,
     y0: Any,
+    p: dict[str, Any],
     loop: Loop,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """States (N, B, n) and, with dual parameters or states, their derivatives (N, B, n, D)."""
-    n = y0.shape[-1] if isinstance(y0, Dual) else np.shape(y0)[-1]
-    m, g0, g1, g, dm, dg0, dg1, dg = sample_map(system, t, loop, n)
-    f = _as_columns(system, ff, per_trajectory)
-    u = f[:-1] @ g0.T + f[1:] @ g1.T + g
     y0v = y0.v if isinstance(y0, Dual) else np.asarray(y0, float)
+    n = y0v.shape[-1]
+    m, g0, g1, g, dm, dg0, dg1, dg = sample_map(system, t, loop, p, n, y0v.shape[0])
+    f = _as_columns(system, ff, per_trajectory)
+    u = _apply(g0, f[:-1]) + _apply(g1, f[1:]) + g
     yv = np.empty((len(t),) + y0v.shape)
     yv[0] = y0v
-    mt = np.ascontiguousarray(m.T)
     for i in range(len(t) - 1):
-        yv[i + 1] = yv[i] @ mt + u[i]
+        yv[i + 1] = _apply(m, yv[i]) + u[i]
     if dm is None and not isinstance(y0, Dual):
         return yv, None
     n_dir = dm.shape[-1] if dm is not None else y0.d.shape[-1]
@@ -105,8 +133,14 @@ def propagate(
     if dm is None:
         force = np.zeros((len(t) - 1,) + yv.shape[1:] + (n_dir,))
     else:
-        force = np.einsum("ijd,nbj->nbid", dm, yv[:-1])
-        force += np.einsum("nbw,iwd->nbid", f[:-1], dg0) + np.einsum("nbw,iwd->nbid", f[1:], dg1) + dg
+        force = np.einsum("...ijd,...j->...id", dm, yv[:-1])
+        force += np.einsum("...iwd,...w->...id", dg0, f[:-1]) + np.einsum("...iwd,...w->...id", dg1, f[1:])
+        force += dg
     for i in range(len(t) - 1):
         yd[i + 1] = np.matmul(m, yd[i]) + force[i]
     return yv, yd
+
+
+def _apply(a: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """a (B|1, n, k) applied to x (..., B|1, k): (..., B, n)."""
+    return np.matmul(a, x[..., None])[..., 0]
