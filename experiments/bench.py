@@ -15,7 +15,8 @@ Measures (one thread, CPU):
     (residuals and exact Jacobian over 20 s of El Centro), and the peak memory of a process
     doing both (each size in its own process, so the peaks do not mix);
   * simulation: ground truth (LSODA) of 25 s, one output-error step and one refinement
-    linearisation, for a Duffing oscillator, Bouc-Wen and a 3-storey building;
+    linearisation, for a Duffing oscillator, Bouc-Wen and a 3-storey building; a linear
+    model's exact sensitivities by its RK4 scheme's one-sample map against the general loop;
   * where a GPU is present, the same training steps on it (module and window moved as
     ``trainer=gpu`` moves them), beside the CPU's.
 """
@@ -194,31 +195,77 @@ def simulation_ms(reps: int = 3) -> list[dict]:
     from pidyn.simulate import simulate
     from pidyn.systems import BoucWen, Duffing, ShearBuilding
 
-    def best(fn) -> float:
-        times = []
-        for _ in range(reps):
-            t0 = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - t0)
-        return 1e3 * min(times)
-
     gm = prepare("el_centro", dt=0.01, duration=25.0)
     out = []
     for system in (Duffing(), BoucWen(), ShearBuilding()):
         truth = system.true_values()
-        row = {"system": system.name, "truth_ms": best(lambda: simulate(system, truth, gm, gm.t))}
+        row = {"system": system.name, "truth_ms": _best(lambda: simulate(system, truth, gm, gm.t), reps)}
         rec = synthetic_from_motion(system, gm, noise=0.0, data_seed=0, params=truth)
         oe = ShootingProblem.from_rest(system, rec, 4)
         th = oe.pack(truth, np.zeros((1, system.n_state)))[: oe.n_theta]
-        row["output_error_step_ms"] = best(lambda: oe.residuals_and_fd_jacobian(th))
+        row["output_error_step_ms"] = _best(lambda: oe.residuals_and_fd_jacobian(th), reps)
         problem = build_problem(system, rec, RefineSettings(initial_state="free"))
         b = problem.bounds[:-1]
         states = np.hstack([rec.clean.x[b], rec.clean.v[b]] + ([rec.clean.z[b]] if system.n_latent else []))
         u = problem.pack(truth, states)
-        row["linearisation_ms"] = best(lambda: problem.linearize(u))
+        row["linearisation_ms"] = _best(lambda: problem.linearize(u), reps)
         out.append(row)
         print(row, flush=True)
     return out
+
+
+def linear_map_ms(reps: int = 3) -> list[dict]:
+    """A linear time-invariant model simulated with the exact sensitivities to every parameter
+    (dual numbers, what an output-error fit does at each step), 25 s of El Centro at dt 0.01 s:
+    by its RK4 scheme's one-sample map (``pidyn.integrate_linear``) and by the general loop,
+    and the largest difference of the two as a share of the response."""
+    import numpy as np
+
+    from pidyn import integrate, integrate_linear
+    from pidyn.autodiff import Dual
+    from pidyn.excitation import prepare
+    from pidyn.systems import LinearSDOF, ShearBuilding
+    from pidyn.systems.sdof import SDOFSystem
+
+    gm = prepare("el_centro", dt=0.01, duration=25.0)
+    supports = SDOFSystem(LinearSDOF().terms, inputs=["s1", "s2", "s3"])
+    shift = np.roll(gm.ag, 7)  # three supports: the record, delayed, and their velocities
+    three = np.column_stack(
+        [gm.ag, shift, 0.5 * gm.ag] + [np.cumsum(c) * 0.01 for c in (gm.ag, shift, 0.5 * gm.ag)]
+    )
+    out = []
+    for system, f in ((LinearSDOF(), gm.ag), (supports, three), (ShearBuilding(5), gm.ag)):
+        names = [s.name for s in system.param_specs() if s.trainable]
+        p = {s.name: float(s.init) for s in system.param_specs()}
+        p.update({n: Dual(np.float64(p[n]), np.eye(len(names))[i]) for i, n in enumerate(names)})
+        y0 = np.zeros((1, system.n_state))
+
+        def run():
+            return integrate.rk4(system, p, gm.t, f, y0)
+
+        row = {"system": f"{system.name} ({len(names)} parameters)"}
+        row["map_ms"] = _best(run, reps)
+        fast = run()[0]
+        general = integrate_linear.applies
+        integrate_linear.applies = lambda *a, **k: False
+        try:
+            row["loop_ms"] = _best(run, reps)
+            slow = run()[0]
+        finally:
+            integrate_linear.applies = general
+        row["difference"] = float(np.abs(fast.v - slow.v).max() / np.abs(slow.v).max())
+        out.append(row)
+        print(row, flush=True)
+    return out
+
+
+def _best(fn, reps: int) -> float:
+    times = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return 1e3 * min(times)
 
 
 def lightning_overhead(n_iter: int = 1500, repeats: int = 3) -> dict:
@@ -342,6 +389,7 @@ def main() -> None:
     if a.simulation:
         res = json.loads((OUT / "bench.json").read_text())
         res["simulation"] = simulation_ms()
+        res["linear_map"] = linear_map_ms()
         res["simulation_date"] = time.strftime("%Y-%m-%d")
         # the machine may not be the one of the other rows: its taylor/float32 iteration, to compare
         res["simulation_reference_ms"] = per_iteration_ms(torch.float32, "taylor")
@@ -362,6 +410,7 @@ def main() -> None:
     res["lightning_overhead"] = lightning_overhead()
     res["storeys"] = storey_scaling()
     res["simulation"] = simulation_ms()
+    res["linear_map"] = linear_map_ms()
     if not a.quick:
         res["end_to_end"] = [end_to_end([]), end_to_end(["system=bouc_wen"])]
     elif (OUT / "bench.json").exists():  # keep the last full run's end-to-end rows
@@ -461,6 +510,19 @@ def _simulation_lines(res: dict) -> list[str]:
         lines += [
             f"| {r['system']} | {r['truth_ms']:.0f} | {r['output_error_step_ms']:.0f} | {r['linearisation_ms']:.0f} |"
             for r in res["simulation"]
+        ]
+    if "linear_map" in res:
+        lines += [
+            "",
+            "### Linear models: the RK4 scheme's one-sample map against the general loop\n",
+            "The same scheme and the same sensitivities (25 s, exact Jacobian to every parameter by dual numbers, "
+            "what an output-error fit does at each step); the difference is the largest, as a share of the response.\n",
+            "| system | one-sample map ms | general loop ms | difference |",
+            "|---|---|---|---|",
+        ]
+        lines += [
+            f"| {r['system']} | {r['map_ms']:.1f} | {r['loop_ms']:.0f} | {r['difference']:.1e} |"
+            for r in res["linear_map"]
         ]
     return lines
 
