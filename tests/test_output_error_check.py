@@ -274,3 +274,27 @@ def test_the_first_cause_keeps_a_located_change_only_when_the_check_names_it(mon
     seen.clear()  # the nominal model failed on the held-out part: the located change stands
     assert pipeline._first_cause(case, nom, sc, fails, row, None) == ("stiffness_loss", None, row)
     assert seen == {}
+
+
+def test_the_polish_of_an_extension_starts_from_the_checks_fit_where_that_simulates_better(tmp_path):
+    """The extension's network estimate can land far from the fit that named the effect (on a
+    Painter Street record its simulation cost 28 times the check's); the polish then starts from
+    the check's fit, chosen on the fitting part, and says so."""
+    from pidyn.data.sources import synthetic
+    from pidyn.discrepancy.pipeline import Case, polish
+    from pidyn.discrepancy.settings import DiagnosisSettings
+    from pidyn.systems import Duffing
+
+    truth = Duffing(c=0.5, k1=15.0, k3=120.0)
+    record = synthetic(truth, "el_centro", duration=12.0, dt=0.02, channels=("x",))
+    case = Case(
+        record, LinearSDOF(), {}, {}, DiagnosisSettings(), 1.0, (0.0, 8.0), (8.0, 12.0), tmp_path, None
+    )
+    far = {"m": 1.0, "c": 2.0, "k1": 6.0, "k3": 900.0}  # a network's estimate in another basin
+    near = {"c": 0.55, "k1": 14.0, "k3": 100.0}  # the check's fit
+    values, note = polish(case, truth, far, max_nfev=40, alternative=near)
+    assert "from the check's fit" in note
+    assert values["k1"] == pytest.approx(15.0, rel=1e-3) and values["k3"] == pytest.approx(120.0, rel=1e-2)
+    values, note = polish(case, truth, {**far, **near}, max_nfev=40, alternative=far)
+    assert "check's fit" not in note  # the network's estimate is the cheaper start: kept
+    assert values["k1"] == pytest.approx(15.0, rel=1e-3)

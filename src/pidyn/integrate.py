@@ -11,7 +11,8 @@ simulated records are made of) or band-limited (``hold="bandlimited"``, for a me
 whose input was low-pass filtered before sampling). A record sampled a few times per period of
 the dynamics needs the second: the linear hold passes a tone at frequency f with the gain
 sinc(f/fs)^2, 0.96 at the Silverbox circuit's resonance (9 samples a period), and a fit
-absorbs that 4 % into the mass.
+absorbs that 4 % into the mass. A linear time-invariant system under the linear hold is
+stepped by the same scheme's one-sample map (``pidyn.integrate_linear``).
 """
 
 from __future__ import annotations

@@ -81,6 +81,17 @@ def system_node(node: Any, inits: dict[str, float], mass: float, identify_mass: 
     return out
 
 
+def check_fit(values: dict[str, float], row: dict, k: int) -> dict[str, float] | None:
+    """The extended model as the output-error check fitted it: the current model's ``values``
+    (at the first step with the check's refit of the nominal parameters) and the effect's
+    estimate; None when the check gave no numbers."""
+    effect = {n: float(v) for n, v in (row.get("parameters") or {}).items() if not isinstance(v, str)}
+    if not effect:
+        return None
+    refit = {n: v for n, v in (row.get("nominal_refit") or {}).items() if v > 0} if k == 1 else {}
+    return {**values, **refit, **effect}
+
+
 def extension_node(
     node: dict, values: dict[str, float], cause: str, row: dict, context: dict, k: int, mass_known: bool
 ) -> dict:

@@ -39,7 +39,14 @@ from pidyn.discrepancy.changes import (
 )
 from pidyn.discrepancy.confirm import Confirmation, confirm, undecided
 from pidyn.discrepancy.effects import EFFECTS, LIBRARY, Signals
-from pidyn.discrepancy.extend import EXTENSION, build_system, extension_node, release_held, system_node  # noqa: F401
+from pidyn.discrepancy.extend import (  # noqa: F401
+    EXTENSION,
+    build_system,
+    check_fit,
+    extension_node,
+    release_held,
+    system_node,
+)
 from pidyn.discrepancy.learned_fit import (
     LEARNED,
     learned_row,
@@ -50,7 +57,7 @@ from pidyn.discrepancy.learned_fit import (
 from pidyn.discrepancy.screening import EXCLUSIVE, Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.verdicts import Verdict, unearned_names
-from pidyn.refine.output_error import fit_output_error
+from pidyn.refine.output_error import fit_output_error, output_error_costs
 from pidyn.reporting import nrmse
 from pidyn.signals import dominant_period
 from pidyn.simulate import simulate_response
@@ -566,25 +573,41 @@ def fit_budget(case: Case) -> int:
 
 
 def polish(
-    case: Case, system: SDOFSystem, values: dict[str, float], max_nfev: int | None = None
+    case: Case,
+    system: SDOFSystem,
+    values: dict[str, float],
+    max_nfev: int | None = None,
+    alternative: dict[str, float] | None = None,
 ) -> tuple[dict[str, float], str]:
     """Output-error least squares on (part of) the fitting span, from ``values`` (``max_nfev``
-    evaluations, default ``fit_budget``)."""
+    evaluations, default ``fit_budget``), or from ``alternative`` (another estimate of the same
+    model) where that simulates the span better: a fit from a worse start can end in a worse
+    local minimum, and the fitting part alone decides which start it takes."""
     st, fit = case.settings, case.fit
     seg_end = fit[1] if st.polish_seconds is None else min(fit[1], fit[0] + float(st.polish_seconds))
     seg = case.record.segment(fit[0], seg_end)
     trainable = {s.name for s in system.param_specs() if s.trainable}
+    start, how = values, ""
+    if alternative is not None:
+        other = {**values, **alternative}
+        starts = [{k: v for k, v in d.items() if k in trainable} for d in (values, other)]
+        costs = output_error_costs(seg, system, starts, int(st.substeps))
+        if costs[1] < costs[0]:
+            start, how = (
+                other,
+                f" from the check's fit (cost {costs[1]:.4g} against the network's {costs[0]:.4g})",
+            )
     res = fit_output_error(
         seg,
         system,
-        init={k: v for k, v in values.items() if k in trainable},
+        init={k: v for k, v in start.items() if k in trainable},
         substeps=int(st.substeps),
         max_nfev=fit_budget(case) if max_nfev is None else int(max_nfev),
         tol=float(st.polish_tol),
     )
-    out = dict(values)
+    out = dict(start)
     out.update(res.params)
-    return out, f"output error on {seg.t[0]:.4g}-{seg.t[-1]:.4g} s: {res.note}, {res.seconds:.1f} s"
+    return out, f"output error on {seg.t[0]:.4g}-{seg.t[-1]:.4g} s{how}: {res.note}, {res.seconds:.1f} s"
 
 
 def identify_nominal(case: Case, values0: dict[str, float], period: float) -> Nominal:
@@ -789,7 +812,10 @@ def _extension_step(
         # weights) follows and the held-out part decides (on a Painter Street record 100 evaluations, 110 s,
         # moved the cost by 3e-4)
         budget = int(st.polish_max_nfev) if trained else None
-        ext_values, out["note"] = polish(case, build_system(release_held(ext_node)), ext_values, budget)
+        check = None if cause == LEARNED else check_fit(values, row, k)  # the fit that named the effect
+        ext_values, out["note"] = polish(
+            case, build_system(release_held(ext_node)), ext_values, budget, check
+        )
     if trained:
         ext_values, out["learned_fit"] = train_learned_force(
             record, system, ext_values, s, case.fit, st.learned, folder
