@@ -229,12 +229,17 @@ def linear_map_ms(reps: int = 3) -> list[dict]:
 
     gm = prepare("el_centro", dt=0.01, duration=25.0)
     supports = SDOFSystem(LinearSDOF().terms, inputs=["s1", "s2", "s3"])
-    shift = np.roll(gm.ag, 7)  # three supports: the record, delayed, and their velocities
+    shift = np.roll(gm.acc, 7)  # three supports: the record, delayed, and their velocities
     three = np.column_stack(
-        [gm.ag, shift, 0.5 * gm.ag] + [np.cumsum(c) * 0.01 for c in (gm.ag, shift, 0.5 * gm.ag)]
+        [gm.acc, shift, 0.5 * gm.acc] + [np.cumsum(c) * 0.01 for c in (gm.acc, shift, 0.5 * gm.acc)]
     )
     out = []
-    for system, f in ((LinearSDOF(), gm.ag), (supports, three), (ShearBuilding(5), gm.ag)):
+    cases = (
+        ("linear SDOF", LinearSDOF(), gm.acc),
+        ("SDOF on three supports", supports, three),
+        ("5-storey shear building", ShearBuilding(5), gm.acc),
+    )
+    for label, system, f in cases:
         names = [s.name for s in system.param_specs() if s.trainable]
         p = {s.name: float(s.init) for s in system.param_specs()}
         p.update({n: Dual(np.float64(p[n]), np.eye(len(names))[i]) for i, n in enumerate(names)})
@@ -243,7 +248,7 @@ def linear_map_ms(reps: int = 3) -> list[dict]:
         def run():
             return integrate.rk4(system, p, gm.t, f, y0)
 
-        row = {"system": f"{system.name} ({len(names)} parameters)"}
+        row = {"system": f"{label} ({len(names)} parameters)"}
         row["map_ms"] = _best(run, reps)
         fast = run()[0]
         general = integrate_linear.applies
