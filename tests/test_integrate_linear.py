@@ -81,6 +81,15 @@ def test_plain_values_and_a_plain_start_give_plain_states(monkeypatch):
     assert np.abs(y_fast - y_slow).max() < 1e-11 * np.abs(y_slow).max()
 
 
+def test_directions_of_the_start_alone_give_its_sensitivities(monkeypatch):
+    system = _supports()
+    t = np.arange(300) * 0.01
+    f = np.random.default_rng(2).standard_normal((len(t), system.excitation_width))
+    y0 = Dual(np.zeros((1, 2)), np.eye(2)[None])  # plain parameters, the initial state as directions
+    (y_fast, _), (y_slow, _) = _both(monkeypatch, system, _values(system), t, f, y0)
+    assert np.abs(y_fast.d - y_slow.d).max() < 1e-11 * np.abs(y_slow.d).max()
+
+
 @pytest.mark.parametrize("name", ["three supports", "building"])
 def test_one_parameter_set_per_trajectory_as_a_finite_difference_jacobian_simulates_them(monkeypatch, name):
     system = SYSTEMS[name]()

@@ -125,17 +125,13 @@ def propagate(
     yv[0] = y0v
     for i in range(len(t) - 1):
         yv[i + 1] = _apply(m, yv[i]) + u[i]
-    if dm is None and not isinstance(y0, Dual):
+    if dm is None:  # the loop carries directions whenever the parameters or the start have them
         return yv, None
-    n_dir = dm.shape[-1] if dm is not None else y0.d.shape[-1]
-    yd = np.empty(yv.shape + (n_dir,))
+    yd = np.empty(yv.shape + dm.shape[-1:])
     yd[0] = y0.d if isinstance(y0, Dual) else 0.0
-    if dm is None:
-        force = np.zeros((len(t) - 1,) + yv.shape[1:] + (n_dir,))
-    else:
-        force = np.einsum("...ijd,...j->...id", dm, yv[:-1])
-        force += np.einsum("...iwd,...w->...id", dg0, f[:-1]) + np.einsum("...iwd,...w->...id", dg1, f[1:])
-        force += dg
+    force = np.einsum("...ijd,...j->...id", dm, yv[:-1])
+    force += np.einsum("...iwd,...w->...id", dg0, f[:-1]) + np.einsum("...iwd,...w->...id", dg1, f[1:])
+    force += dg
     for i in range(len(t) - 1):
         yd[i + 1] = np.matmul(m, yd[i]) + force[i]
     return yv, yd

@@ -88,8 +88,12 @@ def check_fit(values: dict[str, float], row: dict, k: int) -> dict[str, float] |
     effect = {n: float(v) for n, v in (row.get("parameters") or {}).items() if not isinstance(v, str)}
     if not effect:
         return None
-    refit = {n: v for n, v in (row.get("nominal_refit") or {}).items() if v > 0} if k == 1 else {}
-    return {**values, **refit, **effect}
+    return {**values, **_refit(row, k), **effect}
+
+
+def _refit(row: dict, k: int) -> dict[str, float]:
+    """The check's refit of the nominal parameters, which the first step starts from."""
+    return {n: v for n, v in (row.get("nominal_refit") or {}).items() if v > 0} if k == 1 else {}
 
 
 def extension_node(
@@ -98,7 +102,7 @@ def extension_node(
     """The node of step ``k``'s model: the current model (its values; at the first step the
     screening's refit of the nominal parameters) extended with ``cause`` started at the
     screening's estimate (``row``); ``context`` is ``Signals.context()``."""
-    refit = {n: v for n, v in row["nominal_refit"].items() if v > 0} if k == 1 else {}
+    refit = _refit(row, k)
     inner = node_with_values(node, {**values, **refit})
     if k == 1:
         inner = system_node(inner, refit, refit.get("m", values["m"]), not mass_known)
