@@ -494,7 +494,9 @@ def aggregate(base: Path) -> None:
     one = identification_rows(base / "one_input") if (base / "one_input").exists() else []
     lines += reduced_choice_lines(rows, one)
     two = identification_rows(base / "two_modes") if (base / "two_modes").exists() else []
-    lines += two_modes_lines(rows, two, judge)
+    lines += two_modes_lines(rows, two, judge) or kept_section(
+        "## Two modes against one", "## Diagnosis of the strong events", "two_modes"
+    )
     pga = {r["event"]: r["pga_g"] for r in rows if r["direction"] == "transverse" and r["status"] == "ok"}
     diag = diagnosis_rows(base / "diagnose") if (base / "diagnose").exists() else []
     lines += _diagnosis_lines(diag, pga)
@@ -507,6 +509,25 @@ def aggregate(base: Path) -> None:
     ]
     (RESULTS / "README.md").write_text("\n".join(lines))
     print(f"wrote {RESULTS / 'README.md'}")
+
+
+def kept_section(start: str, end: str, folder: str) -> list[str]:
+    """The committed README's section from the line ``start`` up to ``end``, said to be kept, for a
+    study without that sweep's ``folder`` (a sweep not run again keeps its published table rather
+    than dropping it); empty where the README has no such section."""
+    path = RESULTS / "README.md"
+    readme = path.read_text().split("\n") if path.exists() else []
+    heads = [i for i, line in enumerate(readme) if line.startswith(start)]
+    if not heads:
+        return []
+    i = heads[0]
+    j = next((k for k in range(i + 1, len(readme)) if readme[k].startswith(end)), len(readme))
+    body = [line for line in readme[i + 1 : j] if not line.startswith("*Kept from an earlier study")]
+    note = (
+        f"*Kept from an earlier study: this one has no `{folder}` sweep. Its columns for the single "
+        "model are that study's, not the identification table's above.*"
+    )
+    return [readme[i], "", note, *body]
 
 
 def srim_better_lines(rows: list[dict], folder: Path) -> list[str]:

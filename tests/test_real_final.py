@@ -63,3 +63,19 @@ def test_the_table_pairs_each_diagnosis_with_its_own_direction_and_counts_agains
     )
     assert "the final model on 1, the diagnosis' nominal model on 0, the identification on 0" in text
     assert "| b | transverse | 0.050 | none | 0.500 / 0.500 / 0.500 / - | - |" in text
+
+
+def test_a_sweep_not_run_again_keeps_its_published_section(tmp_path, monkeypatch):
+    import real
+
+    (tmp_path / "README.md").write_text(
+        "# t\n\n## Two modes against one\n\n| a |\n|---|\n| 1 |\n\n## Diagnosis of the strong events\n\nx\n"
+    )
+    monkeypatch.setattr(real, "RESULTS", tmp_path)
+    kept = real.kept_section("## Two modes against one", "## Diagnosis", "two_modes")
+    assert kept[0] == "## Two modes against one" and "| 1 |" in kept
+    assert "`two_modes`" in kept[2] and not any(line.startswith("## Diagnosis") for line in kept)
+    (tmp_path / "README.md").write_text("\n".join(["# t", "", *kept, "## Diagnosis of x"]))
+    again = real.kept_section("## Two modes against one", "## Diagnosis", "two_modes")
+    assert sum("Kept from an earlier study" in line for line in again) == 1  # said once, not stacked
+    assert real.kept_section("## Absent", "## Diagnosis", "x") == []

@@ -110,7 +110,10 @@ def _nominal_influence(
     Starts: the data's, and the peers' realizations mapped onto the model (``peer_start``). The
     peer's that simulates the fitting part best is fitted beside the data's, and the lower fitted
     cost is kept: a start's own cost does not rank where its fit ends (on a Painter Street record
-    SRIM's start cost half the data's and its fit ended 7 % higher)."""
+    SRIM's start cost half the data's and its fit ended 7 % higher). The kept fit is then checked
+    against the other basins of the period (``pidyn.refine.period_scan``): no start need lie in the
+    lowest one. With one input nothing is fitted here (the start is ranked by its own cost, and the
+    refits after it take the identification's refinement, which scans the period itself)."""
     from pidyn.baselines.data_start import start_from_data, with_start
 
     seg = record.segment(*fit)
@@ -126,6 +129,7 @@ def _nominal_influence(
         return with_start(system, options[best]), options[best], f"start from {best}"
     fits = {k: _influence_fit(seg, system, v, tol) for k, v in options.items()}
     best = min(fits, key=lambda k: fits[k][1].cost)
+    best = _moved_by_scan(seg, system, fits, options, best, tol)
     if len(fits) > 1:
         log.info(
             "the nominal model fitted from each start (output-error cost on the fitting part): %s; kept %s",
@@ -135,6 +139,29 @@ def _nominal_influence(
     values, res = fits[best]
     note = f"start from {best}, then output error on the accelerations of {fit[0]:.4g}-{fit[1]:.4g} s ({res.note})"
     return with_start(system, options[best]), values, note
+
+
+def _moved_by_scan(seg: Record, system, fits: dict, options: dict, best: str, tol: float) -> str:
+    """The kept fit checked against the other basins of the period; where the scan's start fits
+    the fitting part lower, it is added to ``fits`` and ``options`` under a label that says so."""
+    from pidyn.refine.period_scan import scan_period
+
+    scan = scan_period(system, seg, fits[best][0])
+    if scan is None or scan.values is None:
+        return best
+    moved = _influence_fit(seg, system, {**fits[best][0], **scan.values}, tol)
+    if not moved[1].cost < fits[best][1].cost:
+        return best
+    label = f"{best}, moved by {_scan_words(scan)}"
+    fits[label], options[label] = moved, moved[0]
+    return label
+
+
+def _scan_words(scan) -> str:
+    return (
+        f"a scan of the period to {scan.best_ratio:.3g} times it "
+        f"(output-error cost {scan.cost:.4g} against {scan.estimate_cost:.4g})"
+    )
 
 
 def _influence_fit(seg: Record, system, values: dict[str, float], tol: float):

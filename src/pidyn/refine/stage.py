@@ -21,6 +21,7 @@ import numpy as np
 
 from pidyn.integrate import input_hold
 from pidyn.notes import note
+from pidyn.refine.period_scan import scan_period
 from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
 from pidyn.refine.solve import solve, solve_constrained
 from pidyn.refine.uncertainty import (
@@ -56,6 +57,7 @@ class RefineSettings:
     max_nfev: int = 100  # Levenberg-Marquardt evaluations per penalty round
     gn_steps: int = 40  # constrained Levenberg-Marquardt steps at most (stage 2; most runs need a few)
     reweight: bool = True  # weight each channel by its estimated noise and finish again
+    period_scan: bool = True  # linear models: look for a lower basin of the period (``period_scan``)
 
     def __post_init__(self) -> None:
         if self.states not in STATE_SOURCES:
@@ -96,6 +98,8 @@ class RefineResult:
     covariance: list[list[float]] = field(default_factory=list)
     #: 0: the inverse information (white residuals); else the sandwich over this many lags
     covariance_lags: int = 0
+    #: the scan of the period after the local solve (``pidyn.refine.period_scan.PeriodScan``); empty: none ran
+    period_scan: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -217,14 +221,14 @@ def refine(
 
     Every candidate is scored by a free simulation of the span from the same initial state;
     the best one starts the refinement. When ``prefer`` (PIDynNet) is not the best, the log
-    and the notes say so. A candidate that still simulates better than the refined estimate
-    is refined as well, and the lower cost wins.
+    and the notes say so. A candidate that still simulates better than the refined estimate is
+    refined as well, and the lower cost wins; then the other basins of the period (``_period_scan``).
     """
     settings = settings or RefineSettings()
     t_wall = time.perf_counter()
     problem = build_problem(system, record, settings, t_start, t_end)
     starts = _Starts(problem, settings, start, network_states, prefer)
-    rep, used = starts.solve_best()
+    rep, used, scan = _period_scan(record, problem, starts, *starts.solve_best(), settings)
     u, converged = rep.u, rep.converged
     if settings.reweight:
         r, _ = problem.residuals(u)
@@ -261,7 +265,35 @@ def refine(
         history=rep.history,
         covariance=cov.tolist(),
         covariance_lags=lags,
+        period_scan=scan.to_dict() if scan is not None else {},
     )
+
+
+def _period_scan(record, problem: ShootingProblem, starts: _Starts, rep, used: str, settings: RefineSettings):
+    """The refined estimate checked against the other basins of the period (linear models, a span
+    from the record's start not known to be moving, where the scan's output error from rest is the
+    right cost); where the scan's start refines to a lower cost, it replaces the estimate, and the
+    notes say so. (rep, the start it came from, the scan or None.)"""
+    if not settings.period_scan or settings.initial_state == "free" or problem.bounds[0] != 0:
+        return rep, used, None
+    span = record.segment(None, float(problem.t[problem.bounds[-1]]))
+    theta, _ = problem.unpack(rep.u)
+    scan = scan_period(problem.system, span, problem.values(theta), substeps=problem.substeps)
+    if scan is None or scan.values is None:
+        return rep, used, scan
+    alt = starts.run_from(starts.add("period_scan", scan.values))
+    if not alt.cost < rep.cost * (1 - 1e-6):
+        return rep, used, scan
+    starts.notes.append(
+        note(
+            "period_scan_moved",
+            f"the refinement from {used} ended in a basin of the cost that another period fits better: "
+            f"a scan of the period (output error, {scan.best_ratio:.3g} times the period) refined to "
+            f"cost {alt.cost:.4g} against {rep.cost:.4g}; the estimate is the scan's",
+        )
+    )
+    log.warning(starts.notes[-1])
+    return alt, "period_scan", scan
 
 
 def _test_rest(
@@ -425,6 +457,14 @@ class _Starts:
                 )
             )
             log.warning(self.notes[-1])
+
+    def add(self, label: str, values: dict[str, float]) -> str:
+        """One more candidate start (found after the first solve); returns its label."""
+        from pidyn.params import to_theta
+
+        self.cands[label] = values
+        self.thetas[label] = to_theta(self.problem.specs, values)
+        return label
 
     def run_from(self, label: str):
         st = (

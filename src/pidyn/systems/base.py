@@ -57,6 +57,13 @@ class StructuralSystem(ABC):
     #: one-sample affine map (``pidyn.integrate_linear``)
     linear_time_invariant: bool = False
 
+    def period_scaling(self) -> dict[str, float]:
+        """Powers p of a frequency factor lam: every parameter named here times lam ** p puts
+        every natural frequency times lam and keeps the damping ratios (stiffnesses 2, dashpots 1).
+        Empty where no such family is known (a nonlinear model): no period scan
+        (``pidyn.refine.period_scan``)."""
+        return {}
+
     @property
     def n_inputs(self) -> int:
         return max(1, len(self.inputs))

@@ -132,6 +132,13 @@ class ModesOnSupports(StructuralSystem):
     def param_specs(self) -> list[ParamSpec]:
         return list(self._specs)
 
+    def period_scaling(self) -> dict[str, float]:
+        """Each mode's k 2, its c and its support dashpots 1: every mode's period moves together."""
+        powers = {}
+        for r in range(1, self.n_dof + 1):
+            powers |= {f"k{r}": 2.0, f"c{r}": 1.0} | {f"g{r}_{i}": 1.0 for i in self.inputs}
+        return powers
+
     def linear_params(self) -> list[str]:
         return []  # the sensor sees a sum of modes: no residual is linear in a mode's own c and k
 

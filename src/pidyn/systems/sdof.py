@@ -125,6 +125,12 @@ class SDOFSystem(StructuralSystem):
     def linear_time_invariant(self) -> bool:
         return not self.n_latent and all(type(t) in (ViscousDamping, LinearStiffness) for t in self.terms)
 
+    def period_scaling(self) -> dict[str, float]:
+        if not self.linear_time_invariant:
+            return {}
+        out = {s.name: (1.0 if isinstance(t, ViscousDamping) else 2.0) for t in self.terms for s in t.specs()}
+        return out | {support_damping_name(i): 1.0 for i in self.inputs}
+
     def linear_params(self) -> list[str]:
         # the influence coefficients are linear in the residual too, but a start from a network that
         # fits absolute accelerations pins them poorly: the data start and the refinement estimate them

@@ -268,6 +268,16 @@ class ShearBuilding(StructuralSystem):
     def linear_time_invariant(self) -> bool:
         return all(type(t.term) in (ViscousDamping, LinearStiffness) for t in self.terms)
 
+    def period_scaling(self) -> dict[str, float]:
+        """Storey stiffnesses 2, storey dashpots 1; the masses stay."""
+        if not self.linear_time_invariant:
+            return {}
+        return {
+            s.name: (1.0 if isinstance(t.term, ViscousDamping) else 2.0)
+            for t in self.terms
+            for s in t.specs()
+        }
+
     def linear_params(self) -> list[str]:
         """The parameters the motion residual is linear in: the terms' linear ones and, with the
         masses unknown, the mass ratios (m_i a_i enters linearly too)."""
