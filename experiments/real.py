@@ -192,7 +192,17 @@ def identification_rows(folder: Path) -> list[dict]:
                 row[f"{key}_order"] = b.get("order")
                 row[f"{key}_note"] = b.get("note", "")
         rows.append(row)
-    return rows
+    return with_event_pga(rows)
+
+
+def with_event_pga(rows: list[dict]) -> list[dict]:
+    """Each row with ``event_pga_g``: the largest peak input acceleration of its event over the
+    directions identified (the event's PGA at the station's ground channels)."""
+    peak: dict[str, float] = {}
+    for r in rows:
+        if r.get("status") == "ok" and np.isfinite(r.get("pga_g", np.nan)):
+            peak[r["event"]] = max(peak.get(r["event"], 0.0), r["pga_g"])
+    return [{**r, "event_pga_g": peak[r["event"]]} if r["event"] in peak else r for r in rows]
 
 
 def peer_span(row: dict) -> tuple[float, float] | None:
@@ -209,12 +219,16 @@ def peer_span(row: dict) -> tuple[float, float] | None:
 
 
 def judge(row: dict) -> dict:
-    """The issue's two lines per event: inside the peers' span (weak events), held-out against SRIM."""
+    """The issue's two lines per event: inside the peers' span (weak events), held-out against SRIM.
+    ``inside_peers`` where the direction's own PGA is below 0.1 g; ``weak_event`` says whether the
+    event's (the larger of its two directions') is too: a skewed deck's longitudinal response under
+    a transverse shaking of 0.14 g is not a weak event's."""
     out = {}
     span = peer_span(row)
     ci = row.get("period_ci95") or [None, None]
     if span and None not in ci and row.get("pga_g", 1) < WEAK_G:
         out["inside_peers"] = bool(ci[0] <= span[1] and ci[1] >= span[0])
+        out["weak_event"] = bool(row.get("event_pga_g", row["pga_g"]) < WEAK_G)
     srim = row.get("srim_heldout_nrmse_a")
     if srim is not None and row.get("heldout_nrmse_a") is not None:
         out["beats_srim"] = bool(row["heldout_nrmse_a"] <= srim)
@@ -241,6 +255,7 @@ def identification_table(rows: list[dict], direction: str) -> list[str]:
         ci, zc = r["period_ci95"], r["damping_ci95"]
         j = judge(r)
         inside = "" if "inside_peers" not in j else (" (in)" if j["inside_peers"] else " (**out**)")
+        inside += "" if j.get("weak_event", True) else f" (event {_f(r['event_pga_g'])} g)"
         beats = "" if "beats_srim" not in j else ("" if j["beats_srim"] else " **(SRIM better)**")
         lines.append(
             f"| {r['event']}{tag} | {r['date']} | {_f(r['pga_g'])} | {r['inputs']} -> {r['outputs']} | "
@@ -262,12 +277,14 @@ def summary_lines(rows: list[dict]) -> list[str]:
             if not sel:
                 continue
             js = [judge(r) for r in sel]
-            inside = [j["inside_peers"] for j in js if "inside_peers" in j]
+            inside = [j["inside_peers"] for j in js if j.get("weak_event")]
+            own = [j["inside_peers"] for j in js if "inside_peers" in j]
             beats = [j["beats_srim"] for j in js if "beats_srim" in j]
             wall = max(r["wall_s"] or 0 for r in sel)
             out.append(
                 f"- {direction}, events {'kept out of all tuning' if role == 'untouched' else 'used in tuning'} "
-                f"({len(sel)}): period inside the peers' span on {sum(inside)} of {len(inside)} weak events; "
+                f"({len(sel)}): period inside the peers' span on {sum(inside)} of {len(inside)} weak events "
+                f"({sum(own)} of {len(own)} counting the direction's own PGA); "
                 f"held-out NRMSE at or below SRIM's on {sum(beats)} of {len(beats)} events where SRIM gives a "
                 f"stable model; at most {wall:.0f} s an event."
             )
@@ -478,7 +495,9 @@ def aggregate(base: Path) -> None:
         "OKID-ERA (the order with the lowest fitting-part error among those that do not diverge from rest).",
         "",
         "Events marked *(t)* were looked at while the methods were set up; the others were kept out of all "
-        "tuning. (in) / (**out**): the period's interval inside the peers' span (weak events, PGA below 0.1 g).",
+        "tuning. (in) / (**out**): the period's interval inside the peers' span (weak events: PGA below 0.1 g; "
+        "a direction whose own PGA is below it in an event whose other direction's is not is marked with the "
+        "event's PGA and counted apart in the summary).",
         "",
         "## Summary",
         "",

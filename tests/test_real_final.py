@@ -79,3 +79,28 @@ def test_a_sweep_not_run_again_keeps_its_published_section(tmp_path, monkeypatch
     again = real.kept_section("## Two modes against one", "## Diagnosis", "two_modes")
     assert sum("Kept from an earlier study" in line for line in again) == 1  # said once, not stacked
     assert real.kept_section("## Absent", "## Diagnosis", "x") == []
+
+
+def test_a_direction_weak_in_a_strong_event_is_judged_apart():
+    import real
+
+    def row(direction, pga, period, ci):
+        return {
+            "event": "e",
+            "direction": direction,
+            "status": "ok",
+            "pga_g": pga,
+            "period_s": period,
+            "period_ci95": ci,
+            "srim_period_s": 0.25,
+            "okid_era_period_s": 0.23,
+        }
+
+    rows = real.with_event_pga(
+        [row("transverse", 0.14, 0.27, [0.25, 0.28]), row("longitudinal", 0.07, 0.21, [0.20, 0.22])]
+    )
+    assert [r["event_pga_g"] for r in rows] == [0.14, 0.14]
+    assert real.judge(rows[0]) == {}  # strong in its own direction: no span test
+    assert real.judge(rows[1]) == {"inside_peers": False, "weak_event": False}
+    alone = real.with_event_pga([row("longitudinal", 0.07, 0.24, [0.22, 0.26])])
+    assert real.judge(alone[0]) == {"inside_peers": True, "weak_event": True}
