@@ -147,7 +147,7 @@ def test_two_modes_on_two_supports_are_recovered_from_one_sensor(tmp_path):
 
 def test_the_diagnosis_refuses_modes_by_name():
     """Modes have no physical coordinates for a force law: a named refusal, before any record is read."""
-    from pidyn.discrepancy.pipeline import check_diagnosable
+    from pidyn.discrepancy.case import check_diagnosable
     from pidyn.systems import LinearSDOF
 
     with pytest.raises(ValueError, match="system 'modes'.*system=linear"):

@@ -281,7 +281,8 @@ def test_the_polish_of_an_extension_starts_from_the_checks_fit_where_that_simula
     Painter Street record its simulation cost 28 times the check's); the polish then starts from
     the check's fit, chosen on the fitting part, and says so."""
     from pidyn.data.sources import synthetic
-    from pidyn.discrepancy.pipeline import Case, polish
+    from pidyn.discrepancy.case import Case
+    from pidyn.discrepancy.nominal import polish
     from pidyn.discrepancy.settings import DiagnosisSettings
     from pidyn.systems import Duffing
 

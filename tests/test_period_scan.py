@@ -76,7 +76,9 @@ def test_the_refinement_keeps_an_estimate_in_the_lowest_basin():
     record = _two_modes(0.3)  # the faster mode dominates: its basin is the lowest
     system = LinearSDOF(c=0.5, k=10.0)
     k = (2 * np.pi / 0.18) ** 2
-    res = refine(system, record, {"guess": {"c": 0.1 * np.sqrt(k), "k": k}}, RefineSettings(states="simulated"))
+    res = refine(
+        system, record, {"guess": {"c": 0.1 * np.sqrt(k), "k": k}}, RefineSettings(states="simulated")
+    )
     assert res.start == "guess" and "period_scan_moved" not in codes(res.notes)
     scan = res.period_scan
     assert scan["values"] is None and scan["best_ratio"] == 1.0, scan

@@ -328,27 +328,28 @@ def test_an_accelerometer_diagnosis_starts_from_the_accelerations_when_the_weak_
     """The weak form reads an integrated motion; where its start is not physical (a negative
     damping, as on a longitudinal Painter Street record) or simulates the accelerations worse, the
     diagnosis starts from the output-error fit that combined the supports."""
-    from pidyn.discrepancy import pipeline
+    from pidyn.discrepancy import case as diagnosis_case
+    from pidyn.discrepancy import nominal
     from pidyn.discrepancy.accelerometers import motion_view
     from pidyn.discrepancy.settings import DiagnosisSettings
     from pidyn.systems import LinearSDOF
 
     rec, p = _two_support_record(noise=0.02)
     settings = DiagnosisSettings()
-    fit = pipeline.split_spans(rec, settings.fit_share)[0]
+    fit = diagnosis_case.split_spans(rec, settings.fit_share)[0]
     view = motion_view(rec, LinearSDOF(inputs=["a", "b"]), fit, tol=settings.polish_tol)
     base = LinearSDOF(c=0.5, k=15.0)
-    case = pipeline.prepare(view, base, {}, settings, 1.0, tmp_path, identify=None)
+    case = diagnosis_case.prepare(view, base, {}, settings, 1.0, tmp_path, identify=None)
     fitted = view.meta["accelerometers"]["nominal"]
     assert fitted["k"] == pytest.approx(p["k"], rel=0.02)
     bad = {"m": 1.0, "c": -3.0, "k": 0.12 * p["k"]}
-    values, period = pipeline._accelerometer_start(case, bad, 1.0)
+    values, period = nominal._accelerometer_start(case, bad, 1.0)
     assert values["k"] == pytest.approx(fitted["k"]) and values["c"] > 0
     assert period == pytest.approx(2 * np.pi / np.sqrt(fitted["k"]), rel=1e-6)
     good = {"m": 1.0, "c": fitted["c"], "k": fitted["k"] * 1.0001}
     wrong = {"m": 1.0, "c": fitted["c"], "k": 0.5 * fitted["k"]}
-    assert pipeline._accelerometer_start(case, wrong, 1.0)[0]["k"] == pytest.approx(fitted["k"])
-    assert pipeline._fit_error(case, good) < 0.5 * pipeline._fit_error(case, wrong)
+    assert nominal._accelerometer_start(case, wrong, 1.0)[0]["k"] == pytest.approx(fitted["k"])
+    assert nominal._fit_error(case, good) < 0.5 * nominal._fit_error(case, wrong)
 
 
 def test_the_nominal_model_of_an_accelerometer_record_starts_from_the_better_of_data_and_peers(monkeypatch):

@@ -13,6 +13,9 @@
    learned force, ``pidyn.discrepancy.learned_fit``);
 5. nominal and extended models simulated over the held-out part and compared.
 
+The case and what it ends with are ``pidyn.discrepancy.case``; the nominal model's start, fit,
+modes and running period ``pidyn.discrepancy.nominal``; this module is the loop.
+
 ``identify(node, folder, fit) -> (metrics, system, values)`` identifies the model a config
 node describes on the fitting span ``fit`` and writes its run to ``folder``: the task passes
 it in, so this package never imports the task layer.
@@ -21,14 +24,11 @@ it in, so this package never imports the task layer.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pidyn.data.sources import Record
+from pidyn.discrepancy.case import Case, Nominal, Outcome
 from pidyn.discrepancy.changes import (
     HELDOUT_BAND,
     SETTLE_PERIODS,
@@ -38,7 +38,7 @@ from pidyn.discrepancy.changes import (
     simulation_sensitivity,
 )
 from pidyn.discrepancy.confirm import Confirmation, confirm, undecided
-from pidyn.discrepancy.effects import EFFECTS, LIBRARY, Signals
+from pidyn.discrepancy.effects import Signals
 from pidyn.discrepancy.extend import (  # noqa: F401
     EXTENSION,
     build_system,
@@ -54,19 +54,23 @@ from pidyn.discrepancy.learned_fit import (
     save_unexplained,
     train_learned_force,
 )
+from pidyn.discrepancy.nominal import (
+    fit_budget,
+    identify_nominal,
+    nominal_modes,
+    polish,
+    running_period,
+    starting_point,
+)
 from pidyn.discrepancy.screening import EXCLUSIVE, Screening, screen
-from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.verdicts import Verdict, unearned_names
-from pidyn.refine.output_error import fit_output_error, output_error_costs
 from pidyn.reporting import nrmse
-from pidyn.signals import dominant_period
 from pidyn.simulate import simulate_response
 from pidyn.systems.sdof import SDOFSystem
-from pidyn.weak_form import WeakForm, measurement_noise, smooth_signals, velocity_noise
+from pidyn.weak_form import WeakForm
 
 log = logging.getLogger(__name__)
 
-IdentifyFn = Callable[[dict, Path, tuple[float, float]], tuple[dict, SDOFSystem, dict[str, float]]]
 
 #: what each step keeps of the row that named its effect
 ROW_EVIDENCE = ("score", "delta_bic", "explained", "cv_gain", "heldout_gain", "force_share", "source")
@@ -87,226 +91,6 @@ STEP_EVIDENCE = (
     "parameters",
     "source",
 )
-
-
-def check_diagnosable(system) -> None:
-    """A named refusal for a model the diagnosis cannot extend (before any record is read)."""
-    if getattr(system, "modal_coordinates", False):
-        raise ValueError(
-            f"system '{system.name}': the diagnosis extends force laws in physical coordinates (a single "
-            "degree of freedom or a shear building's storeys), and modes have none; diagnose with "
-            "system=linear, identify the modes with train.py"
-        )
-
-
-def split_spans(record: Record, fit_share: float) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Fitting and held-out time spans: the record's own split if it has one, else a share."""
-    sp = (record.meta or {}).get("split")
-    if sp:
-        return (float(sp["fit"][0]), float(sp["fit"][1])), (float(sp["heldout"][0]), float(sp["heldout"][1]))
-    if not 0.1 <= fit_share <= 0.95:
-        raise ValueError(f"diagnosis.fit_share must lie in [0.1, 0.95], got {fit_share}")
-    t0, t1 = float(record.t[0]), float(record.t[-1])
-    cut = t0 + fit_share * (t1 - t0)
-    return (t0, cut), (cut, t1)
-
-
-@dataclass
-class Case:
-    """One diagnosis: the record and its split, the nominal system and its config node, the
-    settings, and how a model is identified."""
-
-    record: Record
-    base: SDOFSystem
-    base_node: dict
-    effects: dict
-    settings: DiagnosisSettings
-    mass: float | None
-    fit: tuple[float, float]
-    held: tuple[float, float]
-    run_dir: Path
-    identify: IdentifyFn
-
-    @property
-    def mass_known(self) -> bool:
-        return self.mass is not None
-
-    @property
-    def thresholds(self):
-        return self.settings.thresholds
-
-    @property
-    def x_raw(self) -> np.ndarray:
-        """The displacement: measured, or integrated from accelerometers (``accelerometers.motion_view``)."""
-        if self.record.x is not None:
-            return self.record.x[:, 0]
-        return np.asarray(self.record.meta["motion"]["x"], float)
-
-    @property
-    def weak_f(self) -> np.ndarray:
-        """The excitation the weak form pairs with ``x_raw``: high-passed alike on an accelerometer record
-        (identification and output error take the record's own, unfiltered)."""
-        motion = (self.record.meta or {}).get("motion")
-        return self.record.f if motion is None else np.asarray(motion["f"], float)
-
-    @property
-    def v_raw(self) -> np.ndarray | None:
-        if self.record.v is not None:
-            return self.record.v[:, 0]
-        motion = (self.record.meta or {}).get("motion")
-        return None if motion is None else np.asarray(motion["v"], float)
-
-    @property
-    def stiff(self) -> str:
-        return self.base.stiffness_name
-
-    def mask(self, span: tuple[float, float]) -> np.ndarray:
-        return (self.record.t >= span[0]) & (self.record.t <= span[1])
-
-    def signals(self, period: float, k_nom: float, mass: float) -> tuple[Signals, WeakForm]:
-        """Smoothed x, x' and the weak form, on the time scale of ``period``."""
-        r = self.record
-        v_raw = self.v_raw
-        xs, vs = smooth_signals(r.t, self.x_raw, v_raw, period)
-        return (
-            Signals(
-                r.t,
-                xs,
-                vs,
-                mass,
-                k_nom,
-                self.stiff,
-                t_fit_end=self.fit[1],
-                v_noise=velocity_noise(r.t, self.x_raw, v_raw, period),
-            ),
-            WeakForm.for_record(r.t, period),
-        )
-
-    def screen(
-        self,
-        system: SDOFSystem,
-        values: dict[str, float],
-        s: Signals,
-        weak: WeakForm,
-        effects: dict | None = None,
-    ) -> Screening:
-        return screen(
-            system,
-            values,
-            s,
-            self.weak_f,
-            self.x_raw,
-            weak,
-            self.fit[1],
-            self.mass_known,
-            effects=self.effects if effects is None else effects,
-            thresholds=self.thresholds,
-        )
-
-    def free_run(self, system: SDOFSystem, values: dict[str, float], v0: float) -> np.ndarray:
-        """The model from the measured initial state over the whole record."""
-        return self.free_response(system, values, v0)["x"][:, 0]
-
-    def free_response(self, system: SDOFSystem, values: dict[str, float], v0: float) -> dict[str, np.ndarray]:
-        """``free_run``'s x, v and a (relative) over the whole record."""
-        y0 = np.zeros(system.n_state)
-        y0[0], y0[1] = float(self.x_raw[0]), v0
-        return simulate_response(system, values, self.record, int(self.settings.substeps), y0)
-
-    def noise_std(self, measured: np.ndarray, period: float) -> float:
-        """The measurement noise of ``measured``: of an accelerometer, what the record says of it (the
-        simulated noise level, or the sensor's RMS before the shaking), since a smoother's residual
-        reads an acceleration's broadband content as noise; else the smoother's estimate."""
-        meta = self.record.meta or {}
-        if self.from_accelerometers:
-            level = (meta.get("noise_levels") or {}).get("a")
-            if level is not None:
-                absolute = measured + np.asarray(meta.get("sensor_ground", self.record.f), float)
-                return float(level) * float(np.sqrt(np.mean(absolute**2)))
-            pre = (meta.get("pre_event_rms") or {}).get("outputs")
-            if pre:
-                return float(pre[0])
-        return measurement_noise(self.record.t, measured, period)
-
-    @property
-    def from_accelerometers(self) -> bool:
-        """The record's motion was integrated from accelerations (``accelerometers.motion_view``)."""
-        return "accelerometers" in (self.record.meta or {})
-
-
-def prepare(
-    record: Record,
-    base: SDOFSystem,
-    base_node: dict,
-    settings: DiagnosisSettings,
-    mass: float | None,
-    run_dir: Path,
-    identify: IdentifyFn,
-) -> Case:
-    """The settings checked against the library and the nominal system, the fit / held-out split."""
-    wanted = list(settings.effects) if settings.effects else list(LIBRARY)
-    unknown = set(wanted) - set(EFFECTS)
-    if unknown:
-        raise ValueError(
-            f"diagnosis.effects: unknown effect(s) {sorted(unknown)}; the library has {sorted(EFFECTS)}"
-        )
-    effects = {n: EFFECTS[n] for n in wanted}
-    if not isinstance(base, SDOFSystem):
-        raise ValueError(f"diagnosis needs a single-degree-of-freedom nominal system, got '{base.name}'")
-    already = {t.name for t in base.terms} & set(effects)
-    if already:  # an effect the nominal model already has cannot be what it misses
-        log.info("not screening %s: already in the nominal model", sorted(already))
-        effects = {n: e for n, e in effects.items() if n not in already}
-    if mass is None and record.excitation == "ground":
-        raise ValueError(
-            "data.mass is null, but a ground-excited record cannot reveal the mass "
-            "(m x'' + ... = -m ag is homogeneous in m): give the mass"
-        )
-    fit, held = split_spans(record, float(settings.fit_share))
-    log.info(
-        "diagnosing '%s' with nominal '%s': fit %.4g-%.4g s, held out %.4g-%.4g s",
-        record.name,
-        base.name,
-        *fit,
-        *held,
-    )
-    run_dir.mkdir(parents=True, exist_ok=True)
-    return Case(record, base, base_node, effects, settings, mass, fit, held, run_dir, identify)
-
-
-@dataclass
-class Nominal:
-    node: dict
-    system: SDOFSystem
-    values: dict[str, float]
-    metrics: dict
-    polish_note: str | None
-    s: Signals
-    weak: WeakForm
-    period: float
-
-
-@dataclass
-class Outcome:
-    """Everything the summary and the figures are made of."""
-
-    nominal: Nominal
-    screening: Screening
-    check: HeldoutCheck
-    change_row: dict | None
-    extension: dict
-    causes: list[str]
-    cause: str | None
-    forced: bool
-    confirmation: Confirmation | None
-    pointwise: dict
-    x_nom: np.ndarray
-    x_ext: np.ndarray | None
-    sims: dict = field(
-        default_factory=dict
-    )  # nominal / extended: x, v, a over the record (accelerometer records)
-    modal: list[dict] | None = None  # the nominal model's modes with 95 % intervals
-    running: dict | None = None  # period and damping window by window (accelerometer records)
 
 
 def run(case: Case) -> Outcome:
@@ -442,192 +226,6 @@ def _acceleration_sims(case: Case, nom: Nominal, ext: dict) -> dict:
         "nominal": case.free_response(nom.system, nom.values, v0),
         "extended": None if ext["system"] is None else case.free_response(ext["system"], ext["values"], v0),
     }
-
-
-def running_period(case: Case, nom: Nominal) -> dict | None:
-    """On an accelerometer record: the period and damping window by window by output error
-    (``pidyn.discrepancy.running``), windows of about twelve periods (at least 2 s) every quarter
-    window: the test of a moving period picks windows a full width apart from them, and a coarser
-    step leaves a short record fewer to pick (a half-width step left a 20 s Painter Street record
-    two with motion, where the quarter-width one found the period moving)."""
-    if not case.from_accelerometers:
-        return None
-    from pidyn.discrepancy.running import period_varies, running_modes
-
-    width = max(12.0 * nom.period, 2.0)
-    try:
-        out = running_modes(
-            case.record,
-            nom.system,
-            nom.values,
-            width=width,
-            step=width / 4,
-            substeps=int(case.settings.substeps),
-        )
-    except ValueError as exc:
-        log.info("no running period (%s)", exc)
-        return None
-    out["variation"] = period_varies(out, width)
-    v = out["variation"]
-    if v.get("varies"):
-        log.info(
-            "the period moves through the record beyond its windows' intervals: %.3g s at %.3g s against "
-            "%.3g s at %.3g s",
-            v["longest"]["period"],
-            v["longest"]["t"],
-            v["shortest"]["period"],
-            v["shortest"]["t"],
-        )
-    return out
-
-
-def nominal_modes(case: Case, nom: Nominal) -> list[dict] | None:
-    """The nominal model's modes with 95 % intervals: its fitting part refined by multiple shooting
-    (from the polished values and the measured or integrated states) for the covariance."""
-    from pidyn.refine import RefineSettings, refine
-    from pidyn.systems.modal import modes_with_intervals
-
-    try:
-        seg = case.record.segment(*case.fit)
-        res = refine(
-            nom.system, seg, {"nominal": nom.values}, RefineSettings(states="measured", initial_state="free")
-        )
-        return modes_with_intervals(
-            nom.system, {**nom.values, **res.params}, res.names, np.asarray(res.covariance)
-        )
-    except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
-        log.info("no intervals for the nominal model's modes (%s)", exc)
-        try:
-            return modes_with_intervals(nom.system, nom.values)
-        except (ValueError, KeyError):
-            return None
-
-
-def starting_point(case: Case) -> tuple[dict[str, float], float]:
-    """A data-driven start for the nominal parameters (weak-form least squares, no effect) and
-    the natural period, refined once from the start's own stiffness."""
-    period = dominant_period(case.record.t[case.mask(case.fit)], case.x_raw[case.mask(case.fit)])
-    values0 = {s.name: s.init for s in case.base.param_specs()}
-    if case.mass_known:
-        values0["m"] = float(case.mass)
-    s, weak = case.signals(period, values0[case.stiff], values0.get("m", 1.0))
-    values0.update(case.screen(case.base, values0, s, weak, effects={}).nominal_params)
-    if values0.get(case.stiff, 0) > 0 and values0.get("m", 0) > 0:
-        period = 2 * np.pi * np.sqrt(values0["m"] / values0[case.stiff])
-        s, weak = case.signals(period, values0[case.stiff], values0.get("m", 1.0))
-        values0.update(case.screen(case.base, values0, s, weak, effects={}).nominal_params)
-    log.info("weak-form starting point: %s (natural period %.4g s)", _fmt(values0), period)
-    return _accelerometer_start(case, values0, period)
-
-
-def _accelerometer_start(
-    case: Case, values0: dict[str, float], period: float
-) -> tuple[dict[str, float], float]:
-    """On an accelerometer record, the weak form's start or the accelerations' own fit (the data
-    start and output error that combined the supports), whichever simulates the fitting part's
-    accelerations better. The weak form reads an integrated motion, a poor measurement on a stiff
-    structure: on a longitudinal Painter Street record it put the period at 0.96 s (negative
-    damping) where the accelerations say 0.3 s."""
-    fitted = ((case.record.meta or {}).get("accelerometers") or {}).get("nominal")
-    if not fitted:
-        return values0, period
-    names = {s.name for s in case.base.param_specs()}
-    scale = float(case.mass) / float(fitted.get("m", 1.0)) if case.mass_known else 1.0
-    other = {**values0, **{k: float(v) * scale for k, v in fitted.items() if k in names and k != "m"}}
-    if case.mass_known:
-        other["m"] = float(case.mass)
-    errors = [_fit_error(case, v) for v in (values0, other)]
-    if not errors[1] < errors[0]:
-        return values0, period
-    log.info(
-        "starting point from the accelerations' fit: %s (fitting-part NRMSE of a %.3g against the weak form's %.3g)",
-        _fmt(other),
-        errors[1],
-        errors[0],
-    )
-    return other, 2 * np.pi * float(np.sqrt(other.get("m", 1.0) / other[case.stiff]))
-
-
-def _fit_error(case: Case, values: dict[str, float]) -> float:
-    """NRMSE of the simulated (relative) acceleration on the fitting part, from rest; inf for a
-    start that is not a physical structure or that blows up."""
-    if any(values.get(s.name, 1.0) <= 0 for s in case.base.param_specs() if s.transform == "log"):
-        return float("inf")
-    try:
-        a = simulate_response(case.base, values, case.record, int(case.settings.substeps))["a"][:, 0]
-    except (ValueError, KeyError):
-        return float("inf")
-    mask = case.mask(case.fit)
-    if not np.all(np.isfinite(a[mask])):
-        return float("inf")
-    return float(nrmse(a[mask], case.record.a[mask, 0]))
-
-
-def fit_budget(case: Case) -> int:
-    """Output-error evaluations per fit: ``polish_max_nfev``; at least 100 on an accelerometer
-    record, where output error decides between the models and every fit must run to its end (a
-    Painter Street nominal stopped after 30 left a misfit its own refit cut elevenfold, and every
-    library effect looked like a gain)."""
-    st = case.settings
-    return max(int(st.polish_max_nfev), 100) if case.from_accelerometers else int(st.polish_max_nfev)
-
-
-def polish(
-    case: Case,
-    system: SDOFSystem,
-    values: dict[str, float],
-    max_nfev: int | None = None,
-    alternative: dict[str, float] | None = None,
-) -> tuple[dict[str, float], str]:
-    """Output-error least squares on (part of) the fitting span, from ``values`` (``max_nfev``
-    evaluations, default ``fit_budget``), or from ``alternative`` (another estimate of the same
-    model) where that simulates the span better: a fit from a worse start can end in a worse
-    local minimum, and the fitting part alone decides which start it takes."""
-    st, fit = case.settings, case.fit
-    seg_end = fit[1] if st.polish_seconds is None else min(fit[1], fit[0] + float(st.polish_seconds))
-    seg = case.record.segment(fit[0], seg_end)
-    trainable = {s.name for s in system.param_specs() if s.trainable}
-    start, how = values, ""
-    if alternative is not None:
-        other = {**values, **alternative}
-        starts = [{k: v for k, v in d.items() if k in trainable} for d in (values, other)]
-        costs = output_error_costs(seg, system, starts, int(st.substeps))
-        if costs[1] < costs[0]:
-            start, how = (
-                other,
-                f" from the check's fit (cost {costs[1]:.4g} against the network's {costs[0]:.4g})",
-            )
-    res = fit_output_error(
-        seg,
-        system,
-        init={k: v for k, v in start.items() if k in trainable},
-        substeps=int(st.substeps),
-        max_nfev=fit_budget(case) if max_nfev is None else int(max_nfev),
-        tol=float(st.polish_tol),
-    )
-    out = dict(start)
-    out.update(res.params)
-    return out, f"output error on {seg.t[0]:.4g}-{seg.t[-1]:.4g} s{how}: {res.note}, {res.seconds:.1f} s"
-
-
-def identify_nominal(case: Case, values0: dict[str, float], period: float) -> Nominal:
-    """The nominal model on the fitting part: PIDynNet, then the output-error polish."""
-    record = case.record
-    node = system_node(
-        case.base_node,
-        {k: v for k, v in values0.items() if v > 0},
-        values0["m"] if "m" in values0 else 1.0,
-        not case.mass_known,
-    )
-    if record.excitation != case.base_node.get("excitation", record.excitation):
-        node["excitation"] = record.excitation
-    metrics, system, values = case.identify(node, case.run_dir / "nominal", case.fit)
-    polish_note = None
-    if case.settings.polish:
-        values, polish_note = polish(case, system, values)
-    s, weak = case.signals(period, values[case.stiff], values0.get("m", 1.0))
-    s.mass = values["m"]
-    return Nominal(node, system, values, metrics, polish_note, s, weak, period)
 
 
 def heldout_test(case: Case, nom: Nominal, x_nom: np.ndarray) -> HeldoutCheck:
@@ -958,7 +556,3 @@ def confirm_undecided(
         polish_seconds=st.polish_seconds,
         tol=float(st.polish_tol),
     )
-
-
-def _fmt(values: dict[str, float]) -> str:
-    return ", ".join(f"{k}={v:.5g}" for k, v in values.items())

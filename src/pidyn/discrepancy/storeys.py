@@ -37,9 +37,9 @@ from typing import Any
 import numpy as np
 
 from pidyn.data.sources import Record
+from pidyn.discrepancy.case import split_spans
 from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.fit_test import fit_test
-from pidyn.discrepancy.pipeline import split_spans
 from pidyn.discrepancy.screening import Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_learned import learned_storey_force

@@ -8,10 +8,10 @@ from typing import Any
 
 import numpy as np
 
+from pidyn.discrepancy.case import Case, Outcome
 from pidyn.discrepancy.changes import running_estimate
 from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.learned_fit import LEARNED
-from pidyn.discrepancy.pipeline import Case, Outcome
 from pidyn.discrepancy.report import (
     plot_learned_force,
     plot_ranking,

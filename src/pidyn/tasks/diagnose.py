@@ -1,5 +1,4 @@
-"""The diagnosis task: compose the case from the config, run ``pidyn.discrepancy.pipeline``,
-write ``diagnosis.json``, ``report.md`` and the figures.
+"""The diagnosis task: the case from the config, the loop run, ``diagnosis.json``, ``report.md``, figures.
 
 The nominal and extended identifications are ordinary PIDynNet runs in ``nominal/`` and
 ``extended/``, each with its resolved ``config.yaml``.
@@ -20,6 +19,7 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 from pidyn.data.sources import Record
 from pidyn.discrepancy import pipeline
 from pidyn.discrepancy.accelerometers import motion_view, needs_view
+from pidyn.discrepancy.case import Case, check_diagnosable, prepare, split_spans
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.summary import summarize, write_figures
 from pidyn.reporting import write_json
@@ -100,17 +100,17 @@ def diagnose_building_task(cfg: DictConfig, record: Record | None = None) -> dic
     return out
 
 
-def compose_case(cfg: DictConfig, record: Record | None = None) -> pipeline.Case:
+def compose_case(cfg: DictConfig, record: Record | None = None) -> Case:
     """The settings, the nominal system, the record and the identification the pipeline calls."""
     settings = DiagnosisSettings.from_mapping(OmegaConf.to_container(cfg.diagnosis, resolve=True))  # type: ignore[arg-type]
     base = hydra.utils.instantiate(cfg.system)
-    pipeline.check_diagnosable(base)
+    check_diagnosable(base)
     record = build_record(cfg, base) if record is None else record
     if record.excitation != base.excitation:
         base = hydra.utils.instantiate(cfg.system, excitation=record.excitation)
     if needs_view(record):  # accelerometers: the relative motion the screening needs, from the accelerations
         full = hydra.utils.instantiate(cfg.system, inputs=record.inputs) if record.n_inputs > 1 else base
-        fit = pipeline.split_spans(record, float(settings.fit_share))[0]
+        fit = split_spans(record, float(settings.fit_share))[0]
         record = motion_view(record, full, fit, tol=float(settings.polish_tol))
     node = OmegaConf.to_container(cfg.system, resolve=True)
     assert isinstance(node, dict)
@@ -119,7 +119,7 @@ def compose_case(cfg: DictConfig, record: Record | None = None) -> pipeline.Case
         metrics, obj = identify(_sub_cfg(cfg, system_node, folder, fit), record)
         return metrics, obj["system"], obj["module"].net.params.as_floats()
 
-    return pipeline.prepare(
+    return prepare(
         record,
         base,
         node,
