@@ -83,3 +83,13 @@ def test_the_refinement_keeps_an_estimate_in_the_lowest_basin():
     scan = res.period_scan
     assert scan["values"] is None and scan["best_ratio"] == 1.0, scan
     assert len(scan["costs"]) == len(scan["period_ratios"]) and scan["held"] == ["k"]
+
+
+def test_a_point_that_does_not_simulate_is_null_in_the_run_folder():
+    import json
+
+    from pidyn.refine.period_scan import PeriodScan
+
+    scan = PeriodScan([0.5, 1.0], [float("inf"), 2.0], 2.0, 1.0, held=["k"])
+    text = json.dumps(scan.to_dict(), allow_nan=False)
+    assert json.loads(text)["costs"] == [None, 2.0]

@@ -39,7 +39,9 @@ class PeriodScan:
     """The profile of the output-error cost along the period family, and what it found."""
 
     period_ratios: list[float]  # scanned period / estimate's period
-    costs: list[float]  # output-error cost with the stiffnesses held there (inf: did not simulate)
+    costs: list[
+        float
+    ]  # output-error cost with the stiffnesses held there (inf, in JSON null: did not simulate)
     estimate_cost: float  # the same fit at ratio 1
     best_ratio: float
     values: dict[str, float] | None = None  # the free fit from the best point, when that is clearly lower
@@ -48,7 +50,11 @@ class PeriodScan:
     held: list[str] = field(default_factory=list)  # the stiffnesses held along the profile
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """For ``refinement.json``: a point that did not simulate is null (plain JSON has no inf)."""
+        out = asdict(self)
+        out["costs"] = [c if np.isfinite(c) else None for c in self.costs]
+        out["estimate_cost"] = self.estimate_cost if np.isfinite(self.estimate_cost) else None
+        return out
 
 
 def scaled(values: dict[str, float], powers: dict[str, float], lam: float) -> dict[str, float]:
