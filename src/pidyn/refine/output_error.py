@@ -52,7 +52,7 @@ def fit_output_error(
     default runs the whole budget; a model choice needs far less, see
     ``DiagnosisSettings.polish_tol``)."""
     t0 = time.perf_counter()
-    problem, th0 = _problem(record, system, init, substeps)
+    problem, th0 = output_error_problem(record, system, init, substeps)
     fun, jac = problem.fd_fun_and_jac()
     sol = least_squares(
         _with_progress(fun, system, t0),
@@ -99,7 +99,7 @@ def output_error_cost(record, system, values: dict[str, float], substeps: int = 
 def output_error_costs(record, system, starts: list[dict[str, float]], substeps: int = 4) -> np.ndarray:
     """``output_error_cost`` of every start in ``starts`` (values of ``system``'s trainable
     parameters), all from one batched simulation; inf where one is not finite."""
-    problem, _ = _problem(record, system, starts[0], substeps)
+    problem, _ = output_error_problem(record, system, starts[0], substeps)
     specs = trainable_specs(system)
     us = np.stack([_problem_theta(specs, start) for start in starts], axis=1)
     res = problem.batch_residuals(us)
@@ -112,7 +112,7 @@ def _problem_theta(specs, values: dict[str, float]) -> np.ndarray:
     return to_theta(specs, {s.name: values.get(s.name, s.init) for s in specs})
 
 
-def _problem(
+def output_error_problem(
     record, system, init: dict[str, float] | None, substeps: int
 ) -> tuple[ShootingProblem, np.ndarray]:
     """The single-shooting problem from rest, each channel's residual relative to its spread (as a

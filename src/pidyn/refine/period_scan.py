@@ -25,6 +25,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from pidyn.params import to_theta, trainable_specs
+from pidyn.refine.output_error import output_error_problem
 from pidyn.refine.problem import ShootingProblem
 
 log = logging.getLogger(__name__)
@@ -80,9 +81,7 @@ def scan_period(
     if not held:
         return None
     t0 = time.perf_counter()
-    problem = ShootingProblem.from_rest(system, record, substeps)
-    for ch in problem.channels:
-        ch.sigma = max(float(np.std(ch.data)), 1e-300)
+    problem, _ = output_error_problem(record, system, values, substeps)
     specs = trainable_specs(system)
     free = np.array([s.name not in held for s in specs])
     grid = sorted({1.0, *ratios})
