@@ -85,6 +85,59 @@ def test_a_moving_period_adds_the_amplitude_dependent_structure_to_the_check(mon
         assert seen["extra"] == expect
 
 
+def test_a_period_that_moves_between_any_two_separate_windows_counts():
+    """The running period at 0.25 s with tight intervals, but 0.33 s in the window at 0.5 s: a
+    tiling of the record from its first window (0, 1, 2, ... s; width 1 s) steps over it, every
+    pair of windows a width apart does not. A window at 0.02 s (a mode near the sampling rate,
+    fitted to a quiet stretch) is not counted against the nominal period."""
+    from pidyn.discrepancy.running import period_varies
+
+    t = np.arange(0.0, 10.01, 0.25)
+    period = np.full(t.shape, 0.25)
+    period[t == 0.5] = 0.33
+    run = {
+        "t": t,
+        "period": period,
+        "period_lo": 0.98 * period,
+        "period_hi": 1.02 * period,
+        "peak": np.ones_like(t),
+    }
+    out = period_varies(run, width=1.0, period=0.25)
+    assert out["varies"] and out["longest"]["t"] == 0.5 and out["longest"]["period"] == pytest.approx(0.33)
+    held = dict(run, period=np.full(t.shape, 0.25))
+    held["period_lo"], held["period_hi"] = 0.98 * held["period"], 1.02 * held["period"]
+    assert not period_varies(held, width=1.0, period=0.25)["varies"]
+    held["period"] = np.where(t == 3.0, 0.02, held["period"])
+    held["period_lo"], held["period_hi"] = 0.98 * held["period"], 1.02 * held["period"]
+    assert period_varies(held, width=1.0)["varies"]  # no nominal period: the outlier counts
+    assert not period_varies(held, width=1.0, period=0.25)["varies"]
+    # two windows closer than a width share samples: not a pair
+    near = np.where(t == 4.75, 0.30, np.where(t == 5.25, 0.20, 0.25))
+    sure = (t == 4.75) | (t == 5.25)  # the other windows are unsure of their period
+    near_run = dict(
+        run,
+        period=near,
+        period_lo=np.where(sure, near - 0.001, 0.15),
+        period_hi=np.where(sure, near + 0.001, 0.35),
+    )
+    assert not period_varies(near_run, width=1.0, period=0.25)["varies"]
+    assert period_varies(near_run, width=0.5, period=0.25)["varies"]
+
+
+def test_forcing_the_amplitude_dependent_structure_starts_it_as_the_check_does():
+    """``diagnosis.force_effect=amplitude_softening`` (not screened by the weak form) extends with
+    it; a name outside the library is a named error, not a StopIteration."""
+    from types import SimpleNamespace
+
+    from pidyn.discrepancy import pipeline
+
+    sc = SimpleNamespace(ranking=[{"effect": "cubic_stiffness"}], structure=None)
+    row = pipeline._cause_row("amplitude_softening", sc, None, None)
+    assert row["effect"] == "amplitude_softening" and set(row["parameters"]) == {"soft", "gain", "tau"}
+    with pytest.raises(ValueError, match="force_effect='cubic_stifness' is not an effect"):
+        pipeline._cause_row("cubic_stifness", sc, None, None)
+
+
 def test_the_extension_draws_its_own_period_through_the_record(tmp_path):
     """The amplitude-dependent model's period along its simulated response: the period at rest
     at the start, longer in the strong shaking, shorter again in the quieter end, drawn beside

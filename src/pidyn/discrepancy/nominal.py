@@ -41,7 +41,7 @@ def running_period(case: Case, nom: Nominal) -> dict | None:
     except ValueError as exc:
         log.info("no running period (%s)", exc)
         return None
-    out["variation"] = period_varies(out, width)
+    out["variation"] = period_varies(out, width, period=nom.period)
     v = out["variation"]
     if v.get("varies"):
         log.info(

@@ -148,33 +148,46 @@ def _name(system, which: str) -> str:
     return (stiffness_params(system) if which == "k" else damping_params(system))[0]
 
 
-def period_varies(running: dict, width: float, margin: float = 0.03, min_peak_share: float = 0.1) -> dict:
+def period_varies(
+    running: dict,
+    width: float,
+    margin: float = 0.03,
+    min_peak_share: float = 0.1,
+    period: float | None = None,
+) -> dict:
     """Does the period change through the record beyond what each window is sure of? Among
-    windows a full width apart (no shared samples) whose motion reaches ``min_peak_share`` of
-    the record's peak, the longest period's lower 95 % bound against the shortest one's upper
-    bound: apart by more than ``margin`` of the period, no one time-invariant model holds."""
+    windows whose motion reaches ``min_peak_share`` of the record's peak, any two a full width
+    apart (no shared samples): the largest lower 95 % bound of one against the smallest upper
+    bound of the other, apart by more than ``margin`` of the period: no one time-invariant model
+    holds. Every such pair counts, not one tiling of the record: a tiling started at the first
+    window can step over the strongest seconds, where a softening shows most. ``period``: the
+    nominal model's; a window whose period is not within a factor of two of it is not counted
+    (a window fitted to a quiet stretch can return a mode near the sampling rate)."""
     t = np.asarray(running["t"])
-    ok = np.isfinite(np.asarray(running["period"]))
+    p = np.asarray(running["period"], float)
+    ok = np.isfinite(p)
+    if period is not None:
+        ok &= (p >= 0.5 * period) & (p <= 2.0 * period)
     peak = np.asarray(running["peak"])
     ok &= peak >= min_peak_share * float(np.nanmax(peak)) if ok.any() else ok
-    chosen, last = [], -np.inf
-    for i in np.flatnonzero(ok):
-        if t[i] - last >= width - 1e-9:
-            chosen.append(i)
-            last = t[i]
+    idx = np.flatnonzero(ok)
+    apart = np.abs(t[idx, None] - t[None, idx]) >= width - 1e-9
+    chosen = _independent(t[idx], width)
     if len(chosen) < 3:
         return {
             "varies": False,
             "windows": len(chosen),
             "reason": "fewer than 3 independent windows with motion",
         }
-    lo, hi = np.asarray(running["period_lo"])[chosen], np.asarray(running["period_hi"])[chosen]
-    i_long, i_short = chosen[int(np.argmax(lo))], chosen[int(np.argmin(hi))]
-    gap = float(np.max(lo) - np.min(hi))
-    varies = bool(gap > margin * float(np.median(np.asarray(running["period"])[chosen])))
+    lo, hi = np.asarray(running["period_lo"])[idx], np.asarray(running["period_hi"])[idx]
+    gaps = np.where(apart, lo[:, None] - hi[None, :], -np.inf)
+    a, b = np.unravel_index(int(np.argmax(gaps)), gaps.shape)
+    i_long, i_short = int(idx[a]), int(idx[b])
+    gap = float(gaps[a, b])
+    varies = bool(gap > margin * float(np.median(p[idx])))
     return {
         "varies": varies,
-        "windows": len(chosen),
+        "windows": len(idx),
         "gap_s": gap,
         "longest": {
             "t": float(t[i_long]),
@@ -187,3 +200,13 @@ def period_varies(running: dict, width: float, margin: float = 0.03, min_peak_sh
             "ci95": [float(running["period_lo"][i_short]), float(running["period_hi"][i_short])],
         },
     }
+
+
+def _independent(t: np.ndarray, width: float) -> list[int]:
+    """The most windows of ``t`` (sorted) that share no samples, taken greedily from the first."""
+    chosen, last = [], -np.inf
+    for i, ti in enumerate(t):
+        if ti - last >= width - 1e-9:
+            chosen.append(i)
+            last = ti
+    return chosen
