@@ -172,6 +172,7 @@ def identification_rows(folder: Path) -> list[dict]:
                 "notes": "; ".join(meta.get("notes") or []),
                 "period_s": mode.get("period_s"),
                 "period_ci95": mode.get("period_ci95"),
+                "period_profile_ci95": mode.get("period_profile_ci95"),
                 "damping": mode.get("damping_ratio"),
                 "damping_ci95": mode.get("damping_ci95"),
                 "heldout_nrmse_a": held.get("mean_nrmse_a"),
@@ -229,6 +230,10 @@ def judge(row: dict) -> dict:
     if span and None not in ci and row.get("pga_g", 1) < WEAK_G:
         out["inside_peers"] = bool(ci[0] <= span[1] and ci[1] >= span[0])
         out["weak_event"] = bool(row.get("event_pga_g", row["pga_g"]) < WEAK_G)
+        prof = row.get("period_profile_ci95")
+        if prof:  # the profile's set; an end it leaves open (None) runs past the scanned factor of two
+            lo, hi = (-np.inf if prof[0] is None else prof[0]), (np.inf if prof[1] is None else prof[1])
+            out["profile_inside_peers"] = bool(lo <= span[1] and hi >= span[0])
     srim = row.get("srim_heldout_nrmse_a")
     if srim is not None and row.get("heldout_nrmse_a") is not None:
         out["beats_srim"] = bool(row["heldout_nrmse_a"] <= srim)
@@ -243,14 +248,14 @@ def identification_table(rows: list[dict], direction: str) -> list[str]:
     lines = [
         f"### {direction.capitalize()}",
         "",
-        "| event | date | PGA (g) | inputs -> output | T (s), 95 % | damping (%), 95 % | transfer fn T | SRIM T | "
-        "OKID-ERA T | held-out NRMSE: ours / SRIM / OKID-ERA | s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| event | date | PGA (g) | inputs -> output | T (s), 95 % | profile 95 % | damping (%), 95 % | "
+        "transfer fn T | SRIM T | OKID-ERA T | held-out NRMSE: ours / SRIM / OKID-ERA | s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in sorted((r for r in rows if r["direction"] == direction), key=lambda r: r.get("pga_g") or 0):
         tag = " *(t)*" if r["role"] == "tuning" else ""
         if r["status"] != "ok":
-            lines.append(f"| {r['event']}{tag} | {r['date']} | - | - | {r['status']} | | | | | | |")
+            lines.append(f"| {r['event']}{tag} | {r['date']} | - | - | {r['status']} | | | | | | | |")
             continue
         ci, zc = r["period_ci95"], r["damping_ci95"]
         j = judge(r)
@@ -259,12 +264,23 @@ def identification_table(rows: list[dict], direction: str) -> list[str]:
         beats = "" if "beats_srim" not in j else ("" if j["beats_srim"] else " **(SRIM better)**")
         lines.append(
             f"| {r['event']}{tag} | {r['date']} | {_f(r['pga_g'])} | {r['inputs']} -> {r['outputs']} | "
-            f"{_f(r['period_s'])} [{_f(ci[0])}, {_f(ci[1])}]{inside} | {_f(100 * r['damping'], '.1f')} "
+            f"{_f(r['period_s'])} [{_f(ci[0])}, {_f(ci[1])}]{inside} | {_profile_cell(r, j)} | "
+            f"{_f(100 * r['damping'], '.1f')} "
             f"[{_f(100 * zc[0], '.1f')}, {_f(100 * zc[1], '.1f')}] | {_f(r.get('transfer_function_period_s'))} | "
             f"{_f(r.get('srim_period_s'))} | {_f(r.get('okid_era_period_s'))} | {_f(r['heldout_nrmse_a'])} / "
             f"{_f(r.get('srim_heldout_nrmse_a'))} / {_f(r.get('okid_era_heldout_nrmse_a'))}{beats} | {_f(r['wall_s'], '.0f')} |"
         )
     return lines + [""]
+
+
+def _profile_cell(row: dict, j: dict) -> str:
+    """The period's profile-likelihood set, open ends as "..."; (in) / (**out**) for a weak event."""
+    prof = row.get("period_profile_ci95")
+    if not prof:
+        return "-"
+    lo, hi = ("..." if v is None else _f(v) for v in prof)
+    mark = "" if "profile_inside_peers" not in j else (" (in)" if j["profile_inside_peers"] else " (**out**)")
+    return f"[{lo}, {hi}]{mark}"
 
 
 def summary_lines(rows: list[dict]) -> list[str]:
@@ -279,12 +295,16 @@ def summary_lines(rows: list[dict]) -> list[str]:
             js = [judge(r) for r in sel]
             inside = [j["inside_peers"] for j in js if j.get("weak_event")]
             own = [j["inside_peers"] for j in js if "inside_peers" in j]
+            prof = [
+                j["profile_inside_peers"] for j in js if j.get("weak_event") and "profile_inside_peers" in j
+            ]
             beats = [j["beats_srim"] for j in js if "beats_srim" in j]
             wall = max(r["wall_s"] or 0 for r in sel)
             out.append(
                 f"- {direction}, events {'kept out of all tuning' if role == 'untouched' else 'used in tuning'} "
                 f"({len(sel)}): period inside the peers' span on {sum(inside)} of {len(inside)} weak events "
-                f"({sum(own)} of {len(own)} counting the direction's own PGA); "
+                f"({sum(own)} of {len(own)} counting the direction's own PGA; by the profile interval "
+                f"{sum(prof)} of {len(prof)}); "
                 f"held-out NRMSE at or below SRIM's on {sum(beats)} of {len(beats)} events where SRIM gives a "
                 f"stable model; at most {wall:.0f} s an event."
             )

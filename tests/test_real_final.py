@@ -104,3 +104,40 @@ def test_a_direction_weak_in_a_strong_event_is_judged_apart():
     assert real.judge(rows[1]) == {"inside_peers": False, "weak_event": False}
     alone = real.with_event_pga([row("longitudinal", 0.07, 0.24, [0.22, 0.26])])
     assert real.judge(alone[0]) == {"inside_peers": True, "weak_event": True}
+
+
+def test_the_profile_interval_is_judged_beside_the_wald_one():
+    """A weak event's profile set is tested against the peers' span too, an open end as unbounded,
+    and shown in the identification table."""
+    import real
+
+    row = {
+        "event": "e",
+        "direction": "longitudinal",
+        "role": "untouched",
+        "date": "2020-01-01",
+        "status": "ok",
+        "pga_g": 0.02,
+        "event_pga_g": 0.02,
+        "period_s": 0.16,
+        "period_ci95": [0.15, 0.17],
+        "damping": 0.2,
+        "damping_ci95": [0.1, 0.3],
+        "heldout_nrmse_a": 0.2,
+        "wall_s": 10.0,
+        "inputs": [1],
+        "outputs": [2],
+        "srim_period_s": 0.27,
+        "okid_era_period_s": 0.25,
+    }
+    assert real.judge({**row, "period_profile_ci95": [0.14, 0.2]}) == {
+        "inside_peers": False,
+        "weak_event": True,
+        "profile_inside_peers": False,
+    }
+    assert real.judge({**row, "period_profile_ci95": [0.14, None]})["profile_inside_peers"]
+    assert "profile_inside_peers" not in real.judge(row)
+    table = "\n".join(
+        real.identification_table([{**row, "period_profile_ci95": [0.14, None]}], "longitudinal")
+    )
+    assert "| [0.140, ...] (in) |" in table and "0.160 [0.150, 0.170] (**out**)" in table

@@ -85,6 +85,9 @@ def modal_summary(system, values: dict[str, float], refined: Any = None) -> list
         modes = modes_with_intervals(system, values, names, None if not cov else np.asarray(cov))
     except (ValueError, KeyError, np.linalg.LinAlgError):
         return None
+    profile = getattr(refined, "period_profile", None) or {}
+    if profile and len(modes) == 1:  # the period's profile-likelihood set (``pidyn.refine.period_profile``)
+        modes[0]["period_profile_ci95"] = list(profile["ci95"])
     if getattr(system, "modal_coordinates", False):  # a modes model's own coordinates: no shapes to read
         for m in modes:
             m.pop("mode_shape", None)

@@ -88,7 +88,7 @@ def scan_period(
     costs, thetas = [], []
     for ratio in grid:
         theta0 = to_theta(specs, scaled(values, powers, 1.0 / ratio))
-        theta, cost = _profile_point(problem, theta0, free, profile_nfev)
+        theta, cost = profile_point(problem, theta0, free, profile_nfev)
         costs.append(cost)
         thetas.append(theta)
     i_est, i_best = grid.index(1.0), int(np.argmin(costs))
@@ -110,7 +110,7 @@ def scan_period(
     return out
 
 
-def _profile_point(
+def profile_point(
     problem: ShootingProblem, theta0: np.ndarray, free: np.ndarray, max_nfev: int
 ) -> tuple[np.ndarray, float]:
     """The parameters marked ``free`` fitted with the others held at ``theta0``; inf where the

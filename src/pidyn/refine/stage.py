@@ -21,6 +21,7 @@ import numpy as np
 
 from pidyn.integrate import input_hold
 from pidyn.notes import note
+from pidyn.refine.period_profile import profile_period
 from pidyn.refine.period_scan import scan_period
 from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
 from pidyn.refine.solve import solve, solve_constrained
@@ -58,6 +59,9 @@ class RefineSettings:
     gn_steps: int = 40  # constrained Levenberg-Marquardt steps at most (stage 2; most runs need a few)
     reweight: bool = True  # weight each channel by its estimated noise and finish again
     period_scan: bool = True  # linear models: look for a lower basin of the period (``period_scan``)
+    period_profile: bool = (
+        True  # one linear mode: the period's profile-likelihood interval (``period_profile``)
+    )
 
     def __post_init__(self) -> None:
         if self.states not in STATE_SOURCES:
@@ -100,6 +104,8 @@ class RefineResult:
     covariance_lags: int = 0
     #: the scan of the period after the local solve (``pidyn.refine.period_scan.PeriodScan``); empty: none ran
     period_scan: dict = field(default_factory=dict)
+    #: the period's adjusted profile likelihood (``pidyn.refine.period_profile.PeriodProfile``); empty: none ran
+    period_profile: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -239,10 +245,7 @@ def refine(
         problem, u, converged, test = _test_rest(problem, u, converged, settings, rep.history)
     r, J, c, C = problem.linearize(u)
     theta, states = problem.unpack(u)
-    ints, corr, cond, cov, lags = _uncertainty(problem, r, J, C, theta)
-    notes = bound_notes(problem.specs, theta) + identifiability_notes(problem.names, ints, corr, cond)
-    for n_ in notes:
-        log.warning("identifiability: %s", n_)
+    ints, corr, cond, cov, lags, notes = _uncertainty(problem, r, J, C, theta)
     return RefineResult(
         params=problem.values(theta),
         intervals=ints,
@@ -266,6 +269,7 @@ def refine(
         covariance=cov.tolist(),
         covariance_lags=lags,
         period_scan=scan.to_dict() if scan is not None else {},
+        period_profile=_period_profile(record, problem, theta, settings),
     )
 
 
@@ -294,6 +298,25 @@ def _period_scan(record, problem: ShootingProblem, starts: _Starts, rep, used: s
     )
     log.warning(starts.notes[-1])
     return alt, "period_scan", scan
+
+
+def _period_profile(record, problem: ShootingProblem, theta: np.ndarray, settings: RefineSettings) -> dict:
+    """The period's profile-likelihood interval about the final estimate, where the scan's cost
+    is the right one (see ``_period_scan``) and the model is one linear mode; {} elsewhere."""
+    if not settings.period_profile or problem.free_state0 or problem.bounds[0] != 0:
+        return {}
+    span = record.segment(None, float(problem.t[problem.bounds[-1]]))
+    prof = profile_period(problem.system, span, problem.values(theta), substeps=problem.substeps)
+    if prof is None:
+        return {}
+    log.info(
+        "period profile: %.4g s, 95 %% set %s (adjusted by %.3g, %.1f s)",
+        prof.period_min,
+        prof.ci95,
+        prof.adjustment,
+        prof.seconds,
+    )
+    return prof.to_dict()
 
 
 def _test_rest(
@@ -395,14 +418,19 @@ def _rest_sentence(test: dict, settings: RefineSettings) -> str:
 
 
 def _uncertainty(problem: ShootingProblem, r: np.ndarray, J: np.ndarray, C: np.ndarray, theta: np.ndarray):
-    """Intervals, correlation and condition number at the solution, and the lags the covariance
-    took. The covariance is scaled by the residuals' own variance (the weights' noise unit may
-    still be off by a factor); where the residuals are correlated (a model's error on a measured
+    """Intervals, correlation and condition number at the solution, the lags the covariance
+    took, and the notes on what the record does not determine (logged). The covariance is
+    scaled by the residuals' own variance (the weights' noise unit may still be off by a
+    factor); where the residuals are correlated (a model's error on a measured
     record, not white noise) it is the sandwich over that many lags (``uncertainty.sandwich``):
     on Painter Street the white-noise interval of the period was a few tenths of a percent wide
     while the peers' estimates of the same event spread over several percent."""
     cov, cond, lags = residual_covariance(problem, r, J, C)
-    return intervals(problem.specs, theta, cov), correlation(cov), cond, cov, lags
+    ints, corr = intervals(problem.specs, theta, cov), correlation(cov)
+    notes = bound_notes(problem.specs, theta) + identifiability_notes(problem.names, ints, corr, cond)
+    for n_ in notes:
+        log.warning("identifiability: %s", n_)
+    return ints, corr, cond, cov, lags, notes
 
 
 class _Starts:
