@@ -7,7 +7,7 @@ first and the top unmeasured), under every shipped ground motion (its first 20 s
 with measurement noise of 0, 1, 2.5 and 5 % of each floor's RMS at the default fitting share
 0.65, and at 3 % noise with the fitting part ending at 50 and 80 % of the record:
 13 x 6 = 78 records, none drawn by the benchmark (other seeds). On each, the nominal building as
-the diagnosis makes it (``storeys.nominal_fit``: the start from the data and the config's, each
+the diagnosis makes it (``storey_nominal.nominal_fit``: the start from the data and the config's, each
 refined on the fitting part), then the fit test of every measured floor.
 
 Writes ``experiments/results/fit_test_calibration.{md,csv}``; finished records are kept in the
@@ -47,7 +47,8 @@ def one(args: tuple[int, str, float, float]) -> dict:
     from pidyn.config import compose
     from pidyn.data.sources import synthetic_from_motion
     from pidyn.discrepancy.settings import DiagnosisSettings
-    from pidyn.discrepancy.storeys import building_fit_test, nominal_fit, split_spans
+    from pidyn.discrepancy.storey_nominal import nominal_fit
+    from pidyn.discrepancy.storeys import building_fit_test, split_spans
     from pidyn.excitation.ground_motion import prepare
     from pidyn.runs.methods import refine_plan
     from pidyn.systems.shear_building import ShearBuilding

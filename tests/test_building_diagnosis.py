@@ -214,7 +214,7 @@ def test_the_configs_guesses_are_refined_only_when_their_modes_are_far_from_the_
     """Two starts whose modal frequencies lie within a quarter of each other end at the same optimum:
     only the data's is refined. A guess at a quarter of the stiffness (half the frequencies) is
     refined too."""
-    from pidyn.discrepancy.storeys import close_modes
+    from pidyn.discrepancy.storey_nominal import close_modes
 
     system = ShearBuilding(3, MASSES, DAMPINGS, [120.0] * 3)
     config = {s.name: float(s.init) for s in system.param_specs()}
@@ -229,7 +229,8 @@ def test_a_named_effect_needs_a_determined_size():
     """The refinement's interval of the effect's size (its key parameter) decides whether a
     building's extension may be named: two standard deviations from zero (``storey_max_rel_std``)."""
     from pidyn.discrepancy.settings import DiagnosisSettings
-    from pidyn.discrepancy.storeys import Found, refusal_notes, size_spread
+    from pidyn.discrepancy.storey_steps import refusal_notes, size_spread
+    from pidyn.discrepancy.storeys import Found
 
     cand = Found("quadratic_damping", 1, {"c2": 25.0}, {"score": 2.8}, {})
     loose = {"intervals": {"c2_1": {"value": 1.23, "std": 1.30, "rel_std_pct": 106.0}}}

@@ -10,13 +10,13 @@ import pytest
 from pidyn.data.sources import synthetic
 from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.settings import DiagnosisSettings
+from pidyn.discrepancy.storey_nominal import fundamental_hz
 from pidyn.discrepancy.storeys import (
     CORNER_SHARE,
     WINDOW_SHARE,
     Found,
     Study,
     building_with,
-    fundamental_hz,
     misfit_rows,
     storey_signals,
     storey_views,
@@ -143,7 +143,7 @@ def test_a_first_name_that_leaves_most_of_the_misfit_is_challenged(monkeypatch):
     fails the fit test and the name removes less than ``misfit_share`` of its excess over the
     noise (a quadratic spring named a cubic one removed 23 %); a name that removes most of it,
     or a building that passes the test, is kept without a search."""
-    import pidyn.discrepancy.storeys as st
+    import pidyn.discrepancy.storey_steps as st
 
     def test_of(excess: float, failed: bool = True) -> dict:
         return {"failed": failed, "channels": {"a1": {"excess": excess}}}

@@ -15,7 +15,7 @@ def test_a_learned_force_goes_to_the_storey_the_linear_model_misses(tmp_path):
     from pidyn.data.sources import synthetic
     from pidyn.discrepancy.settings import LearnedSettings
     from pidyn.discrepancy.storey_learned import learned_storey_force
-    from pidyn.discrepancy.storeys import fundamental_hz, heldout_nrmse
+    from pidyn.discrepancy.storey_nominal import fundamental_hz, heldout_nrmse
     from pidyn.simulate import simulate_response
     from pidyn.systems import ShearBuilding
 

@@ -12,7 +12,8 @@ import numpy as np
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy.screening import Thresholds
-from pidyn.discrepancy.storeys import BuildingDiagnosis, StoreyView, score_text, step_outcome, storey_system
+from pidyn.discrepancy.storey_steps import step_outcome
+from pidyn.discrepancy.storeys import BuildingDiagnosis, StoreyView, score_text, storey_system
 from pidyn.systems.shear_building import ShearBuilding
 
 

@@ -1,0 +1,136 @@
+"""The nominal building of a storey-by-storey diagnosis: its fit from the data and the config's
+starts, its modes, and how well a building predicts the measured floors."""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+
+from pidyn.data.sources import Record
+from pidyn.reporting import nrmse
+from pidyn.simulate import simulate_response
+from pidyn.systems.shear_building import ShearBuilding
+
+log = logging.getLogger(__name__)
+
+
+def heldout_nrmse(
+    record: Record, system: ShearBuilding, values: dict[str, float], span: tuple[float, float]
+) -> dict:
+    """NRMSE of the absolute acceleration of every measured floor on ``span``, and their mean."""
+    sim = simulate_response(system, values, record)["a"]
+    ag = np.asarray(record.f, float)
+    mask = (record.t >= span[0]) & (record.t <= span[1])
+    per = {}
+    for j in range(record.a.shape[1]):
+        meas = record.a[:, j]
+        if np.isnan(meas).all():
+            continue
+        pred = sim[mask, j] + ag[mask]
+        per[f"a{j + 1}"] = nrmse(pred, meas[mask] + ag[mask]) if np.all(np.isfinite(pred)) else float("inf")
+    return {"per_floor": per, "mean": float(np.mean(list(per.values())))}
+
+
+def nominal_fit(
+    record: Record, system: ShearBuilding, fit: tuple[float, float], settings: Any, start: dict | None = None
+) -> tuple[dict[str, float], Any]:
+    """The linear building on the fitting part, refined (intervals for every parameter) from the
+    start read from the data and from ``start`` (an earlier run's values) or else the config's
+    guesses, each refined on its own (the config's, when its modes are close to the data
+    start's, ``close_modes``, only if the data start's model fits poorly, ``POOR_FIT``): the one whose model simulates the fitting part's
+    floor accelerations better is kept. Scoring the starts by a free simulation before refining
+    them misleads: a guess far below the structure's frequencies barely responds, and its small
+    misfit beat a start at the right frequencies but off in phase (a shake-table building ended
+    at held-out NRMSE 0.89 from the config's guess, 0.26 from the data's start)."""
+    from pidyn.baselines.data_start import start_from_data
+
+    config = {s.name: float(s.init) for s in system.param_specs()}
+    # an earlier run's estimate replaces the config's guesses, not the data's start: refined again
+    # here (segments from the integrated accelerations), a run's estimate can land elsewhere
+    starts = {"config": config} if start is None else {"run": {**config, **start}}
+    try:
+        data = start_from_data(record.segment(*fit), system)
+    except Exception as exc:  # a start that cannot be read leaves the others
+        log.info("no start from the data (%s)", exc)
+        data = None
+    deferred = {}
+    if data is not None:
+        starts["data"] = {**config, **data.values}
+        if start is None and close_modes(system, config, starts["data"]):
+            log.info(
+                "the config's guesses refined only if the data start's model fits poorly: every modal "
+                "frequency within %.0f %% of the data start's",
+                100 * CLOSE_MODES,
+            )
+            deferred = {"config": starts.pop("config")}
+    best = _refined_best(record, system, starts, settings, fit, config)
+    if deferred and (best is None or best[0] > POOR_FIT):
+        # a clean 5-storey building (benchmark case 33) ended at NRMSE 0.97 from the data's start
+        best = min(
+            (b for b in (best, _refined_best(record, system, deferred, settings, fit, config)) if b),
+            key=lambda b: b[0],
+            default=None,
+        )
+    if best is None:
+        raise RuntimeError(
+            f"record '{record.name}': the nominal building could not be refined from any start"
+        )
+    return best[1], best[2]
+
+
+#: a nominal model whose simulation misses this share of the fitting part (NRMSE) is no optimum to
+#: keep without trying the config's start as well
+POOR_FIT = 0.5
+
+
+def _refined_best(
+    record: Record, system: ShearBuilding, starts: dict, settings: Any, fit: tuple[float, float], config: dict
+) -> tuple[float, dict, Any] | None:
+    """Each start refined on its own; (fitting-part NRMSE, values, result) of the best, or None."""
+    from pidyn.refine.stage import refine
+
+    best = None
+    for label, values in starts.items():
+        try:
+            res = refine(
+                system, record, {label: values}, settings, t_start=fit[0], t_end=fit[1], prefer=label
+            )
+        except Exception as exc:  # a start that fails leaves the others
+            log.warning("the nominal refinement from the %s start failed (%s)", label, exc)
+            continue
+        est = {**config, **res.params}
+        score = heldout_nrmse(record, system, est, fit)["mean"]
+        log.info("nominal model from the %s start: NRMSE %.4g on the fitting part", label, score)
+        if best is None or score < best[0]:
+            best = (score, est, res)
+    return best
+
+
+#: relative distance of two starts' modal frequencies below which they share a basin (``close_modes``)
+CLOSE_MODES = 0.25
+
+
+def close_modes(system: ShearBuilding, a: dict[str, float], b: dict[str, float]) -> bool:
+    """Whether every modal frequency of start ``a`` lies within ``CLOSE_MODES`` of ``b``'s: the
+    refinement then ends at the same optimum from either, and refining both only costs time. On
+    seven simulated 3-4 storey buildings the config's guesses (frequencies 4-18 % off the data
+    start's) and the data start reached the same fitting-part NRMSE to four digits, the config's
+    taking up to 104 s against 23 s; a shake-table building far from the config's guesses still
+    gets both starts (there the data's won, 0.26 against 0.89 held out)."""
+    fa, fb = (modal_frequencies(system, v) for v in (a, b))
+    if len(fa) != len(fb) or not (np.all(fa > 0) and np.all(fb > 0)):
+        return False
+    return bool(np.all(np.abs(fa / fb - 1.0) <= CLOSE_MODES))
+
+
+def modal_frequencies(system: ShearBuilding, values: dict[str, float]) -> np.ndarray:
+    """The linear building's modal frequencies (Hz), ascending."""
+    from pidyn.systems.modal import linear_matrices, modal_properties
+
+    return np.sort(modal_properties(*linear_matrices(system, values))["frequency_hz"])
+
+
+def fundamental_hz(system: ShearBuilding, values: dict[str, float]) -> float:
+    return float(min(f for f in modal_frequencies(system, values) if f > 0))
