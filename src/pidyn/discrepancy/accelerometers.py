@@ -54,7 +54,7 @@ def motion_view(
     if peak is None:
         raise ValueError(f"record '{record.name}': the accelerations show no resonance to integrate around")
     fn = peak[0]
-    system, values, note = _nominal_influence(record, system, fit, tol)
+    system, values, note, weights = _nominal_influence(record, system, fit, tol)
     f = np.asarray(record.f, float)
     several = system.n_inputs > 1
     # the motion relative to the supports weighted by their influence (what the sensor reads of them
@@ -82,6 +82,7 @@ def motion_view(
             "highpass_hz": corner,
             "resonance_hz": fn,
             "note": note,
+            "weights": weights,
             "inputs": list(record.inputs),
             "derived": "x, v integrated from a",
         },
@@ -104,9 +105,10 @@ def motion_view(
 
 def _nominal_influence(
     record: Record, system, fit: tuple[float, float], tol: float
-) -> tuple[Any, dict[str, float], str]:
+) -> tuple[Any, dict[str, float], str, dict | None]:
     """The nominal model's values from the best start and, with several inputs, the supports'
-    influence by output error on the fitting part; with a sentence that says where they came from.
+    influence by output error on the fitting part; with a sentence that says where they came from,
+    and the test of the residuals' scale (``_envelope_refit``; None with one input).
     Starts: the data's, and the peers' realizations mapped onto the model (``peer_start``). The
     peer's that simulates the fitting part best is fitted beside the data's, and the lower fitted
     cost is kept: a start's own cost does not rank where its fit ends (on a Painter Street record
@@ -126,7 +128,7 @@ def _nominal_influence(
     options = {name: values, **_peer_options(seg, system, values)}
     if system.n_inputs == 1:
         best = _cheapest(seg, system, options)
-        return with_start(system, options[best]), options[best], f"start from {best}"
+        return with_start(system, options[best]), options[best], f"start from {best}", None
     fits = {k: _influence_fit(seg, system, v, tol) for k, v in options.items()}
     best = min(fits, key=lambda k: fits[k][1].cost)
     best = _moved_by_scan(seg, system, fits, options, best, tol)
@@ -138,7 +140,40 @@ def _nominal_influence(
         )
     values, res = fits[best]
     note = f"start from {best}, then output error on the accelerations of {fit[0]:.4g}-{fit[1]:.4g} s ({res.note})"
-    return with_start(system, options[best]), values, note
+    values, test = _envelope_refit(seg, system, values, tol)
+    if test.follows:
+        note += (
+            f"; the residuals' scale follows the response's envelope (log-likelihood gain {test.statistic:.3g} "
+            f"over {test.independent_samples:.0f} independent samples): refitted with each residual divided by it"
+        )
+    return with_start(system, options[best]), values, note, test.to_dict()
+
+
+def _envelope_refit(seg: Record, system, values: dict[str, float], tol: float):
+    """The supports' fit under the noise model its residuals support (``pidyn.refine.heteroscedastic``):
+    where their scale follows the measured response's envelope (over four periods), the fit redone
+    from ``values`` with each residual divided by it; else ``values`` as they are. (values, the test)."""
+    from pidyn.refine.heteroscedastic import envelope, scale_test
+    from pidyn.refine.output_error import fit_output_error, output_error_problem
+    from pidyn.systems.modal import linear_matrices, modal_properties
+
+    window = 4.0 * float(modal_properties(*linear_matrices(system, values))["period_s"][0])
+    w = envelope(seg.a, seg.dt, window)
+    trainable = {s.name for s in system.param_specs() if s.trainable}
+    init = {k: v for k, v in values.items() if k in trainable}
+    problem, theta = output_error_problem(seg, system, init, 4)
+    r = problem.fd_fun_and_jac()[0](theta)
+    test = scale_test(r, np.tile(w, len(problem.channel_slices())), window)
+    log.info(
+        "the supports' fit: residual scale against the response's envelope: gain %.3g over %.0f samples (%s)",
+        test.statistic,
+        test.independent_samples,
+        "refitted with its weights" if test.follows else "one noise level kept",
+    )
+    if not test.follows:
+        return values, test
+    res = fit_output_error(seg, system, init=init, max_nfev=100, tol=tol, weights=1.0 / w)
+    return {**values, **res.params}, test
 
 
 def _moved_by_scan(seg: Record, system, fits: dict, options: dict, best: str, tol: float) -> str:

@@ -44,16 +44,20 @@ def fit_output_error(
     substeps: int = 4,
     max_nfev: int = 60,
     tol: float = 1e-12,
+    weights: np.ndarray | None = None,
 ) -> OutputErrorFit:
     """The trainable parameters (from their specs' starts, overridden by ``init``) fitted to the
     record's channels simulated from rest, each channel's residual relative to its spread.
     ``tol``: stop when a step that the local model predicted well lowers the cost by less than
     this share, or when the trust region has shrunk below this share of the parameters (the
     default runs the whole budget; a model choice needs far less, see
-    ``DiagnosisSettings.polish_tol``)."""
+    ``DiagnosisSettings.polish_tol``). ``weights`` (N,): every channel's residual at each sample
+    times it (``pidyn.refine.heteroscedastic``); the cost is then the weighted one."""
     t0 = time.perf_counter()
     problem, th0 = output_error_problem(record, system, init, substeps)
     fun, jac = problem.fd_fun_and_jac()
+    if weights is not None:
+        fun, jac = _weighted(problem, fun, jac, np.asarray(weights, float))
     sol = least_squares(
         _with_progress(fun, system, t0),
         th0,
@@ -65,6 +69,16 @@ def fit_output_error(
         gtol=1e-12,
     )
     return OutputErrorFit(problem.values(sol.x), time.perf_counter() - t0, int(sol.nfev), float(sol.cost))
+
+
+def _weighted(problem: ShootingProblem, fun, jac, weights: np.ndarray):
+    """``fun`` and ``jac`` with each channel's residual at sample i times ``weights[i]``."""
+    slices = problem.channel_slices()
+    if any(sl.stop - sl.start != len(weights) for sl in slices):
+        sizes = [sl.stop - sl.start for sl in slices]
+        raise ValueError(f"output error: {len(weights)} weights for channels of {sizes} samples")
+    W = np.concatenate([weights] * len(slices))
+    return (lambda th: fun(th) * W), (lambda th: jac(th) * W[:, None])
 
 
 def _with_progress(fun, system, t0: float):
