@@ -216,10 +216,8 @@ def _cause_row(cause: str | None, sc, change_row: dict | None, confirmation) -> 
     if confirmation and confirmation.row:
         return confirmation.row
     row = next((r for r in sc.ranking if r["effect"] == cause), None)
-    if (
-        row is None and cause == AMPLITUDE
-    ):  # not screened by the weak form: forced, it starts as the check does
-        row = _amplitude_candidate()
+    if row is None and cause == AMPLITUDE:
+        row = _amplitude_candidate()  # not screened by the weak form: forced, it starts as the check does
     if row is None:
         known = sorted({r["effect"] for r in sc.ranking} | {AMPLITUDE})
         raise ValueError(

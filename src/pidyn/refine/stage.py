@@ -59,9 +59,8 @@ class RefineSettings:
     gn_steps: int = 40  # constrained Levenberg-Marquardt steps at most (stage 2; most runs need a few)
     reweight: bool = True  # weight each channel by its estimated noise and finish again
     period_scan: bool = True  # linear models: look for a lower basin of the period (``period_scan``)
-    period_profile: bool = (
-        True  # one linear mode: the period's profile-likelihood interval (``period_profile``)
-    )
+    #: one linear mode: the period's profile-likelihood interval (``period_profile``)
+    period_profile: bool = True
 
     def __post_init__(self) -> None:
         if self.states not in STATE_SOURCES:
@@ -421,10 +420,10 @@ def _uncertainty(problem: ShootingProblem, r: np.ndarray, J: np.ndarray, C: np.n
     """Intervals, correlation and condition number at the solution, the lags the covariance
     took, and the notes on what the record does not determine (logged). The covariance is
     scaled by the residuals' own variance (the weights' noise unit may still be off by a
-    factor); where the residuals are correlated (a model's error on a measured
-    record, not white noise) it is the sandwich over that many lags (``uncertainty.sandwich``):
-    on Painter Street the white-noise interval of the period was a few tenths of a percent wide
-    while the peers' estimates of the same event spread over several percent."""
+    factor); where the residuals are correlated (a model's error on a measured record, not
+    white noise) it is the sandwich over that many lags (``uncertainty.sandwich``): on Painter
+    Street the white-noise interval of the period was a few tenths of a percent wide while the
+    peers' estimates of the same event spread over several percent."""
     cov, cond, lags = residual_covariance(problem, r, J, C)
     ints, corr = intervals(problem.specs, theta, cov), correlation(cov)
     notes = bound_notes(problem.specs, theta) + identifiability_notes(problem.names, ints, corr, cond)
