@@ -531,7 +531,9 @@ def aggregate(base: Path) -> None:
     ]
     lines += srim_better_lines(rows, base / "identify")
     one = identification_rows(base / "one_input") if (base / "one_input").exists() else []
-    lines += reduced_choice_lines(rows, one)
+    lines += reduced_choice_lines(rows, one) or kept_section(
+        "## Three supports against one", "## Two modes against one", "one_input"
+    )
     two = identification_rows(base / "two_modes") if (base / "two_modes").exists() else []
     lines += two_modes_lines(rows, two, judge) or kept_section(
         "## Two modes against one", "## Diagnosis of the strong events", "two_modes"
