@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pidyn.refine.heteroscedastic import envelope, scale_test
+from pidyn.discrepancy.heteroscedastic import envelope, scale_test
 from pidyn.refine.output_error import fit_output_error
 
 

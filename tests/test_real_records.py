@@ -377,7 +377,9 @@ def test_the_nominal_model_of_an_accelerometer_record_starts_from_the_better_of_
         return out
 
     monkeypatch.setattr(accelerometers, "_influence_fit", spy)
-    _, values, note = accelerometers._nominal_influence(rec, LinearSDOF(inputs=["a", "b"]), (0.0, 13.0), 1e-6)
+    _, values, note, _ = accelerometers._nominal_influence(
+        rec, LinearSDOF(inputs=["a", "b"]), (0.0, 13.0), 1e-6
+    )
     assert len(calls) == 2 and values["k"] == pytest.approx(p["k"], rel=0.02)
     kept = min(calls, key=lambda c: c[1])
     assert ("okid_era" in note) == (kept[0] == truth["k"])

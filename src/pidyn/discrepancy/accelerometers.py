@@ -66,9 +66,8 @@ def motion_view(
     absolute = record.a[:, 0] if several else record.a[:, 0] + f
     relative = absolute - ground
     corner = max(corner_share * fn, 2.0 / float(record.t[-1] - record.t[0]))
-    dt = record.dt
-    x, v = (integrate(relative, dt, k, corner) for k in (2, 1))
-    g = integrate(drive, dt, 0, corner)  # the weak form's excitation, filtered as x and v are
+    x, v = (integrate(relative, record.dt, k, corner) for k in (2, 1))
+    g = integrate(drive, record.dt, 0, corner)  # the weak form's excitation, filtered as x and v are
     influence = {k: v for k, v in values.items() if k.startswith(("r_", "g_", "e_"))}
     nominal = {k: float(v) for k, v in values.items() if k not in influence}
     meta = {
@@ -150,10 +149,10 @@ def _nominal_influence(
 
 
 def _envelope_refit(seg: Record, system, values: dict[str, float], tol: float):
-    """The supports' fit under the noise model its residuals support (``pidyn.refine.heteroscedastic``):
+    """The supports' fit under the noise model its residuals support (``pidyn.discrepancy.heteroscedastic``):
     where their scale follows the measured response's envelope (over four periods), the fit redone
     from ``values`` with each residual divided by it; else ``values`` as they are. (values, the test)."""
-    from pidyn.refine.heteroscedastic import envelope, scale_test
+    from pidyn.discrepancy.heteroscedastic import envelope, scale_test
     from pidyn.refine.output_error import fit_output_error, output_error_problem
     from pidyn.systems.modal import linear_matrices, modal_properties
 

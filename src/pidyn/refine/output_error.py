@@ -52,7 +52,7 @@ def fit_output_error(
     this share, or when the trust region has shrunk below this share of the parameters (the
     default runs the whole budget; a model choice needs far less, see
     ``DiagnosisSettings.polish_tol``). ``weights`` (N,): every channel's residual at each sample
-    times it (``pidyn.refine.heteroscedastic``); the cost is then the weighted one."""
+    times it (``pidyn.discrepancy.heteroscedastic``); the cost is then the weighted one."""
     t0 = time.perf_counter()
     problem, th0 = output_error_problem(record, system, init, substeps)
     fun, jac = problem.fd_fun_and_jac()
