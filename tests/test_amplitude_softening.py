@@ -124,18 +124,38 @@ def test_a_period_that_moves_between_any_two_separate_windows_counts():
     assert period_varies(near_run, width=0.5, period=0.25)["varies"]
 
 
-def test_forcing_the_amplitude_dependent_structure_starts_it_as_the_check_does():
-    """``diagnosis.force_effect=amplitude_softening`` (not screened by the weak form) extends with
-    it; a name outside the library is a named error, not a StopIteration."""
-    from types import SimpleNamespace
+def test_forcing_the_amplitude_dependent_structure_screens_it_and_a_wrong_name_fails_first(tmp_path):
+    """``diagnosis.force_effect=amplitude_softening`` (not screened by default) is screened, so the
+    screening ranks it and the extension starts from its row (it used to end in a StopIteration);
+    a name outside the library, or an effect the nominal model already has, is a named error
+    before any work."""
+    from pidyn.discrepancy.case import prepare
+    from pidyn.discrepancy.settings import DiagnosisSettings
 
-    from pidyn.discrepancy import pipeline
+    rec = synthetic(LinearSDOF(c=2.0, k=400.0), "el_centro", channels=("a",), duration=10.0, dt=0.02)
 
-    sc = SimpleNamespace(ranking=[{"effect": "cubic_stiffness"}], structure=None)
-    row = pipeline._cause_row("amplitude_softening", sc, None, None)
-    assert row["effect"] == "amplitude_softening" and set(row["parameters"]) == {"soft", "gain", "tau"}
-    with pytest.raises(ValueError, match="force_effect='cubic_stifness' is not an effect"):
-        pipeline._cause_row("cubic_stifness", sc, None, None)
+    def case(**kw):
+        settings = DiagnosisSettings(**kw)
+        return prepare(rec, LinearSDOF(c=2.0, k=400.0), {}, settings, 1.0, tmp_path, None)
+
+    assert "amplitude_softening" not in case().effects
+    assert "amplitude_softening" in case(force_effect="amplitude_softening").effects
+    assert set(case(effects=["cubic_stiffness"], force_effect="hysteresis").effects) == {
+        "cubic_stiffness",
+        "hysteresis",
+    }
+    with pytest.raises(ValueError, match=r"force_effect: unknown effect\(s\) \['cubic_stifness'\]"):
+        case(force_effect="cubic_stifness")
+    with pytest.raises(ValueError, match="already has it"):
+        prepare(
+            rec,
+            SDOFSystem([ViscousDamping(2.0), LinearStiffness(400.0), AmplitudeSoftening(0.1, 0.1, 1.0)]),
+            {},
+            DiagnosisSettings(force_effect="amplitude_softening"),
+            1.0,
+            tmp_path,
+            None,
+        )
 
 
 def test_the_extension_draws_its_own_period_through_the_record(tmp_path):

@@ -181,19 +181,9 @@ def prepare(
     identify: IdentifyFn,
 ) -> Case:
     """The settings checked against the library and the nominal system, the fit / held-out split."""
-    wanted = list(settings.effects) if settings.effects else list(LIBRARY)
-    unknown = set(wanted) - set(EFFECTS)
-    if unknown:
-        raise ValueError(
-            f"diagnosis.effects: unknown effect(s) {sorted(unknown)}; the library has {sorted(EFFECTS)}"
-        )
-    effects = {n: EFFECTS[n] for n in wanted}
     if not isinstance(base, SDOFSystem):
         raise ValueError(f"diagnosis needs a single-degree-of-freedom nominal system, got '{base.name}'")
-    already = {t.name for t in base.terms} & set(effects)
-    if already:  # an effect the nominal model already has cannot be what it misses
-        log.info("not screening %s: already in the nominal model", sorted(already))
-        effects = {n: e for n, e in effects.items() if n not in already}
+    effects = _screened_effects(settings, base)
     if mass is None and record.excitation == "ground":
         raise ValueError(
             "data.mass is null, but a ground-excited record cannot reveal the mass "
@@ -209,6 +199,28 @@ def prepare(
     )
     run_dir.mkdir(parents=True, exist_ok=True)
     return Case(record, base, base_node, effects, settings, mass, fit, held, run_dir, identify)
+
+
+def _screened_effects(settings: DiagnosisSettings, base: SDOFSystem) -> dict:
+    """The effects to screen: the user's list or the library, and a forced effect among them (so
+    that the screening ranks it, whether or not the library screens it by default); a name outside
+    the library, or a forced effect the nominal model already has, is an error before any work."""
+    wanted = list(settings.effects) if settings.effects else list(LIBRARY)
+    forced = settings.force_effect
+    if forced and forced not in wanted:
+        wanted.append(forced)
+    unknown = set(wanted) - set(EFFECTS)
+    if unknown:
+        what = "force_effect" if unknown == {forced} else "effects"
+        raise ValueError(
+            f"diagnosis.{what}: unknown effect(s) {sorted(unknown)}; the library has {sorted(EFFECTS)}"
+        )
+    already = {t.name for t in base.terms} & set(wanted)
+    if forced in already:
+        raise ValueError(f"diagnosis.force_effect={forced!r}: the nominal model already has it")
+    if already:  # an effect the nominal model already has cannot be what it misses
+        log.info("not screening %s: already in the nominal model", sorted(already))
+    return {n: EFFECTS[n] for n in wanted if n not in already}
 
 
 @dataclass

@@ -215,15 +215,9 @@ def _cause_row(cause: str | None, sc, change_row: dict | None, confirmation) -> 
         return change_row
     if confirmation and confirmation.row:
         return confirmation.row
-    row = next((r for r in sc.ranking if r["effect"] == cause), None)
-    if row is None and cause == AMPLITUDE:
-        row = _amplitude_candidate()  # not screened by the weak form: forced, it starts as the check does
-    if row is None:
-        known = sorted({r["effect"] for r in sc.ranking} | {AMPLITUDE})
-        raise ValueError(
-            f"diagnosis.force_effect={cause!r} is not an effect of the library ({', '.join(known)})"
-        )
-    return row
+    return next(
+        r for r in sc.ranking if r["effect"] == cause
+    )  # a forced effect is screened (``case.prepare``)
 
 
 def _acceleration_sims(case: Case, nom: Nominal, ext: dict) -> dict:
