@@ -26,6 +26,7 @@ import pandas as pd
 from omegaconf import OmegaConf
 
 from pidyn.baselines.registry import entries
+from pidyn.runs.folder import is_complete
 
 # Paper Tables I-III (value, error %), PIDynNet and UKF.
 PAPER = {
@@ -104,7 +105,7 @@ def load_jobs(root: Path, label: str = "") -> tuple[list[dict], list[str]]:
     jobs, failed = [], []
     for d in sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")):
         m = d / "metrics.json"
-        if not m.exists():
+        if not m.exists() or not is_complete(d):  # only a finished run's results count
             failed.append(f"{label}{d.name}")
             continue
         job = json.loads(m.read_text())

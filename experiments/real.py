@@ -157,7 +157,7 @@ def identification_rows(folder: Path) -> list[dict]:
             "pga_catalogue_g": float(cat.get(event, {}).get("pga_str_g") or "nan"),
         }
         failed, metrics = _load(run / "failed.json"), _load(run / "metrics.json")
-        if failed or not metrics:
+        if failed or not metrics or not (run / "complete.json").is_file():  # finished runs only
             row["status"] = "failed: " + (failed["message"] if failed else "no results (interrupted?)")
             rows.append(row)
             continue

@@ -159,6 +159,8 @@ def _runs(folder: Path) -> dict[str, Path]:
 
     out = {}
     for m in sorted(folder.glob("*/metrics.json")) if folder.is_dir() else []:
+        if not (m.parent / "complete.json").is_file():  # a run that did not finish
+            continue
         cfg = yaml.safe_load((m.parent / ".hydra" / "config.yaml").read_text())
         out[str(cfg["data"]["run"])] = m.parent
     return out

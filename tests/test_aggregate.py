@@ -12,6 +12,7 @@ import aggregate  # noqa: E402
 
 def job(d: Path, seed: int, k3: float, ukf_err: float) -> None:
     d.mkdir(parents=True)
+    (d / "complete.json").write_text('{"task": "train"}')  # a finished run says so last
     (d / "metrics.json").write_text(
         json.dumps(
             {
@@ -55,6 +56,8 @@ def test_aggregate_means_rms_and_failed_jobs(tmp_path):
     job(tmp_path / "0_seed=0", 0, 121.2, 3.0)
     job(tmp_path / "1_seed=1", 1, 118.8, 4.0)
     (tmp_path / "2_seed=2").mkdir()  # a failed job: no metrics.json
+    job(tmp_path / "3_seed=3", 3, 50.0, 1.0)  # results written, but the run did not finish: not counted
+    (tmp_path / "3_seed=3" / "complete.json").unlink()
     for d in ("0_seed=0", "1_seed=1"):  # a baseline that cannot apply: no error, no seconds, its reason shown
         b = json.loads((tmp_path / d / "baselines.json").read_text())
         b["baselines"].append(
@@ -69,7 +72,7 @@ def test_aggregate_means_rms_and_failed_jobs(tmp_path):
     df, failed = aggregate.aggregate(tmp_path)
     row = df.iloc[0]
     assert np.isnan(row.equation_error_rms_err) and np.isnan(row.equation_error_seconds)
-    assert failed == ["2_seed=2"]
+    assert failed == ["2_seed=2", "3_seed=3"]
     assert row.seeds == 2 and row.pidynnet_mean == pytest.approx(120.0)
     assert row.pidynnet_rms_err == pytest.approx(1.0)
     assert row.ukf_rms_err == pytest.approx((12.5) ** 0.5)

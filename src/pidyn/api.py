@@ -83,8 +83,14 @@ class Result:
     def load(cls, run_dir: str | Path, objects: dict[str, Any] | None = None) -> Result:
         """A run folder written by ``identify`` or ``pidyn-train``, read back."""
         run_dir = Path(run_dir)
-        if not (run_dir / "metrics.json").exists():
-            raise FileNotFoundError(f"{run_dir}: no metrics.json; not a finished identification run folder")
+        from pidyn.runs.folder import COMPLETE, is_complete
+
+        if not (run_dir / "metrics.json").exists() or not is_complete(run_dir):
+            failed = run_dir / "failed.json"
+            why = f" ({json.loads(failed.read_text()).get('message')})" if failed.is_file() else ""
+            raise FileNotFoundError(
+                f"{run_dir}: no metrics.json and {COMPLETE}; not a finished identification run folder{why}"
+            )
         m = json.loads((run_dir / "metrics.json").read_text())
         ident = yaml.safe_load((run_dir / "identified_params.yaml").read_text())
         state = run_dir / "subperiod_state.json"
@@ -167,7 +173,7 @@ def identify(
     for a dot (``seed=1``, ``refine="none"``, ``baselines="none"``,
     ``model__schedule__max_windows=4``); ``overrides``: raw Hydra override strings.
     """
-    from pidyn.tasks.train import identify as run_identification
+    from pidyn.tasks.train import identify_run as run_identification
 
     groups, values = _split_options(options)
     values.update({f"system.params.{k}.init": float(v) for k, v in (init or {}).items()})

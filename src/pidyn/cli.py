@@ -21,20 +21,58 @@ CONF_DIR = str(_CONF_PATH)
 log = logging.getLogger("pidyn")
 
 
+#: set once a task starts: a Hydra exit before it is a configuration error (a misspelled key or option)
+_STARTED = False
+
+
+def _user_error(exc: BaseException) -> BaseException | None:
+    """The user's error behind ``exc`` (a bad file, a bad value, a misspelled setting), or None for
+    a fault of the program. Hydra and OmegaConf wrap such errors in their own types."""
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    if isinstance(exc, (ValueError, FileNotFoundError, RuntimeError)):
+        return exc
+    if isinstance(exc, (HydraException, OmegaConfBaseException)):
+        cause = exc.__cause__ or exc.__context__
+        return _user_error(cause) if isinstance(cause, BaseException) and _user_error(cause) else exc
+    return None
+
+
 def _guarded(task, cfg: DictConfig) -> dict:
-    """Run a task; user errors (bad files, bad values) end with one clear line and exit 2. In a
-    multirun the job writes its reason to ``failed.json`` in its run folder instead, and the
-    sweep goes on with the other jobs (a missing channel in one event must not stop the rest)."""
+    """Run a task; user errors (bad files, bad values, settings Hydra or OmegaConf refuse) end with
+    one clear line and exit 2. In a multirun the job's run folder keeps the reason in
+    ``failed.json`` (``pidyn.runs.folder``) and the sweep goes on with the other jobs (a missing
+    channel in one event must not stop the rest). An interruption is logged as such."""
+    global _STARTED
+    _STARTED = True
     try:
         return task(cfg)
-    except (ValueError, FileNotFoundError, RuntimeError) as exc:
-        log.error("%s: %s", type(exc).__name__, exc)
+    except KeyboardInterrupt:
+        log.error("interrupted; run the same command again to resume")
+        sys.exit(130)
+    except Exception as exc:
+        err = _user_error(exc)
+        if err is None:
+            raise
+        log.error("%s: %s", type(err).__name__, str(err).splitlines()[0] if str(err) else "")
         if cfg.get("raise_errors", False):
             raise
         if _in_multirun():
-            _write_failure(cfg, exc)
+            _write_failure(cfg, err)
             return {}
         sys.exit(2)
+
+
+def _config_errors_exit_2(main) -> None:
+    """Hydra ends a run whose settings it cannot compose with exit status 1, as for a crash; such a
+    run never reached its task, so it is the user's error: exit status 2, as every other."""
+    try:
+        main()
+    except SystemExit as exc:
+        if exc.code == 1 and not _STARTED:
+            raise SystemExit(2) from None
+        raise
 
 
 def _in_multirun() -> bool:
@@ -48,17 +86,20 @@ def _in_multirun() -> bool:
 
 
 def _write_failure(cfg: DictConfig, exc: BaseException) -> None:
-    import json
+    """The reason, where the run folder's own record (``pidyn.runs.folder``) did not write one: a
+    folder another run holds is not touched."""
+    from pidyn.reporting import write_json
+    from pidyn.runs.folder import FAILED, RunFolderBusy
 
     folder = Path(cfg.paths.output_dir)
+    if isinstance(exc, RunFolderBusy) or (folder / FAILED).exists():
+        return
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "failed.json").write_text(
-        json.dumps({"error": type(exc).__name__, "message": str(exc)}, indent=2)
-    )
+    write_json(folder / FAILED, {"error": type(exc).__name__, "message": str(exc)})
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
-def train_main(cfg: DictConfig) -> float | None:
+def _train(cfg: DictConfig) -> float | None:
     from pidyn.tasks.train import train
 
     metrics = _guarded(train, cfg) or {}
@@ -67,7 +108,7 @@ def train_main(cfg: DictConfig) -> float | None:
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="generalize")
-def generalize_main(cfg: DictConfig) -> float | None:
+def _generalize(cfg: DictConfig) -> float | None:
     from pidyn.tasks.generalize import generalize
 
     summary = _guarded(generalize, cfg)
@@ -75,10 +116,25 @@ def generalize_main(cfg: DictConfig) -> float | None:
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="diagnose")
-def diagnose_main(cfg: DictConfig) -> float | None:
+def _diagnose(cfg: DictConfig) -> float | None:
     from pidyn.tasks.diagnose import diagnose
 
     result = _guarded(diagnose, cfg)
     if not result:
         return None
     return result["gain"]["extended"] if result["gain"]["extended"] is not None else result["gain"]["nominal"]
+
+
+def train_main() -> None:
+    """``pidyn-train`` / ``python train.py``."""
+    _config_errors_exit_2(_train)
+
+
+def diagnose_main() -> None:
+    """``pidyn-diagnose`` / ``python diagnose.py``."""
+    _config_errors_exit_2(_diagnose)
+
+
+def generalize_main() -> None:
+    """``pidyn-generalize`` / ``python generalize.py``."""
+    _config_errors_exit_2(_generalize)

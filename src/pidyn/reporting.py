@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Any
 
@@ -35,12 +36,28 @@ def param_table(
     return out
 
 
+def write_text_atomic(path: Path, text: str) -> None:
+    """``text`` to ``path`` through a temporary name and a rename: a reader sees the old file or
+    the whole new one, never half of it (a full disk or a kill leaves the old one)."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "w") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
 def write_yaml(path: Path, data: dict) -> None:
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    write_text_atomic(path, yaml.safe_dump(data, sort_keys=False))
 
 
 def write_json(path: Path, data: dict) -> None:
-    path.write_text(json.dumps(data, indent=2, default=float))
+    write_text_atomic(path, json.dumps(data, indent=2, default=float))
 
 
 def nrmse(pred: np.ndarray, true: np.ndarray) -> float:

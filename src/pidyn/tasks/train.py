@@ -15,21 +15,33 @@ from typing import Any
 
 from omegaconf import DictConfig
 
+from pidyn.config import check_settings
 from pidyn.data.sources import Record
 from pidyn.runs.build import build_run
+from pidyn.runs.folder import is_complete, run_folder
 from pidyn.runs.methods import run_baselines, run_refinement, start_baselines
 from pidyn.runs.report import write_report
 
 log = logging.getLogger(__name__)
 
+#: what a finished identification claims; a run that fails leaves none of them
+RESULT_FILES = ("metrics.json", "identified_params.yaml", "refinement.json", "report.md", "modal.json")
+
 
 def train(cfg: DictConfig) -> dict[str, Any]:
     """Identify the system's parameters from the configured data; returns the metrics."""
-    done = Path(cfg.paths.output_dir) / "metrics.json"
-    if cfg.get("skip_done", False) and done.exists():  # a sweep resumed: this run is finished
-        log.info("%s holds this run's results (skip_done): not run again", done.parent)
-        return json.loads(done.read_text())
-    return identify(cfg)[0]
+    folder = Path(cfg.paths.output_dir)
+    if cfg.get("skip_done", False) and is_complete(folder):  # a sweep resumed: this run is finished
+        log.info("%s holds this run's results (skip_done): not run again", folder)
+        return json.loads((folder / "metrics.json").read_text())
+    return identify_run(cfg)[0]
+
+
+def identify_run(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``identify`` holding its run folder (``pidyn.runs.folder``): locked, the same run when
+    resumed, ``complete.json`` when it finished, ``failed.json`` and no ``metrics.json`` when not."""
+    with run_folder(cfg, "train", claims=RESULT_FILES):
+        return identify(cfg, record)
 
 
 def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -39,6 +51,7 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     ``record``: data already built from ``cfg.data.source`` (a caller that identifies
     several models on one record builds it once)."""
     t_wall = time.perf_counter()
+    check_settings(cfg)
     run = build_run(cfg, record)
     # the classical baselines need nothing from PIDynNet: they run beside it on another core
     pending = start_baselines(cfg, run.system, run.record, run.hold_out)
