@@ -125,3 +125,60 @@ def user_settings() -> list[str]:
     except ValueError:  # no Hydra context: nothing was set by the user
         return []
     return [o.split("=", 1)[0].lstrip("+~") for o in task]
+
+
+#: the sweep knobs of every task, and what each must be
+_KNOBS: dict[str, tuple[type, ...]] = {
+    "seed": (int,),
+    "data_seed": (int,),
+    "batch_size": (int,),
+    "eq_scale": (int, float),
+    "eq_stretch": (int, float),
+}
+
+
+def check_settings(cfg: DictConfig) -> None:
+    """Every setting resolvable and finite, the sweep knobs of their type: a NaN, an infinity, a
+    word where a number belongs or an interpolation to a missing key is refused by name before
+    any work (``noise=nan`` would otherwise pass a ``>= 0`` check and run without noise)."""
+    import math
+
+    from omegaconf.errors import OmegaConfBaseException
+
+    for key in cfg:
+        if key == "hydra":
+            continue
+        try:
+            value = (
+                OmegaConf.to_container(cfg[key], resolve=True) if OmegaConf.is_config(cfg[key]) else cfg[key]
+            )
+        except OmegaConfBaseException as exc:
+            raise ValueError(f"setting '{key}' cannot be resolved: {str(exc).splitlines()[0]}") from None
+        for path, leaf in _leaves(value, str(key)):
+            if isinstance(leaf, float) and not math.isfinite(leaf):
+                raise ValueError(f"setting '{path}' is {leaf}: a finite number is needed")
+    for key, kinds in _KNOBS.items():
+        if key in cfg and (isinstance(cfg[key], bool) or not isinstance(cfg[key], kinds)):
+            want = "an integer" if kinds == (int,) else "a number"
+            raise ValueError(f"setting '{key}' is {cfg[key]!r}: {want} is needed")
+    noise = cfg.get("noise")
+    if noise is not None and not isinstance(noise, (int, float, DictConfig)) or isinstance(noise, bool):
+        raise ValueError(
+            f"setting 'noise' is {noise!r}: a number (a fraction of each channel's RMS) is needed"
+        )
+    if isinstance(noise, (int, float)) and noise < 0:
+        raise ValueError(f"setting 'noise' is {noise}: it must be 0 or more")
+    for key in ("batch_size", "eq_scale", "eq_stretch"):
+        if key in cfg and cfg[key] <= 0:
+            raise ValueError(f"setting '{key}' is {cfg[key]}: it must be positive")
+
+
+def _leaves(value: Any, path: str):
+    if isinstance(value, dict):
+        for k, v in value.items():
+            yield from _leaves(v, f"{path}.{k}")
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            yield from _leaves(v, f"{path}[{i}]")
+    else:
+        yield path, value

@@ -284,21 +284,67 @@ def read_archive(path: str | Path) -> Archive:
         raise CsmipFormatError(f"{path}: no such archive or folder")
     files = list(_members(path))
     channels: dict[int, V2Channel] = {}
+    combined: list[V2Channel] = []
     skipped = []
     for name, text in files:
         if not name.lower().endswith(".v2"):
             skipped.append(name)
             continue
-        ch = read_v2(text, f"{path.name}/{name}")
+        read = read_v2_channels(text, f"{path.name}/{name}")
+        if len(read) > 1:  # a combined file of every channel: the per-channel files come first
+            combined += read
+            continue
+        ch = read[0]
         if ch.station_channel in channels:
             raise CsmipFormatError(
                 f"{path.name}: station channel {ch.station_channel} in both "
                 f"{channels[ch.station_channel].source} and {ch.source}"
             )
         channels[ch.station_channel] = ch
+    for ch in combined:
+        _merge_combined(channels, ch, path)
     if not channels:
         raise CsmipFormatError(f"{path}: no V2 file (*.v2) in it; found {[n for n, _ in files][:10]}")
     return Archive(path=path, channels=channels, skipped=skipped)
+
+
+def read_v2_channels(text: str, source: str) -> list[V2Channel]:
+    """Every channel of a V2 file: one, or several where the file combines them (CESMD archives
+    may hold one V2 file with every channel, each ended by a ``/&`` line, beside the per-channel
+    files)."""
+    lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+    accel = [i for i, line in enumerate(lines) if (m := _BLOCK.match(line)) and m.group(2).lower() == "accel"]
+    if len(accel) <= 1:
+        return [read_v2(text, source)]
+    chunks, current = [], []
+    for line in lines:
+        current.append(line)
+        if line.lstrip().startswith("/&"):
+            chunks.append(current)
+            current = []
+    if any(line.strip() for line in current):
+        chunks.append(current)
+    found = [
+        c for c in chunks if any((m := _BLOCK.match(line)) and m.group(2).lower() == "accel" for line in c)
+    ]
+    if len(found) != len(accel):
+        raise CsmipFormatError(
+            f"{source}: {len(accel)} acceleration blocks but {len(found)} channels ended by '/&' lines"
+        )
+    return [read_v2("\n".join(c), f"{source} (channel {k + 1} of {len(found)})") for k, c in enumerate(found)]
+
+
+def _merge_combined(channels: dict[int, V2Channel], ch: V2Channel, path: Path) -> None:
+    """A combined file's channel where no per-channel file gives it; where one does, they must agree."""
+    have = channels.get(ch.station_channel)
+    if have is None:
+        channels[ch.station_channel] = ch
+        return
+    same = have.n == ch.n and abs(have.dt - ch.dt) <= 1e-9 * have.dt and np.allclose(have.acc, ch.acc)
+    if not same:
+        raise CsmipFormatError(
+            f"{path.name}: station channel {ch.station_channel} differs between {have.source} and {ch.source}"
+        )
 
 
 def _members(path: Path):

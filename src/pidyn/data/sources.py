@@ -401,6 +401,7 @@ def _read_table(path: Path, units: dict[str, float] | None) -> pd.DataFrame:
         raise DataError(f"{path}: cannot be read as CSV ({exc})") from None
     df.columns = [str(c).strip() for c in df.columns]
     df = df.loc[:, [c for c in df.columns if c and not c.startswith("Unnamed")]]
+    _check_numeric(path, df)
     for col, factor in (units or {}).items():
         if col not in df.columns:
             raise DataError(f"{path}: units given for '{col}', which is not a column ({list(df.columns)})")
@@ -440,11 +441,22 @@ def _excitation_column(path: Path, df: pd.DataFrame, excitation: str | None) -> 
     return col
 
 
+def _check_numeric(path: Path, df: pd.DataFrame) -> None:
+    """Every column numeric; a text cell is named with its column and row (before any unit is applied)."""
+    for c in df.columns:
+        if not pd.api.types.is_numeric_dtype(df[c]) or pd.api.types.is_bool_dtype(df[c]):
+            as_num = pd.to_numeric(df[c], errors="coerce")
+            text = as_num.isna() & df[c].notna()
+            row = int(np.flatnonzero(text.to_numpy())[0]) if text.any() else 0
+            raise DataError(
+                f"{path}: column '{c}' is not numeric: row {row + 2} holds {str(df[c].iloc[row])!r}"
+            )
+
+
 def _check_values(path: Path, df: pd.DataFrame) -> None:
     """Every column numeric and finite; the first bad row is named."""
+    _check_numeric(path, df)
     for c in df.columns:
-        if not np.issubdtype(df[c].dtype, np.number):
-            raise DataError(f"{path}: column '{c}' is not numeric")
         bad = ~np.isfinite(df[c].to_numpy(float))
         if bad.any():
             raise DataError(

@@ -58,8 +58,14 @@ def channel_sets(
     archive: Archive,
 ) -> tuple[str, list[int], list[int]]:
     """(station, inputs, outputs): the given channels, else the station's set for ``direction``."""
+    found = _station_of(archive)
     if station is None:
-        station = _station_of(archive)
+        station = found
+    elif found is not None and _station_number(found) != _station_number(station):
+        raise DataError(
+            f"{archive.path.name}: the files are of station {found}, not data.station={station}; "
+            f"give data.station={found} (with its channel sets) or the archive of {station}"
+        )
     if inputs is not None and outputs is not None:
         return station or "", [int(c) for c in inputs], [int(c) for c in outputs]
     known = stations()
@@ -77,6 +83,14 @@ def channel_sets(
     ins = [int(c) for c in (inputs if inputs is not None else sets[direction]["inputs"])]
     outs = [int(c) for c in (outputs if outputs is not None else sets[direction]["outputs"])]
     return station, ins, outs
+
+
+def _station_number(name: str) -> str:
+    """``CE89324``, ``89324`` and ``ce89324`` name one station."""
+    import re
+
+    m = re.search(r"(\d+)", str(name))
+    return str(int(m.group(1))) if m else str(name).strip().upper()
 
 
 def _station_of(archive: Archive) -> str | None:
