@@ -117,7 +117,7 @@ def heldout_scores(
             meas = getattr(record, kind)
             for fl in floors:
                 pred = measured_convention(sim, record, kind)[:, fl - 1]
-                truth = meas[:, fl - 1] + (_ground(record) if kind == "a" else 0.0)
+                truth = meas[:, fl - 1] + (ground_acceleration(record) if kind == "a" else 0.0)
                 out[f"{kind}{fl}"] = (
                     nrmse(pred[m], truth[m]) if np.all(np.isfinite(pred[m])) else float("inf")
                 )
@@ -140,11 +140,11 @@ def heldout_scores(
 def measured_convention(sim: dict[str, np.ndarray], record, kind: str) -> np.ndarray:
     """The simulated channel as the sensor reads it: an accelerometer's absolute acceleration
     (the record keeps one input's relative; ``_ground`` adds it back on both sides)."""
-    g = _ground(record)
+    g = ground_acceleration(record)
     return sim[kind] + (g[:, None] if kind == "a" and isinstance(g, np.ndarray) else 0.0)
 
 
-def _ground(record) -> np.ndarray | float:
+def ground_acceleration(record) -> np.ndarray | float:
     """The ground acceleration to add back to a relative acceleration (one input), else 0."""
     return np.asarray(record.f, float) if record.excitation == "ground" and record.n_inputs == 1 else 0.0
 

@@ -425,6 +425,10 @@ def _model_lines(d: dict) -> list[str]:
     ]
     if d.get("extended"):
         lines.append(f"| extended | `{d['extended']}` | {_num(g['extended'])} |")
+    if g.get("trivial") is not None:
+        lines.append(f"| knowing nothing | the structure {g['trivial_label']} | {_num(g['trivial'])} |")
+    if d.get("trivial_note"):
+        lines += ["", f"**{d['trivial_note']}**"]
     lines += [
         "",
         f"Fitting part {d['split']['fit'][0]:.4g}-{d['split']['fit'][1]:.4g} s; held-out part "

@@ -146,15 +146,24 @@ def named_step(
 
 def building_gain(nominal: dict, current: dict, extended: bool) -> dict:
     """``gain`` of ``diagnosis.json``: the held-out NRMSE of the floor accelerations."""
-    return {
+    trivial = nominal["heldout"].get("trivial")
+    out = {
         "metric": "heldout_nrmse_a",
         "nominal": nominal["heldout"]["mean"],
         "extended": current["heldout"]["mean"] if extended else None,
         "per_floor": {
             "nominal": nominal["heldout"]["per_floor"],
             "extended": current["heldout"]["per_floor"] if extended else None,
+            "trivial": nominal["heldout"].get("trivial_per_floor"),
         },
+        "trivial": trivial,
+        "trivial_label": "moving with the ground",
     }
+    for key in ("nominal", "extended"):  # beside every held-out score, the prediction that knows nothing
+        out[f"{key}_beats_trivial"] = (
+            None if out[key] is None or trivial is None else bool(out[key] < trivial)
+        )
+    return out
 
 
 def refusal_notes(refused: dict | None) -> list[str]:

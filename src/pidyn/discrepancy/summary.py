@@ -39,7 +39,8 @@ def summarize(case: Case, o: Outcome) -> dict[str, Any]:
         causes = []
     ext_system, ext_values, ext_metrics = ext["system"], ext["values"], ext["metrics"]
     effect_params = _effect_parameters(o, nom, ext_system, ext_values)
-    verdict = Verdict.UNEXPLAINED if unearned else _verdict(case, o, bool(causes), learned)
+    worse = trivial_note(gain)
+    verdict = Verdict.UNEXPLAINED if unearned else _verdict(case, o, bool(causes), learned, worse is not None)
     truth = dict(record.meta.get("hidden_params") or {}) if "hidden_effect" in record.meta else None
     return {
         "nominal": nom.system.describe(nom.values),
@@ -61,6 +62,7 @@ def summarize(case: Case, o: Outcome) -> dict[str, Any]:
         "nominal_parameters": nom.values,
         "extended_parameters": ext_values,
         "gain": gain,
+        "trivial_note": worse,
         "split": {"fit": list(case.fit), "heldout": list(case.held)},
         "record": record.name,
         "noise": (record.meta or {}).get("noise"),
@@ -100,11 +102,51 @@ def heldout_gain(case: Case, o: Outcome) -> dict[str, Any]:
         xc = record.clean.x[:, 0]
         gain["nominal_vs_clean"] = nrmse(o.x_nom[held_mask], xc[held_mask])
         gain["extended_vs_clean"] = None if o.x_ext is None else nrmse(o.x_ext[held_mask], xc[held_mask])
+    gain["trivial"], gain["trivial_label"] = (
+        nrmse(np.zeros(int(held_mask.sum())), case.x_raw[held_mask]),
+        "at rest",
+    )
     if case.from_accelerometers:  # the sensors' quantity decides; the displacement's gain is kept beside it
         from pidyn.discrepancy.accelerometers import acceleration_gain
 
         gain = {**acceleration_gain(record, o.sims, held_mask), "x": gain}
+    for key in ("nominal", "extended"):  # beside every held-out score, the prediction that knows nothing
+        gain[f"{key}_beats_trivial"] = None if gain.get(key) is None else bool(gain[key] < gain["trivial"])
     return gain
+
+
+def log_verdict(d: dict[str, Any]) -> None:
+    """The verdict, where, and the held-out errors beside knowing nothing's, in the log."""
+    import logging
+
+    gain, storeys = d["gain"], d.get("storeys") or []
+    named = [f"{c} in storey {s}" if s else c for c, s in zip(d["causes"], storeys)] or (
+        [d["cause"]] if d.get("cause") else []
+    )
+    logging.getLogger("pidyn.tasks.diagnose").info(
+        "verdict: %s%s; held-out NRMSE (%s) nominal %.4g%s; knowing nothing (the structure %s) %.4g",
+        d["verdict"],
+        f" ({', '.join(named)})" if named else "",
+        gain["metric"],
+        gain["nominal"],
+        "" if gain["extended"] is None else f", extended {gain['extended']:.4g}",
+        gain.get("trivial_label", "at rest"),
+        gain.get("trivial") if gain.get("trivial") is not None else float("nan"),
+    )
+    if d.get("trivial_note"):
+        logging.getLogger("pidyn.tasks.diagnose").warning("%s", d["trivial_note"])
+
+
+def trivial_note(gain: dict[str, Any]) -> str | None:
+    """Says so when the nominal model predicts the held-out part no better than knowing nothing."""
+    if gain.get("nominal_beats_trivial") is not False:
+        return None
+    return note(
+        "worse_than_trivial",
+        f"the nominal model predicts the held-out part worse than knowing nothing (NRMSE {gain['nominal']:.4g} "
+        f"against {gain['trivial']:.4g}, the structure {gain['trivial_label']}): it does not hold there, "
+        "whatever the checks on the fitting part say",
+    )
 
 
 def rivals(o: Outcome) -> dict[str, Any] | None:
@@ -139,10 +181,11 @@ def _effect_parameters(o: Outcome, nom, ext_system, ext_values) -> dict[str, Any
     return effect_params
 
 
-def _verdict(case: Case, o: Outcome, named: bool, learned: bool) -> Verdict:
+def _verdict(case: Case, o: Outcome, named: bool, learned: bool, worse: bool = False) -> Verdict:
     """``discrepancy`` with a named cause; ``unexplained`` with a learned force or a structured
-    misfit (the held-out check failed, or the weak form's residual, or the running period moved);
-    else ``none``."""
+    misfit (the held-out check failed, or the weak form's residual, or the running period moved),
+    or where the nominal model predicts the held-out part worse than knowing nothing (``worse``:
+    it does not hold there, whatever the checks say); else ``none``."""
     sc, check = o.screening, o.check
     varies = bool(((o.running or {}).get("variation") or {}).get("varies"))
     structured = (
@@ -152,7 +195,7 @@ def _verdict(case: Case, o: Outcome, named: bool, learned: bool) -> Verdict:
     )
     if named or (o.cause is not None and o.cause != LEARNED):
         return Verdict.DISCREPANCY
-    return Verdict.UNEXPLAINED if learned or structured else Verdict.NONE
+    return Verdict.UNEXPLAINED if learned or structured or worse else Verdict.NONE
 
 
 def write_figures(case: Case, o: Outcome, d: dict) -> None:

@@ -31,6 +31,7 @@ from pidyn.refine.uncertainty import (
     estimate_noise,
     identifiability_notes,
     intervals,
+    one_sided_intervals,
     residual_correlation,
     residual_covariance,
     set_noise,
@@ -426,6 +427,7 @@ def _uncertainty(problem: ShootingProblem, r: np.ndarray, J: np.ndarray, C: np.n
     peers' estimates of the same event spread over several percent."""
     cov, cond, lags = residual_covariance(problem, r, J, C)
     ints, corr = intervals(problem.specs, theta, cov), correlation(cov)
+    one_sided_intervals(problem, ints, theta, r, J, C)
     notes = bound_notes(problem.specs, theta) + identifiability_notes(problem.names, ints, corr, cond)
     for n_ in notes:
         log.warning("identifiability: %s", n_)

@@ -112,6 +112,60 @@ def correlation(cov: np.ndarray) -> np.ndarray:
     return np.clip(cov / np.outer(sd, sd), -1.0, 1.0)
 
 
+#: the one-sided 95 % point of the standard normal: a parameter on its bound has the likelihood
+#: ratio of a 50:50 mixture of chi-square with 0 and 1 degree of freedom (Self and Liang 1987)
+Z95_ONE_SIDED = 1.6448536269514722
+
+
+def at_bound(specs: list[ParamSpec], theta: np.ndarray, edge: float = 12.0) -> dict[int, str]:
+    """Index -> ``lower`` / ``upper`` for parameters whose transform ran to a bound (a
+    log-parameter towards 0, a boxed one to an end)."""
+    out = {}
+    for i, (s, th) in enumerate(zip(specs, theta)):
+        if s.transform == "log" and th < -edge:
+            out[i] = "lower"
+        elif s.transform == "box" and abs(th) > edge:
+            out[i] = "lower" if th < 0 else "upper"
+    return out
+
+
+def one_sided_intervals(
+    problem: ShootingProblem,
+    ints: dict[str, dict],
+    theta: np.ndarray,
+    r: np.ndarray,
+    J: np.ndarray,
+    C: np.ndarray,
+) -> None:
+    """Replace the interval of every parameter on its bound by a one-sided one, in place.
+
+    In its unconstrained coordinate such a parameter has no curvature left (the Laplace interval
+    shrinks to its value: zero width, a certainty no record gives). In the value's own coordinate
+    the information is finite: the unknowns are rescaled by d value / d raw, the covariance taken
+    there, and the interval runs from the bound to 1.645 standard deviations inside it."""
+    bound = at_bound(problem.specs, theta)
+    if not bound:
+        return
+    scale = np.ones(J.shape[1])
+    for i in bound:
+        scale[i] = dvalue_draw(problem.specs[i], float(theta[i]))
+    Jv = J / scale
+    cov_v = residual_covariance(problem, r, Jv, C / scale if C.shape[0] else C)[0]
+    unit = float(np.sqrt(float(r @ r) / max(len(r) - problem.n_theta, 1)))
+    for i, side in bound.items():
+        s = problem.specs[i]
+        # the pseudo-inverse gives a direction the record does not inform no variance at all; the
+        # spread with every other unknown held is a floor under the marginal one
+        g = float(np.linalg.norm(Jv[:, i]))
+        sd = max(float(np.sqrt(max(cov_v[i, i], 0.0))), unit / g if g > 0 else float("inf"))
+        end = 0.0 if s.transform == "log" else float(s.lower if side == "lower" else s.upper)
+        reach = Z95_ONE_SIDED * sd
+        if s.transform == "box":
+            reach = min(reach, float(s.upper) - float(s.lower))
+        lo, hi = (end, end + reach) if side == "lower" else (end - reach, end)
+        ints[s.name].update({"ci95": [lo, hi], "std": sd, "at_bound": side, "one_sided": True})
+
+
 def bound_notes(specs: list[ParamSpec], theta: np.ndarray, edge: float = 12.0) -> list[str]:
     """Parameters that ran to a bound of their transform (a log-parameter towards 0, a boxed one
     to an end): the data pushed them there, which is a finding, not a converged value."""
@@ -120,14 +174,15 @@ def bound_notes(specs: list[ParamSpec], theta: np.ndarray, edge: float = 12.0) -
         if s.transform == "log" and th < -edge:
             out.append(
                 f"{s.name} ran to its lower bound (0): the record gives no evidence for this term, or the "
-                "model lacks what the data show; treat its interval as meaningless"
+                "model lacks what the data show; its interval is one-sided, from 0 to the largest value the "
+                "record allows"
             )
         elif s.transform == "box" and abs(th) > edge:
             end = s.lower if th < 0 else s.upper
             out.append(
                 f"{s.name} ran to the {'lower' if th < 0 else 'upper'} end of its range ({end:g}): widen "
                 f"system.params.{s.name}.lower/upper if that range is not physical, else the record does not "
-                "determine it"
+                "determine it (its interval is one-sided, from that end)"
             )
     return out
 

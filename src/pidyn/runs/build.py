@@ -15,6 +15,7 @@ import lightning as L
 import torch
 from omegaconf import DictConfig, OmegaConf, open_dict
 
+from pidyn.data.checks import check_floors, check_record
 from pidyn.data.datamodule import SubperiodDataModule
 from pidyn.data.sources import Record
 from pidyn.models.identify import Schedule, SubperiodIdentifier
@@ -119,6 +120,8 @@ def _system_and_record(cfg: DictConfig, record: Record | None) -> tuple[Structur
             cfg.system, inputs=record.inputs
         )  # the model takes the record's inputs
     check_inputs(system, record)
+    check_record(record)
+    check_floors(record, system.name, system.n_dof, getattr(system, "n_outputs", None))
     if record.truth and hasattr(system, "own_units"):  # masses unknown: the truth per kg of floor 1
         record = replace(record, truth=system.own_units(record.truth))
     return system, record

@@ -58,12 +58,14 @@ def write_report(
             b["method"]: {"error_pct": b.get("error_pct"), "seconds": b["seconds"]} for b in baselines
         }
     metrics["wall_seconds"] = time.perf_counter() - t_wall
-    write_json(run_dir / "metrics.json", metrics)
     write_json(run_dir / "windows.json", {"windows": [r.__dict__ for r in results]})
     _assess(run, final, refined, sim, metrics)
+    _adequacy(run, final, sim, metrics)
     if hasattr(system, "storey_equations"):
         _building(run, final, truths, refined, metrics)
     _figures(run, results, truths, baselines, refined, sim, metrics)
+    write_json(run_dir / "metrics.json", metrics)
+    write_run_report(run_dir, system.describe(final), metrics)
     _log_summary(system.describe(final), errors, pidyn_errors, metrics, run_dir)
     return metrics
 
@@ -120,6 +122,75 @@ def _metrics(
     }
 
 
+def _adequacy(run: Run, final: dict[str, float], sim: dict[str, np.ndarray], metrics: dict) -> None:
+    """Whether the identified model describes the record (``pidyn.adequacy``): ``adequate`` and
+    ``adequacy`` in metrics.json, a note and a warning when it does not, the modes marked."""
+    from pidyn.adequacy import check_adequacy, describe, rk4_stability
+
+    record = run.record
+    split = (record.meta or {}).get("split") if run.hold_out else None
+    fit = split["fit"] if split else (float(record.t[0]), float(record.t[-1]))
+    stability = rk4_stability(run.system, final, record.dt)
+    result = check_adequacy(sim, record, fit, split["heldout"] if split else None, stability=stability)
+    metrics["adequate"] = result["adequate"]
+    metrics["adequacy"] = result
+    if "heldout" in metrics:  # the held-out scores beside the prediction that knows nothing
+        metrics["heldout"]["trivial"] = result["trivial"]
+        metrics["heldout"]["trivial_nrmse"] = {
+            k: r["trivial_heldout_nrmse"]
+            for k, r in result["channels"].items()
+            if "trivial_heldout_nrmse" in r
+        }
+        metrics["heldout"]["beats_trivial"] = result["predicts"]
+    if not result["adequate"]:
+        text = note("model_inadequate", describe(result))
+        metrics["notes"].append(text)
+        for m in metrics.get("modal") or []:
+            m["describes_structure"] = False
+        _mark_modal(run.run_dir)
+
+
+def _mark_modal(run_dir: Path) -> None:
+    """modal.json of a rejected model says so: its periods and damping are the fit's, not the structure's."""
+    import json
+
+    path = run_dir / "modal.json"
+    if path.is_file():
+        data = json.loads(path.read_text())
+        data["adequate"] = False
+        data["warning"] = "the identified model does not describe the record (metrics.json adequacy)"
+        write_json(path, data)
+
+
+def write_run_report(run_dir: Path, equation: str, metrics: dict) -> None:
+    """``report.md``: the verdict on the model first, then the equation and the parameters."""
+    from pidyn.adequacy import describe
+
+    ad = metrics["adequacy"]
+    lines = [f"# Identification: {metrics['system']} on {metrics['record']}", ""]
+    lines += [f"**{'Adequate' if ad['adequate'] else 'Not adequate'}**: {describe(ad)}", ""]
+    lines += [f"Identified: `{equation}`", ""]
+    title = "95 % interval" if ad["adequate"] else "95 % interval (conditional on a rejected model)"
+    lines += [f"| parameter | value | {title} |", "|---|---|---|"]
+    for n, v in metrics["params"].items():
+        lo, hi = (metrics.get("ci95") or {}).get(n, (None, None))
+        ci = "" if lo is None else f"[{lo:.5g}, {hi:.5g}]"
+        lines.append(f"| {n} | {v:.5g} | {ci} |")
+    lines += ["", "| channel | fitting part NRMSE | knowing nothing | held-out NRMSE | knowing nothing |"]
+    lines += ["|---|---|---|---|---|"]
+    for c, r in ad["channels"].items():
+        cells = [
+            r.get(k) for k in ("fit_nrmse", "trivial_fit_nrmse", "heldout_nrmse", "trivial_heldout_nrmse")
+        ]
+        lines.append(f"| {c} | " + " | ".join("" if x is None else f"{x:.3g}" for x in cells) + " |")
+    lines += ["", f"Knowing nothing: {ad['trivial']}."]
+    if metrics.get("notes"):
+        lines += ["", "## Notes", ""] + [f"- {n}" for n in metrics["notes"]]
+    from pidyn.reporting import write_text_atomic
+
+    write_text_atomic(run_dir / "report.md", "\n".join(lines) + "\n")
+
+
 def _building(run: Run, final: dict[str, float], truths: dict, refined: Any, metrics: dict) -> None:
     """A building's modal table, storey equations and loops (``building_report``); its modes go to
     metrics.json."""
@@ -136,7 +207,6 @@ def _building(run: Run, final: dict[str, float], truths: dict, refined: Any, met
         int(run.module.iteration),
     )
     metrics["modes"] = {k: v for k, v in modes.items() if k != "truth"}
-    write_json(run.run_dir / "metrics.json", metrics)
 
 
 def _assess(
@@ -146,7 +216,6 @@ def _assess(
     from pidyn.assessment import assess
 
     metrics.update(assess(run.system, run.record, final, refined, sim, run.hold_out, run.run_dir))
-    write_json(run.run_dir / "metrics.json", metrics)
 
 
 def _divergence_note(sim: dict[str, np.ndarray]) -> list[str]:
@@ -250,11 +319,17 @@ def _log_summary(equation: str, errors: dict, pidyn_errors: dict, metrics: dict,
         log.info("errors (%%): %s", ", ".join(f"{k}={v:.3f}" for k, v in errors.items()))
         if "ci95" in metrics:
             log.info("PIDynNet alone (%%): %s", ", ".join(f"{k}={v:.3f}" for k, v in pidyn_errors.items()))
+    adequate = metrics.get("adequate", True)
     if "ci95" in metrics:
         log.info(
-            "95 %% intervals: %s",
+            "95 %% intervals%s: %s",
+            "" if adequate else " (conditional on a model the data reject)",
             ", ".join(f"{n} [{lo:.5g}, {hi:.5g}]" for n, (lo, hi) in metrics["ci95"].items()),
         )
+    if "adequacy" in metrics:
+        from pidyn.adequacy import describe
+
+        (log.info if adequate else log.warning)("%s", describe(metrics["adequacy"]))
     log.info("wall %.1f s, run folder %s", metrics["wall_seconds"], run_dir)
 
 

@@ -16,14 +16,17 @@ from typing import Any
 import hydra
 from omegaconf import DictConfig, OmegaConf, open_dict
 
+from pidyn.config import check_settings
+from pidyn.data.checks import check_floors, check_record
 from pidyn.data.sources import Record
 from pidyn.discrepancy import pipeline
 from pidyn.discrepancy.accelerometers import motion_view, needs_view
 from pidyn.discrepancy.case import Case, check_diagnosable, prepare, split_spans
 from pidyn.discrepancy.settings import DiagnosisSettings
-from pidyn.discrepancy.summary import summarize, write_figures
+from pidyn.discrepancy.summary import log_verdict, summarize, write_figures
 from pidyn.reporting import write_json
 from pidyn.runs.build import build_record
+from pidyn.runs.folder import is_complete, run_folder
 from pidyn.tasks.train import identify
 
 log = logging.getLogger(__name__)
@@ -32,11 +35,17 @@ log = logging.getLogger(__name__)
 def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
     """What the nominal model ``cfg.system`` misses on ``record`` (default: built from
     ``cfg.data``); writes diagnosis.json, report.md and figures to the run folder."""
-    done = Path(cfg.paths.output_dir) / "diagnosis.json"
-    if record is None and cfg.get("skip_done", False) and done.exists():  # a sweep resumed: finished
-        log.info("%s holds this diagnosis (skip_done): not run again", done.parent)
-        return json.loads(done.read_text())
+    folder = Path(cfg.paths.output_dir)
+    if record is None and cfg.get("skip_done", False) and is_complete(folder):  # a sweep resumed: finished
+        log.info("%s holds this diagnosis (skip_done): not run again", folder)
+        return json.loads((folder / "diagnosis.json").read_text())
+    with run_folder(cfg, "diagnose", claims=("diagnosis.json", "report.md")):
+        return _diagnose(cfg, record)
+
+
+def _diagnose(cfg: DictConfig, record: Record | None) -> dict[str, Any]:
     t_wall = time.perf_counter()
+    check_settings(cfg)
     if cfg.system.get("n_storeys") is not None:  # a shear building: storey by storey
         return diagnose_building_task(cfg, record)
     case = compose_case(cfg, record)
@@ -45,14 +54,7 @@ def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
     diagnosis["wall_seconds"] = time.perf_counter() - t_wall
     write_json(case.run_dir / "diagnosis.json", diagnosis)
     write_figures(case, outcome, diagnosis)
-    gain = diagnosis["gain"]
-    log.info(
-        "verdict: %s%s; held-out NRMSE nominal %.4g%s",
-        diagnosis["verdict"],
-        f" ({diagnosis['cause']})" if diagnosis["cause"] else "",
-        gain["nominal"],
-        "" if gain["extended"] is None else f", extended {gain['extended']:.4g}",
-    )
+    log_verdict(diagnosis)
     log.info("run folder %s (%.0f s)", case.run_dir, diagnosis["wall_seconds"])
     return diagnosis
 
@@ -68,6 +70,8 @@ def diagnose_building_task(cfg: DictConfig, record: Record | None = None) -> dic
     settings = DiagnosisSettings.from_mapping(OmegaConf.to_container(cfg.diagnosis, resolve=True))  # type: ignore[arg-type]
     system = hydra.utils.instantiate(cfg.system)
     record = build_record(cfg, system) if record is None else record
+    check_record(record)
+    check_floors(record, system.name, system.n_dof)
     plan = refine_plan(cfg)
     if plan is None:
         raise ValueError(
@@ -88,14 +92,7 @@ def diagnose_building_task(cfg: DictConfig, record: Record | None = None) -> dic
     write_json(run_dir / "diagnosis.json", out)
     (run_dir / "report.md").write_text("\n".join(report_lines(out)) + "\n")
     write_building_figures(run_dir, d)
-    where = ", ".join(f"{c} in storey {s}" for c, s in zip(out["causes"], out["storeys"]))
-    log.info(
-        "verdict: %s%s; held-out NRMSE of the floor accelerations nominal %.4g%s",
-        out["verdict"],
-        f" ({where})" if where else "",
-        out["gain"]["nominal"],
-        "" if out["gain"]["extended"] is None else f", extended {out['gain']['extended']:.4g}",
-    )
+    log_verdict(out)
     log.info("run folder %s (%.0f s)", run_dir, out["wall_seconds"])
     return out
 
@@ -106,6 +103,7 @@ def compose_case(cfg: DictConfig, record: Record | None = None) -> Case:
     base = hydra.utils.instantiate(cfg.system)
     check_diagnosable(base)
     record = build_record(cfg, base) if record is None else record
+    check_record(record)
     if record.excitation != base.excitation:
         base = hydra.utils.instantiate(cfg.system, excitation=record.excitation)
     if needs_view(record):  # accelerometers: the relative motion the screening needs, from the accelerations

@@ -1,0 +1,121 @@
+"""The adequacy test: a model that describes its record passes, one that does not (a response
+unrelated to the input, an input in the wrong units, a model that diverges, a prediction worse
+than knowing nothing) fails with its reason in words; the trivial predictions; the one-sided
+interval of a parameter on its bound."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from pidyn.adequacy import (
+    AdequacySettings,
+    check_adequacy,
+    describe,
+    ljung_box,
+    rk4_stability,
+    trivial_predictions,
+)
+from pidyn.config import make_system
+from pidyn.data.sources import Record
+from pidyn.simulate import simulate_response
+
+
+def _record(noise: float = 0.02, channels=("x", "v")) -> Record:
+    return Record.simulate("linear", excitation="el_centro", duration=20, noise=noise, channels=channels)
+
+
+def _sim(record: Record, **values) -> dict[str, np.ndarray]:
+    system = make_system("linear")
+    return simulate_response(system, {**record.truth, **values}, record)
+
+
+def test_the_true_model_is_adequate_and_a_wrong_one_is_not():
+    rec = _record()
+    good = check_adequacy(_sim(rec), rec, (0.0, 14.0), (14.0, 20.0))
+    assert good["adequate"] and good["explains"] and good["predicts"] and good["within_noise"], good[
+        "reasons"
+    ]
+    assert good["fit_nrmse"] < 0.03 and good["trivial"] == "at rest"
+    # a model 30 % too stiff still "explains" most of the response, but not within the declared noise
+    stiff = check_adequacy(_sim(rec, k=rec.truth["k"] * 1.3), rec, (0.0, 14.0), (14.0, 20.0))
+    assert not stiff["adequate"] and stiff["within_noise"] is False
+    assert "declared noise" in describe(stiff) and "DOES NOT DESCRIBE" in describe(stiff)
+
+
+def test_a_response_unrelated_to_the_input_is_not_explained():
+    rec = _record(noise=0.0)
+    rng = np.random.default_rng(0)
+    noise = replace(
+        rec,
+        x=rng.normal(size=rec.x.shape) * np.std(rec.x),
+        v=rng.normal(size=rec.v.shape) * np.std(rec.v),
+        clean=None,
+        meta={},
+    )
+    out = check_adequacy(_sim(rec), noise, (0.0, 14.0), (14.0, 20.0))
+    assert not out["adequate"] and not out["explains"] and out["predicts"] is False
+    assert out["within_noise"] is None  # a measurement declares no noise
+    assert out["fit_nrmse"] > 1.0 and any("knowing nothing" in r for r in out["reasons"])
+
+
+def test_a_diverging_model_fails_as_such():
+    rec = _record()
+    sim = _sim(rec)
+    sim["x"] = sim["x"].copy()
+    sim["x"][-10:] = np.inf
+    out = check_adequacy(sim, rec, (0.0, 20.0))
+    assert not out["adequate"] and not out["simulates"] and "diverges" in out["reasons"][0]
+
+
+def test_an_accelerometer_is_scored_against_the_structure_moving_with_its_support():
+    rec = _record(channels=("a",))
+    triv = trivial_predictions(rec, (0.0, 14.0))
+    label, series = triv["a"]
+    assert label == "moving with ground" and np.allclose(series, rec.f)
+    out = check_adequacy(_sim(rec), rec, (0.0, 14.0), (14.0, 20.0))
+    assert out["adequate"], out["reasons"]
+    # predicting the ground's own acceleration is what "moving with the support" scores
+    row = out["channels"]["a"]
+    meas = rec.a[:, 0] + rec.f
+    m = rec.t >= 14.0 - 1e-9
+    expected = np.sqrt(np.mean((rec.f[m] - meas[m]) ** 2)) / np.std(meas[m])
+    assert row["trivial_heldout_nrmse"] == pytest.approx(expected)
+
+
+def test_a_prediction_worse_than_rest_on_the_held_out_part_is_flagged():
+    rec = _record(noise=0.0)
+    # the true model on the fitting part; the held-out part's response turned over (a model out of
+    # phase there predicts it worse than rest does)
+    bent = replace(rec, x=np.where(rec.t[:, None] > 14.0, -rec.x, rec.x), v=None, clean=None, meta={})
+    out = check_adequacy(_sim(rec), bent, (0.0, 14.0), (14.0, 20.0))
+    assert out["explains"] and out["predicts"] is False and not out["adequate"]
+    assert out["heldout_nrmse"] > out["trivial_heldout_nrmse"]
+
+
+def test_ljung_box_passes_white_noise_and_rejects_a_smooth_error():
+    rng = np.random.default_rng(1)
+    assert ljung_box(rng.normal(size=2000), 20)[1] > 0.01
+    smooth = np.convolve(rng.normal(size=2000), np.ones(25) / 25, mode="same")
+    assert ljung_box(smooth, 20)[1] < 1e-6
+
+
+def test_settings_are_ordered_limits():
+    s = AdequacySettings()
+    assert 0 < s.max_fit_nrmse < 1 and s.noise_tolerance > 1 and s.noise_floor_nrmse > 0
+
+
+def test_a_model_too_stiff_for_the_integrator_step_is_refused_by_name():
+    system = make_system("shear_building", n_storeys=3)
+    values = system.true_values()
+    ok = rk4_stability(system, values, 0.02)
+    assert ok is not None and ok["stable"]
+    # a storey of a hundredth of a gram and huge damping: a rate of about 5e4 per second
+    bad = {**values, "m2": 1e-5, "c2": 547.0}
+    out = rk4_stability(system, bad, 1 / 120)
+    assert not out["stable"] and out["max_abs_lambda_h"] > 2.8
+    rec = _record()
+    res = check_adequacy(_sim(rec), rec, (0.0, 20.0), stability=out)
+    assert not res["adequate"] and not res["simulates"] and "RK4 stability region" in res["reasons"][0]
