@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # the default index would serve a CUDA build.
 TORCH_INDEX ?=
 
-.PHONY: install train test test-all test-fast lint format bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench discrepancy-bench-building heldout-calibration fit-test-calibration basin robustness efficiency benchmarks real
+.PHONY: install train test test-all test-fast lint format bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench discrepancy-bench-building heldout-calibration heldout-calibration-building adequacy-calibration fit-test-calibration basin hayward robustness efficiency benchmarks real
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -70,6 +70,17 @@ discrepancy-bench-building: $(STAMP)
 
 heldout-calibration: $(STAMP)
 	$(PY) experiments/heldout_calibration.py $(ARGS)
+
+heldout-calibration-building: $(STAMP)
+	$(PY) experiments/heldout_calibration_building.py $(ARGS)
+
+adequacy-calibration: $(STAMP)
+	$(PY) experiments/adequacy_calibration.py $(ARGS)
+
+# the second shipped bridge with Painter Street's settings (nothing tuned to it) -> experiments/results/real/hayward.md
+hayward: $(STAMP)
+	$(PY) train.py experiment=hayward hydra.sweep.dir=outputs/hayward/identify skip_done=true $(ARGS)
+	$(PY) experiments/station_table.py outputs/hayward/identify experiments/results/real/hayward --title "Hayward interchange bridge (CSMIP CE58658): every shipped event, identified as Painter Street is"
 
 fit-test-calibration: $(STAMP)
 	$(PY) experiments/fit_test_calibration.py $(ARGS)
