@@ -221,3 +221,14 @@ def test_killed_failed_and_resumed_run_folder_tells_the_truth(tmp_path, monkeypa
     assert (run / COMPLETE).exists() and not (run / FAILED).exists() and not (run / LOCK).exists()
     saved = json.loads((run / "metrics.json").read_text())
     assert saved["adequate"] is metrics["adequate"] and "adequacy" in saved
+
+
+def test_the_api_raises_value_errors_not_a_frameworks(tmp_path):
+    import pidyn
+
+    with pytest.raises(ValueError, match="k3.*init > 0") as exc:
+        pidyn.identify(None, "duffing", init={"k3": -5.0}, out_dir=tmp_path / "run", baselines="none")
+    assert type(exc.value) is ValueError
+    assert json.loads((tmp_path / "run" / FAILED).read_text())["error"] == "ValueError"
+    proc = _cli(["system.params.k3.init=-5", f"hydra.run.dir={tmp_path / 'cli'}"])
+    assert proc.returncode == 2 and "init > 0" in _error_line(proc)

@@ -16,6 +16,7 @@ its run folder (``Result.run_dir``), so a notebook run can be reopened with
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
 import time
@@ -157,6 +158,22 @@ class Result:
         return directory
 
 
+@contextlib.contextmanager
+def _user_errors():
+    """A setting Hydra or OmegaConf refuses (a wrong value in ``init``, a misspelled override)
+    comes out as a ``ValueError`` with the cause's message: the API raises no framework's type."""
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    try:
+        yield
+    except (HydraException, OmegaConfBaseException) as exc:
+        cause = exc.__cause__ if isinstance(exc.__cause__, (ValueError, FileNotFoundError)) else None
+        if cause is not None:
+            raise cause from None
+        raise ValueError(str(exc).splitlines()[0] if str(exc) else type(exc).__name__) from exc
+
+
 def identify(
     record: Record | None = None,
     system: str = "duffing",
@@ -180,10 +197,15 @@ def identify(
     values.setdefault("trainer.enable_progress_bar", False)
     values.setdefault("raise_errors", True)
     run_dir = _run_dir(out_dir, "train", system)
-    cfg = compose(
-        "train", groups={"system": system, **groups}, values=values, overrides=overrides, output_dir=run_dir
-    )
-    _, objects = run_identification(cfg, record=record)
+    with _user_errors():
+        cfg = compose(
+            "train",
+            groups={"system": system, **groups},
+            values=values,
+            overrides=overrides,
+            output_dir=run_dir,
+        )
+        _, objects = run_identification(cfg, record=record)
     return Result.load(run_dir, objects)
 
 
@@ -298,7 +320,8 @@ def diagnose(
         overrides=overrides,
         output_dir=run_dir,
     )
-    d = run_diagnosis(cfg, record=record)
+    with _user_errors():
+        d = run_diagnosis(cfg, record=record)
     return Diagnosis(
         verdict=d["verdict"],
         causes=list(d["causes"]),

@@ -29,19 +29,24 @@ from pidyn.systems.base import StructuralSystem
 log = logging.getLogger(__name__)
 
 
-def build_record(cfg: DictConfig, system: StructuralSystem) -> Record:
-    """The record from ``cfg.data.source``; a data error (a bad file, a missing channel) comes out as
-    itself, not wrapped in Hydra's instantiation error, so it is named as such."""
+def instantiate(node: DictConfig, **kwargs: Any) -> Any:
+    """``hydra.utils.instantiate``, with a user's error (a bad value, a bad file, a missing channel)
+    coming out as itself, not wrapped in Hydra's instantiation error, so it is named as such."""
     from hydra.errors import InstantiationException
 
     try:
-        if "system" in _target_args(cfg.data.source):
-            return hydra.utils.instantiate(cfg.data.source, system=system)
-        return hydra.utils.instantiate(cfg.data.source)
+        return hydra.utils.instantiate(node, **kwargs)
     except InstantiationException as exc:
         if isinstance(exc.__cause__, (ValueError, FileNotFoundError)):
             raise exc.__cause__ from None
         raise
+
+
+def build_record(cfg: DictConfig, system: StructuralSystem) -> Record:
+    """The record from ``cfg.data.source`` (``instantiate``)."""
+    if "system" in _target_args(cfg.data.source):
+        return instantiate(cfg.data.source, system=system)
+    return instantiate(cfg.data.source)
 
 
 def _target_args(node: DictConfig) -> set[str]:
@@ -104,7 +109,7 @@ def build_run(cfg: DictConfig, record: Record | None) -> Run:
 def _system_and_record(cfg: DictConfig, record: Record | None) -> tuple[StructuralSystem, Record]:
     """The system and the record, checked against each other: the excitation, the inputs (a system
     with ``inputs: null`` takes the record's), the truth in the system's own units."""
-    system: StructuralSystem = hydra.utils.instantiate(cfg.system)
+    system: StructuralSystem = instantiate(cfg.system)
     record = build_record(cfg, system) if record is None else record
     if record.excitation != system.excitation:
         raise ValueError(

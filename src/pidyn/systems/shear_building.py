@@ -150,6 +150,10 @@ class ShearBuilding(StructuralSystem):
             the storey stiffness; other terms add to it).
         guess: starting values by base name for every storey (``{c: 1.0, k: 100.0}``);
             ``params`` overrides any single parameter (``{k2: {init: 80}}``).
+        mass_ratio_range: with the masses unknown, the range of each floor's mass over floor 1's,
+            held by the parameters' transform (a box), so that no fit can reach a floor of almost
+            no mass, whose damping rate the integrator's step cannot follow (a flexible shake-table
+            model had ended at m2 = 0.0098, c2 = 547 and diverged).
     """
 
     def __init__(
@@ -164,9 +168,15 @@ class ShearBuilding(StructuralSystem):
         excitation: ExcitationKind = "ground",
         params: dict | None = None,
         name: str = "shear_building",
+        mass_ratio_range: Sequence[float] = (0.1, 10.0),
     ) -> None:
         super().__init__(excitation)
         self.name = name
+        self.mass_ratio_range = (float(mass_ratio_range[0]), float(mass_ratio_range[1]))
+        if not 0 < self.mass_ratio_range[0] < 1 < self.mass_ratio_range[1]:
+            raise ValueError(
+                f"shear_building: mass_ratio_range must hold 1 inside (0, inf), got {list(mass_ratio_range)}"
+            )
         self.mass_known = not (isinstance(masses, str) and masses == UNKNOWN_MASSES)
         if isinstance(masses, str) and self.mass_known:
             raise ValueError(
@@ -210,8 +220,9 @@ class ShearBuilding(StructuralSystem):
                 ParamSpec(f"m{i + 1}", init=m, scale=m, true=m, trainable=False, unit="kg")
                 for i, m in enumerate(self.masses)
             ]
+        lo, hi = self.mass_ratio_range
         return [ParamSpec("m1", init=1.0, scale=1.0, true=1.0, trainable=False, unit="m1 (the unit)")] + [
-            ParamSpec(f"m{i + 1}", init=1.0, scale=1.0, lower=0.02, upper=50.0, unit="m1")
+            ParamSpec(f"m{i + 1}", init=1.0, scale=1.0, transform="box", lower=lo, upper=hi, unit="m1")
             for i in range(1, self.n_dof)
         ]
 

@@ -13,7 +13,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import hydra
 from omegaconf import DictConfig, OmegaConf, open_dict
 
 from pidyn.config import check_settings
@@ -25,7 +24,7 @@ from pidyn.discrepancy.case import Case, check_diagnosable, prepare, split_spans
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.summary import log_verdict, summarize, write_figures
 from pidyn.reporting import write_json
-from pidyn.runs.build import build_record
+from pidyn.runs.build import build_record, instantiate
 from pidyn.runs.folder import is_complete, run_folder
 from pidyn.tasks.train import identify
 
@@ -68,7 +67,7 @@ def diagnose_building_task(cfg: DictConfig, record: Record | None = None) -> dic
     from pidyn.runs.methods import refine_plan
 
     settings = DiagnosisSettings.from_mapping(OmegaConf.to_container(cfg.diagnosis, resolve=True))  # type: ignore[arg-type]
-    system = hydra.utils.instantiate(cfg.system)
+    system = instantiate(cfg.system)
     record = build_record(cfg, system) if record is None else record
     check_record(record)
     check_floors(record, system.name, system.n_dof)
@@ -100,14 +99,14 @@ def diagnose_building_task(cfg: DictConfig, record: Record | None = None) -> dic
 def compose_case(cfg: DictConfig, record: Record | None = None) -> Case:
     """The settings, the nominal system, the record and the identification the pipeline calls."""
     settings = DiagnosisSettings.from_mapping(OmegaConf.to_container(cfg.diagnosis, resolve=True))  # type: ignore[arg-type]
-    base = hydra.utils.instantiate(cfg.system)
+    base = instantiate(cfg.system)
     check_diagnosable(base)
     record = build_record(cfg, base) if record is None else record
     check_record(record)
     if record.excitation != base.excitation:
-        base = hydra.utils.instantiate(cfg.system, excitation=record.excitation)
+        base = instantiate(cfg.system, excitation=record.excitation)
     if needs_view(record):  # accelerometers: the relative motion the screening needs, from the accelerations
-        full = hydra.utils.instantiate(cfg.system, inputs=record.inputs) if record.n_inputs > 1 else base
+        full = instantiate(cfg.system, inputs=record.inputs) if record.n_inputs > 1 else base
         fit = split_spans(record, float(settings.fit_share))[0]
         record = motion_view(record, full, fit, tol=float(settings.polish_tol))
     node = OmegaConf.to_container(cfg.system, resolve=True)
