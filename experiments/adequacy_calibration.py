@@ -55,16 +55,30 @@ def shaking_start(record: str, lead: float = 2.0) -> float:
     return max(t5 - lead, 0.0)
 
 
+def judge(model, values: dict[str, float], target, cut: float) -> tuple[dict, float]:
+    """``model`` fitted by output error on ``target`` up to ``cut`` from ``values``, and the
+    adequacy test of its simulation with the rest held out; the seconds it took."""
+    from pidyn.adequacy import check_adequacy, rk4_stability
+    from pidyn.refine.output_error import fit_output_error
+    from pidyn.simulate import simulate_response
+
+    t0 = time.perf_counter()
+    est = fit_output_error(target.segment(None, cut), model, values, max_nfev=40)
+    final = {**values, **est.params}
+    sim = simulate_response(model, final, target)
+    stability = rk4_stability(model, final, target.dt)
+    res = check_adequacy(sim, target, (0.0, cut), (cut, float(target.t[-1])), stability=stability)
+    return res, time.perf_counter() - t0
+
+
 def one(args: tuple[int, str, str, float]) -> list[dict]:
-    """The clean record's fit and test, and the wrong model's (linear on a nonlinear record)."""
+    """The clean record's fit and test, and the wrong model's (linear on a nonlinear record, or
+    the linear model on a response unrelated to its input: the channels shuffled in time)."""
     from dataclasses import replace
 
-    from pidyn.adequacy import check_adequacy, rk4_stability
     from pidyn.config import make_system
     from pidyn.data.sources import synthetic_from_motion
     from pidyn.excitation.ground_motion import prepare
-    from pidyn.refine.output_error import fit_output_error
-    from pidyn.simulate import simulate_response
 
     i, record, system_name, noise = args
     channels = ("a",) if i % 3 == 2 else ("x", "v")
@@ -72,23 +86,22 @@ def one(args: tuple[int, str, str, float]) -> list[dict]:
     gm = prepare(record, duration=DURATION, dt=0.01, start=shaking_start(record))
     rec = synthetic_from_motion(system, gm, noise=noise, data_seed=7000 + i, channels=channels)
     cut = float(rec.t[-1]) * FIT_SHARE
-    fit_rec = rec.segment(None, cut)
+    cases = [("clean", system, rec.truth, rec)]
+    if system_name != "linear":  # started from the true c and initial stiffness
+        lin = make_system("linear")
+        start = {
+            **lin.true_values(),
+            "c": rec.truth.get("c", 0.5),
+            "k": rec.truth.get("k", rec.truth.get("k1")),
+        }
+        cases.append(("linear on " + system_name, lin, start, rec))
+    else:
+        perm = np.random.default_rng(7000 + i).permutation(len(rec.t))
+        shuffled = replace(rec, **{c: getattr(rec, c)[perm] for c in channels}, clean=None, meta={})
+        cases.append(("unrelated response", system, rec.truth, shuffled))
     out = []
-
-    def judge(model, values: dict[str, float], kind: str, target=rec) -> None:
-        t0 = time.perf_counter()
-        est = fit_output_error(
-            fit_rec if target is rec else target.segment(None, cut), model, values, max_nfev=40
-        )
-        final = {**values, **est.params}
-        sim = simulate_response(model, final, target)
-        res = check_adequacy(
-            sim,
-            target,
-            (0.0, cut),
-            (cut, float(target.t[-1])),
-            stability=rk4_stability(model, final, target.dt),
-        )
+    for kind, model, values, target in cases:
+        res, seconds = judge(model, values, target, cut)
         out.append(
             {
                 "i": i,
@@ -97,37 +110,13 @@ def one(args: tuple[int, str, str, float]) -> list[dict]:
                 "noise": noise,
                 "channels": "".join(channels),
                 "case": kind,
-                "adequate": res["adequate"],
-                "explains": res["explains"],
-                "predicts": res["predicts"],
-                "within_noise": res["within_noise"],
-                "fit_nrmse": res["fit_nrmse"],
+                **{k: res[k] for k in ("adequate", "explains", "predicts", "within_noise", "fit_nrmse")},
                 "heldout_nrmse": res["heldout_nrmse"],
                 "trivial_heldout_nrmse": res["trivial_heldout_nrmse"],
                 "reasons": "; ".join(res["reasons"]),
-                "seconds": time.perf_counter() - t0,
+                "seconds": seconds,
             }
         )
-
-    judge(system, rec.truth, "clean")
-    if system_name != "linear":  # the wrong model: linear on a nonlinear record, started from the data's k
-        lin = make_system("linear")
-        judge(
-            lin,
-            {**lin.true_values(), "c": rec.truth.get("c", 0.5), "k": rec.truth.get("k", rec.truth.get("k1"))},
-            "linear on " + system_name,
-        )
-    if system_name == "linear":  # a response unrelated to its input: the channels shuffled in time
-        rng = np.random.default_rng(7000 + i)
-        perm = rng.permutation(len(rec.t))
-        shuffled = replace(
-            rec,
-            **{c: getattr(rec, c)[perm] for c in channels},
-            clean=None,
-            meta={},
-            name=rec.name + " shuffled",
-        )
-        judge(system, rec.truth, "unrelated response", target=shuffled)
     return out
 
 
