@@ -232,3 +232,28 @@ def test_the_api_raises_value_errors_not_a_frameworks(tmp_path):
     assert json.loads((tmp_path / "run" / FAILED).read_text())["error"] == "ValueError"
     proc = _cli(["system.params.k3.init=-5", f"hydra.run.dir={tmp_path / 'cli'}"])
     assert proc.returncode == 2 and "init > 0" in _error_line(proc)
+
+
+@pytest.mark.slow
+def test_sigterm_is_logged_and_the_folder_says_interrupted(tmp_path):
+    run = tmp_path / "run"
+    # windows long enough (2000 iterations) that the signal lands inside the second
+    longer = [o for o in FAST if "max_iters" not in o] + ["model.schedule.max_iters=2000"]
+    proc = subprocess.Popen(
+        [sys.executable, "train.py", *longer, f"hydra.run.dir={run}"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    deadline = time.time() + 180
+    while not (run / "subperiod_state.json").exists() and proc.poll() is None and time.time() < deadline:
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGTERM)
+    out, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 143, out[-2000:]
+    assert "interrupted at" in out and "SIGTERM" in out and "run the same command again to resume" in out
+    failed = json.loads((run / FAILED).read_text())
+    assert (
+        failed["error"] == "Interrupted" and not (run / "metrics.json").exists() and not (run / LOCK).exists()
+    )
