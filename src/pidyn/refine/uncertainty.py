@@ -52,11 +52,31 @@ def covariance(
     w = np.linalg.eigvalsh(info)
     cond = float(w[-1] / max(w[0], 1e-300)) if w[-1] > 0 else float("inf")
     cov_red = np.linalg.pinv(info, rcond=1e-15, hermitian=True)
+    nt = problem.n_theta
+    floor = variance_floor(N[:nt], info)
     if r is not None and lags > 0:
         cov_red = cov_red @ sandwich(JN, r, problem.channel_slices(), lags) @ cov_red
-    cov_u = N @ cov_red @ N.T
-    nt = problem.n_theta
-    return cov_u[:nt, :nt], cond
+        floor = floor * float(r @ r) / max(len(r), 1)  # the sandwich is in the residuals' units
+    cov = (N @ cov_red @ N.T)[:nt, :nt]
+    idx = np.arange(nt)
+    cov[idx, idx] = np.maximum(np.diag(cov), floor)
+    return cov, cond
+
+
+def variance_floor(rows: np.ndarray, info: np.ndarray) -> np.ndarray:
+    """A lower bound on each parameter's variance that a singular information matrix cannot hide.
+
+    The pseudo-inverse gives a direction the record does not inform no variance at all, so a
+    parameter along it got an interval of zero width: a certainty no record gives. With the
+    parameter theta_i = n_i . z in the reduced coordinates z, Cauchy-Schwarz gives
+    Var(theta_i) >= (n_i . n_i)^2 / (n_i' I n_i) for any information I; infinite where I does
+    not see n_i at all."""
+    out = np.empty(len(rows))
+    for i, n_i in enumerate(rows):
+        seen = float(n_i @ info @ n_i)
+        norm2 = float(n_i @ n_i)
+        out[i] = 0.0 if norm2 == 0 else (norm2**2 / seen if seen > 0 else np.inf)
+    return out
 
 
 def sandwich(JN: np.ndarray, r: np.ndarray, slices: list[slice], lags: int) -> np.ndarray:
@@ -124,7 +144,7 @@ def at_bound(specs: list[ParamSpec], theta: np.ndarray, edge: float = 12.0) -> d
     for i, (s, th) in enumerate(zip(specs, theta)):
         if s.transform == "log" and th < -edge:
             out[i] = "lower"
-        elif s.transform == "box" and abs(th) > edge:
+        elif s.bounded and abs(th) > edge:
             out[i] = "lower" if th < 0 else "upper"
     return out
 
@@ -160,7 +180,7 @@ def one_sided_intervals(
         sd = max(float(np.sqrt(max(cov_v[i, i], 0.0))), unit / g if g > 0 else float("inf"))
         end = 0.0 if s.transform == "log" else float(s.lower if side == "lower" else s.upper)
         reach = Z95_ONE_SIDED * sd
-        if s.transform == "box":
+        if s.bounded:
             reach = min(reach, float(s.upper) - float(s.lower))
         lo, hi = (end, end + reach) if side == "lower" else (end - reach, end)
         ints[s.name].update({"ci95": [lo, hi], "std": sd, "at_bound": side, "one_sided": True})
@@ -177,7 +197,7 @@ def bound_notes(specs: list[ParamSpec], theta: np.ndarray, edge: float = 12.0) -
                 "model lacks what the data show; its interval is one-sided, from 0 to the largest value the "
                 "record allows"
             )
-        elif s.transform == "box" and abs(th) > edge:
+        elif s.bounded and abs(th) > edge:
             end = s.lower if th < 0 else s.upper
             out.append(
                 f"{s.name} ran to the {'lower' if th < 0 else 'upper'} end of its range ({end:g}): widen "
