@@ -17,7 +17,7 @@ import numpy as np
 import torch
 from torch import nn
 
-Transform = Literal["log", "box", "logbox", "identity"]
+Transform = Literal["log", "box", "identity"]
 
 #: a positive (log-transformed) estimate that ran to zero, its exp underflowing, restarts here when
 #: a model is built from it: a friction damper can take a storey's whole viscous damping
@@ -38,10 +38,8 @@ class ParamSpec:
         init: starting value when no better initialisation is available.
         scale: typical magnitude; ``identity`` uses ``value = scale * raw``.
         transform: ``log`` (positive, value = scale * exp(raw)), ``box`` (within
-            [lower, upper] through a sigmoid), ``logbox`` (within [lower, upper] through a sigmoid
-            of the logarithm: a positive ratio held between two bounds, like ``log`` inside them)
-            or ``identity``.
-        lower, upper: physical bounds (required for ``box`` and ``logbox``; used as a guard otherwise).
+            [lower, upper] through a sigmoid) or ``identity``.
+        lower, upper: physical bounds (required for ``box``; used as a guard otherwise).
         true: the ground truth when it is known (synthetic data), else None.
         trainable: False for known quantities (e.g. a measured mass).
         unit: for reports.
@@ -57,30 +55,18 @@ class ParamSpec:
     trainable: bool = True
     unit: str = ""
 
-    @property
-    def bounded(self) -> bool:
-        """Whether the transform itself holds the value inside [lower, upper]."""
-        return self.transform in ("box", "logbox")
-
     def __post_init__(self) -> None:
         if self.transform == "log" and self.init <= 0:
             raise ValueError(f"parameter '{self.name}': log transform needs init > 0, got {self.init}")
-        if self.transform == "logbox" and not (self.lower or 0) > 0:
-            raise ValueError(f"parameter '{self.name}': logbox transform needs 0 < lower < upper")
-        if self.bounded:
+        if self.transform == "box":
             if self.lower is None or self.upper is None or not self.lower < self.upper:
-                raise ValueError(f"parameter '{self.name}': {self.transform} transform needs lower < upper")
+                raise ValueError(f"parameter '{self.name}': box transform needs lower < upper")
             if not self.lower < self.init < self.upper:
                 raise ValueError(
                     f"parameter '{self.name}': init {self.init} outside ({self.lower}, {self.upper})"
                 )
         if self.scale <= 0:
             raise ValueError(f"parameter '{self.name}': scale must be positive")
-
-
-def _logbox_unit(spec: ParamSpec, value: float) -> float:
-    lo, hi = math.log(spec.lower), math.log(spec.upper)  # type: ignore[arg-type]
-    return (math.log(max(value, 1e-300)) - lo) / (hi - lo)
 
 
 def to_raw(spec: ParamSpec, value: float) -> float:
@@ -92,9 +78,6 @@ def to_raw(spec: ParamSpec, value: float) -> float:
         assert lo is not None and hi is not None
         u = min(max((value - lo) / (hi - lo), 1e-9), 1 - 1e-9)
         return math.log(u / (1 - u))
-    if spec.transform == "logbox":
-        u = min(max(_logbox_unit(spec, value), 1e-9), 1 - 1e-9)
-        return math.log(u / (1 - u))
     return value / spec.scale
 
 
@@ -105,10 +88,6 @@ def from_raw(spec: ParamSpec, raw: torch.Tensor) -> torch.Tensor:
     if spec.transform == "box":
         assert spec.lower is not None and spec.upper is not None
         return spec.lower + (spec.upper - spec.lower) * torch.sigmoid(raw)
-    if spec.transform == "logbox":
-        assert spec.lower is not None and spec.upper is not None
-        lo, hi = math.log(spec.lower), math.log(spec.upper)
-        return torch.exp(lo + (hi - lo) * torch.sigmoid(raw))
     return spec.scale * raw
 
 
@@ -186,7 +165,7 @@ def clip_to_bounds(spec: ParamSpec, value: float) -> float:
     hi = spec.upper if spec.upper is not None else math.inf
     if spec.transform == "log":
         lo = max(lo, 1e-12 * spec.scale)
-    if spec.bounded:
+    if spec.transform == "box":
         eps = 1e-6 * (hi - lo)
         lo, hi = lo + eps, hi - eps
     return min(max(value, lo), hi)
@@ -213,10 +192,6 @@ def from_theta(specs: list[ParamSpec], theta: np.ndarray) -> dict[str, np.ndarra
         elif s.transform == "box":
             assert s.lower is not None and s.upper is not None
             out[s.name] = s.lower + (s.upper - s.lower) / (1 + np.exp(-th))
-        elif s.transform == "logbox":
-            assert s.lower is not None and s.upper is not None
-            lo, hi = math.log(s.lower), math.log(s.upper)
-            out[s.name] = np.exp(lo + (hi - lo) / (1 + np.exp(-th)))
         else:
             out[s.name] = s.scale * th
     return out

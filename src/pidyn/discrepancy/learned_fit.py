@@ -63,7 +63,7 @@ class LearnedFit:
 
 def _free_spec(spec: ParamSpec, value: float) -> ParamSpec:
     """The spec re-centred at ``value`` so that its raw coordinate is O(1) (L-BFGS's first step)."""
-    if spec.bounded:
+    if spec.transform == "box":
         return spec
     if spec.transform == "log":
         return dataclasses.replace(spec, init=max(value, 1e-300), scale=max(value, 1e-300))

@@ -144,7 +144,7 @@ def at_bound(specs: list[ParamSpec], theta: np.ndarray, edge: float = 12.0) -> d
     for i, (s, th) in enumerate(zip(specs, theta)):
         if s.transform == "log" and th < -edge:
             out[i] = "lower"
-        elif s.bounded and abs(th) > edge:
+        elif s.transform == "box" and abs(th) > edge:
             out[i] = "lower" if th < 0 else "upper"
     return out
 
@@ -180,7 +180,7 @@ def one_sided_intervals(
         sd = max(float(np.sqrt(max(cov_v[i, i], 0.0))), unit / g if g > 0 else float("inf"))
         end = 0.0 if s.transform == "log" else float(s.lower if side == "lower" else s.upper)
         reach = Z95_ONE_SIDED * sd
-        if s.bounded:
+        if s.transform == "box":
             reach = min(reach, float(s.upper) - float(s.lower))
         lo, hi = (end, end + reach) if side == "lower" else (end - reach, end)
         ints[s.name].update({"ci95": [lo, hi], "std": sd, "at_bound": side, "one_sided": True})
@@ -197,7 +197,7 @@ def bound_notes(specs: list[ParamSpec], theta: np.ndarray, edge: float = 12.0) -
                 "model lacks what the data show; its interval is one-sided, from 0 to the largest value the "
                 "record allows"
             )
-        elif s.bounded and abs(th) > edge:
+        elif s.transform == "box" and abs(th) > edge:
             end = s.lower if th < 0 else s.upper
             out.append(
                 f"{s.name} ran to the {'lower' if th < 0 else 'upper'} end of its range ({end:g}): widen "

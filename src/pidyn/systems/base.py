@@ -177,7 +177,7 @@ def merge_specs(defaults: list[ParamSpec], overrides: dict | None) -> list[Param
             raise ValueError(
                 f"parameter '{s.name}': unknown field(s) {sorted(bad)}; allowed {sorted(allowed)}"
             )
-        if "init" in o and "scale" not in o and not s.bounded:
+        if "init" in o and "scale" not in o and s.transform != "box":
             o["scale"] = abs(float(o["init"])) or s.scale  # never scale by the (unknown) truth
         out.append(replace(s, **o))
     return out

@@ -151,7 +151,7 @@ class ShearBuilding(StructuralSystem):
         guess: starting values by base name for every storey (``{c: 1.0, k: 100.0}``);
             ``params`` overrides any single parameter (``{k2: {init: 80}}``).
         mass_ratio_range: with the masses unknown, the range of each floor's mass over floor 1's,
-            held by the parameters' transform (a box in the logarithm), so that no fit can reach a floor of almost
+            held by the parameters' transform (a box), so that no fit can reach a floor of almost
             no mass, whose damping rate the integrator's step cannot follow (a flexible shake-table
             model had ended at m2 = 0.0098, c2 = 547 and diverged).
     """
@@ -222,7 +222,7 @@ class ShearBuilding(StructuralSystem):
             ]
         lo, hi = self.mass_ratio_range
         return [ParamSpec("m1", init=1.0, scale=1.0, true=1.0, trainable=False, unit="m1 (the unit)")] + [
-            ParamSpec(f"m{i + 1}", init=1.0, scale=1.0, transform="logbox", lower=lo, upper=hi, unit="m1")
+            ParamSpec(f"m{i + 1}", init=1.0, scale=1.0, transform="box", lower=lo, upper=hi, unit="m1")
             for i in range(1, self.n_dof)
         ]
 
@@ -259,7 +259,11 @@ class ShearBuilding(StructuralSystem):
             base = re.sub(r"_?\d+$", "", s.name)
             if s.trainable and base in guess:
                 g = float(guess[base])
-                s = replace(s, init=g, scale=abs(g) or s.scale) if not s.bounded else replace(s, init=g)
+                s = (
+                    replace(s, init=g, scale=abs(g) or s.scale)
+                    if s.transform != "box"
+                    else replace(s, init=g)
+                )
             out.append(s)
         return out
 
