@@ -23,12 +23,10 @@ a rerun.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import platform
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +34,8 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
+
+from calibration_grid import calibration_args, finished, run_grid  # noqa: E402
 
 from pidyn.excitation.ground_motion import SHIPPED  # noqa: E402
 
@@ -166,15 +166,10 @@ def write_table(df: pd.DataFrame, path: Path, seconds: float, ran: int) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--records", nargs="*", default=sorted(SHIPPED))
-    ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--results", type=Path, default=ROOT / "experiments" / "results")
-    args = ap.parse_args()
+    args = calibration_args(__doc__, SHIPPED)
     logging.basicConfig(level=logging.ERROR)
     csv = args.results / "adequacy_calibration.csv"
-    done = pd.read_csv(csv) if csv.exists() else pd.DataFrame()
-    have = set(zip(done.get("record", []), done.get("system", []), done.get("noise", [])))
+    done, have = finished(csv, ["record", "system", "noise"], args.fresh)
     todo = []
     for record in args.records:
         for s, system in enumerate(SYSTEMS):
@@ -182,21 +177,14 @@ def main() -> None:
                 i = (sorted(SHIPPED).index(record) * len(SYSTEMS) + s) * len(NOISES) + k
                 if (record, system, noise) not in have:
                     todo.append((i, record, system, noise))
-    t0, rows = time.perf_counter(), [done] if len(done) else []
-    with ProcessPoolExecutor(args.jobs) as pool:
-        for k, out in enumerate(pool.map(one, todo), start=1):
-            rows.append(pd.DataFrame(out))
-            pd.concat(rows, ignore_index=True).to_csv(csv, index=False)
-            print(
-                f"[{k}/{len(todo)}] "
-                + "; ".join(
-                    f"{r['case']} {r['system']} {r['record']} {r['noise']:g}: {'ok' if r['adequate'] else 'REJECTED'}"
-                    for r in out
-                ),
-                flush=True,
-            )
-    df = pd.concat(rows, ignore_index=True) if rows else done
-    write_table(df, args.results / "adequacy_calibration.md", time.perf_counter() - t0, len(todo))
+
+    def describe(r: dict) -> str:
+        return (
+            f"{r['case']} {r['system']} {r['record']} {r['noise']:g}: {'ok' if r['adequate'] else 'REJECTED'}"
+        )
+
+    df, seconds = run_grid(csv, done, todo, one, describe, args.jobs)
+    write_table(df, args.results / "adequacy_calibration.md", seconds, len(todo))
 
 
 if __name__ == "__main__":

@@ -19,12 +19,10 @@ CSV and skipped on a rerun.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import platform
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
@@ -34,6 +32,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from calibration_grid import calibration_args, finished, run_grid  # noqa: E402
 from discrepancy_bench_building import draw_building, draw_sensors  # noqa: E402
 
 from pidyn.discrepancy.settings import FitTestSettings  # noqa: E402
@@ -125,34 +124,25 @@ def write_table(df: pd.DataFrame, path: Path, seconds: float, ran: int) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--records", nargs="*", default=sorted(SHIPPED))
-    ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--results", type=Path, default=ROOT / "experiments" / "results")
-    args = ap.parse_args()
+    args = calibration_args(__doc__, SHIPPED)
     logging.basicConfig(level=logging.WARNING)
     csv = args.results / "fit_test_calibration.csv"
-    done = pd.read_csv(csv) if csv.exists() else pd.DataFrame()
-    have = set(zip(done.get("record", []), done.get("noise", []), done.get("fit_share", [])))
+    done, have = finished(csv, ["record", "noise", "fit_share"], args.fresh)
     todo = []
     for record in args.records:
         for g, (noise, share) in enumerate(GRID):
             i = sorted(SHIPPED).index(record) * len(GRID) + g  # a record's seeds whatever else runs
             if (record, noise, share) not in have:
                 todo.append((i, record, noise, share))
-    t0, rows = time.perf_counter(), [done] if len(done) else []
-    with ProcessPoolExecutor(args.jobs) as pool:
-        for k, row in enumerate(pool.map(one, todo), start=1):
-            rows.append(pd.DataFrame([row]))
-            df = pd.concat(rows, ignore_index=True)
-            df.to_csv(csv, index=False)  # each finished record is kept
-            print(
-                f"[{k}/{len(todo)}] {row['record']} noise {row['noise']:g} share {row['fit_share']:g}: "
-                f"worst {row['worst_floor']} ratio {row['worst_ratio']:.2f}{' FAILED' if row['failed'] else ''}",
-                flush=True,
-            )
-    df = pd.concat(rows, ignore_index=True) if rows else done
-    write_table(df, args.results / "fit_test_calibration.md", time.perf_counter() - t0, len(todo))
+
+    def describe(r: dict) -> str:
+        return (
+            f"{r['record']} noise {r['noise']:g} share {r['fit_share']:g}: worst {r['worst_floor']} ratio "
+            f"{r['worst_ratio']:.2f}{' FAILED' if r['failed'] else ''}"
+        )
+
+    df, seconds = run_grid(csv, done, todo, one, describe, args.jobs)
+    write_table(df, args.results / "fit_test_calibration.md", seconds, len(todo))
 
 
 if __name__ == "__main__":

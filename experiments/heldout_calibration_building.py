@@ -20,12 +20,10 @@ the CSV and skipped on a rerun.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import platform
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
@@ -34,6 +32,8 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
+
+from calibration_grid import calibration_args, finished, run_grid  # noqa: E402
 
 from pidyn.excitation.ground_motion import SHIPPED  # noqa: E402
 
@@ -150,40 +150,25 @@ def write_table(df: pd.DataFrame, path: Path, seconds: float, ran: int) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--records", nargs="*", default=sorted(SHIPPED))
-    ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--results", type=Path, default=ROOT / "experiments" / "results")
-    ap.add_argument("--fresh", action="store_true", help="run every record again (a changed test)")
-    args = ap.parse_args()
+    args = calibration_args(__doc__, SHIPPED)
     logging.basicConfig(level=logging.WARNING)
     csv = args.results / "heldout_calibration_building.csv"
-    done = pd.read_csv(csv) if csv.exists() and not args.fresh else pd.DataFrame()
-    have = set(
-        zip(
-            done.get("record", []), done.get("noise", []), done.get("fit_share", []), done.get("duration", [])
-        )
-    )
+    done, have = finished(csv, ["record", "noise", "fit_share", "duration"], args.fresh)
     todo = []
     for record in args.records:
         for g, (noise, share, duration) in enumerate(GRID):
             i = sorted(SHIPPED).index(record) * len(GRID) + g  # a record's seeds whatever else runs
             if (record, noise, share, duration) not in have:
                 todo.append((i, record, noise, share, duration))
-    t0, rows = time.perf_counter(), [done] if len(done) else []
-    with ProcessPoolExecutor(args.jobs) as pool:
-        for k, row in enumerate(pool.map(one, todo), start=1):
-            rows.append(pd.DataFrame([row]))
-            df = pd.concat(rows, ignore_index=True)
-            df.to_csv(csv, index=False)  # each finished record is kept
-            print(
-                f"[{k}/{len(todo)}] {row['record']} {row['n_storeys']} storeys noise {row['noise']:g} share "
-                f"{row['fit_share']:g} {row['duration']:g} s: p {row['p_min']:.3g}{' FAILED' if row['failed'] else ''} "
-                f"({row['seconds']:.0f} s)",
-                flush=True,
-            )
-    df = pd.concat(rows, ignore_index=True) if rows else done
-    write_table(df, args.results / "heldout_calibration_building.md", time.perf_counter() - t0, len(todo))
+
+    def describe(r: dict) -> str:
+        return (
+            f"{r['record']} {r['n_storeys']} storeys noise {r['noise']:g} share {r['fit_share']:g} "
+            f"{r['duration']:g} s: p {r['p_min']:.3g}{' FAILED' if r['failed'] else ''} ({r['seconds']:.0f} s)"
+        )
+
+    df, seconds = run_grid(csv, done, todo, one, describe, args.jobs)
+    write_table(df, args.results / "heldout_calibration_building.md", seconds, len(todo))
 
 
 if __name__ == "__main__":

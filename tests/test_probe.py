@@ -175,21 +175,26 @@ FAST = [
 ]
 
 
+def _start_until_first_window(args: list[str], run: Path, **popen) -> subprocess.Popen:
+    """``train.py`` started in ``run``, returned once its first window's state is saved."""
+    proc = subprocess.Popen(
+        [sys.executable, "train.py", *args, f"hydra.run.dir={run}"],
+        cwd=ROOT,
+        stderr=subprocess.STDOUT,
+        **popen,
+    )
+    deadline = time.time() + 180
+    while not (run / "subperiod_state.json").exists() and proc.poll() is None and time.time() < deadline:
+        time.sleep(0.2)
+    return proc
+
+
 @pytest.mark.slow
 def test_killed_failed_and_resumed_run_folder_tells_the_truth(tmp_path, monkeypatch, caplog):
     """Killed (SIGKILL, no handler) after its first window; then a write that fails as on a full
     disk; then resumed to the end, refusing on the way a run with another seed."""
     run = tmp_path / "run"
-    proc = subprocess.Popen(
-        [sys.executable, "train.py", *FAST, f"hydra.run.dir={run}"],
-        cwd=ROOT,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-    )
-    deadline = time.time() + 180
-    while not (run / "subperiod_state.json").exists() and proc.poll() is None and time.time() < deadline:
-        time.sleep(0.2)
+    proc = _start_until_first_window(FAST, run, stdout=subprocess.DEVNULL, start_new_session=True)
     time.sleep(float(np.random.default_rng().uniform(0.0, 1.0)))  # a point inside the second window
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
@@ -239,16 +244,7 @@ def test_sigterm_is_logged_and_the_folder_says_interrupted(tmp_path):
     run = tmp_path / "run"
     # windows long enough (2000 iterations) that the signal lands inside the second
     longer = [o for o in FAST if "max_iters" not in o] + ["model.schedule.max_iters=2000"]
-    proc = subprocess.Popen(
-        [sys.executable, "train.py", *longer, f"hydra.run.dir={run}"],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    deadline = time.time() + 180
-    while not (run / "subperiod_state.json").exists() and proc.poll() is None and time.time() < deadline:
-        time.sleep(0.2)
+    proc = _start_until_first_window(longer, run, stdout=subprocess.PIPE, text=True)
     proc.send_signal(signal.SIGTERM)
     out, _ = proc.communicate(timeout=120)
     assert proc.returncode == 143, out[-2000:]
