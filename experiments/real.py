@@ -163,9 +163,15 @@ def identification_rows(folder: Path) -> list[dict]:
             continue
         meta, mode = metrics.get("record_meta") or {}, (metrics.get("modal") or [{}])[0]
         held = metrics.get("heldout") or {}
+        adequate = metrics.get("adequate", True)
+        if not adequate:  # a rejected model's period and damping are the fit's, not the bridge's
+            mode = {}
         row.update(
             {
-                "status": "ok",
+                "status": "ok" if adequate else "ok (model not adequate: no period or damping)",
+                "adequate": adequate,
+                "trivial_heldout_nrmse_a": _mean_or_none(held.get("trivial_nrmse")),
+                "beats_trivial": held.get("beats_trivial"),
                 "pga_g": meta.get("pga", float("nan")) / 9.80665,
                 "inputs": meta.get("input_channels"),
                 "outputs": meta.get("output_channels"),
@@ -194,6 +200,11 @@ def identification_rows(folder: Path) -> list[dict]:
                 row[f"{key}_note"] = b.get("note", "")
         rows.append(row)
     return with_event_pga(rows)
+
+
+def _mean_or_none(scores: dict | None) -> float | None:
+    vals = [v for k, v in (scores or {}).items() if k.startswith("a")]
+    return float(np.mean(vals)) if vals else None
 
 
 def with_event_pga(rows: list[dict]) -> list[dict]:
