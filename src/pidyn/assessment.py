@@ -48,15 +48,20 @@ def assess(
     sim: dict[str, np.ndarray],
     hold_out: bool,
     run_dir: Path,
+    adequate: bool = True,
 ) -> dict[str, Any]:
     """modal.json, and the metrics to add: the modes, the held-out scores (a record identified on
-    its fitting part only), what a strong-motion record says of itself."""
+    its fitting part only), what a strong-motion record says of itself. The modes of a model that
+    does not describe its record (``pidyn.adequacy``) are marked as the fit's, not the structure's."""
     import logging
 
     out: dict[str, Any] = {}
     modes = modal_summary(system, final, refined)
     if modes is not None:
-        write_modal(run_dir, modes)
+        for m in modes if not adequate else []:
+            m["describes_structure"] = False
+        extra = None if adequate else {"adequate": False, "warning": NOT_ADEQUATE}
+        write_modal(run_dir, modes, extra)
         out["modal"] = [{k: v for k, v in m.items() if not k.startswith("mode_shape")} for m in modes]
     meta = record.meta or {}
     if "station" in meta:
@@ -72,6 +77,9 @@ def assess(
             ", ".join(f"{k} {v:.3g}" for k, v in out["heldout"]["nrmse"].items()),
         )
     return out
+
+
+NOT_ADEQUATE = "the identified model does not describe the record (metrics.json adequacy)"
 
 
 def modal_summary(system, values: dict[str, float], refined: Any = None) -> list[dict] | None:

@@ -162,7 +162,7 @@ def check_settings(cfg: DictConfig) -> None:
             want = "an integer" if kinds == (int,) else "a number"
             raise ValueError(f"setting '{key}' is {cfg[key]!r}: {want} is needed")
     noise = cfg.get("noise")
-    if noise is not None and not isinstance(noise, (int, float, DictConfig)) or isinstance(noise, bool):
+    if isinstance(noise, bool) or (noise is not None and not isinstance(noise, (int, float, DictConfig))):
         raise ValueError(
             f"setting 'noise' is {noise!r}: a number (a fraction of each channel's RMS) is needed"
         )

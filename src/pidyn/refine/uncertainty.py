@@ -169,15 +169,11 @@ def one_sided_intervals(
     scale = np.ones(J.shape[1])
     for i in bound:
         scale[i] = dvalue_draw(problem.specs[i], float(theta[i]))
-    Jv = J / scale
-    cov_v = residual_covariance(problem, r, Jv, C / scale if C.shape[0] else C)[0]
-    unit = float(np.sqrt(float(r @ r) / max(len(r) - problem.n_theta, 1)))
+    # the covariance's variance floor (``variance_floor``) keeps an uninformed direction wide here too
+    cov_v = residual_covariance(problem, r, J / scale, C / scale if C.shape[0] else C)[0]
     for i, side in bound.items():
         s = problem.specs[i]
-        # the pseudo-inverse gives a direction the record does not inform no variance at all; the
-        # spread with every other unknown held is a floor under the marginal one
-        g = float(np.linalg.norm(Jv[:, i]))
-        sd = max(float(np.sqrt(max(cov_v[i, i], 0.0))), unit / g if g > 0 else float("inf"))
+        sd = float(np.sqrt(max(cov_v[i, i], 0.0)))
         end = 0.0 if s.transform == "log" else float(s.lower if side == "lower" else s.upper)
         reach = Z95_ONE_SIDED * sd
         if s.transform == "box":

@@ -131,8 +131,8 @@ def _check_same_run(folder: Path, cfg: DictConfig, resume: bool) -> None:
     saved_path = folder / CONFIG
     worked = (
         (folder / COMPLETE).is_file()
-        or any(folder.glob("subperiod_state.json"))
-        or any(folder.glob("*/subperiod_state.json"))
+        or (folder / "subperiod_state.json").is_file()
+        or any(folder.glob("*/subperiod_state.json"))  # a diagnosis's identifications
     )
     if not saved_path.is_file() or not worked:  # a run refused before any work leaves nothing to resume
         return

@@ -13,7 +13,15 @@ import torch
 from omegaconf import DictConfig
 
 from pidyn.notes import note
-from pidyn.reporting import diverged, param_table, plot_convergence, plot_response, write_json, write_yaml
+from pidyn.reporting import (
+    diverged,
+    param_table,
+    plot_convergence,
+    plot_response,
+    write_json,
+    write_text_atomic,
+    write_yaml,
+)
 from pidyn.runs.build import Run
 from pidyn.runs.metrics import channel_nrmse, record_noise, relative_errors, sim_nrmse_x
 from pidyn.simulate import simulate_response
@@ -59,8 +67,9 @@ def write_report(
         }
     metrics["wall_seconds"] = time.perf_counter() - t_wall
     write_json(run_dir / "windows.json", {"windows": [r.__dict__ for r in results]})
-    _assess(run, final, refined, sim, metrics)
-    _adequacy(run, final, sim, metrics)
+    adequacy = _adequacy(run, final, sim)
+    _assess(run, final, refined, sim, metrics, adequacy["adequate"])
+    _record_adequacy(adequacy, metrics)
     if hasattr(system, "storey_equations"):
         _building(run, final, truths, refined, metrics)
     _figures(run, results, truths, baselines, refined, sim, metrics)
@@ -122,19 +131,26 @@ def _metrics(
     }
 
 
-def _adequacy(run: Run, final: dict[str, float], sim: dict[str, np.ndarray], metrics: dict) -> None:
-    """Whether the identified model describes the record (``pidyn.adequacy``): ``adequate`` and
-    ``adequacy`` in metrics.json, a note and a warning when it does not, the modes marked."""
-    from pidyn.adequacy import check_adequacy, describe, rk4_stability
+def _adequacy(run: Run, final: dict[str, float], sim: dict[str, np.ndarray]) -> dict[str, Any]:
+    """Whether the identified model describes the record (``pidyn.adequacy``), on the fitting part
+    and on a held-out part, with the integrator's stability at the record's step."""
+    from pidyn.adequacy import check_adequacy, rk4_stability
 
     record = run.record
     split = (record.meta or {}).get("split") if run.hold_out else None
     fit = split["fit"] if split else (float(record.t[0]), float(record.t[-1]))
     stability = rk4_stability(run.system, final, record.dt)
-    result = check_adequacy(sim, record, fit, split["heldout"] if split else None, stability=stability)
+    return check_adequacy(sim, record, fit, split["heldout"] if split else None, stability=stability)
+
+
+def _record_adequacy(result: dict[str, Any], metrics: dict) -> None:
+    """``adequate`` and ``adequacy`` in metrics.json, the held-out scores beside the prediction that
+    knows nothing, and a note when the model does not describe the record."""
+    from pidyn.adequacy import describe
+
     metrics["adequate"] = result["adequate"]
     metrics["adequacy"] = result
-    if "heldout" in metrics:  # the held-out scores beside the prediction that knows nothing
+    if "heldout" in metrics:
         metrics["heldout"]["trivial"] = result["trivial"]
         metrics["heldout"]["trivial_nrmse"] = {
             k: r["trivial_heldout_nrmse"]
@@ -143,23 +159,7 @@ def _adequacy(run: Run, final: dict[str, float], sim: dict[str, np.ndarray], met
         }
         metrics["heldout"]["beats_trivial"] = result["predicts"]
     if not result["adequate"]:
-        text = note("model_inadequate", describe(result))
-        metrics["notes"].append(text)
-        for m in metrics.get("modal") or []:
-            m["describes_structure"] = False
-        _mark_modal(run.run_dir)
-
-
-def _mark_modal(run_dir: Path) -> None:
-    """modal.json of a rejected model says so: its periods and damping are the fit's, not the structure's."""
-    import json
-
-    path = run_dir / "modal.json"
-    if path.is_file():
-        data = json.loads(path.read_text())
-        data["adequate"] = False
-        data["warning"] = "the identified model does not describe the record (metrics.json adequacy)"
-        write_json(path, data)
+        metrics["notes"].append(note("model_inadequate", describe(result)))
 
 
 def write_run_report(run_dir: Path, equation: str, metrics: dict) -> None:
@@ -186,8 +186,6 @@ def write_run_report(run_dir: Path, equation: str, metrics: dict) -> None:
     lines += ["", f"Knowing nothing: {ad['trivial']}."]
     if metrics.get("notes"):
         lines += ["", "## Notes", ""] + [f"- {n}" for n in metrics["notes"]]
-    from pidyn.reporting import write_text_atomic
-
     write_text_atomic(run_dir / "report.md", "\n".join(lines) + "\n")
 
 
@@ -210,12 +208,12 @@ def _building(run: Run, final: dict[str, float], truths: dict, refined: Any, met
 
 
 def _assess(
-    run: Run, final: dict[str, float], refined: Any, sim: dict[str, np.ndarray], metrics: dict
+    run: Run, final: dict[str, float], refined: Any, sim: dict[str, np.ndarray], metrics: dict, adequate: bool
 ) -> None:
     """modal.json and, on a record with a held-out part, how the model predicts it (``pidyn.assessment``)."""
     from pidyn.assessment import assess
 
-    metrics.update(assess(run.system, run.record, final, refined, sim, run.hold_out, run.run_dir))
+    metrics.update(assess(run.system, run.record, final, refined, sim, run.hold_out, run.run_dir, adequate))
 
 
 def _divergence_note(sim: dict[str, np.ndarray]) -> list[str]:

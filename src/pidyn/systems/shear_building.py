@@ -33,8 +33,8 @@ from typing import Any
 import numpy as np
 import torch
 
+import pidyn.systems.shear_rate as shear_rate
 from pidyn.params import ParamSpec, positive
-from pidyn.systems import shear_rate
 from pidyn.systems.base import ExcitationKind, Kinematics, StructuralSystem, merge_specs, stack_last
 from pidyn.systems.terms import TERMS, BoucWenHysteresis, ForceTerm, LinearStiffness, ViscousDamping
 
