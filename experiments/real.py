@@ -30,6 +30,8 @@ from launch import run_logged
 from real_final import final_lines
 from real_modes import two_modes_lines
 
+from pidyn.assessment import reported_damping
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"
 RECORDS = ROOT / "data" / "painter_street"
@@ -179,8 +181,9 @@ def identification_rows(folder: Path) -> list[dict]:
                 "period_s": mode.get("period_s"),
                 "period_ci95": mode.get("period_ci95"),
                 "period_profile_ci95": mode.get("period_profile_ci95"),
-                "damping": mode.get("damping_ratio"),
-                "damping_ci95": mode.get("damping_ci95"),
+                "damping": reported_damping(mode)[0],
+                "damping_ci95": reported_damping(mode)[1],
+                "damping_note": mode.get("not_a_property"),
                 "heldout_nrmse_a": held.get("mean_nrmse_a"),
                 "fit_nrmse_a": held.get("fit_mean_nrmse_a"),
                 "wall_s": metrics.get("wall_seconds"),

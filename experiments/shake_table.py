@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 from launch import run_logged
 
+from pidyn.assessment import reported_damping
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"
 MODELS_DIR = ROOT / "data" / "mini_shake_table"
@@ -248,8 +250,8 @@ def run_rows(folder: Path, model: str) -> list[dict]:
                 "run": label,
                 "frequency_hz": fm.get("frequency_hz"),
                 "frequency_ci95": fm.get("frequency_ci95"),
-                "damping_ratio": fm.get("damping_ratio"),
-                "damping_ci95": fm.get("damping_ci95"),
+                "damping_ratio": reported_damping(fm)[0],
+                "damping_ci95": reported_damping(fm)[1],
                 "frequencies_hz": [md["frequency_hz"] for md in modes],
                 "heldout": held,
                 "heldout_mean": (m.get("heldout") or {}).get("mean_nrmse_a"),

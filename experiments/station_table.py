@@ -19,6 +19,8 @@ from pathlib import Path
 
 import yaml
 
+from pidyn.assessment import reported_damping
+
 
 def _load(path: Path) -> dict | None:
     return json.loads(path.read_text()) if path.is_file() else None
@@ -55,8 +57,8 @@ def rows(sweep: Path) -> list[dict]:
             period_s=mode.get("period_s"),
             period_ci95=mode.get("period_ci95"),
             period_profile_ci95=mode.get("period_profile_ci95"),
-            damping=mode.get("damping_ratio"),
-            damping_ci95=mode.get("damping_ci95"),
+            damping=reported_damping(mode)[0],
+            damping_ci95=reported_damping(mode)[1],
             reasons="; ".join(ad["reasons"]),
         )
         out.append(row)

@@ -20,7 +20,7 @@ import contextlib
 import json
 import shutil
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -175,7 +175,7 @@ def _user_errors():
 
 
 def identify(
-    record: Record | None = None,
+    record: Record | Sequence[Record] | None = None,
     system: str = "duffing",
     *,
     init: dict[str, float] | None = None,
@@ -184,7 +184,8 @@ def identify(
     **options: Any,
 ) -> Result:
     """Identify ``system`` (a name from ``conf/system``) from ``record`` (default: the
-    configured simulated record) with PIDynNet and the refinement stage.
+    configured simulated record; a list: several records of one structure, its parameters shared
+    and each record's initial state its own) with PIDynNet and the refinement stage.
 
     ``init``: starting guesses (``{"k3": 50.0}``). ``options``: config settings by key, ``__``
     for a dot (``seed=1``, ``refine="none"``, ``baselines="none"``,
@@ -192,6 +193,11 @@ def identify(
     """
     from pidyn.tasks.train import identify_run as run_identification
 
+    if record is not None and not isinstance(record, Record):
+        from pidyn.data.multi import concatenate
+
+        with _user_errors():
+            record = concatenate(list(record))
     groups, values = _split_options(options)
     values.update({f"system.params.{k}.init": float(v) for k, v in (init or {}).items()})
     values.setdefault("trainer.enable_progress_bar", False)
@@ -229,9 +235,52 @@ class ResponsePrediction:
         return pd.DataFrame(cols)
 
 
+@dataclass
+class RecordPrediction:
+    """A measured record the identification never saw, predicted by the identified model simulated
+    from rest under the record's own inputs: ``scores`` is what ``predict.py`` writes to
+    prediction.json (NRMSE per channel, their mean, knowing nothing's beside it)."""
+
+    name: str
+    t: np.ndarray
+    measured: dict[str, np.ndarray]
+    predicted: dict[str, np.ndarray]
+    scores: dict[str, Any]
+
+    @property
+    def mean_nrmse_a(self) -> float | None:
+        return self.scores["mean_nrmse_a"]
+
+    def to_frame(self) -> pd.DataFrame:
+        cols: dict[str, np.ndarray] = {"t": self.t}
+        for k in self.measured:
+            cols[f"{k}_measured"] = self.measured[k]
+            cols[f"{k}_predicted"] = self.predicted[k]
+        return pd.DataFrame(cols)
+
+
+def _predict_record(result: Result, record: Record) -> RecordPrediction:
+    from pidyn.assessment import measured_convention
+    from pidyn.runs.prediction import Identified, channel_names, predict_record
+
+    with _user_errors():
+        run = Identified.load(result.run_dir)
+        system, rec, values = run.for_record(record=record)
+        scores, sim = predict_record(run, rec, system, values)
+    measured, predicted = {}, {}
+    for kind, floors in rec.sensors().items():
+        meas = measured_convention({kind: getattr(rec, kind)}, rec, kind)
+        pred = measured_convention(sim, rec, kind)
+        names = channel_names(rec, [f"{kind}{fl}" for fl in floors])
+        for fl in floors:
+            measured[names[f"{kind}{fl}"]] = meas[:, fl - 1]
+            predicted[names[f"{kind}{fl}"]] = pred[:, fl - 1]
+    return RecordPrediction(rec.name, rec.t, measured, predicted, scores)
+
+
 def predict(
     result: Result,
-    excitation: str | Path,
+    excitation: str | Path | Record,
     *,
     scale: float = 1.0,
     stretch: float = 1.0,
@@ -240,9 +289,16 @@ def predict(
     start: float = 0.0,
     **settings: Any,
 ) -> ResponsePrediction:
-    """Predict the response of the identified structure to ``excitation`` (a shipped record's
-    name or an AT2 path), as in the paper's Eq. 14. ``settings``: fields of ``PredictSettings``
+    """Predict the response of the identified structure to ``excitation``.
+
+    A measured ``Record`` (CSMIP, IMU, CSV, simulated): the model simulated from rest under the
+    record's own inputs, every measured channel scored (a ``RecordPrediction``, as ``predict.py``).
+    A shipped record's name or an AT2 path: as in the paper's Eq. 14, PIDynNet's networks
+    fine-tuned on the physics alone beside the model simulated (a ``ResponsePrediction``; needs
+    the networks of a run of this session). ``settings``: fields of ``PredictSettings``
     (``iterations``, ``lbfgs_steps``, ``split_tol``, ``min_window``, ``start_from``)."""
+    if isinstance(excitation, Record):
+        return _predict_record(result, excitation)
     from pidyn.excitation.ground_motion import prepare
     from pidyn.models.predict import PredictSettings, predict_response
     from pidyn.simulate import simulate

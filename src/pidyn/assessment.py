@@ -68,6 +68,18 @@ def assess(
         out["record_meta"] = {k: meta.get(k) for k in RECORD_META}
     elif "alignment" in meta:  # an IMU set
         out["record_meta"] = {k: meta.get(k) for k in IMU_META}
+    # what the record measures: a prediction of another record must measure the same
+    out.setdefault("record_meta", {}).update({"sensors": record.sensors(), "inputs": record.inputs})
+    if meta.get("pieces"):  # several records of the structure (pidyn.data.multi)
+        out.setdefault("record_meta", {})["records"] = [
+            {
+                "name": q["name"],
+                "t0": float(record.t[q["i0"]]),
+                "t1": float(record.t[q["i1"] - 1]),
+                **q["meta"],
+            }
+            for q in meta["pieces"]
+        ]
     split = meta.get("split") if hold_out else None
     if split:
         out["heldout"] = heldout_scores(sim, record, split["heldout"], split["fit"])
@@ -80,6 +92,38 @@ def assess(
 
 
 NOT_ADEQUATE = "the identified model does not describe the record (metrics.json adequacy)"
+
+#: a damping ratio outside this range is the fit's, not a structure's (a bridge, a building)
+DAMPING_RANGE = (0.005, 0.30)
+#: nor is one whose 95 % interval spans more than this factor
+DAMPING_SPAN = 3.0
+
+
+def judge_damping(mode: dict) -> None:
+    """Mark a mode whose damping no structure has, or that the record does not determine, as the
+    fit's: ``describes_structure: false`` with the reason in ``not_a_property``."""
+    zeta, ci = mode.get("damping_ratio"), mode.get("damping_ci95") or [None, None]
+    lo, hi = DAMPING_RANGE
+    why = None
+    if zeta is None or not np.isfinite(zeta):
+        why = "no damping ratio"
+    elif not lo <= zeta <= hi:
+        why = f"damping ratio {100 * zeta:.3g} % outside {100 * lo:g}-{100 * hi:g} %"
+    elif any(v is None or not np.isfinite(v) for v in ci):
+        why = "no interval of the damping ratio"
+    elif ci[0] <= 0 or ci[1] / ci[0] > DAMPING_SPAN:
+        why = f"damping interval [{100 * ci[0]:.3g}, {100 * ci[1]:.3g}] % spans more than a factor {DAMPING_SPAN:g}"
+    if why is not None:
+        mode["describes_structure"] = False
+        mode["not_a_property"] = why
+
+
+def reported_damping(mode: dict | None) -> tuple[float | None, list | None]:
+    """(damping ratio, its interval) as a table reports them: none for a mode that does not
+    describe the structure (``judge_damping``, or a model the data reject)."""
+    if not mode or mode.get("describes_structure") is False:
+        return None, None
+    return mode.get("damping_ratio"), mode.get("damping_ci95")
 
 
 def modal_summary(system, values: dict[str, float], refined: Any = None) -> list[dict] | None:
@@ -96,6 +140,8 @@ def modal_summary(system, values: dict[str, float], refined: Any = None) -> list
     profile = getattr(refined, "period_profile", None) or {}
     if profile and len(modes) == 1:  # the period's profile-likelihood set (``pidyn.refine.period_profile``)
         modes[0]["period_profile_ci95"] = list(profile["ci95"])
+    for m in modes:
+        judge_damping(m)
     if getattr(system, "modal_coordinates", False):  # a modes model's own coordinates: no shapes to read
         for m in modes:
             m.pop("mode_shape", None)

@@ -1,8 +1,8 @@
-"""Console entry points ``pidyn-train``, ``pidyn-diagnose``, ``pidyn-generalize``.
+"""Console entry points ``pidyn-train``, ``pidyn-diagnose``, ``pidyn-generalize``, ``pidyn-predict``.
 
 The configs ship inside the package (``pidyn/conf``, Hydra's ``pkg://pidyn.conf``), so the
-commands work from any directory and from an installed wheel; ``train.py``, ``diagnose.py`` and
-``generalize.py`` at the repository root are shims to these functions.
+commands work from any directory and from an installed wheel; ``train.py``, ``diagnose.py``,
+``generalize.py`` and ``predict.py`` at the repository root are shims to these functions.
 """
 
 from __future__ import annotations
@@ -125,6 +125,14 @@ def _diagnose(cfg: DictConfig) -> float | None:
     return result["gain"]["extended"] if result["gain"]["extended"] is not None else result["gain"]["nominal"]
 
 
+@hydra.main(version_base="1.3", config_path="conf", config_name="predict")
+def _predict(cfg: DictConfig) -> float | None:
+    from pidyn.tasks.predict import predict
+
+    out = _guarded(predict, cfg) or {}
+    return out.get("mean_nrmse_a")
+
+
 def train_main() -> None:
     """``pidyn-train`` / ``python train.py``."""
     _config_errors_exit_2(_train)
@@ -138,3 +146,8 @@ def diagnose_main() -> None:
 def generalize_main() -> None:
     """``pidyn-generalize`` / ``python generalize.py``."""
     _config_errors_exit_2(_generalize)
+
+
+def predict_main() -> None:
+    """``pidyn-predict`` / ``python predict.py``."""
+    _config_errors_exit_2(_predict)

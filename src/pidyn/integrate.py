@@ -17,6 +17,7 @@ stepped by the same scheme's one-sample map (``pidyn.integrate_linear``).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -32,6 +33,17 @@ HOLDS = ("linear", "bandlimited")
 def input_hold(record: Any) -> str:
     """How a record's excitation is read between samples: ``meta["input_hold"]``, else linear."""
     return str(record.meta.get("input_hold", "linear"))
+
+
+def piece_starts(record: Any, i0: int = 0, i1: int | None = None) -> list[int]:
+    """Sample indices, relative to ``i0``, in (i0, i1) where another record of a record made of
+    several begins (``meta["pieces"]``, see ``pidyn.data.multi``): a free run restarts there."""
+    out = []
+    for piece in (getattr(record, "meta", None) or {}).get("pieces") or []:
+        s = int(piece["i0"])
+        if s > i0 and (i1 is None or s < i1):
+            out.append(s - i0)
+    return out
 
 
 def stage_excitation(f: np.ndarray, substeps: int, hold: str = "linear") -> np.ndarray | None:
@@ -90,6 +102,7 @@ def rk4(
     substeps: int = 4,
     t0: np.ndarray | float = 0.0,
     stages: np.ndarray | None = None,
+    restarts: Sequence[int] = (),
 ) -> tuple[Any, Any]:
     """Integrate ``B`` trajectories over the shared local grid ``t`` (N,).
 
@@ -101,9 +114,14 @@ def rk4(
         t0: absolute start time of each trajectory (time-dependent terms see t0 + t - t[0]).
         stages: the excitation at the stage times (``stage_excitation``; (N-1, 2*substeps+1)
             followed by f's trailing axes), instead of linear between samples.
+        restarts: sample indices (0 < i < N) where another record begins: the state there is
+            rest, not the previous sample's state stepped on (``pidyn.data.multi``).
     Returns:
         states (N, B, n_state) and their rates (N, B, n_state), dual when any input is.
     """
+    cuts = sorted({int(i) for i in restarts if 0 < int(i) < len(t)})
+    if cuts:
+        return _pieces(system, p, t, f, y0, substeps, t0, stages, cuts)
     N = len(t)
     D = _n_dir(p, y0)
     tt = (
@@ -128,6 +146,41 @@ def rk4(
     F = ff if per_trajectory else np.broadcast_to(ff[:, None], (N, shape[0]) + ff.shape[1:])
     R = system.state_rate(T, Y, p, F)
     return Y, R
+
+
+def _pieces(
+    system: StructuralSystem,
+    p: dict[str, Any],
+    t: np.ndarray,
+    f: np.ndarray,
+    y0: Any,
+    substeps: int,
+    t0: np.ndarray | float,
+    stages: np.ndarray | None,
+    cuts: list[int],
+) -> tuple[Any, Any]:
+    """``rk4`` record by record: the first from ``y0``, every later one from rest."""
+    t = np.asarray(t, float)
+    edges = [0, *cuts, len(t)]
+    rest = Dual(np.zeros_like(y0.v), np.zeros_like(y0.d)) if isinstance(y0, Dual) else np.zeros(np.shape(y0))
+    Ys, Rs = [], []
+    for k, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
+        start = np.asarray(t0, float) + (t[a] - t[0])
+        piece_stages = None if stages is None else stages[a : max(a, b - 1)]
+        Y, R = rk4(
+            system, p, t[a:b], np.asarray(f)[a:b], y0 if k == 0 else rest, substeps, start, piece_stages
+        )
+        Ys.append(Y)
+        Rs.append(R)
+    if any(isinstance(Y, Dual) for Y in Ys):
+        D = _n_dir(p, y0)
+        as_dual = [Y if isinstance(Y, Dual) else Dual(Y, np.zeros(np.shape(Y) + (D,))) for Y in Ys]
+        rates = [R if isinstance(R, Dual) else Dual(R, np.zeros(np.shape(R) + (D,))) for R in Rs]
+        return (
+            Dual(np.concatenate([Y.v for Y in as_dual]), np.concatenate([Y.d for Y in as_dual])),
+            Dual(np.concatenate([R.v for R in rates]), np.concatenate([R.d for R in rates])),
+        )
+    return np.concatenate(Ys), np.concatenate(Rs)
 
 
 def _steps(

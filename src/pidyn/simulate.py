@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.integrate import odeint, solve_ivp
 
-from pidyn.integrate import input_hold, rk4, stage_excitation
+from pidyn.integrate import input_hold, piece_starts, rk4, stage_excitation
 from pidyn.systems.base import StructuralSystem
 
 if TYPE_CHECKING:
@@ -142,14 +142,18 @@ def simulate_states(
     state0: np.ndarray | None = None,
     substeps: int = 4,
     hold: str = "linear",
+    restarts: tuple[int, ...] | list[int] = (),
 ) -> tuple[np.ndarray, np.ndarray]:
     """One model's states Y (N, n_state) and their rates R (N, n_state) under the excitation ``f``
     (read between samples by ``hold``, see ``pidyn.integrate``) from ``state0`` (the full state,
-    default rest); a model that blows up gives NaNs."""
+    default rest), from rest again at each of ``restarts`` (where another record begins); a model
+    that blows up gives NaNs."""
     y0 = np.zeros(system.n_state) if state0 is None else np.asarray(state0, float)
     stages = stage_excitation(f, substeps, hold)
     with np.errstate(all="ignore"):
-        Y, R = rk4(system, dict(values), t, f, y0[None, :], substeps=substeps, stages=stages)
+        Y, R = rk4(
+            system, dict(values), t, f, y0[None, :], substeps=substeps, stages=stages, restarts=restarts
+        )
     return Y[:, 0], R[:, 0]
 
 
@@ -167,7 +171,9 @@ def simulate_response(
     ``state0`` (the full state, default rest), the excitation read between samples as the
     record says (``meta["input_hold"]``, default linear)."""
     n = system.n_dof
-    Y, R = simulate_states(system, values, record.t, record.f, state0, substeps, input_hold(record))
+    Y, R = simulate_states(
+        system, values, record.t, record.f, state0, substeps, input_hold(record), piece_starts(record)
+    )
     with np.errstate(all="ignore"):
         a = system.acceleration_output(R[:, n : 2 * n], np.asarray(record.f, float), dict(values))
     return {"x": Y[:, :n], "v": Y[:, n : 2 * n], "z": Y[:, 2 * n :], "a": a}

@@ -84,6 +84,7 @@ class SubperiodDataModule(L.LightningDataModule):
             t_end,
             accel_signal=accel_signal,
             cover_tail=cover_tail,
+            pieces=_piece_spans(record),
         )
         self.active: Window = self.windows[0]
         self.inner_steps, self.n_batches, self.physics = 10, 1, True
@@ -100,3 +101,11 @@ class SubperiodDataModule(L.LightningDataModule):
             self.active, self.batch_size, self.inner_steps, self.n_batches, seed, self.physics
         )
         return DataLoader(ds, batch_size=None, num_workers=0)
+
+
+def _piece_spans(record: Record) -> list[tuple[float, float]] | None:
+    """The time spans of the records a record is made of (``pidyn.data.multi``); None for one."""
+    parts = (record.meta or {}).get("pieces")
+    if not parts:
+        return None
+    return [(float(record.t[p["i0"]]), float(record.t[p["i1"] - 1])) for p in parts]

@@ -380,9 +380,11 @@ def align_floors(
 
 
 def checked_run(
-    path: str | Path, run: str, n_storeys: int | None, align: str, fit_share: float | None
+    path: str | Path, run: str | None, n_storeys: int | None, align: str, fit_share: float | None
 ) -> list[tuple[str, Path]]:
     """The run's files, one per floor, after the settings and the storey count are checked."""
+    if run is None:
+        raise ImuFormatError("no run: set data.run=LABEL (one run) or 'data.runs=[A,B]' (several)")
     if align not in ("clock", "lag"):
         raise ImuFormatError(f"data.align must be 'clock' or 'lag', got '{align}'")
     if fit_share is not None and not 0.1 <= fit_share <= 0.95:
@@ -414,7 +416,7 @@ def _meta(path, run: str, files, imus, report, align: str, notes: list[str], pre
 
 def xsens_record(
     path: str | Path,
-    run: str,
+    run: str | None,
     n_storeys: int | None = None,
     dt: float | None = None,
     align: str = "lag",

@@ -17,7 +17,7 @@ from pidyn.data.csv_table import (
     read_table,
     uniform_time,
 )
-from pidyn.data.errors import DataError
+from pidyn.data.errors import DataError, needed
 from pidyn.excitation.ground_motion import GroundMotion, prepare
 from pidyn.simulate import Trajectory, add_noise, simulate
 from pidyn.systems.base import StructuralSystem
@@ -328,7 +328,7 @@ def _noise_levels(noise: float | dict[str, float] | None, channels: Sequence[str
 
 
 def from_csv(
-    path: str | Path,
+    path: str | Path | None,
     time_col: str = "t",
     excitation: str | None = None,
     units: dict[str, float] | None = None,
@@ -351,7 +351,7 @@ def from_csv(
     simulated from a piecewise-linear input) or ``bandlimited`` (a measured input, low-pass
     filtered before sampling; see ``pidyn.integrate``).
     """
-    path = Path(path)
+    path = Path(needed(path, "no file: set data.path=FILE.csv (one record) or 'data.paths=[A.csv,B.csv]'"))
     checked_hold(input_hold, f"{path}: input_hold")
     df = read_table(path, units)
     if at2 is not None:

@@ -106,7 +106,7 @@ def _station_of(archive: Archive) -> str | None:
 
 
 def csmip_record(
-    path: str | Path,
+    path: str | Path | None,
     station: str | None = None,
     direction: str = "transverse",
     inputs: Sequence[int] | None = None,
@@ -175,7 +175,7 @@ def _unmeasured_columns(a: np.ndarray, system) -> np.ndarray:
 
 
 def _channels_used(
-    path: str | Path,
+    path: str | Path | None,
     station: str | None,
     direction: str,
     inputs: Sequence[int] | None,
@@ -185,6 +185,10 @@ def _channels_used(
 ) -> tuple[Any, str, list[int], list[int], list[str]]:
     """The archive, its station and the input and output channels used (at most ``limit``
     outputs), with notes on what was left out."""
+    if path is None:
+        raise DataError(
+            "no archive: set data.path=FILE.zip (one event) or 'data.paths=[A.zip,B.zip]' (several)"
+        )
     if on_missing not in ("error", "drop"):
         raise DataError(f"data.on_missing must be 'error' or 'drop', got '{on_missing}'")
     archive = read_archive(path)

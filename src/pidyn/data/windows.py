@@ -28,6 +28,7 @@ class Window:
     f_pool: torch.Tensor
     peak_x: float = 0.0
     informative: bool = True
+    piece: int = 0  # which record of several (``pidyn.data.multi``) the window is cut from
     # excitation transform: q'' = s(t) (s = ag, or -u/m), q(t0) = q'(t0) = 0; None if unused
     q_data: torch.Tensor | None = None
     qd_data: torch.Tensor | None = None
@@ -197,8 +198,14 @@ def make_windows(
     dtype: torch.dtype | None = None,
     accel_signal: np.ndarray | None = None,
     cover_tail: bool = False,
+    pieces: list[tuple[float, float]] | None = None,
 ) -> list[Window]:
     """Cut a record into equal windows of ``length`` seconds.
+
+    ``pieces``: the time spans of the records a record is made of (``pidyn.data.multi``): each is
+    cut on its own, so that no window spans two records, and the windows take turns between
+    the records (the first of each, then the second of each, ...) so that a budget of windows
+    sees every record.
 
     ``accel_signal`` (the excitation as an acceleration: ag, or -u/m) switches on the
     excitation transform: each window carries q, q' with q'' = accel_signal, so that the
@@ -217,13 +224,40 @@ def make_windows(
     ref = next(c for c in (x, v, a) if c is not None)
     t_start = t[0] if t_start is None else t_start
     t_end = t[-1] if t_end is None else min(t_end, t[-1])
-    bounds = window_bounds(t, length, t_start, t_end, cover_tail)
+    bounds = [(t0, t1, 0) for t0, t1 in window_bounds(t, length, t_start, t_end, cover_tail)]
+    if pieces and len(pieces) > 1:
+        bounds = _taking_turns(t, length, t_start, t_end, cover_tail, pieces)
     record_peak = float(np.nanmax(np.abs(ref[(t >= t_start) & (t <= t_end)])))
     series = _Series(t, np.asarray(f, float), x, v, a, ref, accel_signal)
-    return [
-        _window(i, t0, t1, series, pool_size, min_peak_fraction * record_peak, dtype)
-        for i, (t0, t1) in enumerate(bounds)
-    ]
+    out = []
+    for i, (t0, t1, k) in enumerate(bounds):
+        w = _window(i, t0, t1, series, pool_size, min_peak_fraction * record_peak, dtype)
+        w.piece = k
+        out.append(w)
+    return out
+
+
+def _taking_turns(
+    t: np.ndarray,
+    length: float,
+    t_start: float,
+    t_end: float,
+    cover_tail: bool,
+    pieces: list[tuple[float, float]],
+) -> list[tuple[float, float, int]]:
+    """Every record's windows within [t_start, t_end], in turns: (t0, t1, record)."""
+    per = []
+    for k, (p0, p1) in enumerate(pieces):
+        lo, hi = max(p0, t_start), min(p1, t_end)
+        per.append(
+            [(a, b, k) for a, b in window_bounds(t, length, lo, hi, cover_tail)] if hi - lo >= length else []
+        )
+    if not any(per):
+        raise ValueError(f"no record holds a window of {length:g} s within [{t_start:g}, {t_end:g}] s")
+    turns = []
+    for j in range(max(len(p) for p in per)):
+        turns += [p[j] for p in per if j < len(p)]
+    return turns
 
 
 @dataclass

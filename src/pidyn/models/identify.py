@@ -220,6 +220,8 @@ class SubperiodIdentifier:
                 continue
             t_start = time.perf_counter()
             it0 = int(self.module.iteration)
+            if self.results and self.dm.windows[self.results[-1].index].piece != w.piece:
+                z_end = None  # another record: its latent state is not the last window's
             net.enter_window(w)
             self._pretrain(w, first_done, z_end)
             notes = self._starts(w, first_done, z_end)

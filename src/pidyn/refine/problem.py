@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pidyn.autodiff import Dual
-from pidyn.integrate import input_hold, rk4, stage_excitation
+from pidyn.integrate import input_hold, piece_starts, rk4, stage_excitation
 from pidyn.params import ParamSpec, fixed_values, from_theta, to_theta, trainable_specs
 from pidyn.reporting import BLOWN_UP, diverged
 from pidyn.systems.base import StructuralSystem
@@ -67,10 +67,16 @@ def record_channels(record, n_dof: int) -> list[Channel]:
 
 
 def segment_bounds(
-    t: np.ndarray, length: float | None, t_start: float | None = None, t_end: float | None = None
+    t: np.ndarray,
+    length: float | None,
+    t_start: float | None = None,
+    t_end: float | None = None,
+    breaks: tuple[int, ...] | list[int] = (),
 ) -> np.ndarray:
     """Sample indices b_0 < ... < b_S of segments of about ``length`` s over [t_start, t_end]
-    (None: one segment). A last piece shorter than half a segment joins its neighbour."""
+    (None: one segment). A last piece shorter than half a segment joins its neighbour.
+    ``breaks``: sample indices where another record begins; with ``length`` every record is cut
+    on its own, so that a segment never spans two records."""
     i0 = 0 if t_start is None else int(np.searchsorted(t, t_start - 1e-9))
     i1 = len(t) - 1 if t_end is None else int(np.searchsorted(t, t_end + 1e-9)) - 1
     if i1 - i0 < 2:
@@ -78,10 +84,14 @@ def segment_bounds(
     if length is None:
         return np.array([i0, i1])
     step = max(2, int(round(length / float(t[1] - t[0]))))
-    b = list(range(i0, i1, step))
-    if i1 - b[-1] < step // 2 and len(b) > 1:
-        b.pop()
-    return np.array(b + [i1])
+    edges = [i0, *sorted(b for b in breaks if i0 + 2 < b < i1 - 2), i1]
+    out: list[int] = []
+    for a, z in zip(edges[:-1], edges[1:]):
+        b = list(range(a, z, step))
+        if z - b[-1] < step // 2 and len(b) > 1:
+            b.pop()
+        out += b
+    return np.array(out + [i1])
 
 
 #: a residual (noise units) is capped here: a blown-up trial step costs a large finite amount,
@@ -112,9 +122,13 @@ class ShootingProblem:
         state_scale: np.ndarray | None = None,
         fixed: dict[str, float] | None = None,
         hold: str = "linear",
+        restarts: tuple[int, ...] | list[int] = (),
     ) -> None:
         """``fixed``: values of the known (non-trainable) parameters, default their specs' init;
-        ``hold``: how the excitation is read between samples (``pidyn.integrate``)."""
+        ``hold``: how the excitation is read between samples (``pidyn.integrate``); ``restarts``:
+        sample indices where another record begins (``pidyn.data.multi``): a segment boundary
+        there has its own free state and no continuity defect, a single segment restarts from
+        rest there."""
         self.system = system
         self.t, self.f = np.asarray(t, float), np.asarray(f, float)
         self.channels = channels
@@ -129,6 +143,12 @@ class ShootingProblem:
         self.n_theta = len(self.specs)
         self.ns = system.n_state
         self.S = len(self.bounds) - 1
+        self.restarts = sorted({int(r) for r in restarts if self.bounds[0] < int(r) < self.bounds[-1]})
+        inner = set(int(b) for b in self.bounds[1:-1])
+        if self.S > 1 and not set(self.restarts) <= inner:
+            raise ValueError("segments must end where another record begins (segment_bounds(..., breaks=))")
+        #: the continuity defects kept: between segments of one record
+        self.link = np.array([int(b) not in set(self.restarts) for b in self.bounds[1:-1]], bool)
         self.fixed_state0 = None if fixed_state0 is None else np.asarray(fixed_state0, float).reshape(self.ns)
         self.state_scale = np.ones(self.ns) if state_scale is None else np.asarray(state_scale, float)
         lengths = np.diff(self.bounds)
@@ -176,6 +196,7 @@ class ShootingProblem:
             fixed_state0=np.zeros(system.n_state),
             fixed=fixed,
             hold=input_hold(record),
+            restarts=piece_starts(record),
         )
 
     def pack(self, values: dict[str, float], states: np.ndarray) -> np.ndarray:
@@ -220,8 +241,17 @@ class ShootingProblem:
             y0 = Dual(states, d)
         p = self._params(theta, dual)
         with np.errstate(all="ignore"):
+            inner = [r - int(self.bounds[0]) for r in self.restarts] if self.S == 1 else []
             Y, R = rk4(
-                self.system, p, self.t_local, self.F, y0, self.substeps, t0=self.t0, stages=self.stages
+                self.system,
+                p,
+                self.t_local,
+                self.F,
+                y0,
+                self.substeps,
+                t0=self.t0,
+                stages=self.stages,
+                restarts=inner,
             )
             return Y, R, self._accelerations(R, p, self.F)
 
@@ -260,7 +290,7 @@ class ShootingProblem:
         _, states = self.unpack(u)
         yv = Y.v if isinstance(Y, Dual) else Y
         end = yv[self.ends[:-1], np.arange(self.S - 1)]  # (S-1, ns)
-        return _bounded(((states[1:] - end) / self.state_scale).ravel())
+        return _bounded(((states[1:] - end) / self.state_scale)[self.link].ravel())
 
     def _state_cols(self, s: np.ndarray) -> np.ndarray:
         """Columns of segment s's initial state in u (-1 where it is fixed)."""
@@ -287,10 +317,10 @@ class ShootingProblem:
         J[rows[:, None], cols[ok]] = G[ok, nt:]
         c = self._defects(u, Y)
         C = np.zeros((len(c), n_u))
-        if self.S > 1:
-            s = np.arange(self.S - 1)
-            end_d = Y.d[self.ends[:-1], s] / self.state_scale[None, :, None]  # (S-1, ns, D)
-            rr = s[:, None] * ns + np.arange(ns)[None, :]  # defect rows
+        if self.S > 1 and self.link.any():
+            s = np.nonzero(self.link)[0]
+            end_d = Y.d[self.ends[s], s] / self.state_scale[None, :, None]  # (links, ns, D)
+            rr = np.arange(len(s))[:, None] * ns + np.arange(ns)[None, :]  # defect rows
             C[rr.ravel(), :nt] = -end_d[..., :nt].reshape(-1, nt)
             own = self._state_cols(s)
             ok = own[:, 0] >= 0
@@ -333,7 +363,15 @@ class ShootingProblem:
         with np.errstate(all="ignore"):
             st = None if self.stages is None else self.stages[:, :, 0]
             Y, R = rk4(
-                self.system, p, self.t_local, self.F[:, 0], y0, self.substeps, t0=float(self.t0[0]), stages=st
+                self.system,
+                p,
+                self.t_local,
+                self.F[:, 0],
+                y0,
+                self.substeps,
+                t0=float(self.t0[0]),
+                stages=st,
+                restarts=[r - int(self.bounds[0]) for r in self.restarts],
             )
             A = self._accelerations(
                 R, p, np.broadcast_to(self.F[:, :1], (self.F.shape[0], B) + self.F.shape[2:])
@@ -377,6 +415,7 @@ class ShootingProblem:
                 self.substeps,
                 t0=float(self.t[i0]),
                 stages=None if self.record_stages is None else self.record_stages[i0:i1],
+                restarts=[r - i0 for r in self.restarts if i0 < r <= i1],
             )
         return Y[:, 0], R[:, 0]
 

@@ -19,7 +19,7 @@ from typing import Literal
 
 import numpy as np
 
-from pidyn.integrate import input_hold
+from pidyn.integrate import input_hold, piece_starts
 from pidyn.notes import note
 from pidyn.refine.period_profile import profile_period
 from pidyn.refine.period_scan import scan_period
@@ -188,7 +188,8 @@ def build_problem(
     system, record, settings: RefineSettings, t_start: float | None = None, t_end: float | None = None
 ) -> ShootingProblem:
     channels = record_channels(record, system.n_dof)
-    bounds = segment_bounds(record.t, settings.segment_length, t_start, t_end)
+    starts = piece_starts(record)
+    bounds = segment_bounds(record.t, settings.segment_length, t_start, t_end, breaks=starts)
     state0 = np.zeros(system.n_state) if settings.initial_state == "rest" else None
     return ShootingProblem(
         system,
@@ -199,6 +200,7 @@ def build_problem(
         settings.substeps,
         fixed_state0=state0,
         hold=input_hold(record),
+        restarts=starts,
     )
 
 
@@ -390,6 +392,7 @@ def _solved_at_rest(problem: ShootingProblem, u: np.ndarray, settings: RefineSet
         state_scale=problem.state_scale,
         fixed=problem.fixed,
         hold=problem.hold,
+        restarts=problem.restarts,
     )
     run, _ = rest.free_run(theta, np.zeros(ns))
     states = np.nan_to_num(run[rest.bounds[:-1] - rest.bounds[0]])

@@ -17,6 +17,7 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 
 from pidyn.data.checks import check_floors, check_record
 from pidyn.data.datamodule import SubperiodDataModule
+from pidyn.data.multi import concatenate
 from pidyn.data.sources import Record
 from pidyn.models.identify import Schedule, SubperiodIdentifier
 from pidyn.models.lit_module import PIDynNetModule
@@ -42,11 +43,37 @@ def instantiate(node: DictConfig, **kwargs: Any) -> Any:
         raise
 
 
+#: a data group's list of records -> the source's setting each of them sets (``data.paths=[...]``)
+MANY = {"paths": "path", "runs": "run"}
+
+
 def build_record(cfg: DictConfig, system: StructuralSystem) -> Record:
-    """The record from ``cfg.data.source`` (``instantiate``)."""
-    if "system" in _target_args(cfg.data.source):
-        return instantiate(cfg.data.source, system=system)
-    return instantiate(cfg.data.source)
+    """The record from ``cfg.data.source`` (``instantiate``), or the records of ``data.paths`` /
+    ``data.runs`` laid end to end (``pidyn.data.multi``): one structure, several earthquakes."""
+    for many, one in MANY.items():
+        values = OmegaConf.select(cfg, f"data.{many}", default=None)
+        if values is None:
+            continue
+        if isinstance(values, str) or not OmegaConf.is_list(values) or not len(values):
+            raise ValueError(
+                f"data.{many} must be a non-empty list, e.g. 'data.{many}=[A,B]'; got {values!r}"
+            )
+        if one not in cfg.data.source:
+            raise ValueError(f"data.{many}: the source {cfg.data.source._target_} takes no '{one}'")
+        records = []
+        for value in values:
+            node = cfg.data.source.copy()
+            node[one] = value
+            records.append(_one_record(node, system))
+        log.info("identifying from %d records: %s", len(records), ", ".join(r.name for r in records))
+        return concatenate(records)
+    return _one_record(cfg.data.source, system)
+
+
+def _one_record(node: DictConfig, system: StructuralSystem) -> Record:
+    if "system" in _target_args(node):
+        return instantiate(node, system=system)
+    return instantiate(node)
 
 
 def _target_args(node: DictConfig) -> set[str]:
@@ -83,7 +110,7 @@ def build_run(cfg: DictConfig, record: Record | None) -> Run:
     torch.set_default_dtype(torch.float64 if str(cfg.get("precision", "32")) == "64" else torch.float32)
     L.seed_everything(cfg.seed, workers=True, verbose=False)
 
-    system, record = _system_and_record(cfg, record)
+    system, record = system_and_record(cfg, record)
     hold_out = _hold_out(cfg, record)
     system, start = data_start(cfg, system, record, run_dir)
     accel = system.excitation_as_acceleration(record.f) if cfg.model.excitation_transform else None
@@ -106,7 +133,7 @@ def build_run(cfg: DictConfig, record: Record | None) -> Run:
     return Run(system, record, module, ident, trainer_factory, logger, run_dir, start, hold_out)
 
 
-def _system_and_record(cfg: DictConfig, record: Record | None) -> tuple[StructuralSystem, Record]:
+def system_and_record(cfg: DictConfig, record: Record | None) -> tuple[StructuralSystem, Record]:
     """The system and the record, checked against each other: the excitation, the inputs (a system
     with ``inputs: null`` takes the record's), the truth in the system's own units."""
     system: StructuralSystem = instantiate(cfg.system)

@@ -214,6 +214,14 @@ def _assess(
     from pidyn.assessment import assess
 
     metrics.update(assess(run.system, run.record, final, refined, sim, run.hold_out, run.run_dir, adequate))
+    for r, mode in enumerate(metrics.get("modal") or [], start=1):
+        if adequate and mode.get("not_a_property"):  # a rejected model is said so once, elsewhere
+            text = note(
+                "damping_not_a_property",
+                f"mode {r}: {mode['not_a_property']}: the fit's damping, not reported as the structure's",
+            )
+            log.warning(text)
+            metrics.setdefault("notes", []).append(text)
 
 
 def _divergence_note(sim: dict[str, np.ndarray]) -> list[str]:

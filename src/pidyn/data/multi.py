@@ -1,0 +1,133 @@
+"""Several records of one structure as one record: the pieces follow each other on one time axis.
+
+A structure identified from several earthquakes shares its parameters across them; each record
+keeps its own initial state. Laid end to end, the records go through every stage of a run as one
+record, and ``meta["pieces"]`` says where each begins. Whatever simulates over a junction starts
+the next record from rest (``piece_starts``), the shooting segments and PIDynNet's windows end
+there, and a continuity defect never joins two records.
+
+The fitting part is every record but the last one's held-out share (when the records have a
+split): the held-out part is the end of the last record, as it is for one record.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from pidyn.data.errors import DataError
+from pidyn.integrate import piece_starts
+from pidyn.simulate import Trajectory
+
+__all__ = ["concatenate", "piece_starts", "pieces"]
+
+#: metadata that must agree between the records of one structure (the channel map and its units)
+SAME = (
+    "station",
+    "direction",
+    "inputs",
+    "input_channels",
+    "output_channels",
+    "acceleration",
+    "units",
+    "input_hold",
+)
+
+
+def pieces(record) -> list[dict]:
+    """The records a record is made of: ``{"name", "i0", "i1"}`` (samples i0 <= i < i1); one
+    piece for a plain record."""
+    return list((record.meta or {}).get("pieces") or [{"name": record.name, "i0": 0, "i1": len(record.t)}])
+
+
+def concatenate(records: Sequence, name: str | None = None):
+    """One record from several of one structure (same step, channels, inputs and units)."""
+
+    records = list(records)
+    if not records:
+        raise DataError("no record to identify from (data.paths or data.runs is empty)")
+    if len(records) == 1:
+        return records[0]
+    first = records[0]
+    dt = first.dt
+    for r in records[1:]:
+        _check_alike(first, r, dt)
+    t_parts, offset, out_pieces = [], 0.0, []
+    n = 0
+    for r in records:
+        local = r.t - r.t[0]
+        t_parts.append(local + offset)
+        out_pieces.append(
+            {"name": r.name, "i0": n, "i1": n + len(r.t), "t_offset": offset, "meta": _piece_meta(r.meta)}
+        )
+        n += len(r.t)
+        offset = float(t_parts[-1][-1]) + dt
+    t = np.concatenate(t_parts)
+    cat = lambda k: None if getattr(first, k) is None else np.concatenate([getattr(r, k) for r in records])  # noqa: E731
+    meta = {
+        k: v for k, v in (first.meta or {}).items() if k not in ("split", "pieces", "notes", "path", "span")
+    }
+    meta["pieces"] = out_pieces
+    meta["paths"] = [(r.meta or {}).get("path", r.name) for r in records]
+    meta["notes"] = [f"{r.name}: {text}" for r in records for text in (r.meta or {}).get("notes") or []]
+    if "pga" in meta:
+        meta["pga"] = max(float((r.meta or {}).get("pga", 0.0)) for r in records)
+    split = (records[-1].meta or {}).get("split")
+    if split and all((r.meta or {}).get("split") for r in records):
+        cut = out_pieces[-1]["t_offset"] + float(split["fit"][1]) - float(records[-1].t[0])
+        meta["split"] = {"fit": [float(t[0]), cut], "heldout": [cut, float(t[-1])]}
+    clean = None
+    if all(r.clean is not None for r in records):
+        c = [r.clean for r in records]
+        z = None if c[0].z is None else np.concatenate([ci.z for ci in c])
+        clean = Trajectory(
+            t=t,
+            x=np.concatenate([ci.x for ci in c]),
+            v=np.concatenate([ci.v for ci in c]),
+            a=np.concatenate([ci.a for ci in c]),
+            f=np.concatenate([ci.f for ci in c]),
+            z=z,
+        )
+    return replace(
+        first,
+        name=name or "+".join(r.name for r in records),
+        t=t,
+        f=np.concatenate([r.f for r in records]),
+        x=cat("x"),
+        v=cat("v"),
+        a=cat("a"),
+        clean=clean,
+        meta=meta,
+    )
+
+
+def _piece_meta(meta: dict | None) -> dict:
+    """What a piece keeps of its own record's metadata (where it came from, its shaking)."""
+    keep = ("path", "t_offset", "span", "pga", "run", "event")
+    return {k: v for k, v in (meta or {}).items() if k in keep}
+
+
+def _check_alike(first, other, dt: float) -> None:
+    """Records of one structure: one step, one channel map, the same excitation and truth."""
+    problems = []
+    if abs(other.dt - dt) > 1e-9 * max(dt, 1.0):
+        problems.append(f"time step {other.dt:g} s against {dt:g} s (set data.dt to resample)")
+    if other.excitation != first.excitation:
+        problems.append(f"{other.excitation} excitation against {first.excitation}")
+    if other.n_inputs != first.n_inputs or other.inputs != first.inputs:
+        problems.append(f"inputs {other.inputs or other.n_inputs} against {first.inputs or first.n_inputs}")
+    if other.sensors() != first.sensors():
+        problems.append(f"channels {other.sensors()} against {first.sensors()}")
+    for key in SAME:
+        a, b = (first.meta or {}).get(key), (other.meta or {}).get(key)
+        if a != b:
+            problems.append(f"{key} {b!r} against {a!r}")
+    if (first.truth or None) != (other.truth or None):
+        problems.append("another true structure")
+    if problems:
+        raise DataError(
+            f"record '{other.name}' does not match '{first.name}' ({'; '.join(problems)}): "
+            "the records of one identification must measure one structure the same way"
+        )

@@ -1,0 +1,69 @@
+"""The prediction task: ``python predict.py run=RUN data=csmip data.path=C.zip data.station=CE89324
+data.direction=transverse`` predicts the record with the model of the run folder ``RUN``
+(``pidyn.runs.prediction``) and writes ``prediction.json`` and ``figures/prediction.png``.
+
+The plain simulation is the prediction. PIDynNet's physics-only networks (the paper's Eq. 14)
+need the identification's networks in memory: ``pidyn.predict(result, excitation)`` in the
+session that identified them.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+from omegaconf import DictConfig
+
+from pidyn.reporting import write_json
+from pidyn.runs.folder import run_folder
+from pidyn.runs.prediction import Identified, figure, predict_record
+
+log = logging.getLogger(__name__)
+
+#: what a finished prediction claims
+RESULT_FILES = ("prediction.json",)
+
+
+def predict(cfg: DictConfig) -> dict[str, Any]:
+    """Predict the record of ``cfg.data`` with the model of the run ``cfg.run``; returns prediction.json's content."""
+    with run_folder(cfg, "predict", claims=RESULT_FILES) as folder:
+        return predict_in(cfg, folder)
+
+
+def predict_in(cfg: DictConfig, folder: Path) -> dict[str, Any]:
+    from pidyn.config import check_settings
+
+    check_settings(cfg)
+    if cfg.get("run") is None:
+        raise ValueError("run=RUN is needed: the run folder of the identification whose model predicts")
+    if cfg.get("data") is None:
+        raise ValueError(
+            "the record to predict is needed: data=csmip data.path=C.zip (or data=xsens, data=csv)"
+        )
+    run = Identified.load(cfg.run)
+    system, record, values = run.for_record(cfg.data)
+    linear_run = Identified.load(cfg.linear_run) if cfg.get("linear_run") else None
+    out, sim = predict_record(run, record, system, values, linear_run, cfg.data)
+    write_json(folder / "prediction.json", out)
+    figure(folder / "figures" / "prediction.png", record, sim, run, out)
+    _log(out)
+    return out
+
+
+def _log(out: dict[str, Any]) -> None:
+    mean = out["mean_nrmse_a"]
+    per = ", ".join(f"{k} {v:.3g}" for k, v in out["nrmse"].items())
+    log.info(
+        "predicted %s with the model of %s: NRMSE %s (mean %s)", out["record"], out["run"], per, _fmt(mean)
+    )
+    log.info("knowing nothing (%s): mean NRMSE %s", out["trivial"], _fmt(out["trivial_mean_nrmse_a"]))
+    if out["beats_trivial"] is False:
+        log.warning(
+            "THE MODEL PREDICTS THIS RECORD NO BETTER THAN KNOWING NOTHING (%s): its prediction is not to be used",
+            out["trivial"],
+        )
+
+
+def _fmt(v: float | None) -> str:
+    return "n/a" if v is None else f"{v:.3g}"

@@ -1,0 +1,165 @@
+"""Several records of one structure identified as one, and a record the model never saw predicted."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pidyn import Record
+from pidyn.config import make_system
+from pidyn.data.errors import DataError
+from pidyn.data.multi import concatenate, pieces
+from pidyn.data.windows import make_windows
+from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
+from pidyn.simulate import simulate_response
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _records(system="duffing", noise=0.0):
+    kw = dict(duration=8.0, channels=("x", "v"), noise=noise)
+    return (
+        Record.simulate(system, "el_centro", scale=0.5, seed=1, **kw),
+        Record.simulate(system, "kobe", scale=1.0, seed=2, **kw),
+    )
+
+
+def test_concatenated_record_keeps_its_pieces_and_truth():
+    r1, r2 = _records()
+    both = concatenate([r1, r2])
+    assert len(both.t) == len(r1.t) + len(r2.t)
+    assert np.allclose(np.diff(both.t), r1.dt)
+    assert [p["name"] for p in pieces(both)] == [r1.name, r2.name]
+    assert pieces(both)[1]["i0"] == len(r1.t)
+    assert both.truth == r1.truth
+    assert both.clean is not None and len(both.clean.x) == len(both.t)
+
+
+def test_records_of_another_step_or_structure_are_refused_by_name():
+    r1, r2 = _records()
+    coarse = Record.simulate("duffing", "kobe", duration=8.0, dt=0.02, channels=("x", "v"))
+    with pytest.raises(DataError, match="time step"):
+        concatenate([r1, coarse])
+    other = Record.simulate("duffing", "kobe", duration=8.0, channels=("x", "v"), k1=30.0)
+    with pytest.raises(DataError, match="another true structure"):
+        concatenate([r1, other])
+    with pytest.raises(DataError, match="no record"):
+        concatenate([])
+
+
+def test_a_free_run_starts_each_record_from_rest():
+    """The model simulated over the records laid end to end is each record simulated on its own."""
+    system = make_system("bouc_wen")
+    values = {s.name: s.true if s.true is not None else s.init for s in system.param_specs()}
+    r1, r2 = _records("bouc_wen")
+    both = concatenate([r1, r2])
+    whole = simulate_response(system, values, both)["x"]
+    apart = np.concatenate([simulate_response(system, values, r)["x"] for r in (r1, r2)])
+    assert np.allclose(whole, apart, rtol=0, atol=1e-12 * np.abs(apart).max())
+    assert np.allclose(apart, both.clean.x, atol=1e-4 * np.abs(apart).max())
+
+
+def test_shooting_segments_end_where_a_record_begins_and_no_defect_joins_records():
+    system = make_system("duffing")
+    r1, r2 = _records()
+    both = concatenate([r1, r2])
+    start = pieces(both)[1]["i0"]
+    bounds = segment_bounds(both.t, 1.0, breaks=[start])
+    assert start in bounds
+    prob = ShootingProblem(
+        system, both.t, both.f, record_channels(both, 1), bounds, restarts=[start], fixed_state0=np.zeros(2)
+    )
+    assert prob.link.sum() == prob.S - 2  # every boundary but the records' junction
+    truth = {s.name: s.true for s in system.param_specs() if s.trainable}
+    states = np.stack([[both.clean.x[b, 0], both.clean.v[b, 0]] for b in bounds[:-1]])
+    r, c = prob.residuals(prob.pack(truth, states))
+    assert len(c) == 2 * (prob.S - 2)
+    assert np.max(np.abs(c)) < 1e-3 and np.max(np.abs(r)) < 1e-2
+    _, J, _, C = prob.linearize(prob.pack(truth, states))
+    assert C.shape == (len(c), prob.n_unknowns) and J.shape[1] == prob.n_unknowns
+
+
+def test_windows_take_turns_between_records_and_never_span_two():
+    r1, r2 = _records()
+    both = concatenate([r1, r2])
+    spans = [(both.t[p["i0"]], both.t[p["i1"] - 1]) for p in pieces(both)]
+    wins = make_windows(both.t, both.f, both.x, both.v, None, 2.0, 50, pieces=spans)
+    assert [w.piece for w in wins[:4]] == [0, 1, 0, 1]
+    for w in wins:
+        lo, hi = spans[w.piece]
+        assert lo - 1e-9 <= w.t0 and w.t1 <= hi + 1e-9
+
+
+def test_predict_refuses_a_record_of_other_channels():
+    from pidyn.runs.prediction import Identified, check_channels
+
+    run = Identified(Path("RUN"), None, {"record_meta": {"station": "CE89324", "output_channels": [7]}})
+    rec = Record(name="other", t=np.arange(100) * 0.02, f=np.sin(np.arange(100)), a=np.cos(np.arange(100)))
+    rec.meta = {"station": "CE89324", "output_channels": [9]}
+    with pytest.raises(ValueError, match="output_channels"):
+        check_channels(run, rec)
+    rec.meta["output_channels"] = [7]
+    check_channels(run, rec)
+
+
+def test_predict_needs_a_finished_run(tmp_path):
+    from pidyn.runs.prediction import Identified
+
+    (tmp_path / "metrics.json").write_text("{}")
+    with pytest.raises(FileNotFoundError, match="not a finished identification"):
+        Identified.load(tmp_path)
+
+
+@pytest.mark.slow
+def test_bouc_wen_from_two_earthquakes_predicts_a_third(tmp_path):
+    """Two simulated earthquakes at different amplitudes of one Bouc-Wen structure give its
+    parameters within their intervals, and the model predicts a third earthquake it never saw
+    (simulated from rest) within 1 % NRMSE; predict.py writes the same from a CSV and refuses a
+    record of other channels with a named error."""
+    import pidyn
+
+    kw = dict(duration=15.0, channels=("x", "v"))
+    r1 = Record.simulate("bouc_wen", "el_centro", scale=0.5, noise=0.01, seed=1, **kw)
+    r2 = Record.simulate("bouc_wen", "kobe", scale=1.0, noise=0.01, seed=2, **kw)
+    r3 = Record.simulate("bouc_wen", "northridge", scale=0.8, **kw)
+    res = pidyn.identify(
+        [r1, r2], "bouc_wen", out_dir=tmp_path / "run", model__schedule__max_windows=3, baselines="none"
+    )
+    frame = res.to_frame()
+    for name, row in frame.iterrows():
+        assert row.ci95_lo <= row.truth <= row.ci95_hi, name
+        assert abs(row.error_pct) < 2.0, name
+    assert [r["name"] for r in res.metrics["record_meta"]["records"]] == [r1.name, r2.name]
+    pred = pidyn.predict(res, r3)
+    assert max(pred.scores["nrmse"].values()) < 0.01
+    # the command line, from a CSV of the third earthquake
+    csv = tmp_path / "northridge.csv"
+    pd.DataFrame({"t": r3.t, "ag": r3.f, "x": r3.x[:, 0], "v": r3.v[:, 0]}).to_csv(csv, index=False)
+    out = tmp_path / "pred"
+    cmd = [
+        sys.executable,
+        str(ROOT / "predict.py"),
+        f"run={tmp_path / 'run'}",
+        "data=csv",
+        f"data.path={csv}",
+    ]
+    done = subprocess.run([*cmd, f"hydra.run.dir={out}"], capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    saved = json.loads((out / "prediction.json").read_text())
+    assert set(saved) >= {"mean_nrmse_a", "nrmse", "span", "linear_mean_nrmse_a"}
+    assert saved["nrmse"]["x1"] == pytest.approx(pred.scores["nrmse"]["x1"], rel=1e-9)
+    assert (out / "figures" / "prediction.png").is_file()
+    # a record with an acceleration channel only: not what the model was identified on
+    pd.DataFrame({"t": r3.t, "ag": r3.f, "a": r3.x[:, 0]}).to_csv(csv, index=False)
+    bad = subprocess.run(
+        [*cmd, f"hydra.run.dir={tmp_path / 'bad'}"], capture_output=True, text=True, cwd=tmp_path
+    )
+    assert bad.returncode == 2
+    assert "channels" in bad.stderr + bad.stdout
+    assert not (tmp_path / "bad" / "prediction.json").exists()
