@@ -88,7 +88,7 @@ def _run(cmd: list[str], log: Path) -> int:
 
 def identify(out: Path, station: str, direction: str, system: str, train: list[dict]) -> Path:
     """One model from the training events at once (a finished run is kept)."""
-    run = out / direction / system / "run"
+    run = out / system / "run"
     if (run / "complete.json").is_file():
         return run
     paths = ",".join(r["path"] for r in train)
@@ -107,7 +107,7 @@ def identify(out: Path, station: str, direction: str, system: str, train: list[d
         f"hydra.run.dir={run}",
     ]
     t0 = time.perf_counter()
-    rc = _run(cmd, out / direction / system / "train.log")
+    rc = _run(cmd, out / system / "train.log")
     print(f"  {direction} {system} {out.name}: identified on {len(train)} events, exit {rc}, "
           f"{time.perf_counter() - t0:.0f} s", flush=True)
     return run

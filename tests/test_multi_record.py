@@ -124,12 +124,12 @@ def test_bouc_wen_from_two_earthquakes_predicts_a_third(tmp_path):
     record of other channels with a named error."""
     import pidyn
 
-    kw = dict(duration=15.0, channels=("x", "v"))
+    kw = dict(duration=12.0, channels=("x", "v"))
     r1 = Record.simulate("bouc_wen", "el_centro", scale=0.5, noise=0.01, seed=1, **kw)
     r2 = Record.simulate("bouc_wen", "kobe", scale=1.0, noise=0.01, seed=2, **kw)
     r3 = Record.simulate("bouc_wen", "northridge", scale=0.8, **kw)
     res = pidyn.identify(
-        [r1, r2], "bouc_wen", out_dir=tmp_path / "run", model__schedule__max_windows=3, baselines="none"
+        [r1, r2], "bouc_wen", out_dir=tmp_path / "run", model__schedule__max_windows=2, baselines="none"
     )
     frame = res.to_frame()
     for name, row in frame.iterrows():

@@ -367,3 +367,34 @@ def test_a_long_output_error_fit_says_how_far_it_has_come(monkeypatch, caplog):
         fit = output_error.fit_output_error(r, s, init=start, max_nfev=5)
     lines = [m for m in caplog.messages if "evaluations, cost" in m]
     assert len(lines) == fit.nfev and lines[0].startswith("output error of linear_sdof: 1 evaluations")
+
+
+def test_a_preferred_start_that_blows_up_lends_no_states_to_the_others():
+    """The preferred start (PIDynNet's) blows up when simulated; the segments' states and their
+    scale come from the start that does not, and the refinement ends at the truth. Before, the
+    diverging start's states gave the scale inf, and the refinement from the good start ended on a
+    model that blows up (the stiff shake-table building's Sine 1.5 run)."""
+    from pidyn.refine.stage import _Starts, build_problem
+
+    system = LinearSDOF()
+    r = synthetic(system, "kobe", duration=10.0, channels=("x", "v"))
+    truth = system.true_values()
+    unstable = {**truth, "k": 2e6}  # RK4 at dt/4 grows about 4 times a substep: huge, finite states
+    starts = {"pidynnet": unstable, "data": dict(truth)}
+    prob = build_problem(system, r, RefineSettings())
+    chosen = _Starts(prob, RefineSettings(), starts, None, "pidynnet")
+    assert chosen.first == "data" and np.all(np.isfinite(prob.state_scale))
+    res = refine(system, r, starts, RefineSettings(states="networks"))
+    assert res.start == "data"
+    for k, v in res.params.items():
+        assert abs(v - truth[k]) / truth[k] < 1e-4, (k, v)
+
+
+def test_a_long_record_gets_longer_segments_not_thousands():
+    from pidyn.refine.stage import MAX_SEGMENTS, build_problem
+
+    system = LinearSDOF()
+    r = synthetic(system, "kobe", duration=40.0, dt=0.01, channels=("x", "v"))
+    prob = build_problem(system, r, RefineSettings(segment_length=0.1))
+    assert prob.S <= MAX_SEGMENTS + 1
+    assert build_problem(system, r, RefineSettings(segment_length=1.0)).S == 40

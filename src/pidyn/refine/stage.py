@@ -189,7 +189,9 @@ def build_problem(
 ) -> ShootingProblem:
     channels = record_channels(record, system.n_dof)
     starts = piece_starts(record)
-    bounds = segment_bounds(record.t, settings.segment_length, t_start, t_end, breaks=starts)
+    bounds = segment_bounds(
+        record.t, _segment_length(record, settings, t_start, t_end), t_start, t_end, starts
+    )
     state0 = np.zeros(system.n_state) if settings.initial_state == "rest" else None
     return ShootingProblem(
         system,
@@ -202,6 +204,34 @@ def build_problem(
         hold=input_hold(record),
         restarts=starts,
     )
+
+
+#: at most this many shooting segments: the Jacobian is dense in the segments' states, so its size
+#: grows with the record's length times their number (several records of a structure laid end to
+#: end would otherwise give thousands); a longer record gets longer segments
+MAX_SEGMENTS = 120
+
+
+def _segment_length(
+    record, settings: RefineSettings, t_start: float | None, t_end: float | None
+) -> float | None:
+    length = settings.segment_length
+    if length is None:
+        return None
+    span = (record.t[-1] if t_end is None else min(t_end, record.t[-1])) - (
+        record.t[0] if t_start is None else t_start
+    )
+    if span / length > MAX_SEGMENTS:
+        longer = span / MAX_SEGMENTS
+        log.info(
+            "shooting segments of %.3g s, not %.3g s: at most %d over %.4g s",
+            longer,
+            length,
+            MAX_SEGMENTS,
+            span,
+        )
+        return longer
+    return length
 
 
 def _state_scale(problem: ShootingProblem, states: np.ndarray) -> np.ndarray:
@@ -460,10 +490,15 @@ class _Starts:
         self.thetas = {k: to_theta(problem.specs, v) for k, v in self.cands.items()}
         self.first = prefer if prefer in self.thetas else next(iter(self.thetas))
         self.states0 = initial_states(problem, self.thetas[self.first], settings.states, network_states)
-        problem.state_scale = _state_scale(problem, self.states0)
         fits = {k: problem.free_run_fit(th, self.states0[0]) for k, th in self.thetas.items()}
         self.costs = {k: c for k, (c, _) in fits.items()}
         self.order = sorted(self.costs, key=lambda k: self.costs[k])
+        steady = [k for k in self.order if not fits[k][1]]
+        if fits[self.first][1] and steady:
+            # the states carried by a model that blows up are no states (and their spread no scale)
+            self.first = steady[0]
+            self.states0 = initial_states(problem, self.thetas[self.first], settings.states, network_states)
+        problem.state_scale = _state_scale(problem, self.states0)
         self.notes: list[str] = []
         blown = [k for k, (_, b) in fits.items() if b]
         if len(blown) == len(fits):
