@@ -163,3 +163,15 @@ def test_bouc_wen_from_two_earthquakes_predicts_a_third(tmp_path):
     assert bad.returncode == 2
     assert "channels" in bad.stderr + bad.stdout
     assert not (tmp_path / "bad" / "prediction.json").exists()
+
+
+def test_the_api_reads_what_the_command_line_reads():
+    """``Record.from_csmip`` and ``Record.from_xsens`` read as ``data=csmip`` and ``data=xsens`` do."""
+    rec = Record.from_csmip(
+        ROOT / "data" / "painter_street" / "records" / "petrolia_25apr1992_ce89324p.zip",
+        station="CE89324",
+        max_outputs=1,
+    )
+    assert rec.inputs == ["ch3", "ch17", "ch20"] and rec.meta["output_channels"] == [7]
+    imu = Record.from_xsens(ROOT / "data" / "mini_shake_table" / "Stiff 3 story", run="Sine 1.5")
+    assert imu.a.shape[1] == 3 and imu.meta["run"] == "Sine 1.5"

@@ -138,6 +138,34 @@ class Record:
         return from_csv(path, **kwargs)
 
     @classmethod
+    def from_csmip(
+        cls,
+        path: str | Path,
+        station: str | None = None,
+        direction: str = "transverse",
+        inputs: Sequence[int] | None = None,
+        outputs: Sequence[int] | None = None,
+        **kwargs,
+    ) -> Record:
+        """One event of a strong-motion station from its CSMIP / CESMD archive (a zip of V2 files or
+        a folder), as ``data=csmip`` reads it (``pidyn.data.strong_motion.csmip_record``: ``dt``,
+        ``span``, ``fit_share``, ``on_missing`` ...)."""
+        from pidyn.data.strong_motion import csmip_record
+
+        return csmip_record(
+            path, station=station, direction=direction, inputs=inputs, outputs=outputs, **kwargs
+        )
+
+    @classmethod
+    def from_xsens(cls, path: str | Path, run: str, **kwargs) -> Record:
+        """One run of a building model measured by Xsens DOT IMUs (a folder with a subfolder per
+        floor), as ``data=xsens`` reads it (``pidyn.data.imu.xsens_record``: ``align``, ``dt``,
+        ``span``, ``fit_share`` ...)."""
+        from pidyn.data.imu import xsens_record
+
+        return xsens_record(path, run, **kwargs)
+
+    @classmethod
     def simulate(
         cls,
         system: StructuralSystem | str,
