@@ -108,8 +108,11 @@ def identify(out: Path, station: str, direction: str, system: str, train: list[d
     ]
     t0 = time.perf_counter()
     rc = _run(cmd, out / system / "train.log")
-    print(f"  {direction} {system} {out.name}: identified on {len(train)} events, exit {rc}, "
-          f"{time.perf_counter() - t0:.0f} s", flush=True)
+    print(
+        f"  {direction} {system} {out.name}: identified on {len(train)} events, exit {rc}, "
+        f"{time.perf_counter() - t0:.0f} s",
+        flush=True,
+    )
     return run
 
 
@@ -156,7 +159,11 @@ def per_event(csv_path: Path) -> dict[tuple[str, str], dict]:
 
 
 def _f(v, fmt=".3f") -> str:
-    return "-" if v in (None, "", "nan") or (isinstance(v, float) and not np.isfinite(v)) else format(float(v), fmt)
+    return (
+        "-"
+        if v in (None, "", "nan") or (isinstance(v, float) and not np.isfinite(v))
+        else format(float(v), fmt)
+    )
 
 
 def table(rows: list[dict], own: dict, systems: list[str]) -> list[dict]:
@@ -168,7 +175,9 @@ def table(rows: list[dict], own: dict, systems: list[str]) -> list[dict]:
             "direction": r["direction"],
             "fold": r["fold"],
             "pga_g": r["pga_g"],
-            "per_event_heldout_nrmse_a": _num((own.get((r["event"], r["direction"])) or {}).get("heldout_nrmse_a")),
+            "per_event_heldout_nrmse_a": _num(
+                (own.get((r["event"], r["direction"])) or {}).get("heldout_nrmse_a")
+            ),
         }
         for s in systems:
             line[f"{s}_nrmse_a"] = (res.get(s) or {}).get("mean_nrmse_a")
@@ -209,11 +218,17 @@ def summary_lines(lines: list[dict], systems: list[str], others: dict[str, list[
             )
         for s in systems:
             worse = [r["event"] for r in rows if not _lt(r[f"{s}_nrmse_a"], r["trivial_nrmse_a"])]
-            out.append(f"- {s}: {len(worse)} of {len(rows)} no better than knowing nothing" + (f" ({', '.join(worse)})" if worse else ""))
+            out.append(
+                f"- {s}: {len(worse)} of {len(rows)} no better than knowing nothing"
+                + (f" ({', '.join(worse)})" if worse else "")
+            )
         if others.get(direction):
             out.append(
                 "- not predicted (another channel set than the model's): "
-                + ", ".join(f"{o['event']} ({o.get('error') or [o.get('inputs'), o.get('outputs')]})" for o in others[direction])
+                + ", ".join(
+                    f"{o['event']} ({o.get('error') or [o.get('inputs'), o.get('outputs')]})"
+                    for o in others[direction]
+                )
             )
         out.append("")
     return out
@@ -249,6 +264,41 @@ def markdown(lines: list[dict], systems: list[str], others: dict, args, seconds:
             + f" | {_f(r['trivial_nrmse_a'])} | {_f(r['per_event_heldout_nrmse_a'])} |"
         )
     return "\n".join(head) + "\n"
+
+
+def period_figure(out: Path, station: str, directions: list[str], per_event_csv: Path, path: Path) -> None:
+    """Each event's own period (with its interval; a model that does not describe its event left
+    out) against the event's PGA, and each fold's cross-event linear model's period as a band: one
+    model of the bridge against 25 per-event fits."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    own = per_event(per_event_csv)
+    fig, axes = plt.subplots(1, len(directions), figsize=(5.2 * len(directions), 3.8), squeeze=False)
+    for ax, direction in zip(axes[0], directions):
+        rows = [r for (e, d), r in own.items() if d == direction and _num(r.get("period_s"))]
+        for r in rows:
+            lo, hi = json.loads(r["period_ci95"]) if r.get("period_ci95") else (None, None)
+            pga, per = float(r["pga_g"]), float(r["period_s"])
+            if lo is not None and hi is not None:
+                ax.plot([pga, pga], [lo, hi], color="0.6", lw=1)
+            ax.plot(pga, per, "o", color="0.25", ms=3.5)
+        for k, modal in enumerate(sorted((out / direction).glob("fold*/linear/run/modal.json"))):
+            mode = json.loads(modal.read_text())["modes"][0]
+            lo, hi = mode.get("period_ci95") or (mode["period_s"], mode["period_s"])
+            ax.axhspan(lo, hi, alpha=0.15, color=f"C{k}")
+            ax.axhline(mode["period_s"], lw=1, color=f"C{k}", label=f"cross-event model, fold {k}")
+        ax.set_xscale("log")
+        ax.set_xlabel("event PGA at the supports (g)")
+        ax.set_ylabel("first period (s)")
+        ax.set_title(f"{station} {direction}: per-event fits (points) and one model (bands)", fontsize=9)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def main() -> None:
@@ -292,11 +342,28 @@ def main() -> None:
     (RESULTS / f"{stem}.md").write_text(markdown(lines, args.systems, others, args, time.perf_counter() - t0))
     for r in rows:  # the figure: the chosen event predicted by the nonlinear model that never saw it
         if r["event"] == args.figure_event:
-            src = out / r["direction"] / f"fold{r['fold']}" / args.systems[-1] / "predictions" / r["event"] / "figures" / "prediction.png"
+            src = (
+                out
+                / r["direction"]
+                / f"fold{r['fold']}"
+                / args.systems[-1]
+                / "predictions"
+                / r["event"]
+                / "figures"
+                / "prediction.png"
+            )
             if src.is_file():
                 dst = RESULTS / "figures" / f"{stem}_{r['event']}_{r['direction']}.png"
                 dst.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(src, dst)
+    if "linear" in args.systems:
+        period_figure(
+            out,
+            args.station,
+            args.directions.split(","),
+            args.per_event,
+            RESULTS / "figures" / f"{stem}_period.png",
+        )
     print((RESULTS / f"{stem}.md").read_text())
 
 

@@ -175,3 +175,30 @@ def test_the_api_reads_what_the_command_line_reads():
     assert rec.inputs == ["ch3", "ch17", "ch20"] and rec.meta["output_channels"] == [7]
     imu = Record.from_xsens(ROOT / "data" / "mini_shake_table" / "Stiff 3 story", run="Sine 1.5")
     assert imu.a.shape[1] == 3 and imu.meta["run"] == "Sine 1.5"
+
+
+def test_one_amplitude_dependent_model_from_a_weak_and_a_strong_earthquake():
+    """The model whose stiffness falls and damping rises with the response's amplitude (the
+    ``amplitude`` system, one model for a bridge's weak and strong events) is found from a weak
+    and a strong record together, started away from the truth."""
+    from pidyn.refine import RefineSettings, refine
+    from pidyn.systems.sdof import SDOFSystem
+    from pidyn.systems.terms import AmplitudeSoftening, LinearStiffness, ViscousDamping
+
+    system = SDOFSystem(
+        [
+            ViscousDamping(2.0),
+            LinearStiffness(600.0),
+            AmplitudeSoftening(0.3, 1.5, 1.0, a_ref=0.005, w0=25.0),
+        ],
+        name="amplitude",
+    )
+    kw = dict(duration=10.0, dt=0.02, channels=("x", "v"))
+    weak = Record.simulate(system, "el_centro", scale=0.1, **kw)
+    strong = Record.simulate(system, "kobe", scale=0.5, **kw)
+    truth = system.true_values()
+    guess = {**truth, "soft": 0.1, "gain": 0.5, "c": 2.5, "k": 550.0, "tau": 2.0}
+    res = refine(system, concatenate([weak, strong]), {"guess": guess}, RefineSettings(states="simulated"))
+    for name in ("c", "k", "soft", "gain", "tau"):
+        assert res.params[name] == pytest.approx(truth[name], rel=1e-4), name
+    assert make_system("amplitude").n_latent == 1  # the shipped config builds the same model
