@@ -243,12 +243,12 @@ def _median(values) -> float | None:
     return float(np.median(v)) if v else None
 
 
-def markdown(lines: list[dict], systems: list[str], others: dict, args, seconds: float) -> str:
+def markdown(lines: list[dict], systems: list[str], others: dict, args, seconds: float, n_runs: int) -> str:
     head = [
         f"# Leave events out: station {args.station}",
         "",
         f"`python experiments/cross_event.py --station {args.station} --folds {args.folds} --seed {args.seed}` "
-        f"({seconds / 60:.0f} min on this machine). Each event is predicted by models identified on the events "
+        f"({n_runs} identifications, {seconds / 60:.0f} min of run time on 2 cores, two at a time). Each event is predicted by models identified on the events "
         "of the other folds at once, simulated from rest under its own support motions; NRMSE of the deck "
         "acceleration over the event's shaking span. `per-event` is each event's own model on the held-out "
         "part of its own record (the per-event study), `knowing nothing` the deck moving with its support.",
@@ -274,6 +274,7 @@ def period_figure(out: Path, station: str, directions: list[str], per_event_csv:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     own = per_event(per_event_csv)
     fig, axes = plt.subplots(1, len(directions), figsize=(5.2 * len(directions), 3.8), squeeze=False)
@@ -291,6 +292,7 @@ def period_figure(out: Path, station: str, directions: list[str], per_event_csv:
             ax.axhspan(lo, hi, alpha=0.15, color=f"C{k}")
             ax.axhline(mode["period_s"], lw=1, color=f"C{k}", label=f"cross-event model, fold {k}")
         ax.set_xscale("log")
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_xlabel("event PGA at the supports (g)")
         ax.set_ylabel("first period (s)")
         ax.set_title(f"{station} {direction}: per-event fits (points) and one model (bands)", fontsize=9)
@@ -318,7 +320,6 @@ def main() -> None:
     unknown = set(args.systems) - set(SYSTEMS)
     if unknown:
         raise SystemExit(f"--systems: unknown {sorted(unknown)}; known {sorted(SYSTEMS)}")
-    t0 = time.perf_counter()
     out = args.out / args.station
     jobs, others = [], {}
     for direction in args.directions.split(","):
@@ -339,7 +340,12 @@ def main() -> None:
         w = csv.DictWriter(fh, fieldnames=list(lines[0]))
         w.writeheader()
         w.writerows(lines)
-    (RESULTS / f"{stem}.md").write_text(markdown(lines, args.systems, others, args, time.perf_counter() - t0))
+    walls = [
+        json.loads(m.read_text()).get("wall_seconds", 0.0) for m in out.glob("*/fold*/*/run/metrics.json")
+    ]
+    (RESULTS / f"{stem}.md").write_text(
+        markdown(lines, args.systems, others, args, float(sum(walls)), len(walls))
+    )
     for r in rows:  # the figure: the chosen event predicted by the nonlinear model that never saw it
         if r["event"] == args.figure_event:
             src = (
