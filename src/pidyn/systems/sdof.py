@@ -34,6 +34,7 @@ import torch
 from pidyn.params import ParamSpec
 from pidyn.systems.base import ExcitationKind, Kinematics, StructuralSystem, merge_specs, stack_last
 from pidyn.systems.terms import (
+    AmplitudeSoftening,
     BoucWenHysteresis,
     CubicStiffness,
     ForceTerm,
@@ -313,6 +314,27 @@ def support_damping_name(input_name: str) -> str:
 def LinearSDOF(c: float = 0.5, k: float = 15.0, **kw) -> SDOFSystem:
     """m x'' + c x' + k x = -m ag (paper Eq. 6)."""
     return SDOFSystem([ViscousDamping(c), LinearStiffness(k)], name=kw.pop("name", "linear_sdof"), **kw)
+
+
+def AmplitudeDependent(
+    c: float = 2.0,
+    k: float = 600.0,
+    soft: float = 0.2,
+    gain: float = 1.0,
+    tau: float = 2.0,
+    a_ref: float = 0.005,
+    w0: float = 25.0,
+    **kw,
+) -> SDOFSystem:
+    """m x'' + c (1 + gain e) x' + k (1 - soft e) x = -m ag, e' = (A / a_ref - e) / tau: a stiffness
+    that falls and a damping that rises with the response's recent amplitude e (``AmplitudeSoftening``),
+    one model for a structure's weak and strong earthquakes. ``a_ref`` (m) and ``w0`` (rad/s) are the
+    structure's scale (a typical response amplitude, the nominal circular frequency), not identified."""
+    return SDOFSystem(
+        [ViscousDamping(c), LinearStiffness(k), AmplitudeSoftening(soft, gain, tau, a_ref=a_ref, w0=w0)],
+        name=kw.pop("name", "amplitude"),
+        **kw,
+    )
 
 
 def Duffing(c: float = 0.5, k1: float = 15.0, k3: float = 120.0, signed_k3: bool = False, **kw) -> SDOFSystem:
