@@ -138,6 +138,7 @@ def test_bouc_wen_from_two_earthquakes_predicts_a_third(tmp_path):
     assert [r["name"] for r in res.metrics["record_meta"]["records"]] == [r1.name, r2.name]
     pred = pidyn.predict(res, r3)
     assert max(pred.scores["nrmse"].values()) < 0.01
+    assert pred.scores["seen_by_run"] is False and pidyn.predict(res, r1).scores["seen_by_run"] is True
     # the command line, from a CSV of the third earthquake
     csv = tmp_path / "northridge.csv"
     pd.DataFrame({"t": r3.t, "ag": r3.f, "x": r3.x[:, 0], "v": r3.v[:, 0]}).to_csv(csv, index=False)

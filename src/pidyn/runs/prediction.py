@@ -21,6 +21,9 @@ from pidyn.runs.folder import COMPLETE, is_complete
 from pidyn.simulate import simulate_response
 from pidyn.systems.base import StructuralSystem
 
+#: the channels' units, for the figure's axes
+UNITS = {"x": "m", "v": "m/s", "a": "m/s^2"}
+
 #: the record's channel map must be the run's, key by key (a missing key is not compared)
 CHANNEL_KEYS = ("station", "direction", "input_channels", "output_channels")
 
@@ -178,6 +181,7 @@ def predict_record(
         "system": run.metrics.get("system"),
         "identified_on": run.metrics.get("record"),
         "record": record.name,
+        "seen_by_run": record.name in str(run.metrics.get("record") or "").split("+"),
         "pga": meta.get("pga"),
         "simulated": "from rest, the record's own input motions, fixed-step RK4",
     }
@@ -225,10 +229,13 @@ def figure(path: Path, record: Record, sim: dict[str, np.ndarray], run: Identifi
         name = names[f"{kind}{fl}"]
         ax.plot(t, meas, color="0.3", lw=0.9, label=f"measured {name}")
         ax.plot(t, plottable(pred), lw=0.8, ls="--", label=f"predicted (NRMSE {out['nrmse'][name]:.3g})")
-        ax.set_ylabel(name)
+        ax.set_ylabel(f"{name} ({UNITS.get(kind, '')})")
         ax.legend(fontsize=8, loc="upper right")
     axes[-1, 0].set_xlabel("t (s)")
-    fig.suptitle(f"{record.name}: predicted by the model of {Path(str(out['run'])).name}", fontsize=10)
+    seen = str(out.get("identified_on") or "").split("+")
+    on = f"{len(seen)} records" if len(seen) > 1 else (seen[0] or Path(str(out["run"])).name)
+    on += " including this one" if out.get("seen_by_run") else ""
+    fig.suptitle(f"{record.name}: predicted by the {out.get('system')} model identified on {on}", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

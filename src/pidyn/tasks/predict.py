@@ -58,6 +58,11 @@ def _log(out: dict[str, Any]) -> None:
         "predicted %s with the model of %s: NRMSE %s (mean %s)", out["record"], out["run"], per, _fmt(mean)
     )
     log.info("knowing nothing (%s): mean NRMSE %s", out["trivial"], _fmt(out["trivial_mean_nrmse_a"]))
+    if out["seen_by_run"]:
+        log.warning(
+            "%s is one of the records the run was identified on: this is a fit, not a prediction",
+            out["record"],
+        )
     if out["beats_trivial"] is False:
         log.warning(
             "THE MODEL PREDICTS THIS RECORD NO BETTER THAN KNOWING NOTHING (%s): its prediction is not to be used",
