@@ -167,7 +167,11 @@ def write_run_report(run_dir: Path, equation: str, metrics: dict) -> None:
     from pidyn.adequacy import describe
 
     ad = metrics["adequacy"]
-    lines = [f"# Identification: {metrics['system']} on {metrics['record']}", ""]
+    names = str(metrics["record"]).split("+")
+    on = metrics["record"] if len(names) == 1 else f"{len(names)} records"
+    lines = [f"# Identification: {metrics['system']} on {on}", ""]
+    if len(names) > 1:  # several records of the structure (pidyn.data.multi)
+        lines += ["Records, parameters shared, each its own initial state: " + ", ".join(names), ""]
     lines += [f"**{'Adequate' if ad['adequate'] else 'Not adequate'}**: {describe(ad)}", ""]
     lines += [f"Identified: `{equation}`", ""]
     title = "95 % interval" if ad["adequate"] else "95 % interval (conditional on a rejected model)"
