@@ -303,7 +303,7 @@ def period_figure(out: Path, station: str, directions: list[str], per_event_csv:
     plt.close(fig)
 
 
-def main() -> None:
+def _args() -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--station", default="CE89324")
     ap.add_argument("--records", type=Path, default=ROOT / "data" / "painter_street" / "records")
@@ -320,19 +320,11 @@ def main() -> None:
     unknown = set(args.systems) - set(SYSTEMS)
     if unknown:
         raise SystemExit(f"--systems: unknown {sorted(unknown)}; known {sorted(SYSTEMS)}")
-    out = args.out / args.station
-    jobs, others = [], {}
-    for direction in args.directions.split(","):
-        keep, other = events(args.records, args.station, direction)
-        others[direction] = other
-        parts = folds(keep, args.folds, args.seed)
-        print(f"{direction}: {len(keep)} events in {args.folds} folds; {len(other)} with another channel set")
-        for k, test in enumerate(parts):
-            train = [r for r in keep if r not in test]
-            jobs.append((direction, k, train, test))
-    with ThreadPoolExecutor(max_workers=args.jobs) as pool:
-        done = list(pool.map(lambda j: fold_job(args, out, *j), jobs))
-    rows = [r for part in done for r in part]
+    return args
+
+
+def write_results(args, out: Path, rows: list[dict], others: dict) -> Path:
+    """The table (CSV and markdown), the chosen event's prediction figure and the period figure."""
     lines = table(rows, per_event(args.per_event), args.systems)
     RESULTS.mkdir(parents=True, exist_ok=True)
     stem = f"cross_event_{args.station.lower()}"
@@ -346,31 +338,35 @@ def main() -> None:
     (RESULTS / f"{stem}.md").write_text(
         markdown(lines, args.systems, others, args, float(sum(walls)), len(walls))
     )
-    for r in rows:  # the figure: the chosen event predicted by the nonlinear model that never saw it
+    for r in rows:  # the chosen event predicted by the last model named, which never saw it
         if r["event"] == args.figure_event:
-            src = (
-                out
-                / r["direction"]
-                / f"fold{r['fold']}"
-                / args.systems[-1]
-                / "predictions"
-                / r["event"]
-                / "figures"
-                / "prediction.png"
-            )
+            fold = out / r["direction"] / f"fold{r['fold']}" / args.systems[-1]
+            src = fold / "predictions" / r["event"] / "figures" / "prediction.png"
             if src.is_file():
                 dst = RESULTS / "figures" / f"{stem}_{r['event']}_{r['direction']}.png"
                 dst.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(src, dst)
     if "linear" in args.systems:
-        period_figure(
-            out,
-            args.station,
-            args.directions.split(","),
-            args.per_event,
-            RESULTS / "figures" / f"{stem}_period.png",
-        )
-    print((RESULTS / f"{stem}.md").read_text())
+        figure = RESULTS / "figures" / f"{stem}_period.png"
+        period_figure(out, args.station, args.directions.split(","), args.per_event, figure)
+    return RESULTS / f"{stem}.md"
+
+
+def main() -> None:
+    args = _args()
+    out = args.out / args.station
+    jobs, others = [], {}
+    for direction in args.directions.split(","):
+        keep, other = events(args.records, args.station, direction)
+        others[direction] = other
+        parts = folds(keep, args.folds, args.seed)
+        print(f"{direction}: {len(keep)} events in {args.folds} folds; {len(other)} with another channel set")
+        for k, test in enumerate(parts):
+            train = [r for r in keep if r not in test]
+            jobs.append((direction, k, train, test))
+    with ThreadPoolExecutor(max_workers=args.jobs) as pool:
+        done = list(pool.map(lambda j: fold_job(args, out, *j), jobs))
+    print(write_results(args, out, [r for part in done for r in part], others).read_text())
 
 
 if __name__ == "__main__":
