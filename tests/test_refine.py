@@ -398,3 +398,17 @@ def test_a_long_record_gets_longer_segments_not_thousands():
     prob = build_problem(system, r, RefineSettings(segment_length=0.1))
     assert prob.S <= MAX_SEGMENTS + 1
     assert build_problem(system, r, RefineSettings(segment_length=1.0)).S == 40
+
+
+def test_a_parameter_run_to_infinity_is_named_not_a_linear_algebra_complaint():
+    from pidyn.refine.stage import RefinementDiverged, _uncertainty, build_problem
+
+    system = LinearSDOF()
+    r = synthetic(system, "kobe", duration=5.0, channels=("x", "v"))
+    prob = build_problem(system, r, RefineSettings(segment_length=None, initial_state="rest"))
+    u = prob.pack(system.true_values(), np.zeros((prob.S, prob.ns)))
+    res, J, c, C = prob.linearize(u)
+    theta = u[: prob.n_theta].copy()
+    theta[prob.names.index("k")] = 1e6  # exp overflows: k = inf
+    with pytest.raises(RefinementDiverged, match="ran k to infinity"):
+        _uncertainty(prob, res, J, C, theta)

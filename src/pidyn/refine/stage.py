@@ -450,6 +450,11 @@ def _rest_sentence(test: dict, settings: RefineSettings) -> str:
     )
 
 
+class RefinementDiverged(ValueError):
+    """The refinement's solve ended where a parameter is infinite (a log coordinate run off): named,
+    instead of a linear-algebra routine's complaint about infs further on."""
+
+
 def _uncertainty(problem: ShootingProblem, r: np.ndarray, J: np.ndarray, C: np.ndarray, theta: np.ndarray):
     """Intervals, correlation and condition number at the solution, the lags the covariance
     took, and the notes on what the record does not determine (logged). The covariance is
@@ -458,6 +463,13 @@ def _uncertainty(problem: ShootingProblem, r: np.ndarray, J: np.ndarray, C: np.n
     white noise) it is the sandwich over that many lags (``uncertainty.sandwich``): on Painter
     Street the white-noise interval of the period was a few tenths of a percent wide while the
     peers' estimates of the same event spread over several percent."""
+    lost = [n for n, v in problem.values(theta).items() if not np.isfinite(v)]
+    if lost or not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
+        raise RefinementDiverged(
+            f"the refinement ran {', '.join(lost) or 'the model'} to infinity: its solve did not end on a finite "
+            "model of the record, and no interval can be given; give a start nearer the data "
+            "(system.params.<name>.init, model.refine.starts) or a model the record determines"
+        )
     cov, cond, lags = residual_covariance(problem, r, J, C)
     ints, corr = intervals(problem.specs, theta, cov), correlation(cov)
     one_sided_intervals(problem, ints, theta, r, J, C)
