@@ -142,7 +142,7 @@ def storey_cost(n: int, iters: int = 100) -> dict:
     import numpy as np
 
     from pidyn.refine import RefineSettings
-    from pidyn.refine.stage import build_problem
+    from pidyn.refine.setup import build_problem
 
     torch.set_default_dtype(torch.float32)
     net, w, sb, rec = _building_window(n, with_record=True)
@@ -191,7 +191,7 @@ def simulation_ms(reps: int = 3) -> list[dict]:
     from pidyn.data.sources import synthetic_from_motion
     from pidyn.excitation import prepare
     from pidyn.refine import RefineSettings, ShootingProblem
-    from pidyn.refine.stage import build_problem
+    from pidyn.refine.setup import build_problem
     from pidyn.simulate import simulate
     from pidyn.systems import BoucWen, Duffing, ShearBuilding
 

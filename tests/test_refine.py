@@ -374,7 +374,8 @@ def test_a_preferred_start_that_blows_up_lends_no_states_to_the_others():
     scale come from the start that does not, and the refinement ends at the truth. Before, the
     diverging start's states gave the scale inf, and the refinement from the good start ended on a
     model that blows up (the stiff shake-table building's Sine 1.5 run)."""
-    from pidyn.refine.stage import _Starts, build_problem
+    from pidyn.refine.setup import build_problem
+    from pidyn.refine.stage import _Starts
 
     system = LinearSDOF()
     r = synthetic(system, "kobe", duration=10.0, channels=("x", "v"))
@@ -391,7 +392,7 @@ def test_a_preferred_start_that_blows_up_lends_no_states_to_the_others():
 
 
 def test_a_long_record_gets_longer_segments_not_thousands():
-    from pidyn.refine.stage import MAX_SEGMENTS, build_problem
+    from pidyn.refine.setup import MAX_SEGMENTS, build_problem
 
     system = LinearSDOF()
     r = synthetic(system, "kobe", duration=40.0, dt=0.01, channels=("x", "v"))
@@ -401,7 +402,8 @@ def test_a_long_record_gets_longer_segments_not_thousands():
 
 
 def test_a_parameter_run_to_infinity_is_named_not_a_linear_algebra_complaint():
-    from pidyn.refine.stage import RefinementDiverged, _uncertainty, build_problem
+    from pidyn.refine.setup import build_problem
+    from pidyn.refine.stage import RefinementDiverged, _uncertainty
 
     system = LinearSDOF()
     r = synthetic(system, "kobe", duration=5.0, channels=("x", "v"))

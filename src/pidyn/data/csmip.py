@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pidyn.data.sources import DataError
+from pidyn.data.errors import DataError
 
 #: factors to SI of the units V2 files declare
 _UNITS = {

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pidyn.data.sources import DataError, Record, checked_hold
+from pidyn.data.sources import READERS, DataError, Record, checked_hold
 from pidyn.notes import note
 
 NOMINAL_STEP_US = 1e6 / 120.0
@@ -473,3 +473,6 @@ def xsens_record(
         excitation="ground",
         meta=meta,
     )
+
+
+READERS["xsens"] = xsens_record

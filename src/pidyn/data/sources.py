@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -21,6 +21,11 @@ from pidyn.data.errors import DataError, needed
 from pidyn.excitation.ground_motion import GroundMotion, prepare
 from pidyn.simulate import Trajectory, add_noise, simulate
 from pidyn.systems.base import StructuralSystem
+
+#: the readers of the measured formats the command line reads, by name (``Record.from_csmip``,
+#: ``Record.from_xsens``): each reader's module adds its own and ``pidyn.data`` imports them, so that
+#: the record does not import the readers that build it
+READERS: dict[str, Callable[..., Record]] = {}
 
 
 @dataclass
@@ -150,9 +155,7 @@ class Record:
         """One event of a strong-motion station from its CSMIP / CESMD archive (a zip of V2 files or
         a folder), as ``data=csmip`` reads it (``pidyn.data.strong_motion.csmip_record``: ``dt``,
         ``span``, ``fit_share``, ``on_missing`` ...)."""
-        from pidyn.data.strong_motion import csmip_record
-
-        return csmip_record(
+        return READERS["csmip"](
             path, station=station, direction=direction, inputs=inputs, outputs=outputs, **kwargs
         )
 
@@ -161,9 +164,7 @@ class Record:
         """One run of a building model measured by Xsens DOT IMUs (a folder with a subfolder per
         floor), as ``data=xsens`` reads it (``pidyn.data.imu.xsens_record``: ``align``, ``dt``,
         ``span``, ``fit_share`` ...)."""
-        from pidyn.data.imu import xsens_record
-
-        return xsens_record(path, run, **kwargs)
+        return READERS["xsens"](path, run, **kwargs)
 
     @classmethod
     def simulate(

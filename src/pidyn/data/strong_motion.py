@@ -35,7 +35,7 @@ import yaml
 from scipy.signal import resample_poly
 
 from pidyn.data.csmip import Archive, CsmipFormatError, MissingChannelError, read_archive
-from pidyn.data.sources import DataError, Record, checked_hold
+from pidyn.data.sources import READERS, DataError, Record, checked_hold
 from pidyn.notes import note
 
 log = logging.getLogger(__name__)
@@ -165,6 +165,9 @@ def csmip_record(
     }
     name = Path(path).name.split(".")[0]
     return Record(name=name, t=t, f=f, a=a, excitation="ground", meta=meta)
+
+
+READERS["csmip"] = csmip_record
 
 
 def _unmeasured_columns(a: np.ndarray, system) -> np.ndarray:

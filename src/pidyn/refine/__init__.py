@@ -1,7 +1,8 @@
 """Refinement: output error over shooting segments with exact Jacobians, and intervals."""
 
 from pidyn.refine.problem import Channel, ShootingProblem, record_channels, segment_bounds
-from pidyn.refine.stage import RefineResult, RefineSettings, initial_states, refine
+from pidyn.refine.setup import RefineSettings, initial_states
+from pidyn.refine.stage import RefineResult, refine
 
 __all__ = [
     "Channel",

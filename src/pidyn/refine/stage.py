@@ -15,15 +15,14 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import asdict, dataclass, field
-from typing import Literal
 
 import numpy as np
 
-from pidyn.integrate import input_hold, piece_starts
 from pidyn.notes import note
 from pidyn.refine.period_profile import profile_period
 from pidyn.refine.period_scan import scan_period
-from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
+from pidyn.refine.problem import ShootingProblem
+from pidyn.refine.setup import RefineSettings, build_problem, initial_states, state_scale
 from pidyn.refine.solve import solve, solve_constrained
 from pidyn.refine.uncertainty import (
     bound_notes,
@@ -38,42 +37,6 @@ from pidyn.refine.uncertainty import (
 )
 
 log = logging.getLogger(__name__)
-
-StateSource = Literal["networks", "measured", "simulated", "integrated"]
-STATE_SOURCES = ("networks", "measured", "simulated", "integrated")
-InitialState = Literal["auto", "free", "rest"]
-INITIAL_STATES = ("auto", "free", "rest")
-
-
-@dataclass
-class RefineSettings:
-    """How the shooting problem is set up and solved (``conf/model/refine/multiple_shooting.yaml``)."""
-
-    segment_length: float = 1.0  # s; shorter segments give a smoother cost (Ribeiro et al. 2020)
-    states: StateSource = "networks"  # segment initial states: networks | measured | simulated | integrated
-    substeps: int = 4  # RK4 steps per sample interval
-    initial_state: InitialState = "auto"  # rest | free | auto: at rest unless the data reject it
-    rest_test_level: float = 0.01  # auto: false-rejection rate of the likelihood-ratio test of rest
-    penalty_start: float = 100.0  # first continuity weight, relative to a segment's data term
-    penalty_tol: float = 1e-6  # stage 1 ends when every continuity defect is below this (state scales)
-    max_nfev: int = 100  # Levenberg-Marquardt evaluations per penalty round
-    gn_steps: int = 40  # constrained Levenberg-Marquardt steps at most (stage 2; most runs need a few)
-    reweight: bool = True  # weight each channel by its estimated noise and finish again
-    period_scan: bool = True  # linear models: look for a lower basin of the period (``period_scan``)
-    #: one linear mode: the period's profile-likelihood interval (``period_profile``)
-    period_profile: bool = True
-
-    def __post_init__(self) -> None:
-        if self.states not in STATE_SOURCES:
-            raise ValueError(f"refine.states must be one of {', '.join(STATE_SOURCES)}; got '{self.states}'")
-        if self.initial_state not in INITIAL_STATES:
-            raise ValueError(
-                f"refine.initial_state must be one of {', '.join(INITIAL_STATES)}; got '{self.initial_state}'"
-            )
-        if not 0 < self.rest_test_level < 1:
-            raise ValueError(f"refine.rest_test_level must lie in (0, 1), got {self.rest_test_level}")
-        if self.segment_length is not None and self.segment_length <= 0:
-            raise ValueError(f"refine.segment_length must be > 0 s, got {self.segment_length}")
 
 
 @dataclass
@@ -109,140 +72,6 @@ class RefineResult:
 
     def to_dict(self) -> dict:
         return asdict(self)
-
-
-def _lookup(network_states: np.ndarray | None, t: float, tol: float) -> np.ndarray | None:
-    if network_states is None or not len(network_states):
-        return None
-    i = int(np.argmin(np.abs(network_states[:, 0] - t)))
-    return network_states[i, 1:] if abs(network_states[i, 0] - t) <= tol else None
-
-
-def initial_states(
-    problem: ShootingProblem, theta: np.ndarray, source: StateSource, network_states: np.ndarray | None = None
-) -> np.ndarray:
-    """Segment initial states (S, n_state): from the networks, the measured x, x' or the
-    integrated measurements where they exist, otherwise carried from the previous segment's
-    simulated end (at ``theta``)."""
-    n, ns = problem.system.n_dof, problem.ns
-    t = problem.t
-    tol = 0.5 * float(t[1] - t[0])
-    measured = {(ch.kind, ch.dof): ch.data for ch in problem.channels if ch.kind in ("x", "v")}
-    if source == "integrated":
-        measured = integrated_states(problem)
-        source = "measured"
-    states = np.zeros((problem.S, ns))
-    y = np.zeros(ns)
-    for s in range(problem.S):
-        i = int(problem.bounds[s])
-        got = _lookup(network_states, float(t[i]), tol) if source == "networks" else None
-        if got is not None and got.size == ns:
-            y = got.copy()
-        elif source == "measured" or s == 0:
-            y = _measured_state(y, measured, i, n)
-        states[s] = y
-        if s + 1 < problem.S:
-            end = problem.free_run(theta, y, i, int(problem.bounds[s + 1]))[0][-1]
-            y = np.nan_to_num(end, nan=0.0, posinf=0.0, neginf=0.0)
-    return states
-
-
-def integrated_states(problem: ShootingProblem) -> dict[tuple[str, int], np.ndarray]:
-    """x and x' of every floor with a sensor, as a practitioner gets them from accelerometers:
-    the acceleration integrated (trapezoidal rule) with a linear baseline correction of the
-    velocity and of the displacement; a measured velocity or displacement is used as it is.
-    This is the refinement's start without networks (integration drifts, see docs/buildings.md)."""
-    t = problem.t
-    by = {(ch.kind, ch.dof): ch.data for ch in problem.channels}
-    out: dict[tuple[str, int], np.ndarray] = {}
-
-    def integral(y: np.ndarray) -> np.ndarray:
-        z = np.concatenate([[0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))])
-        return z - np.polyval(np.polyfit(t, z, 1), t)
-
-    for d in range(problem.system.n_dof):
-        v = by.get(("v", d))
-        if v is None and ("a", d) in by:
-            v = integral(by[("a", d)])
-        x = by.get(("x", d))
-        if x is None and v is not None:
-            x = integral(v)
-        if x is not None:
-            out[("x", d)] = x
-        if v is not None:
-            out[("v", d)] = v
-    return out
-
-
-def _measured_state(y: np.ndarray, measured: dict, i: int, n: int) -> np.ndarray:
-    y = y.copy()
-    for d in range(n):
-        if ("x", d) in measured:
-            y[d] = measured[("x", d)][i]
-        if ("v", d) in measured:
-            y[n + d] = measured[("v", d)][i]
-    return y
-
-
-def build_problem(
-    system, record, settings: RefineSettings, t_start: float | None = None, t_end: float | None = None
-) -> ShootingProblem:
-    channels = record_channels(record, system.n_dof)
-    starts = piece_starts(record)
-    bounds = segment_bounds(
-        record.t, _segment_length(record, settings, t_start, t_end), t_start, t_end, starts
-    )
-    state0 = np.zeros(system.n_state) if settings.initial_state == "rest" else None
-    return ShootingProblem(
-        system,
-        record.t,
-        record.f,
-        channels,
-        bounds,
-        settings.substeps,
-        fixed_state0=state0,
-        hold=input_hold(record),
-        restarts=starts,
-    )
-
-
-#: at most this many shooting segments: the Jacobian is dense in the segments' states, so its size
-#: grows with the record's length times their number (several records of a structure laid end to
-#: end would otherwise give thousands); a longer record gets longer segments
-MAX_SEGMENTS = 120
-
-
-def _segment_length(
-    record, settings: RefineSettings, t_start: float | None, t_end: float | None
-) -> float | None:
-    length = settings.segment_length
-    if length is None:
-        return None
-    span = (record.t[-1] if t_end is None else min(t_end, record.t[-1])) - (
-        record.t[0] if t_start is None else t_start
-    )
-    if span / length > MAX_SEGMENTS:
-        longer = span / MAX_SEGMENTS
-        log.info(
-            "shooting segments of %.3g s, not %.3g s: at most %d over %.4g s",
-            longer,
-            length,
-            MAX_SEGMENTS,
-            span,
-        )
-        return longer
-    return length
-
-
-def _state_scale(problem: ShootingProblem, states: np.ndarray) -> np.ndarray:
-    n = problem.system.n_dof
-    ref = {(ch.kind, ch.dof): float(np.std(ch.data)) for ch in problem.channels}
-    scale = np.std(states, axis=0)
-    for d in range(n):
-        scale[d] = max(scale[d], ref.get(("x", d), 0.0))
-        scale[n + d] = max(scale[n + d], ref.get(("v", d), 0.0))
-    floor = max(float(np.max(scale[:n])), 1e-12)
-    return np.where(scale > 1e-9 * floor, scale, floor)
 
 
 def refine(
@@ -510,7 +339,7 @@ class _Starts:
             # the states carried by a model that blows up are no states (and their spread no scale)
             self.first = steady[0]
             self.states0 = initial_states(problem, self.thetas[self.first], settings.states, network_states)
-        problem.state_scale = _state_scale(problem, self.states0)
+        problem.state_scale = state_scale(problem, self.states0)
         self.notes: list[str] = []
         blown = [k for k, (_, b) in fits.items() if b]
         if len(blown) == len(fits):
