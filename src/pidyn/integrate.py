@@ -35,15 +35,10 @@ def input_hold(record: Any) -> str:
     return str(record.meta.get("input_hold", "linear"))
 
 
-def piece_starts(record: Any, i0: int = 0, i1: int | None = None) -> list[int]:
-    """Sample indices, relative to ``i0``, in (i0, i1) where another record of a record made of
-    several begins (``meta["pieces"]``, see ``pidyn.data.multi``): a free run restarts there."""
-    out = []
-    for piece in (getattr(record, "meta", None) or {}).get("pieces") or []:
-        s = int(piece["i0"])
-        if s > i0 and (i1 is None or s < i1):
-            out.append(s - i0)
-    return out
+def piece_starts(record: Any) -> list[int]:
+    """Sample indices where another record of a record made of several begins (``meta["pieces"]``,
+    see ``pidyn.data.multi``): a free run restarts from rest there."""
+    return [int(piece["i0"]) for piece in (record.meta or {}).get("pieces") or [] if int(piece["i0"]) > 0]
 
 
 def stage_excitation(f: np.ndarray, substeps: int, hold: str = "linear") -> np.ndarray | None:

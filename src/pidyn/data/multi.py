@@ -3,7 +3,7 @@
 A structure identified from several earthquakes shares its parameters across them; each record
 keeps its own initial state. Laid end to end, the records go through every stage of a run as one
 record, and ``meta["pieces"]`` says where each begins. Whatever simulates over a junction starts
-the next record from rest (``piece_starts``), the shooting segments and PIDynNet's windows end
+the next record from rest (``pidyn.integrate.piece_starts``), the shooting segments and PIDynNet's windows end
 there, and a continuity defect never joins two records.
 
 The fitting part is every record but the last one's held-out share (when the records have a
@@ -18,16 +18,12 @@ from dataclasses import replace
 import numpy as np
 
 from pidyn.data.errors import DataError
-from pidyn.integrate import piece_starts
 from pidyn.simulate import Trajectory
-
-__all__ = ["concatenate", "piece_starts", "pieces"]
 
 #: metadata that must agree between the records of one structure (the channel map and its units)
 SAME = (
     "station",
     "direction",
-    "inputs",
     "input_channels",
     "output_channels",
     "acceleration",
@@ -44,7 +40,6 @@ def pieces(record) -> list[dict]:
 
 def concatenate(records: Sequence, name: str | None = None):
     """One record from several of one structure (same step, channels, inputs and units)."""
-
     records = list(records)
     if not records:
         raise DataError("no record to identify from (data.paths or data.runs is empty)")

@@ -16,6 +16,7 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 
 from pidyn.assessment import heldout_scores
 from pidyn.data.sources import Record
+from pidyn.params import fixed_values
 from pidyn.reporting import nrmse
 from pidyn.runs.folder import COMPLETE, is_complete
 from pidyn.simulate import simulate_response
@@ -65,8 +66,7 @@ class Identified:
             with open_dict(cfg):
                 cfg.data = data
         system, record = system_and_record(cfg, record)
-        fixed = {s.name: float(s.init) for s in system.param_specs() if not s.trainable}
-        values = {**fixed, **{k: float(v) for k, v in self.metrics["params"].items()}}
+        values = {**fixed_values(system), **{k: float(v) for k, v in self.metrics["params"].items()}}
         missing = sorted(s.name for s in system.param_specs() if s.name not in values)
         if missing:
             raise ValueError(f"{self.run_dir}: the run's metrics.json gives no value of {', '.join(missing)}")
