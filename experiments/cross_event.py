@@ -32,7 +32,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"
 #: the models compared; the first is the reference linear model of the layout
-SYSTEMS = {"linear": ["system=linear"], "duffing": ["system=duffing", "system.signed_k3=true"]}
+SYSTEMS = {
+    "linear": ["system=linear"],
+    "duffing": ["system=duffing", "system.signed_k3=true"],
+    "rigid_deck": ["system=rigid_deck"],  # every deck channel, each support its own spring (transverse)
+}
 #: a strong event (the issue's bar: the nonlinear model must beat the linear one there)
 STRONG_G = 0.2
 
@@ -179,8 +183,11 @@ def table(rows: list[dict], own: dict, systems: list[str]) -> list[dict]:
                 (own.get((r["event"], r["direction"])) or {}).get("heldout_nrmse_a")
             ),
         }
+        ref = list((res.get(systems[0]) or {}).get("nrmse") or {})  # the reference model's channels
         for s in systems:
             line[f"{s}_nrmse_a"] = (res.get(s) or {}).get("mean_nrmse_a")
+            scores = (res.get(s) or {}).get("nrmse") or {}
+            line[f"{s}_nrmse_ref"] = _median([scores.get(c) for c in ref]) if ref else None
         first = next((v for v in res.values() if v), {})
         line["trivial_nrmse_a"] = first.get("trivial_mean_nrmse_a")
         line["trivial"] = first.get("trivial")

@@ -26,6 +26,7 @@ SAME = (
     "direction",
     "input_channels",
     "output_channels",
+    "sensor_channels",
     "acceleration",
     "units",
     "input_hold",
@@ -65,6 +66,8 @@ def concatenate(records: Sequence, name: str | None = None):
         k: v for k, v in (first.meta or {}).items() if k not in ("split", "pieces", "notes", "path", "span")
     }
     meta["pieces"] = out_pieces
+    if "sensor_a" in meta:  # a deck's channels, kept beside its end motions (pidyn.data.layout)
+        meta["sensor_a"] = np.concatenate([np.asarray(r.meta["sensor_a"]) for r in records])
     meta["paths"] = [(r.meta or {}).get("path", r.name) for r in records]
     meta["notes"] = [f"{r.name}: {text}" for r in records for text in (r.meta or {}).get("notes") or []]
     if "pga" in meta:

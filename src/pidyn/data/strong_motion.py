@@ -26,28 +26,19 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from scipy.signal import resample_poly
 
 from pidyn.data.csmip import Archive, CsmipFormatError, MissingChannelError, read_archive
+from pidyn.data.layout import end_motions, observation
 from pidyn.data.sources import READERS, DataError, Record, checked_hold
+from pidyn.data.stations import STATIONS_FILE, station_number, stations
 from pidyn.notes import note
 
 log = logging.getLogger(__name__)
-
-STATIONS_FILE = "stations.yaml"
-
-
-def stations() -> dict:
-    """The channel sets of the stations the project knows (``pidyn/data/measured/stations.yaml``)."""
-    ref = resources.files("pidyn.data.measured").joinpath(STATIONS_FILE)
-    with ref.open("r", encoding="utf-8") as fh:
-        return dict(yaml.safe_load(fh) or {})
 
 
 def channel_sets(
@@ -61,7 +52,7 @@ def channel_sets(
     found = _station_of(archive)
     if station is None:
         station = found
-    elif found is not None and _station_number(found) != _station_number(station):
+    elif found is not None and station_number(found) != station_number(station):
         raise DataError(
             f"{archive.path.name}: the files are of station {found}, not data.station={station}; "
             f"give data.station={found} (with its channel sets) or the archive of {station}"
@@ -83,14 +74,6 @@ def channel_sets(
     ins = [int(c) for c in (inputs if inputs is not None else sets[direction]["inputs"])]
     outs = [int(c) for c in (outputs if outputs is not None else sets[direction]["outputs"])]
     return station, ins, outs
-
-
-def _station_number(name: str) -> str:
-    """``CE89324``, ``89324`` and ``ce89324`` name one station."""
-    import re
-
-    m = re.search(r"(\d+)", str(name))
-    return str(int(m.group(1))) if m else str(name).strip().upper()
 
 
 def _station_of(archive: Archive) -> str | None:
@@ -130,6 +113,8 @@ def csmip_record(
     if not 0.1 <= fit_share <= 0.95:
         raise DataError(f"data.fit_share must lie in [0.1, 0.95], got {fit_share}")
     sensors = None if system is None else getattr(system, "n_outputs", system.n_dof)
+    if getattr(system, "sensors", None):  # a deck read where each channel stands: every deck channel
+        sensors = None
     limit = max_outputs if max_outputs is not None else sensors
     archive, station, ins, outs, notes = _channels_used(
         path, station, direction, inputs, outputs, on_missing, limit
@@ -143,7 +128,9 @@ def csmip_record(
     else:
         f = acc_in[i0:i1, 0]
         a = a - f[:, None]  # one ground: accelerations relative to it, as every record keeps them
-    a = _unmeasured_columns(a, system)
+    H = observation(system, outs) if system is not None else None
+    sensor_a = a
+    a = _unmeasured_columns(a, system) if H is None else end_motions(a, H)
     for text in notes:
         log.info("%s: %s", archive.path.name, text)
     cut = float(t[-1]) * fit_share
@@ -163,6 +150,13 @@ def csmip_record(
         "input_hold": checked_hold(input_hold, "data.input_hold"),
         "split": {"fit": [0.0, cut], "heldout": [cut, float(t[-1])]},
     }
+    if H is not None:  # the deck's end motions from its channels; the channels kept for scoring
+        meta |= {
+            "sensor_channels": outs,
+            "observation": H.tolist(),
+            "sensor_a": sensor_a,
+            "output_channels": [],
+        }
     name = Path(path).name.split(".")[0]
     return Record(name=name, t=t, f=f, a=a, excitation="ground", meta=meta)
 

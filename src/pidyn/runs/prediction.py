@@ -15,6 +15,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf, open_dict
 
 from pidyn.assessment import heldout_scores
+from pidyn.data.layout import sensor_view
 from pidyn.data.sources import Record
 from pidyn.params import fixed_values
 from pidyn.reporting import nrmse
@@ -118,7 +119,8 @@ def score(system: StructuralSystem, values: dict[str, float], record: Record) ->
     """The model simulated from rest over the record: NRMSE per measured channel and their mean."""
     sim = simulate_response(system, values, record)
     span = (float(record.t[0]), float(record.t[-1]))
-    scores = heldout_scores(sim, record, span)
+    record, channels = sensor_view(record, sim)  # a deck's own channels (pidyn.data.layout)
+    scores = heldout_scores(channels, record, span)
     names = channel_names(record, list(scores["nrmse"]))
     nrmse_by = {names[k]: float(v) for k, v in scores["nrmse"].items()}
     acc = [v for k, v in nrmse_by.items() if k.startswith("a")]
@@ -131,6 +133,7 @@ def trivial(record: Record) -> dict[str, Any]:
     from pidyn.adequacy import trivial_predictions
     from pidyn.assessment import measured_convention
 
+    record, _ = sensor_view(record, {})  # a deck's own channels (pidyn.data.layout)
     span = (float(record.t[0]), float(record.t[-1]))
     preds = trivial_predictions(record, span)
     out, labels = {}, set()
@@ -217,6 +220,7 @@ def figure(path: Path, record: Record, sim: dict[str, np.ndarray], run: Identifi
     from pidyn.reporting import plottable
 
     path.parent.mkdir(parents=True, exist_ok=True)
+    record, sim = sensor_view(record, sim)
     panels = [(kind, fl) for kind, floors in record.sensors().items() for fl in floors]
     names = channel_names(record, [f"{k}{fl}" for k, fl in panels])
     fig, axes = plt.subplots(

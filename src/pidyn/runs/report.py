@@ -24,6 +24,7 @@ from pidyn.reporting import (
 )
 from pidyn.runs.build import Run
 from pidyn.runs.metrics import channel_nrmse, record_noise, relative_errors, sim_nrmse_x
+from pidyn.runs.supports import support_lines, support_table
 from pidyn.simulate import simulate_response
 from pidyn.systems.base import StructuralSystem
 
@@ -72,6 +73,11 @@ def write_report(
     _record_adequacy(adequacy, metrics)
     if hasattr(system, "storey_equations"):
         _building(run, final, truths, refined, metrics)
+    if hasattr(system, "support_stiffness_params"):  # a bridge on its supports
+        metrics["supports"], support_notes = support_table(system, final, refined)
+        for text in support_notes:
+            log.warning(text)
+        metrics["notes"] = list(metrics.get("notes") or []) + support_notes
     _figures(run, results, truths, baselines, refined, sim, metrics)
     write_json(run_dir / "metrics.json", metrics)
     write_run_report(run_dir, system.describe(final), metrics)
@@ -188,6 +194,8 @@ def write_run_report(run_dir: Path, equation: str, metrics: dict) -> None:
         ]
         lines.append(f"| {c} | " + " | ".join("" if x is None else f"{x:.3g}" for x in cells) + " |")
     lines += ["", f"Knowing nothing: {ad['trivial']}."]
+    if metrics.get("supports"):
+        lines += ["", "## Supports (per kg of deck)", "", *support_lines(metrics["supports"])]
     if metrics.get("notes"):
         lines += ["", "## Notes", ""] + [f"- {n}" for n in metrics["notes"]]
     write_text_atomic(run_dir / "report.md", "\n".join(lines) + "\n")

@@ -111,7 +111,7 @@ def _per_storey(value: float | Sequence[float], n: int, what: str) -> list[float
     return vals
 
 
-def _storey_term(spec: Mapping[str, Any], k: float) -> ForceTerm:
+def storey_term(spec: Mapping[str, Any], k: float) -> ForceTerm:
     """A term from its config entry ``{term: <name>, <param>: value, ...}`` (names as in ``TERMS``)."""
     spec = dict(spec)
     name = spec.pop("term", None)
@@ -238,7 +238,7 @@ class ShearBuilding(StructuralSystem):
                 raise ValueError(f"shear_building: storey_terms names storey {i}; storeys are 1..{n}")
             entries = [entries] if isinstance(entries, (Mapping, ForceTerm)) else list(entries)
             # a config entry, or a term object (the diagnosis extends a building by its own terms)
-            extra[i - 1] = [e if isinstance(e, ForceTerm) else _storey_term(e, k[i - 1]) for e in entries]
+            extra[i - 1] = [e if isinstance(e, ForceTerm) else storey_term(e, k[i - 1]) for e in entries]
             replaced[i - 1] = any(
                 not isinstance(e, ForceTerm) and isinstance(t, BoucWenHysteresis)
                 for e, t in zip(entries, extra[i - 1])
