@@ -53,8 +53,8 @@ def test_the_station_layout_places_every_channel_and_a_station_without_one_is_na
     assert np.allclose(H.sum(axis=1), 1.0) and np.allclose(H[1:], [[0, 1], [1, 0]])
     with pytest.raises(DataError, match="no positions"):
         station_deck("CE58658", "transverse")
-    with pytest.raises(DataError, match="transverse"):
-        station_deck("CE89324", "longitudinal")
+    along = station_deck("CE89324", "longitudinal")  # along the deck: one translation on the supports
+    assert along.n_dof == 1 and along.inputs == ("ch15", "ch1", "ch18")
     with pytest.raises(DataError, match=r"channel\(s\) \[99\]"):
         station_deck("CE89324", "transverse", inputs=[3, 17, 99])
 
@@ -144,3 +144,37 @@ def test_supports_the_data_cannot_tell_apart_are_said_so_and_their_values_not_re
     assert [r["k_determined"] for r in rows] == [True, False, True]
     table = "\n".join(support_lines(rows))
     assert "not determined" in table and "400" not in table.split("\n")[3].split("|")[4]
+
+
+def test_a_support_takes_any_force_term_and_its_sensitivities_are_exact():
+    """An abutment that softens with amplitude and a hysteretic bent: the model simulates, and the
+    dual numbers the refinement uses give the finite differences' derivatives."""
+    from pidyn.autodiff import deriv, seed, value
+    from pidyn.systems.terms import AmplitudeSoftening, BoucWenHysteresis
+
+    deck = _deck(
+        support_terms={
+            1: [{"term": "amplitude_softening", "soft": 0.3, "gain": 0.5, "a_ref": 0.005, "w0": 25.0}],
+            2: [{"term": "hysteresis"}],
+        }
+    )
+    assert isinstance(deck.supports[0][-1].term, AmplitudeSoftening) and deck.supports[0][-1].reads == (
+        "k1",
+        "c1",
+    )
+    assert isinstance(deck.supports[1][-1].term, BoucWenHysteresis) and "k2" in {
+        s.name for s in deck.param_specs()
+    }
+    assert deck.n_latent == 2 and deck.n_state == 6 and not deck.linear_time_invariant
+    p = {s.name: float(s.init) for s in deck.param_specs()}
+    rng = np.random.default_rng(1)
+    y, f = 0.01 * rng.normal(size=6), rng.normal(size=6)
+    y[4] = 0.5
+    base = deck.state_rate(0.0, y, p, f)
+    assert base.shape == (6,) and np.all(np.isfinite(base))
+    for name in ("k1", "soft1", "c3"):
+        dual = deck.state_rate(0.0, y, {**p, name: seed(p[name], np.array([1.0]))}, f)
+        h = 1e-6 * max(abs(p[name]), 1.0)
+        fd = (deck.state_rate(0.0, y, {**p, name: p[name] + h}, f) - base) / h
+        assert np.allclose(value(dual), base) and np.abs(fd).max() > 0
+        assert np.allclose(deriv(dual, 1)[..., 0], fd, rtol=1e-4, atol=1e-6), name

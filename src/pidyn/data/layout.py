@@ -31,15 +31,10 @@ def station_deck(
     inputs: list[int] | None = None,
     outputs: list[int] | None = None,
     **kwargs: Any,
-) -> RigidDeck:
+) -> Any:
     """A rigid deck on a station's supports for one direction's channel set (``stations.yaml``):
-    one support per input channel, read where each stands; the outputs are its deck sensors."""
-    if direction != "transverse":
-        raise DataError(
-            f"system=rigid_deck models the deck's motion across it (transverse); '{direction}' is one "
-            "translation that every deck sensor reads alike: use system=linear with the supports"
-        )
-    lay = station_layout(station, layout)
+    one support per input channel, read where each stands; the outputs are its deck sensors.
+    Along the deck, one translation on the supports."""
     if inputs is None or outputs is None:
         sets = (station_entry(station).get("directions") or {}).get(direction) or {}
         inputs = inputs if inputs is not None else sets.get("inputs")
@@ -48,6 +43,9 @@ def station_deck(
         raise DataError(
             f"station {station}: no channel set for '{direction}'; give data.inputs and data.outputs"
         )
+    if direction != "transverse":
+        return _along(inputs, direction, **kwargs)
+    lay = station_layout(station, layout)
     missing = [c for c in [*inputs, *outputs] if int(c) not in lay["positions"]]
     if missing:
         raise DataError(f"station {station}: the layout gives no position for channel(s) {missing}")
@@ -57,6 +55,28 @@ def station_deck(
         length=lay["length"],
         sensors={f"ch{c}": lay["positions"][int(c)] for c in outputs},
         **kwargs,
+    )
+
+
+def _along(inputs: list[int], direction: str, **kwargs: Any) -> Any:
+    """Along the deck (longitudinal) a deck rigid in its plane only translates: every deck channel
+    reads one motion, a single degree of freedom on the supports (``SDOFSystem`` with inputs)."""
+    from pidyn.systems import LinearSDOF
+
+    if kwargs.get("support_terms"):
+        raise DataError(
+            f"system=rigid_deck: support_terms act on the deck's supports across it, not '{direction}'"
+        )
+    k = kwargs.get("stiffnesses", 200.0)
+    c = kwargs.get("dampings", 1.0)
+    k = float(np.sum(k)) * (len(inputs) if np.ndim(k) == 0 else 1)
+    c = float(np.sum(c)) * (len(inputs) if np.ndim(c) == 0 else 1)
+    return LinearSDOF(
+        c=c,
+        k=k,
+        inputs=[f"ch{i}" for i in inputs],
+        params=kwargs.get("params"),
+        name="rigid_deck_longitudinal",
     )
 
 

@@ -319,12 +319,29 @@ def _support_terms(
         if not 1 <= j <= n:
             raise ValueError(f"rigid_deck: support_terms names support {j}; supports are 1..{n}")
         entries = [entries] if isinstance(entries, (Mapping, ForceTerm)) else list(entries)
-        out[j - 1] = [e if isinstance(e, ForceTerm) else storey_term(e, k[j - 1]) for e in entries]
+        out[j - 1] = [e if isinstance(e, ForceTerm) else storey_term(_own(e, j), k[j - 1]) for e in entries]
         replaced[j - 1] = any(
             not isinstance(e, ForceTerm) and isinstance(t, BoucWenHysteresis)
             for e, t in zip(entries, out[j - 1])
         )
     return out, replaced
+
+
+def _own(entry: Mapping[str, Any], j: int) -> dict:
+    """A config entry whose term reads the support's spring and dashpot by name (an amplitude
+    law scales them) is pointed at support j's own (``k2``, ``c2``)."""
+    import inspect
+
+    from pidyn.systems.terms import TERMS
+
+    entry = dict(entry)
+    cls = TERMS.get(entry.get("term"))
+    if cls is not None:
+        args = inspect.signature(cls).parameters
+        for ref, base in (("stiffness", "k"), ("damping", "c")):
+            if ref in args:
+                entry.setdefault(ref, f"{base}{j}")
+    return entry
 
 
 def _latent_slices(supports: list[list[OnStorey]]) -> list[list[slice | None]]:

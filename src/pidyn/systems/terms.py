@@ -774,6 +774,7 @@ TERMS: dict[str, type[ForceTerm]] = {
         GapContact,
         TrilinearSpring,
         StribeckFriction,
+        AmplitudeSoftening,
         LearnedForce,
     )
 }
