@@ -45,9 +45,10 @@ def one(args: tuple[int, str, float, float]) -> dict:
     """The nominal fit and fit test of one clean building."""
     from pidyn.config import compose
     from pidyn.data.sources import synthetic_from_motion
+    from pidyn.discrepancy.case import split_spans
     from pidyn.discrepancy.settings import DiagnosisSettings
+    from pidyn.discrepancy.storey_choice import building_fit_test
     from pidyn.discrepancy.storey_nominal import nominal_fit
-    from pidyn.discrepancy.storeys import building_fit_test, split_spans
     from pidyn.excitation.ground_motion import prepare
     from pidyn.runs.methods import refine_plan
     from pidyn.systems.shear_building import ShearBuilding

@@ -67,9 +67,11 @@ def one(args: tuple[int, str, float, float, float]) -> dict:
     """The nominal fit and held-out test of one clean building."""
     from pidyn.config import compose
     from pidyn.data.sources import synthetic_from_motion
+    from pidyn.discrepancy.case import split_spans
     from pidyn.discrepancy.settings import DiagnosisSettings
+    from pidyn.discrepancy.storey_choice import Study
     from pidyn.discrepancy.storey_nominal import heldout_nrmse, nominal_fit
-    from pidyn.discrepancy.storeys import Study, building_heldout_test, split_spans
+    from pidyn.discrepancy.storeys import building_heldout_test
     from pidyn.excitation.ground_motion import prepare
     from pidyn.runs.methods import refine_plan
     from pidyn.systems.shear_building import ShearBuilding

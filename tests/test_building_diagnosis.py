@@ -166,7 +166,7 @@ def test_an_effect_the_weak_form_misses_is_found_through_the_fit_test(tmp_path):
 def test_storey_shear_from_floor_accelerations_is_the_storey_force():
     """The identity the screening rests on: -sum_{j>=i} m_j a_j (absolute) equals each storey's
     restoring force, noise-free and without any model."""
-    from pidyn.discrepancy.storeys import storey_views
+    from pidyn.discrepancy.storey_model import storey_views
 
     b = ShearBuilding(3, MASSES, DAMPINGS, STIFFNESSES)
     rec = synthetic(b, "el_centro", duration=20.0, dt=0.01, noise=0.0, channels=("a",))
@@ -199,7 +199,7 @@ def test_a_hysteresis_found_by_the_diagnosis_adds_to_the_storey_spring():
 def test_an_extension_restarts_a_damper_the_nominal_fit_ran_to_zero():
     """In log space a damper at 1e-12 cannot come back (its gradient is proportional to it): an
     extension starts it at a tenth of the others' median, and leaves the others as they are."""
-    from pidyn.discrepancy.storeys import building_with
+    from pidyn.discrepancy.storey_model import building_with
 
     nominal = ShearBuilding(4, [1.0, 1.0, 1.0, 1.0])
     values = {**{f"m{i}": 1.0 for i in range(1, 5)}, **{f"k{i}": 100.0 for i in range(1, 5)}}
@@ -229,8 +229,9 @@ def test_a_named_effect_needs_a_determined_size():
     """The refinement's interval of the effect's size (its key parameter) decides whether a
     building's extension may be named: two standard deviations from zero (``storey_max_rel_std``)."""
     from pidyn.discrepancy.settings import DiagnosisSettings
-    from pidyn.discrepancy.storey_steps import refusal_notes, size_spread
-    from pidyn.discrepancy.storeys import Found
+    from pidyn.discrepancy.storey_extension import size_spread
+    from pidyn.discrepancy.storey_model import Found
+    from pidyn.discrepancy.storey_steps import refusal_notes
 
     cand = Found("quadratic_damping", 1, {"c2": 25.0}, {"score": 2.8}, {})
     loose = {"intervals": {"c2_1": {"value": 1.23, "std": 1.30, "rel_std_pct": 106.0}}}

@@ -10,17 +10,16 @@ import pytest
 from pidyn.data.sources import synthetic
 from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.settings import DiagnosisSettings
-from pidyn.discrepancy.storey_nominal import fundamental_hz
-from pidyn.discrepancy.storeys import (
+from pidyn.discrepancy.storey_choice import Study, misfit_rows
+from pidyn.discrepancy.storey_model import (
     CORNER_SHARE,
     WINDOW_SHARE,
     Found,
-    Study,
     building_with,
-    misfit_rows,
     storey_signals,
     storey_views,
 )
+from pidyn.discrepancy.storey_nominal import fundamental_hz
 from pidyn.simulate import simulate_response
 from pidyn.systems.shear_building import ShearBuilding
 
@@ -101,7 +100,7 @@ def test_the_misfit_search_stops_at_a_candidate_that_removes_nearly_all_of_it(mo
     """``confirm_leaning`` with a failed fit test: the candidates come best first, so one that
     removes ``misfit_done`` of the excess ends the search (the next is not refined), and one that
     removes less than ``misfit_share`` is not named even with a large BIC gain."""
-    import pidyn.discrepancy.storeys as st
+    import pidyn.discrepancy.storey_choice as st
 
     settings = DiagnosisSettings()
     left = {"A": 0.05, "B": 0.6, "C": 0.0, "D": 0.8}  # the excess each extension leaves, of 1.0 before

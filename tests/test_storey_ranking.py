@@ -9,9 +9,10 @@ import pytest
 
 from pidyn.data.sources import synthetic
 from pidyn.discrepancy.settings import DiagnosisSettings
+from pidyn.discrepancy.storey_choice import Study
+from pidyn.discrepancy.storey_model import CORNER_SHARE, WINDOW_SHARE
 from pidyn.discrepancy.storey_nominal import fundamental_hz
 from pidyn.discrepancy.storey_ranking import rank_candidates
-from pidyn.discrepancy.storeys import CORNER_SHARE, WINDOW_SHARE, Study
 from pidyn.systems.shear_building import ShearBuilding
 
 MASSES, DAMPINGS, STIFFNESSES = [1.0, 1.2, 0.8], [0.5, 0.5, 0.5], [200.0, 160.0, 120.0]

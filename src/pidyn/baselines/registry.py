@@ -14,6 +14,7 @@ import importlib
 import pkgutil
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from pidyn.baselines.common import BaselineResult
@@ -77,11 +78,10 @@ def entries() -> dict[str, Entry]:
     """Every registered estimator, in the tables' order (the modules found on first use)."""
     global _FOUND
     if not _FOUND:
-        import pidyn.baselines as package
-
-        for info in pkgutil.iter_modules(package.__path__):
+        here = Path(__file__).parent  # the package's folder, without importing the package here
+        for info in pkgutil.iter_modules([str(here)]):
             if info.name not in ("registry", "worker"):
-                importlib.import_module(f"{package.__name__}.{info.name}")
+                importlib.import_module(f"{__package__}.{info.name}")
         _FOUND = True
     return dict(sorted(_ENTRIES.items(), key=lambda kv: (kv[1].order, kv[0])))
 

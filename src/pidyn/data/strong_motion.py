@@ -112,12 +112,8 @@ def csmip_record(
     between samples (``pidyn.integrate``)."""
     if not 0.1 <= fit_share <= 0.95:
         raise DataError(f"data.fit_share must lie in [0.1, 0.95], got {fit_share}")
-    sensors = None if system is None else getattr(system, "n_outputs", system.n_dof)
-    if getattr(system, "sensors", None):  # a deck read where each channel stands: every deck channel
-        sensors = None
-    limit = max_outputs if max_outputs is not None else sensors
     archive, station, ins, outs, notes = _channels_used(
-        path, station, direction, inputs, outputs, on_missing, limit
+        path, station, direction, inputs, outputs, on_missing, _output_limit(system, max_outputs)
     )
     acc_in, vel_in, acc_out, step = _aligned_channels(archive, ins, outs, dt, notes)
     i0, i1, pre_rms = shaking_span(acc_in, acc_out, step, span, pre, post)
@@ -128,9 +124,7 @@ def csmip_record(
     else:
         f = acc_in[i0:i1, 0]
         a = a - f[:, None]  # one ground: accelerations relative to it, as every record keeps them
-    H = observation(system, outs) if system is not None else None
-    sensor_a = a
-    a = _unmeasured_columns(a, system) if H is None else end_motions(a, H)
+    a, deck = _read_through(system, outs, a)
     for text in notes:
         log.info("%s: %s", archive.path.name, text)
     cut = float(t[-1]) * fit_share
@@ -149,19 +143,32 @@ def csmip_record(
         "pga": float(np.max(np.abs(acc_in[i0:i1]))),
         "input_hold": checked_hold(input_hold, "data.input_hold"),
         "split": {"fit": [0.0, cut], "heldout": [cut, float(t[-1])]},
+        **deck,
     }
-    if H is not None:  # the deck's end motions from its channels; the channels kept for scoring
-        meta |= {
-            "sensor_channels": outs,
-            "observation": H.tolist(),
-            "sensor_a": sensor_a,
-            "output_channels": [],
-        }
     name = Path(path).name.split(".")[0]
     return Record(name=name, t=t, f=f, a=a, excitation="ground", meta=meta)
 
 
 READERS["csmip"] = csmip_record
+
+
+def _output_limit(system, max_outputs: int | None) -> int | None:
+    """How many outputs a model keeps: as many as it has degrees of freedom, or every channel of a
+    deck read where each stands."""
+    if max_outputs is not None or system is None:
+        return max_outputs
+    return None if getattr(system, "sensors", None) else getattr(system, "n_outputs", system.n_dof)
+
+
+def _read_through(system, outs: list[int], a: np.ndarray) -> tuple[np.ndarray, dict]:
+    """The outputs as the model's degrees of freedom read them: a deck's end motions from its
+    channels by least squares (the channels kept in the metadata for scoring,
+    ``pidyn.data.layout``), else the channels themselves."""
+    H = observation(system, outs) if system is not None else None
+    if H is None:
+        return _unmeasured_columns(a, system), {}
+    meta = {"sensor_channels": outs, "observation": H.tolist(), "sensor_a": a, "output_channels": []}
+    return end_motions(a, H), meta
 
 
 def _unmeasured_columns(a: np.ndarray, system) -> np.ndarray:

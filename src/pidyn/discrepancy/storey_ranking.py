@@ -23,6 +23,7 @@ import numpy as np
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS
+from pidyn.discrepancy.storey_model import Found, building_with, storey_signals
 from pidyn.simulate import input_hold, simulate_batch
 
 #: effects whose size may take either sign (a spring that hardens or softens, a damping that
@@ -150,8 +151,6 @@ def _scored(
     study, current: dict, found: list, views: list, rows: list[tuple[int, dict]]
 ) -> tuple[list[Ranked], np.ndarray]:
     """The candidates scored (best first) and the current model's residual, its parameters profiled out."""
-    from pidyn.discrepancy.storeys import Found, building_with, storey_signals
-
     record, fit = study.record, study.fit
     mask = (record.t >= fit[0]) & (record.t <= fit[1])
     floors = measured_floors(record)

@@ -12,8 +12,8 @@ import numpy as np
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy.screening import Thresholds
-from pidyn.discrepancy.storey_steps import step_outcome
-from pidyn.discrepancy.storeys import BuildingDiagnosis, StoreyView, score_text, storey_system
+from pidyn.discrepancy.storey_extension import step_outcome
+from pidyn.discrepancy.storey_model import BuildingDiagnosis, StoreyView, score_text, storey_system
 from pidyn.systems.shear_building import ShearBuilding
 
 

@@ -4,35 +4,23 @@ building refined and judged on the held-out floors, and what each step reports."
 from __future__ import annotations
 
 import logging
-from dataclasses import replace
-from typing import Any
 
 import numpy as np
 
-from pidyn.data.sources import Record
-from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.screening import Screening
-from pidyn.discrepancy.settings import DiagnosisSettings
-from pidyn.discrepancy.storey_nominal import heldout_nrmse
-from pidyn.discrepancy.storey_ranking import trial_values
-from pidyn.discrepancy.storeys import (
-    Found,
-    StoreyView,
+from pidyn.discrepancy.storey_choice import (
     Study,
     best_row,
     better,
-    building_with,
     close_rivals,
     confirm_leaning,
     excess2,
-    fit_bic,
     leaning_rows,
     misfit_rows,
-    score_text,
-    storey_signals,
 )
+from pidyn.discrepancy.storey_extension import fit_bic
+from pidyn.discrepancy.storey_model import Found, StoreyView, score_text, storey_signals
 from pidyn.notes import note
-from pidyn.systems.shear_building import ShearBuilding, storey_param
 
 log = logging.getLogger(__name__)
 
@@ -186,106 +174,3 @@ def refusal_notes(refused: dict | None) -> list[str]:
             f"{refused['heldout_after']:.4g}): not named",
         )
     ]
-
-
-def try_extension(
-    record: Record,
-    nominal_system: ShearBuilding,
-    current: dict,
-    found: list[Found],
-    cand: Found,
-    fit: tuple[float, float],
-    held: tuple[float, float],
-    settings: DiagnosisSettings,
-    refine_settings: Any,
-) -> dict:
-    """The building with ``cand`` added, refined on the fitting part; accepted when it predicts
-    the held-out floor accelerations better than the current model by ``storey_min_gain``."""
-    from pidyn.refine.stage import refine
-
-    # the refinement identifies the shapes the screening fixed from the record (a friction's
-    # width: benchmark case 64's friction settled 23 % low at the width its filtered drifts gave)
-    cand = replace(cand, ctx={**cand.ctx, "free_width": True})
-    ext, start = building_with(
-        nominal_system, trial_values(current["values"], cand.storey, cand.row), [*found, cand]
-    )
-    log.info(
-        "storey %d: %s (score %.1f), extending and refining",
-        cand.storey,
-        cand.effect,
-        cand.row["score"] or 0.0,
-    )
-    res = refine(
-        ext, record, {"screening": start}, refine_settings, t_start=fit[0], t_end=fit[1], prefer="screening"
-    )
-    values = {**start, **res.params}
-    ho = heldout_nrmse(record, ext, values, held)
-    before = current["heldout"]["mean"]
-    bic = fit_bic(record, ext, values, fit, current["noise"])
-    accepted = bool(np.isfinite(ho["mean"]) and ho["mean"] < before * (1.0 - float(settings.storey_min_gain)))
-    params, report = _step_report(cand, values, res, bic, before, ho["mean"], accepted)
-    if accepted and (spread := size_spread(cand, report)) > float(settings.storey_max_rel_std):
-        # a size the data do not fix: a quadratic damper in storey 1 (c2 1.23, 95 % 0.15-9.8) stood
-        # in for the storey's collapsed linear damper beside a friction named in storey 2
-        accepted = False
-        report.update(accepted=False, size_rel_std=spread)
-    log.info(
-        "storey %d %s: held-out NRMSE %.4g -> %.4g (%s)",
-        cand.storey,
-        cand.effect,
-        before,
-        ho["mean"],
-        step_outcome(report),
-    )
-    done = Found(cand.effect, cand.storey, params, cand.row, cand.ctx)
-    return {
-        "accepted": accepted,
-        "report": report,
-        "found": done,
-        "current": {"system": ext, "values": values, "heldout": ho, "result": res, "noise": current["noise"]},
-    }
-
-
-def step_outcome(step: dict) -> str:
-    """A step's end for people (the log and the report): named, or which rule refused it."""
-    if step["accepted"]:
-        return "named"
-    if step.get("size_rel_std") is not None:
-        return f"refused: its size is not determined (std {100 * step['size_rel_std']:.0f} % of it)"
-    return "refused: no held-out gain"
-
-
-def size_spread(cand: Found, report: dict) -> float:
-    """The standard deviation of the effect's size (its key parameter) as a share of it, from the
-    refinement's interval; 0 where it has none."""
-    iv = report["intervals"].get(storey_param(EFFECTS[cand.effect].key, cand.storey)) or {}
-    rel = iv.get("rel_std_pct")
-    return float(rel) / 100.0 if rel is not None and np.isfinite(rel) else 0.0
-
-
-def _step_report(
-    cand: Found, values: dict, res: Any, bic: float, before: float, after: float, accepted: bool
-) -> tuple[dict[str, float], dict]:
-    """The effect's own parameters (its names without the storey) and what ``diagnosis.json``
-    keeps of the step."""
-    names = {
-        s.name: storey_param(s.name, cand.storey)
-        for s in EFFECTS[cand.effect].term(cand.params, cand.ctx).specs()
-    }
-    params = {base: float(values[full]) for base, full in names.items() if full in values}
-    report = {
-        "effect": cand.effect,
-        "storey": cand.storey,
-        "score": cand.row.get("score"),
-        "cv_gain": cand.row.get("cv_gain"),
-        "screening_parameters": cand.params,
-        "parameters": {names[b]: v for b, v in params.items()},
-        "intervals": {full: res.intervals.get(full) for full in names.values() if full in res.intervals},
-        "source": "weak_form",
-        "fit_bic": bic,
-        "n_params": len(names),
-        "heldout_before": before,
-        "heldout_after": after,
-        "accepted": accepted,
-    }
-    return params, report

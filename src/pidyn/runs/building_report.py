@@ -229,7 +229,7 @@ def storey_residuals(
     from scipy.signal import welch
 
     from pidyn.baselines.data_start import fundamental
-    from pidyn.discrepancy.storeys import storey_views
+    from pidyn.discrepancy.storey_model import storey_views
 
     if record.a is None or np.isnan(record.a).any() or record.n_inputs != 1:
         return []

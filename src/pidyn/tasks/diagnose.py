@@ -62,8 +62,9 @@ def diagnose_building_task(cfg: DictConfig, record: Record | None = None) -> dic
     """A shear building's diagnosis (``pidyn.discrepancy.storeys``), written to the run folder."""
     from dataclasses import replace
 
+    from pidyn.discrepancy.case import split_spans
     from pidyn.discrepancy.storey_report import report_lines, summarize_building, write_building_figures
-    from pidyn.discrepancy.storeys import diagnose_building, split_spans
+    from pidyn.discrepancy.storeys import diagnose_building
     from pidyn.runs.methods import refine_plan
 
     settings = DiagnosisSettings.from_mapping(OmegaConf.to_container(cfg.diagnosis, resolve=True))  # type: ignore[arg-type]
