@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def _build_wheel(tmp: Path) -> Path:
     src = tmp / "src_copy"
     src.mkdir()
-    for name in ("pyproject.toml", "README.md"):
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
         shutil.copy(ROOT / name, src / name)
     shutil.copytree(ROOT / "src", src / "src", ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
     out = tmp / "wheel"
@@ -89,6 +89,11 @@ def test_wheel_installs_and_pidyn_train_runs_from_any_directory(tmp_path):
     names = zipfile.ZipFile(wheel).namelist()
     assert "pidyn/conf/train.yaml" in names and "pidyn/conf/system/bouc_wen.yaml" in names
     assert any(n.startswith("pidyn/excitation/records/") and n.endswith(".AT2") for n in names)
+    assert "pidyn/py.typed" in names and any(n.endswith("licenses/LICENSE") for n in names)
+    meta = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("METADATA"))).decode()
+    import pidyn
+
+    assert f"Version: {pidyn.__version__}" in meta and "quakeio" not in meta  # the version written once
 
     env_dir = _fresh_env(tmp_path, wheel)
     work = tmp_path / "elsewhere"

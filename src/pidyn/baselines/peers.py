@@ -98,7 +98,7 @@ def _require_mdof():
     try:
         import mdof  # noqa: F401
     except ImportError:
-        raise RuntimeError("mdof is not installed: pip install 'pidyn[peer]' (mdof and quakeio)") from None
+        raise RuntimeError("mdof is not installed: pip install 'pidyn[peer]'") from None
     return mdof
 
 
