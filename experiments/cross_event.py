@@ -37,6 +37,8 @@ SYSTEMS = {
     "duffing": ["system=duffing", "system.signed_k3=true"],
     "rigid_deck": ["system=rigid_deck"],  # every deck channel, each support its own spring (transverse)
 }
+#: the linear model of each model's own layout, scored beside it (a linear model is its own)
+LINEAR_OF = {"duffing": "linear"}
 #: a strong event (the issue's bar: the nonlinear model must beat the linear one there)
 STRONG_G = 0.2
 
@@ -143,11 +145,11 @@ def predict(run: Path, linear: Path | None, row: dict, station: str, direction: 
 def fold_job(args, out: Path, direction: str, k: int, train: list[dict], test: list[dict]) -> list[dict]:
     fold_dir = out / direction / f"fold{k}"
     runs = {s: identify(fold_dir, args.station, direction, s, train) for s in args.systems}
-    linear = runs.get("linear")
     rows = []
     for row in test:
         res = {}
         for s, run in runs.items():
+            linear = runs.get(LINEAR_OF.get(s, ""))  # the linear model of the same layout, if another
             if (run / "complete.json").is_file():
                 res[s] = predict(run, linear, row, args.station, direction, fold_dir / s / "predictions")
         rows.append({**row, "direction": direction, "fold": k, "n_train": len(train), "results": res})

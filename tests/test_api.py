@@ -120,3 +120,24 @@ def test_a_plain_script_without_a_main_guard_runs_once(tmp_path):
     assert "baseline worker failed" not in out.stderr, out.stderr[-2000:]
     rows = json.loads((tmp_path / "run" / "baselines.json").read_text())["baselines"]
     assert rows[0]["method"] == "equation_error" and rows[0]["params"], rows
+
+
+def test_a_notebook_without_logging_sees_the_progress_lines_and_a_configured_program_keeps_its_own(capfd):
+    import logging
+
+    from pidyn.api import _progress
+
+    root = logging.getLogger()
+    saved = root.handlers[:]
+    root.handlers.clear()  # a notebook: nobody configured logging
+    try:
+        with _progress():
+            logging.getLogger("pidyn.models.identify").info("window 1 of 8")
+        assert "window 1 of 8" in capfd.readouterr().err
+        assert not logging.getLogger("pidyn").handlers  # removed after the call
+        mine = logging.StreamHandler()
+        root.addHandler(mine)
+        with _progress():
+            assert not logging.getLogger("pidyn").handlers  # the program's own handler decides
+    finally:
+        root.handlers[:] = saved

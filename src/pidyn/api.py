@@ -159,6 +159,30 @@ class Result:
 
 
 @contextlib.contextmanager
+def _progress():
+    """A notebook or script whose logging nobody configured sees pidyn's progress lines (windows,
+    refinement, diagnosis steps) on stderr for the call; a program that set up its own logging
+    (a handler on ``pidyn`` or on the root logger) keeps it as it is."""
+    import logging
+    import sys
+
+    logger = logging.getLogger("pidyn")
+    if logger.handlers or logging.getLogger().handlers:
+        yield
+        return
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("[%(asctime)s] %(message)s", "%H:%M:%S"))
+    level = logger.level
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+
+
+@contextlib.contextmanager
 def _user_errors():
     """A setting Hydra or OmegaConf refuses (a wrong value in ``init``, a misspelled override)
     comes out as a ``ValueError`` with the cause's message: the API raises no framework's type."""
@@ -196,14 +220,14 @@ def identify(
     if record is not None and not isinstance(record, Record):
         from pidyn.data.multi import concatenate
 
-        with _user_errors():
+        with _user_errors(), _progress():
             record = concatenate(list(record))
     groups, values = _split_options(options)
     values.update({f"system.params.{k}.init": float(v) for k, v in (init or {}).items()})
     values.setdefault("trainer.enable_progress_bar", False)
     values.setdefault("raise_errors", True)
     run_dir = _run_dir(out_dir, "train", system)
-    with _user_errors():
+    with _user_errors(), _progress():
         cfg = compose(
             "train",
             groups={"system": system, **groups},
@@ -263,7 +287,7 @@ def _predict_record(result: Result, record: Record) -> RecordPrediction:
     from pidyn.assessment import measured_convention
     from pidyn.runs.prediction import Identified, channel_names, predict_record
 
-    with _user_errors():
+    with _user_errors(), _progress():
         run = Identified.load(result.run_dir)
         system, rec, values = run.for_record(record=record)
         scores, sim = predict_record(run, rec, system, values)
@@ -376,7 +400,7 @@ def diagnose(
         overrides=overrides,
         output_dir=run_dir,
     )
-    with _user_errors():
+    with _user_errors(), _progress():
         d = run_diagnosis(cfg, record=record)
     return Diagnosis(
         verdict=d["verdict"],
