@@ -178,3 +178,14 @@ def test_a_support_takes_any_force_term_and_its_sensitivities_are_exact():
         fd = (deck.state_rate(0.0, y, {**p, name: p[name] + h}, f) - base) / h
         assert np.allclose(value(dual), base) and np.abs(fd).max() > 0
         assert np.allclose(deriv(dual, 1)[..., 0], fd, rtol=1e-4, atol=1e-6), name
+
+
+def test_each_kind_of_data_gets_its_default_model_and_a_named_system_wins():
+    from pidyn.config import compose
+
+    assert compose("train").system._target_ == "pidyn.systems.Duffing"  # the paper's default
+    bridge = compose("train", groups={"data": "csmip"})
+    assert bridge.system._target_ == "pidyn.systems.LinearSDOF" and bridge.system.inputs is None
+    deck = compose("train", groups={"data": "csmip", "system": "rigid_deck"})
+    assert deck.system._target_ == "pidyn.data.layout.station_deck"
+    assert compose("train", groups={"system": "shear_building"}).system._target_.endswith("ShearBuilding")
