@@ -2,9 +2,9 @@
 data.direction=transverse`` predicts the record with the model of the run folder ``RUN``
 (``pidyn.runs.prediction``) and writes ``prediction.json`` and ``figures/prediction.png``.
 
-The plain simulation is the prediction. PIDynNet's physics-only networks (the paper's Eq. 14)
-need the identification's networks in memory: ``pidyn.predict(result, excitation)`` in the
-session that identified them.
+The plain simulation is the prediction. ``physics_only=true`` adds the paper's Eq. 14 beside it:
+fresh networks trained on the physics alone with the run's parameters held
+(``pidyn.runs.physics_only``), where the model takes one ground acceleration.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from omegaconf import DictConfig
 
 from pidyn.reporting import write_json
 from pidyn.runs.folder import run_folder
+from pidyn.runs.physics_only import physics_only
 from pidyn.runs.prediction import Identified, figure, predict_record
 
 log = logging.getLogger(__name__)
@@ -45,6 +46,10 @@ def predict_in(cfg: DictConfig, folder: Path) -> dict[str, Any]:
     system, record, values = run.for_record(cfg.data)
     linear_run = Identified.load(cfg.linear_run) if cfg.get("linear_run") else None
     out, sim = predict_record(run, record, system, values, linear_run, cfg.data)
+    if cfg.get("physics_only"):
+        entry = physics_only(run.cfg, system, values, record, sim, cfg.physics)
+        out["physics_only"] = {k: v for k, v in entry.items() if k != "response"}
+        log.info("physics-only networks (Eq. 14): %s", _physics_text(out["physics_only"]))
     write_json(folder / "prediction.json", out)
     figure(folder / "figures" / "prediction.png", record, sim, run, out)
     _log(out)
@@ -68,6 +73,12 @@ def _log(out: dict[str, Any]) -> None:
             "THE MODEL PREDICTS THIS RECORD NO BETTER THAN KNOWING NOTHING (%s): its prediction is not to be used",
             out["trivial"],
         )
+
+
+def _physics_text(entry: dict[str, Any]) -> str:
+    if not entry.get("applies"):
+        return f"not applicable: {entry['why']}"
+    return f"mean NRMSE {_fmt(entry['mean_nrmse_a'])} in {entry['seconds']:.0f} s"
 
 
 def _fmt(v: float | None) -> str:
