@@ -16,7 +16,8 @@ from pidyn.discrepancy.storey_model import Found, building_with
 from pidyn.discrepancy.storey_nominal import heldout_nrmse
 from pidyn.discrepancy.storey_ranking import floor_noise, measured_floors, trial_values
 from pidyn.simulate import simulate_response
-from pidyn.systems.shear_building import ShearBuilding, storey_param
+from pidyn.systems.places import storey_param
+from pidyn.systems.shear_building import ShearBuilding
 
 log = logging.getLogger(__name__)
 

@@ -15,8 +15,9 @@ from pidyn.discrepancy.verdicts import Verdict
 from pidyn.params import positive
 from pidyn.signals import integrate
 from pidyn.simulate import simulate_response
+from pidyn.systems.places import storey_param
 from pidyn.systems.sdof import SDOFSystem
-from pidyn.systems.shear_building import ShearBuilding, storey_param
+from pidyn.systems.shear_building import ShearBuilding
 from pidyn.systems.terms import LinearStiffness, ViscousDamping
 from pidyn.weak_form import WeakForm, smooth_signals, velocity_noise
 

@@ -38,8 +38,8 @@ import torch
 
 from pidyn.params import ParamSpec
 from pidyn.systems.base import Kinematics, StructuralSystem, merge_specs, stack_last
-from pidyn.systems.shear_building import OnStorey, storey_term
-from pidyn.systems.terms import BoucWenHysteresis, ForceTerm, LinearStiffness, ViscousDamping
+from pidyn.systems.places import OnStorey, PlacedTerms, latent_slices, place_terms
+from pidyn.systems.terms import ForceTerm, LinearStiffness, ViscousDamping
 
 
 def sensor_row(position: float, length: float) -> np.ndarray:
@@ -48,7 +48,7 @@ def sensor_row(position: float, length: float) -> np.ndarray:
     return np.array([1.0 - xi, xi])
 
 
-class RigidDeck(StructuralSystem):
+class RigidDeck(PlacedTerms, StructuralSystem):
     """A deck rigid in plan on ``len(inputs)`` supports (see the module docstring).
 
     Args:
@@ -97,7 +97,9 @@ class RigidDeck(StructuralSystem):
         self.xi = tuple(s / self.length for s in self.positions)
         k = _per_support(stiffnesses, n, "stiffnesses")
         c = _per_support(dampings, n, "dampings")
-        extra, replaced = _support_terms(support_terms, n, k)
+        extra, replaced = place_terms(
+            support_terms, n, k, "rigid_deck: support_terms", own=_own, place="support"
+        )
         self.supports: list[list[OnStorey]] = []
         for j in range(n):
             terms: list[ForceTerm] = [ViscousDamping(c[j])]
@@ -114,28 +116,16 @@ class RigidDeck(StructuralSystem):
         self._specs = merge_specs(defaults, params)
         self.n_latent = sum(t.n_latent for t in self.terms)
         self.latent_names = tuple(t.name for t in self.terms if t.n_latent)
-        self._slices = _latent_slices(self.supports)
+        self._slices = latent_slices(self.supports)
 
     # ------------------------------------------------------------------ structure
     def param_specs(self) -> list[ParamSpec]:
         return list(self._specs)
 
     @property
-    def terms(self) -> list[OnStorey]:
-        return [t for s in self.supports for t in s]
-
-    @property
-    def linear_time_invariant(self) -> bool:
-        return all(type(t.term) in (ViscousDamping, LinearStiffness) for t in self.terms)
-
-    def period_scaling(self) -> dict[str, float]:
-        if not self.linear_time_invariant:
-            return {}
-        return {
-            s.name: (1.0 if isinstance(t.term, ViscousDamping) else 2.0)
-            for t in self.terms
-            for s in t.specs()
-        }
+    def places(self) -> list[list[OnStorey]]:
+        """The supports, each its terms (``PlacedTerms``)."""
+        return self.supports
 
     def linear_params(self) -> list[str]:
         """None: the quasi-static influence R depends on the springs, so the motion residual is
@@ -307,26 +297,6 @@ def _per_support(value: float | Sequence[float], n: int, what: str) -> list[floa
     return vals
 
 
-def _support_terms(
-    spec: Mapping[Any, Any] | None, n: int, k: list[float]
-) -> tuple[list[list[ForceTerm]], list[bool]]:
-    """Each support's further terms, and whether a configured hysteresis replaces its linear
-    spring (a term object adds to it, as on a building's storey)."""
-    out: list[list[ForceTerm]] = [[] for _ in range(n)]
-    replaced = [False] * n
-    for key, entries in dict(spec or {}).items():
-        j = int(key)
-        if not 1 <= j <= n:
-            raise ValueError(f"rigid_deck: support_terms names support {j}; supports are 1..{n}")
-        entries = [entries] if isinstance(entries, (Mapping, ForceTerm)) else list(entries)
-        out[j - 1] = [e if isinstance(e, ForceTerm) else storey_term(_own(e, j), k[j - 1]) for e in entries]
-        replaced[j - 1] = any(
-            not isinstance(e, ForceTerm) and isinstance(t, BoucWenHysteresis)
-            for e, t in zip(entries, out[j - 1])
-        )
-    return out, replaced
-
-
 def _own(entry: Mapping[str, Any], j: int) -> dict:
     """A config entry whose term reads the support's spring and dashpot by name (an amplitude
     law scales them) is pointed at support j's own (``k2``, ``c2``)."""
@@ -342,17 +312,6 @@ def _own(entry: Mapping[str, Any], j: int) -> dict:
             if ref in args:
                 entry.setdefault(ref, f"{base}{j}")
     return entry
-
-
-def _latent_slices(supports: list[list[OnStorey]]) -> list[list[slice | None]]:
-    out, i = [], 0
-    for support in supports:
-        row = []
-        for t in support:
-            row.append(slice(i, i + t.n_latent) if t.n_latent else None)
-            i += t.n_latent
-        out.append(row)
-    return out
 
 
 def _with_unit(spec: ParamSpec, unit: str) -> ParamSpec:

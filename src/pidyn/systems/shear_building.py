@@ -36,60 +36,8 @@ import torch
 import pidyn.systems.shear_rate as shear_rate
 from pidyn.params import ParamSpec, positive
 from pidyn.systems.base import ExcitationKind, Kinematics, StructuralSystem, merge_specs, stack_last
-from pidyn.systems.terms import TERMS, BoucWenHysteresis, ForceTerm, LinearStiffness, ViscousDamping
-
-
-def storey_param(base: str, storey: int) -> str:
-    """The name of parameter ``base`` of storey ``storey`` (1-based): c1, beta2, k3_1."""
-    return f"{base}_{storey}" if base[-1].isdigit() else f"{base}{storey}"
-
-
-class OnStorey(ForceTerm):
-    """A force term acting on one storey's drift, its parameters renamed with the storey number."""
-
-    def __init__(self, term: ForceTerm, storey: int) -> None:
-        self.term, self.storey = term, storey
-        self.name = f"{term.name}{storey}"
-        self.n_latent = term.n_latent
-        self.rename = {s.name: storey_param(s.name, storey) for s in term.specs()}
-        self.linear = tuple(self.rename[n] for n in term.linear)
-        #: parameters of other terms this one reads by their full name (a stiffness loss scales k2)
-        self.reads = tuple(
-            ref
-            for ref in (getattr(term, "stiffness", None), getattr(term, "damping", None))
-            if isinstance(ref, str)
-        )
-
-    def specs(self) -> list[ParamSpec]:
-        return [replace(s, name=self.rename[s.name]) for s in self.term.specs()]
-
-    def _local(self, p: Mapping[str, Any]) -> dict[str, Any]:
-        local = {base: p[full] for base, full in self.rename.items()}
-        for ref in self.reads:
-            if ref in p:
-                local[ref] = p[ref]
-        return local
-
-    def force(self, t, x, v, z, p):
-        return self.term.force(t, x, v, z, self._local(p))
-
-    def latent_rate(self, t, x, v, z, p):
-        return self.term.latent_rate(t, x, v, z, self._local(p))
-
-    def formula(self, p):
-        out = re.sub(r"\bx\b", f"d{self.storey}", self.term.formula(self._local(p)))
-        return re.sub(r"\bz\b", f"z{self.storey}", out)
-
-    @property
-    def initial_stiffness_param(self) -> str | None:
-        """The parameter that is this term's stiffness about rest (dF/dd at d = 0, z = 0)."""
-        if isinstance(self.term, (LinearStiffness, BoucWenHysteresis)):
-            return self.rename[self.term.param]
-        return None
-
-    @property
-    def damping_param(self) -> str | None:
-        return self.rename["c"] if isinstance(self.term, ViscousDamping) else None
+from pidyn.systems.places import OnStorey, PlacedTerms, latent_slices, place_terms
+from pidyn.systems.terms import BoucWenHysteresis, ForceTerm, LinearStiffness, ViscousDamping
 
 
 def _per_unit_m1(spec: ParamSpec) -> ParamSpec:
@@ -111,21 +59,6 @@ def _per_storey(value: float | Sequence[float], n: int, what: str) -> list[float
     return vals
 
 
-def storey_term(spec: Mapping[str, Any], k: float) -> ForceTerm:
-    """A term from its config entry ``{term: <name>, <param>: value, ...}`` (names as in ``TERMS``)."""
-    spec = dict(spec)
-    name = spec.pop("term", None)
-    if name not in TERMS or name in ("viscous_damping", "linear_stiffness", "learned_force"):
-        allowed = sorted(set(TERMS) - {"viscous_damping", "linear_stiffness", "learned_force"})
-        raise ValueError(f"shear_building: storey term '{name}' is not one of {', '.join(allowed)}")
-    if name == "hysteresis":
-        spec.setdefault("k", k)  # the storey's stiffness becomes the hysteretic spring's
-    try:
-        return TERMS[name](**spec)
-    except TypeError as exc:
-        raise ValueError(f"shear_building: storey term '{name}': {exc}") from None
-
-
 #: ``masses: unknown``: floor 1's mass is the unit, the others are identified as ratios to it
 UNKNOWN_MASSES = "unknown"
 
@@ -134,7 +67,7 @@ class UnknownMassError(ValueError):
     """An absolute stiffness or damping asked of a model whose masses the records do not give."""
 
 
-class ShearBuilding(StructuralSystem):
+class ShearBuilding(PlacedTerms, StructuralSystem):
     """N-storey shear building; every storey a viscous damper plus a spring (linear, or
     hysteretic) plus any further force terms, all on its drift.
 
@@ -193,7 +126,7 @@ class ShearBuilding(StructuralSystem):
             k = [float(stiffnesses) * (1 - (1 - stiffness_taper) * i / max(n - 1, 1)) for i in range(n)]
         else:
             k = _per_storey(stiffnesses, n, "stiffnesses")
-        extra, replaced = self._extra_terms(storey_terms, n, k)
+        extra, replaced = place_terms(storey_terms, n, k, "shear_building: storey_terms")
         self.storeys: list[list[OnStorey]] = []
         for i in range(n):
             terms: list[ForceTerm] = [ViscousDamping(c[i])]
@@ -227,25 +160,6 @@ class ShearBuilding(StructuralSystem):
         ]
 
     @staticmethod
-    def _extra_terms(storey_terms, n: int, k: list[float]) -> tuple[list[list[ForceTerm]], list[bool]]:
-        """Each storey's further terms, and whether a configured hysteresis replaces its linear
-        spring (a term object adds to it: the diagnosis's hysteresis is k d + kh z)."""
-        extra: list[list[ForceTerm]] = [[] for _ in range(n)]
-        replaced = [False] * n
-        for key, entries in dict(storey_terms or {}).items():
-            i = int(key)
-            if not 1 <= i <= n:
-                raise ValueError(f"shear_building: storey_terms names storey {i}; storeys are 1..{n}")
-            entries = [entries] if isinstance(entries, (Mapping, ForceTerm)) else list(entries)
-            # a config entry, or a term object (the diagnosis extends a building by its own terms)
-            extra[i - 1] = [e if isinstance(e, ForceTerm) else storey_term(e, k[i - 1]) for e in entries]
-            replaced[i - 1] = any(
-                not isinstance(e, ForceTerm) and isinstance(t, BoucWenHysteresis)
-                for e, t in zip(entries, extra[i - 1])
-            )
-        return extra, replaced
-
-    @staticmethod
     def _apply_guess(specs: list[ParamSpec], guess: Mapping[str, float]) -> list[ParamSpec]:
         """Starting values by base name (``k`` sets k1..kN): an unknown base name fails."""
         bases = {re.sub(r"_?\d+$", "", s.name) for s in specs if s.trainable}
@@ -272,22 +186,9 @@ class ShearBuilding(StructuralSystem):
         return list(self._specs)
 
     @property
-    def terms(self) -> list[OnStorey]:
-        return [t for s in self.storeys for t in s]
-
-    @property
-    def linear_time_invariant(self) -> bool:
-        return all(type(t.term) in (ViscousDamping, LinearStiffness) for t in self.terms)
-
-    def period_scaling(self) -> dict[str, float]:
-        """Storey stiffnesses 2, storey dashpots 1; the masses stay."""
-        if not self.linear_time_invariant:
-            return {}
-        return {
-            s.name: (1.0 if isinstance(t.term, ViscousDamping) else 2.0)
-            for t in self.terms
-            for s in t.specs()
-        }
+    def places(self) -> list[list[OnStorey]]:
+        """The storeys, each its terms (``PlacedTerms``); the masses stay under a period scaling."""
+        return self.storeys
 
     def linear_params(self) -> list[str]:
         """The parameters the motion residual is linear in: the terms' linear ones and, with the
@@ -323,13 +224,7 @@ class ShearBuilding(StructuralSystem):
         cached = getattr(self, "_slices", None)
         if cached is not None and cached[0] == key:  # an integrator asks at every step
             return cached[1]
-        out, i = [], 0
-        for storey in self.storeys:
-            row = []
-            for t in storey:
-                row.append(slice(i, i + t.n_latent) if t.n_latent else None)
-                i += t.n_latent
-            out.append(row)
+        out = latent_slices(self.storeys)
         self._slices = (key, out)
         return out
 
