@@ -208,8 +208,11 @@ def per_event(csv_path: Path) -> dict[tuple[str, str], dict]:
     """The per-event study's held-out scores (each event's model on the rest of its own record)."""
     if not csv_path.is_file():
         return {}
-    with csv_path.open() as fh:
-        return {(r["event"], r["direction"]): r for r in csv.DictReader(fh)}
+    with csv_path.open() as fh:  # the station tables name an event by its archive (``..._ce58658p``)
+        rows = list(csv.DictReader(fh))
+    for r in rows:
+        r.setdefault("heldout_nrmse_a", r.get("heldout_nrmse"))
+    return {(_event(Path(r["event"])), r["direction"]): r for r in rows}
 
 
 def _f(v, fmt=".3f") -> str:
@@ -253,11 +256,13 @@ def _num(v):
         return None
 
 
-def summary_lines(lines: list[dict], systems: list[str], others: dict[str, list[dict]]) -> list[str]:
+def summary_lines(lines: list[dict], all_systems: list[str], others: dict[str, list[dict]]) -> list[str]:
+    """Per direction, the medians and counts of the models identified in it."""
     out = []
     for direction in sorted({r["direction"] for r in lines}):
         rows = [r for r in lines if r["direction"] == direction]
         out += [f"### {direction}", ""]
+        systems = [s for s in all_systems if any(r[f"{s}_nrmse_a"] is not None for r in rows)]
         meds = {s: _median([r[f"{s}_nrmse_a"] for r in rows]) for s in systems}
         own = _median([r["per_event_heldout_nrmse_a"] for r in rows])
         triv = _median([r["trivial_nrmse_a"] for r in rows])
