@@ -189,3 +189,12 @@ def test_each_kind_of_data_gets_its_default_model_and_a_named_system_wins():
     deck = compose("train", groups={"data": "csmip", "system": "rigid_deck"})
     assert deck.system._target_ == "pidyn.data.layout.station_deck"
     assert compose("train", groups={"system": "shear_building"}).system._target_.endswith("ShearBuilding")
+
+
+def test_the_diagnosis_of_a_deck_support_by_support_is_refused_by_name(tmp_path):
+    from pidyn.config import compose
+    from pidyn.tasks.diagnose import _diagnose
+
+    cfg = compose("diagnose", groups={"data": "csmip", "system": "rigid_deck"}, output_dir=tmp_path)
+    with pytest.raises(ValueError, match="support by support"):
+        _diagnose(cfg, None)

@@ -249,19 +249,6 @@ class RigidDeck(PlacedTerms, StructuralSystem):
             + " (d_j: support j's deformation; nonlinear springs on its dynamic part)"
         )
 
-    def rebuilt(self, **changes: Any) -> RigidDeck:
-        """This deck with some constructor arguments changed (support terms, names, params)."""
-        args = dict(
-            inputs=self.inputs,
-            positions=self.positions,
-            length=self.length,
-            gyration=self.length * float(np.sqrt(self.mass_matrix[0, 0] - 0.25)),
-            support_terms=None,
-            name=self.name,
-            sensors=self.sensors,
-        )
-        return RigidDeck(**(args | changes))
-
 
 def sum_of(parts: list) -> Any:
     """The sum of scalars or arrays of any kind (NumPy, dual, torch), starting from the first."""
