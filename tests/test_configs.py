@@ -10,9 +10,13 @@ SYSTEMS = sorted(p.stem for p in (Path(CONF) / "system").glob("*.yaml"))
 EXPERIMENTS = sorted(p.stem for p in (Path(CONF) / "experiment").glob("*.yaml"))
 
 
+#: what a system needs of its data to be built (a deck: its station's layout)
+NEEDS = {"rigid_deck": ["data=csmip", "data.station=CE89324"]}
+
+
 @pytest.mark.parametrize("system", SYSTEMS)
 def test_every_system_composes_and_instantiates(system, tmp_path):
-    cfg = make_cfg([f"system={system}"], tmp_path)
+    cfg = make_cfg([f"system={system}", *NEEDS.get(system, [])], tmp_path)
     s = hydra.utils.instantiate(cfg.system)
     assert s.param_specs() and all(sp.true is not None for sp in s.param_specs())
     hydra.utils.instantiate(cfg.model.rpn, out_features=s.n_dof)

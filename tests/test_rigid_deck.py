@@ -196,5 +196,5 @@ def test_the_diagnosis_of_a_deck_support_by_support_is_refused_by_name(tmp_path)
     from pidyn.tasks.diagnose import _diagnose
 
     cfg = compose("diagnose", groups={"data": "csmip", "system": "rigid_deck"}, output_dir=tmp_path)
-    with pytest.raises(ValueError, match="support by support"):
+    with pytest.raises(ValueError, match="diagnosis support by support"):
         _diagnose(cfg, None)

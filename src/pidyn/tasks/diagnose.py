@@ -48,10 +48,7 @@ def _diagnose(cfg: DictConfig, record: Record | None) -> dict[str, Any]:
     if cfg.system.get("n_storeys") is not None:  # a shear building: storey by storey
         return diagnose_building_task(cfg, record)
     if cfg.system.get("support_terms", "absent") != "absent":  # a bridge's supports, one by one
-        raise ValueError(
-            "the diagnosis of a bridge support by support (system=rigid_deck) is not built yet; "
-            "diagnose the single degree of freedom on the supports (system=linear)"
-        )
+        raise ValueError("a bridge's diagnosis support by support is not built yet: diagnose system=linear")
     case = compose_case(cfg, record)
     outcome = pipeline.run(case)
     diagnosis = summarize(case, outcome)
