@@ -119,9 +119,6 @@ class RigidDeck(PlacedTerms, StructuralSystem):
         self._slices = latent_slices(self.supports)
 
     # ------------------------------------------------------------------ structure
-    def param_specs(self) -> list[ParamSpec]:
-        return list(self._specs)
-
     @property
     def places(self) -> list[list[OnStorey]]:
         """The supports, each its terms (``PlacedTerms``)."""
@@ -195,13 +192,7 @@ class RigidDeck(PlacedTerms, StructuralSystem):
         motion = [
             M[i, 0] * (k.a[..., 0] + g[..., 0]) + M[i, 1] * (k.a[..., 1] + g[..., 1]) + q[i] for i in range(2)
         ]
-        out = {"motion": stack_last(motion, k.x)}
-        for j, (support, slices) in enumerate(zip(self.supports, self._slices)):
-            for term, sl in zip(support, slices):
-                if sl is not None:
-                    assert k.z is not None and k.zd is not None
-                    out[term.name] = k.zd[:, sl] - term.latent_rate(k.t, d[j], dv[j], k.z[:, sl], p)
-        return out
+        return {"motion": stack_last(motion, k.x), **self.latent_residuals(k, d, dv, p, self._slices)}
 
     def state_rate(self, t, y, p, f):
         x, v, z = y[..., :2], y[..., 2:4], y[..., 4:]

@@ -122,6 +122,10 @@ class PlacedTerms:
     """What a structure of places (``places``: a list of each place's terms) knows of its terms."""
 
     places: list[list[OnStorey]]
+    _specs: list[ParamSpec]
+
+    def param_specs(self) -> list[ParamSpec]:
+        return list(self._specs)
 
     @property
     def terms(self) -> list[OnStorey]:
@@ -140,3 +144,14 @@ class PlacedTerms:
             for t in self.terms
             for s in t.specs()
         }
+
+    def latent_residuals(self, k: Any, d: list, dv: list, p: Any, slices: list[list[slice | None]]) -> dict:
+        """Each latent term's residual (its state's rate against its law) at its place's
+        deformation ``d[j]`` and rate ``dv[j]``, named by the term."""
+        out = {}
+        for j, (place, row) in enumerate(zip(self.places, slices)):
+            for term, sl in zip(place, row):
+                if sl is not None:
+                    assert k.z is not None and k.zd is not None
+                    out[term.name] = k.zd[:, sl] - term.latent_rate(k.t, d[j], dv[j], k.z[:, sl], p)
+        return out

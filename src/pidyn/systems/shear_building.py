@@ -182,9 +182,6 @@ class ShearBuilding(PlacedTerms, StructuralSystem):
         return out
 
     # ------------------------------------------------------------------ structure
-    def param_specs(self) -> list[ParamSpec]:
-        return list(self._specs)
-
     @property
     def places(self) -> list[list[OnStorey]]:
         """The storeys, each its terms (``PlacedTerms``); the masses stay under a period scaling."""
@@ -265,14 +262,11 @@ class ShearBuilding(PlacedTerms, StructuralSystem):
             raise ValueError(f"{self.name}: latent states {self.latent_names} are required")
         rhs = self._floor_forces(k.t, k.x, k.v, k.z, p, f)
         motion = [p[f"m{i + 1}"] * k.a[..., i] - rhs[i] for i in range(self.n_dof)]
-        out = {"motion": stack_last(motion, k.x)}
         d, dv = self._drifts(k.x, k.v)
-        for i, (storey, slices) in enumerate(zip(self.storeys, self._latent_slices())):
-            for term, sl in zip(storey, slices):
-                if sl is not None:
-                    assert k.z is not None and k.zd is not None
-                    out[term.name] = k.zd[:, sl] - term.latent_rate(k.t, d[i], dv[i], k.z[:, sl], p)
-        return out
+        return {
+            "motion": stack_last(motion, k.x),
+            **self.latent_residuals(k, d, dv, p, self._latent_slices()),
+        }
 
     def state_rate(self, t, y, p, f):
         if self.excitation == "ground" and not isinstance(y, torch.Tensor):  # the integrator's path
