@@ -151,17 +151,17 @@ class Dual:
 
     # ------------------------------------------------------------------ NumPy protocol
     def __array_ufunc__(self, ufunc: np.ufunc, method: str, *inputs: Any, **kw: Any) -> Any:
-        if method != "__call__" or kw:
-            return NotImplemented
         fn = _UFUNCS.get(ufunc)
-        if fn is None:
-            return NotImplemented
+        if method != "__call__" or kw or fn is None:
+            raise TypeError(
+                unsupported(f"np.{ufunc.__name__}" + ("" if method == "__call__" else f".{method}"))
+            )
         return fn(*inputs)
 
     def __array_function__(self, func: Any, types: Any, args: Any, kwargs: Any) -> Any:
         fn = _FUNCTIONS.get(func)
         if fn is None:
-            return NotImplemented
+            raise TypeError(unsupported(f"np.{getattr(func, '__name__', func)}"))
         return fn(*args, **kwargs)
 
 
@@ -222,6 +222,13 @@ _UFUNCS = {
     np.sqrt: _unary(np.sqrt, lambda x, v: 0.5 / v),
     np.sin: _unary(np.sin, lambda x, v: np.cos(x)),
     np.cos: _unary(np.cos, lambda x, v: -np.sin(x)),
+    np.arctan: _unary(np.arctan, lambda x, v: 1.0 / (1.0 + x * x)),
+    np.sinh: _unary(np.sinh, lambda x, v: np.cosh(x)),
+    np.cosh: _unary(np.cosh, lambda x, v: np.sinh(x)),
+    **{  # comparisons on the values (a NumPy scalar on the left: 0.0 < x)
+        f: (lambda f: lambda a, b: f(value(a), value(b)))(f)
+        for f in (np.less, np.less_equal, np.greater, np.greater_equal, np.equal, np.not_equal)
+    },
     np.maximum: _maximum,
     np.minimum: _minimum,
     np.sign: _sign,
@@ -249,7 +256,26 @@ def _where(cond: Any, a: Any, b: Any) -> Dual:
     return Dual(np.where(cond, a.v, b.v), np.where(_e(cond), a.d, b.d))
 
 
-_FUNCTIONS = {np.stack: _stack, np.concatenate: _concatenate, np.where: _where}
+def _clip(a: Any, lo: Any, hi: Any) -> Dual:
+    out = a if lo is None else _maximum(a, lo)
+    return out if hi is None else _minimum(out, hi)
+
+
+_FUNCTIONS = {np.stack: _stack, np.concatenate: _concatenate, np.where: _where, np.clip: _clip}
+
+
+def supported() -> list[str]:
+    """The NumPy operations a force term may use to get exact sensitivities (the refinement, the
+    Cramer-Rao bound): besides + - * / ** and comparisons, these ufuncs and functions."""
+    return sorted(f"np.{f.__name__}" for f in [*_UFUNCS, *_FUNCTIONS])
+
+
+def unsupported(name: str) -> str:
+    return (
+        f"{name} has no exact sensitivity in pidyn.autodiff, which the refinement runs force terms through; "
+        f"write the term with {', '.join(supported())} (docs/extending.md), or add its derivative to "
+        "pidyn.autodiff"
+    )
 
 
 def seed(values: np.ndarray, directions: np.ndarray) -> Dual:
