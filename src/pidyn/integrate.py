@@ -24,6 +24,7 @@ import numpy as np
 
 from pidyn import integrate_linear
 from pidyn.autodiff import Dual
+from pidyn.compiled import kernel
 from pidyn.systems.base import StructuralSystem
 
 #: how the excitation is read between its samples
@@ -134,7 +135,8 @@ def rk4(
     if stages is None and integrate_linear.applies(system, p, t, y0):
         Yv, Yd = integrate_linear.propagate(system, np.asarray(t, float), ff, per_trajectory, y0, p, loop)
     else:
-        Yv, Yd = _steps(system, p, t, tt, ff, stages, y0, substeps, D)
+        done = kernel.steps(system, p, t, tt, ff, stages, y0, substeps, D)
+        Yv, Yd = done if done is not None else _steps(system, p, t, tt, ff, stages, y0, substeps, D)
     shape = Yv.shape[1:]
     Y: Any = Dual(Yv, Yd) if Yd is not None else Yv
     T = tt if np.ndim(tt) == 2 else np.broadcast_to(np.asarray(tt)[:, None], (N, shape[0]))

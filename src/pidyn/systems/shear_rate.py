@@ -63,6 +63,10 @@ def _minus_neighbour(u: Any, sides: tuple[slice, slice]) -> Any:
     """u_i - u_{i-1} (``_BELOW``) or u_i - u_{i+1} (``_ABOVE``) along the floors: a plain
     array's last axis, a dual array's values and its derivatives' axis before the directions."""
     put, take = sides
+    if not isinstance(u, (Dual, np.ndarray)):  # another array type (a traced one): by slices
+        if sides is _BELOW:
+            return np.concatenate([u[..., :1], u[..., 1:] - u[..., :-1]], axis=-1)
+        return np.concatenate([u[..., :-1] - u[..., 1:], u[..., -1:]], axis=-1)
     if isinstance(u, Dual):
         v, d = u.v.copy(), u.d.copy()
         v[..., put] -= u.v[..., take]

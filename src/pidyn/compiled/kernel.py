@@ -1,0 +1,130 @@
+"""The RK4 loop of ``pidyn.integrate`` at compiled speed, for any system whose state rate a tape
+can record (``pidyn.compiled.tape``): every system and force term of the library but a learned
+force (a network evaluated in NumPy), which stays in Python.
+
+``steps`` takes what ``pidyn.integrate._steps`` takes and returns the same arrays, or None
+where it does not apply (a state rate it cannot record, no C compiler, ``PIDYN_COMPILED=0``,
+a run of a few samples, as the UKF's one-sample predictions, where Python is as quick).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import logging
+import os
+from typing import Any
+
+import numpy as np
+
+from pidyn.autodiff import Dual
+from pidyn.compiled import build, codegen
+from pidyn.compiled.tape import Tape, record
+
+log = logging.getLogger(__name__)
+
+#: fewer sample intervals than this are integrated in Python (tracing and packing cost more)
+MIN_INTERVALS = 8
+_KERNELS: dict[tuple, tuple[Any, np.ndarray] | None] = {}
+_DOUBLE_P = ctypes.POINTER(ctypes.c_double)
+
+
+def enabled() -> bool:
+    return os.environ.get("PIDYN_COMPILED", "1") != "0"
+
+
+def _kernel(tape: Tape, n_param: int, n_state: int, n_input: int) -> tuple[Any, np.ndarray] | None:
+    """The compiled library of a tape and its constants, built once per tape shape."""
+    key = (tuple(tape.nodes), tuple(tape.outputs), n_param, n_state, n_input)
+    if key not in _KERNELS:
+        lib = build.load(codegen.source(tape, n_param, n_state, n_input))
+        if lib is not None:
+            for name in ("run", "run_d"):
+                getattr(lib, name).restype = ctypes.c_int
+        _KERNELS[key] = None if lib is None else (lib, np.array(codegen.plan(tape).constants + [0.0]))
+    return _KERNELS[key]
+
+
+def _ptr(a: np.ndarray | None) -> Any:
+    return None if a is None else a.ctypes.data_as(_DOUBLE_P)
+
+
+def _params(p: dict[str, Any], names: list[str], B: int, D: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """(B, NP) values and (B, NP, D) derivatives of the parameters, broadcast to the trajectories."""
+    P = np.empty((B, len(names)))
+    dP = np.zeros((B, len(names), D)) if D else None
+    for j, name in enumerate(names):
+        value = p[name]
+        if isinstance(value, Dual):
+            P[:, j] = np.broadcast_to(value.v, (B,))
+            if dP is not None:
+                dP[:, j, :] = np.broadcast_to(value.d, (B, D))
+        else:
+            P[:, j] = np.broadcast_to(np.asarray(value, float), (B,))
+    return P, dP
+
+
+def _inputs(ff: np.ndarray, per_trajectory: bool, multi: bool, B: int) -> np.ndarray:
+    """The excitation samples as (N, B, W)."""
+    f = ff if multi else ff[..., None]
+    if not per_trajectory:
+        f = f[:, None, :]
+    return np.ascontiguousarray(np.broadcast_to(f, (f.shape[0], B, f.shape[-1])), dtype=float)
+
+
+def _stages(stages: np.ndarray, per_trajectory: bool, multi: bool, B: int) -> np.ndarray:
+    s = stages if multi else stages[..., None]
+    if not per_trajectory:
+        s = s[:, :, None, :]
+    return np.ascontiguousarray(np.broadcast_to(s, s.shape[:2] + (B, s.shape[-1])), dtype=float)
+
+
+def steps(
+    system: Any,
+    p: dict[str, Any],
+    t: np.ndarray,
+    tt: np.ndarray,
+    ff: np.ndarray,
+    stages: np.ndarray | None,
+    y0: Any,
+    substeps: int,
+    D: int,
+) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """``pidyn.integrate._steps`` compiled: states (N, B, n_state) and their derivatives."""
+    N = len(t)
+    if N - 1 < MIN_INTERVALS or not enabled():
+        return None
+    multi = system.n_inputs > 1
+    width = system.excitation_width
+    per_trajectory = ff.ndim == (3 if multi else 2)
+    names = list(p)
+    try:
+        tape = record(system, names, width)
+    except Exception as exc:  # noqa: BLE001 - any code a tape cannot follow is integrated in Python
+        log.debug("%s: not compiled (%s)", system.name, exc)
+        return None
+    found = _kernel(tape, len(names), system.n_state, width)
+    if found is None:
+        return None
+    lib, K = found
+    Y0v = np.ascontiguousarray(y0.v if isinstance(y0, Dual) else y0, dtype=float)
+    B = Y0v.shape[0]
+    P, dP = _params(p, names, B, D)
+    TT = np.ascontiguousarray(np.broadcast_to(tt if np.ndim(tt) == 2 else np.asarray(tt)[:, None], (N, B)))
+    F = _inputs(ff, per_trajectory, multi, B)
+    ST = None if stages is None else _stages(stages, per_trajectory, multi, B)
+    tl = np.ascontiguousarray(t, dtype=float)
+    Yv = np.empty((N, B, system.n_state))
+    common = (ctypes.c_int(N), ctypes.c_int(B), ctypes.c_int(int(substeps)))
+    if not D:
+        rc = lib.run(*common, _ptr(tl), _ptr(TT), _ptr(F), _ptr(ST), _ptr(P), _ptr(K), _ptr(Y0v), _ptr(Yv))
+        return (Yv, None) if rc == 0 else None
+    dY0 = np.zeros((B, system.n_state, D))
+    if isinstance(y0, Dual):
+        dY0[...] = y0.d
+    Yd = np.empty((N, B, system.n_state, D))
+    rc = lib.run_d(
+        *common[:3],
+        ctypes.c_int(D),
+        *map(_ptr, (tl, TT, F, ST, P, dP, K, Y0v, dY0, Yv, Yd)),
+    )
+    return (Yv, Yd) if rc == 0 else None

@@ -1,0 +1,136 @@
+"""The C template of the compiled RK4 loop, filled by ``pidyn.compiled.codegen.source``
+(``str.format``: the blocks in single braces are filled, C's own braces are doubled)."""
+
+TEMPLATE = r"""/* A compiled RK4 loop for one system (pidyn.compiled.codegen fills the blocks in braces).
+   Layouts (C order): tl (N), TT (N, B), F (N, B, NW), ST (N-1, 2S+1, B, NW) or NULL,
+   P (B, NP), dP (B, NP, D), Y0 (B, NS), dY0 (B, NS, D), Y (N, B, NS), dY (N, B, NS, D). */
+#include <math.h>
+#include <stdlib.h>
+
+#define NP {NP}
+#define NS {NS}
+#define NW {NW}
+#define NI {NI}
+#define NSLOT {NSLOT}
+
+static void prologue(const double *P, const double *K, double *I) {{
+    (void)P; (void)K; (void)I;
+    {prologue}
+}}
+
+static void prologue_d(int D, const double *P, const double *dP, const double *K, double *I, double *Id) {{
+    (void)D; (void)P; (void)dP; (void)K; (void)I; (void)Id;
+    {prologue_d}
+}}
+
+static void rate(double t, const double *y, const double *f, const double *P, const double *I,
+                 const double *K, double *out) {{
+    (void)t; (void)y; (void)f; (void)P; (void)I; (void)K;
+    {rate}
+}}
+
+static void rate_d(int D, double t, const double *y, const double *yd, const double *f, const double *P,
+                   const double *dP, const double *I, const double *Id, const double *K, double *out,
+                   double *outd, double *w) {{
+    (void)t; (void)y; (void)yd; (void)f; (void)P; (void)dP; (void)I; (void)Id; (void)K; (void)w;
+    {rate_d}
+}}
+
+/* the excitation at the start, middle and end of substep s of interval i (pidyn.integrate._stage_inputs) */
+static void inputs(int B, int S, int i, int s, int b, const double *F, const double *ST, double *fa,
+                   double *fm, double *fb) {{
+    if (ST) {{
+        const double *row = ST + (size_t)i * (2 * S + 1) * B * NW;
+        for (int q = 0; q < NW; q++) {{
+            fa[q] = row[((size_t)(2 * s) * B + b) * NW + q];
+            fm[q] = row[((size_t)(2 * s + 1) * B + b) * NW + q];
+            fb[q] = row[((size_t)(2 * s + 2) * B + b) * NW + q];
+        }}
+        return;
+    }}
+    for (int q = 0; q < NW; q++) {{
+        double f0 = F[((size_t)i * B + b) * NW + q], f1 = F[((size_t)(i + 1) * B + b) * NW + q];
+        double df = (f1 - f0) / S;
+        fa[q] = f0 + s * df;
+        fm[q] = fa[q] + 0.5 * df;
+        fb[q] = fa[q] + df;
+    }}
+}}
+
+int run(int N, int B, int S, const double *tl, const double *TT, const double *F, const double *ST,
+        const double *P, const double *K, const double *Y0, double *Y) {{
+    double I[NI], y[NS], k1[NS], k2[NS], k3[NS], k4[NS], u[NS], fa[NW], fm[NW], fb[NW];
+    for (int b = 0; b < B; b++) {{
+        const double *Pb = P + (size_t)b * NP;
+        prologue(Pb, K, I);
+        for (int j = 0; j < NS; j++) {{
+            y[j] = Y0[(size_t)b * NS + j];
+            Y[(size_t)b * NS + j] = y[j];
+        }}
+        for (int i = 0; i < N - 1; i++) {{
+            double h = (tl[i + 1] - tl[i]) / S;
+            for (int s = 0; s < S; s++) {{
+                double ta = TT[(size_t)i * B + b] + s * h;
+                inputs(B, S, i, s, b, F, ST, fa, fm, fb);
+                rate(ta, y, fa, Pb, I, K, k1);
+                for (int j = 0; j < NS; j++) u[j] = y[j] + (0.5 * h) * k1[j];
+                rate(ta + 0.5 * h, u, fm, Pb, I, K, k2);
+                for (int j = 0; j < NS; j++) u[j] = y[j] + (0.5 * h) * k2[j];
+                rate(ta + 0.5 * h, u, fm, Pb, I, K, k3);
+                for (int j = 0; j < NS; j++) u[j] = y[j] + h * k3[j];
+                rate(ta + h, u, fb, Pb, I, K, k4);
+                for (int j = 0; j < NS; j++) y[j] = y[j] + (h / 6.0) * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
+            }}
+            for (int j = 0; j < NS; j++) Y[((size_t)(i + 1) * B + b) * NS + j] = y[j];
+        }}
+    }}
+    return 0;
+}}
+
+int run_d(int N, int B, int S, int D, const double *tl, const double *TT, const double *F, const double *ST,
+          const double *P, const double *dP, const double *K, const double *Y0, const double *dY0, double *Y,
+          double *dY) {{
+    size_t nd = (size_t)NS * D;
+    double *buf = malloc(sizeof(double) * ((size_t)NI * D + 6 * nd + (size_t)NSLOT * D + 1));
+    if (!buf) return 1;
+    double *Id = buf, *yd = Id + (size_t)NI * D, *k1d = yd + nd, *k2d = k1d + nd, *k3d = k2d + nd;
+    double *k4d = k3d + nd, *ud = k4d + nd, *w = ud + nd;
+    double I[NI], y[NS], k1[NS], k2[NS], k3[NS], k4[NS], u[NS], fa[NW], fm[NW], fb[NW];
+    for (int b = 0; b < B; b++) {{
+        const double *Pb = P + (size_t)b * NP, *dPb = dP + (size_t)b * NP * D;
+        prologue_d(D, Pb, dPb, K, I, Id);
+        for (int j = 0; j < NS; j++) {{
+            y[j] = Y0[(size_t)b * NS + j];
+            Y[(size_t)b * NS + j] = y[j];
+        }}
+        for (size_t q = 0; q < nd; q++) {{
+            yd[q] = dY0[(size_t)b * nd + q];
+            dY[(size_t)b * nd + q] = yd[q];
+        }}
+        for (int i = 0; i < N - 1; i++) {{
+            double h = (tl[i + 1] - tl[i]) / S;
+            for (int s = 0; s < S; s++) {{
+                double ta = TT[(size_t)i * B + b] + s * h;
+                inputs(B, S, i, s, b, F, ST, fa, fm, fb);
+                rate_d(D, ta, y, yd, fa, Pb, dPb, I, Id, K, k1, k1d, w);
+                for (int j = 0; j < NS; j++) u[j] = y[j] + (0.5 * h) * k1[j];
+                for (size_t q = 0; q < nd; q++) ud[q] = yd[q] + k1d[q] * (0.5 * h);
+                rate_d(D, ta + 0.5 * h, u, ud, fm, Pb, dPb, I, Id, K, k2, k2d, w);
+                for (int j = 0; j < NS; j++) u[j] = y[j] + (0.5 * h) * k2[j];
+                for (size_t q = 0; q < nd; q++) ud[q] = yd[q] + k2d[q] * (0.5 * h);
+                rate_d(D, ta + 0.5 * h, u, ud, fm, Pb, dPb, I, Id, K, k3, k3d, w);
+                for (int j = 0; j < NS; j++) u[j] = y[j] + h * k3[j];
+                for (size_t q = 0; q < nd; q++) ud[q] = yd[q] + k3d[q] * h;
+                rate_d(D, ta + h, u, ud, fb, Pb, dPb, I, Id, K, k4, k4d, w);
+                for (int j = 0; j < NS; j++) y[j] = y[j] + (h / 6.0) * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
+                for (size_t q = 0; q < nd; q++)
+                    yd[q] = yd[q] + (k1d[q] + k2d[q] * 2.0 + k3d[q] * 2.0 + k4d[q]) * (h / 6.0);
+            }}
+            for (int j = 0; j < NS; j++) Y[((size_t)(i + 1) * B + b) * NS + j] = y[j];
+            for (size_t q = 0; q < nd; q++) dY[((size_t)(i + 1) * B + b) * nd + q] = yd[q];
+        }}
+    }}
+    free(buf);
+    return 0;
+}}
+"""
