@@ -13,7 +13,20 @@ X = np.array([0.3, -0.7, 1.4])
 
 @pytest.mark.parametrize(
     "fn",
-    [np.arctan, np.sinh, np.cosh, np.tanh, np.sin, lambda x: np.clip(x, -0.5, 0.5), lambda x: 0.0 < x * x],
+    [
+        np.arctan,
+        np.sinh,
+        np.cosh,
+        np.tanh,
+        np.sin,
+        lambda x: np.clip(x, -0.5, 0.5),
+        lambda x: 0.0 < x * x,
+        lambda x: (
+            np.tanh(x @ np.array([[0.5, -1.0], [2.0, 0.1], [0.3, 0.3]]))
+            @ np.array([[1.0, 2.0], [-1.0, 0.5]]).T
+        ),
+        lambda x: np.array([[1.0, 2.0, 3.0], [0.5, -1.0, 0.0]]) @ x,
+    ],
 )
 def test_each_supported_operation_has_the_finite_differences_derivative(fn):
     dual = fn(seed(X, np.eye(3)))

@@ -4,15 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from pidyn import integrate
-from pidyn.autodiff import Dual
+from pidyn.autodiff import Dual, value
 from pidyn.compiled import build, kernel
-from pidyn.compiled.tape import NotTraceable, record
+from pidyn.compiled.tape import record
 from pidyn.systems.deck import RigidDeck
 from pidyn.systems.sdof import LinearSDOF, SDOFSystem
 from pidyn.systems.shear_building import ShearBuilding
-from pidyn.systems.terms import TERMS, LinearStiffness, ViscousDamping
+from pidyn.systems.terms import TERMS, ForceTerm, LinearStiffness, ViscousDamping
 
 pytestmark = pytest.mark.skipif(build.compiler() is None, reason="no C compiler")
 
@@ -20,12 +21,36 @@ N, DT = 400, 0.01
 
 
 def _sdof(name: str) -> SDOFSystem:
-    term = TERMS[name](t_d=2.0, t_max=4.0) if name in ("stiffness_loss", "damping_change") else TERMS[name]()
+    if name in ("stiffness_loss", "damping_change"):
+        term = TERMS[name](t_d=2.0, t_max=4.0)
+    elif name == "learned_force":  # a network with every weight set: a trained one
+        term = TERMS[name](x_scale=0.05, v_scale=0.3, f_scale=0.5, hidden=8)
+        gen = torch.Generator().manual_seed(0)
+        for q in term.net.parameters():
+            q.data = torch.randn(q.shape, generator=gen, dtype=q.dtype)
+    else:
+        term = TERMS[name]()
     return LinearSDOF(c=0.4, k=30.0).with_term(term)
 
 
+class _Branching(ForceTerm):
+    """A force that branches on a value in Python: no tape can follow it."""
+
+    name = "branching"
+    linear = ()
+
+    def specs(self):
+        return []
+
+    def force(self, t, x, v, z, p):
+        return 0.1 * x if float(np.max(np.abs(value(x)))) > 1.0 else 0.0 * x
+
+    def formula(self, p):
+        return "branching"
+
+
 def _systems() -> dict[str, object]:
-    out = {name: _sdof(name) for name in TERMS if name not in ("learned_force", "viscous_damping")}
+    out = {name: _sdof(name) for name in TERMS if name != "viscous_damping"}
     out["two_supports_sdof"] = SDOFSystem([ViscousDamping(0.4), LinearStiffness(30.0)], inputs=["a", "b"])
     out["building"] = ShearBuilding(
         n_storeys=3,
@@ -139,9 +164,9 @@ def test_rk4_uses_it_and_restarts_still_apply(monkeypatch):
 
 
 def test_untraceable_rates_fall_back():
-    """A learned force (a network in NumPy) is not compiled, and the loop in Python runs it."""
-    system = LinearSDOF().with_term(TERMS["learned_force"]())
-    with pytest.raises(NotTraceable):
+    """A force that branches on a value in Python is not compiled, and the loop in Python runs it."""
+    system = LinearSDOF().with_term(_Branching())
+    with pytest.raises(TypeError):  # NotTraceable, or an operation on a traced scalar that it lacks
         record(system, [s.name for s in system.param_specs()], 1)
     t = np.arange(N) * DT
     p = system.true_values()

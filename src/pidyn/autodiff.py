@@ -92,6 +92,12 @@ class Dual:
     def __neg__(self) -> Dual:
         return Dual(-self.v, -self.d)
 
+    def __matmul__(self, o: Any) -> Dual:
+        return _matmul(self, o)
+
+    def __rmatmul__(self, o: Any) -> Dual:
+        return _matmul(o, self)
+
     def __pos__(self) -> Dual:
         return self
 
@@ -208,6 +214,15 @@ def _sign(a: Dual) -> np.ndarray:
     return np.sign(a.v)
 
 
+def _matmul(a: Any, b: Any) -> Dual:
+    """A dual array times a plain matrix (a network's layer), or a plain matrix times a dual vector."""
+    if isinstance(a, Dual) and not isinstance(b, Dual) and np.ndim(b) == 2:
+        return Dual(a.v @ b, np.swapaxes(np.swapaxes(a.d, -1, -2) @ b, -1, -2))
+    if isinstance(b, Dual) and not isinstance(a, Dual) and np.ndim(a) == 2 and b.ndim == 1:
+        return Dual(a @ b.v, a @ b.d)
+    raise TypeError(unsupported("np.matmul of two dual arrays, or of other shapes than (..., n) @ (n, m)"))
+
+
 _UFUNCS = {
     np.add: _binary("add"),
     np.subtract: _binary("sub"),
@@ -232,6 +247,7 @@ _UFUNCS = {
     np.maximum: _maximum,
     np.minimum: _minimum,
     np.sign: _sign,
+    np.matmul: _matmul,
 }
 
 

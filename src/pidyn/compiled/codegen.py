@@ -93,22 +93,19 @@ def plan(tape: Tape) -> Plan:
 
 
 class _Names:
-    """How the code names each node's value and derivative, in the prologue or the rate."""
+    """How the code names each node's value, and its derivative along direction k."""
 
     def __init__(self, tape: Tape, pl: Plan) -> None:
         self.tape, self.pl = tape, pl
-        self.const = {}
-        self.inv = {}
-        self.slot = {}
+        self.const: dict[int, int] = {}
+        self.inv: dict[int, int] = {}
         for i, (op, *_) in enumerate(tape.nodes):
             if op == "const":
                 self.const[i] = len(self.const)
             elif pl.invariant[i] and op != "param":
                 self.inv[i] = len(self.inv)
-            elif not pl.invariant[i] and op not in LEAVES and pl.carries[i]:
-                self.slot[i] = len(self.slot)
 
-    def value(self, i: int, prologue: bool) -> str:
+    def value(self, i: int) -> str:
         op, *args = self.tape.nodes[i]
         if op == "const":
             return f"K[{self.const[i]}]"
@@ -123,15 +120,15 @@ class _Names:
         return f"I[{self.inv[i]}]" if self.pl.invariant[i] else f"v{i}"
 
     def deriv(self, i: int) -> str | None:
-        """A pointer to node i's D derivatives, None where it has none."""
+        """Node i's derivative along direction ``k``, None where it has none."""
         if not self.pl.carries[i]:
             return None
         op, *args = self.tape.nodes[i]
         if op == "param":
-            return f"(dP + {args[0]} * D)"
+            return f"dP[{args[0]} * D + k]"
         if op == "state":
-            return f"(yd + {args[0]} * D)"
-        return f"(Id + {self.inv[i] * 1} * D)" if self.pl.invariant[i] else f"(w + {self.slot[i]} * D)"
+            return f"yd[{args[0]} * D + k]"
+        return f"Id[{self.inv[i]} * D + k]" if self.pl.invariant[i] else f"d{i}"
 
 
 def _op_of(tape: Tape, i: int) -> str:
@@ -141,26 +138,37 @@ def _op_of(tape: Tape, i: int) -> str:
     return op
 
 
-def _node_code(tape: Tape, names: _Names, i: int, prologue: bool, dual: bool) -> list[str]:
-    op, *args = tape.nodes[i]
-    op = _op_of(tape, i)
-    a = [names.value(j, prologue) for j in args]
-    target = names.value(i, prologue)
+def _value_line(tape: Tape, names: _Names, i: int) -> str:
+    a = [names.value(j) for j in tape.nodes[i][1:]]
     decl = "" if names.pl.invariant[i] else "const double "
-    lines = [f"{decl}{target} = {_VALUE[op].format(*a)};"]
-    d = names.deriv(i) if dual else None
-    if d is None:
-        return lines
-    ds = [names.deriv(j) for j in args]
-    lines.append(f"for (int k = 0; k < D; k++) {d}[k] = {_chain(op, a, ds, target)};")
-    return lines
+    return f"{decl}{names.value(i)} = {_VALUE[_op_of(tape, i)].format(*a)};"
 
 
-def _chain(op: str, a: list[str], ds: list[str | None], v: str) -> str:
-    """The derivative of one direction k, in the order ``pidyn.autodiff.Dual`` computes it."""
-    da = [None if d is None else f"{d}[k]" for d in ds]
+def _factor_line(tape: Tape, names: _Names, i: int) -> str | None:
+    """A unary operation's chain factor (or a power's two), computed once, before the directions."""
+    op, *args = _op_of(tape, i), *tape.nodes[i][1:]
+    a, v = [names.value(j) for j in args], names.value(i)
+    if op in _CHAIN and names.pl.carries[i]:
+        return f"const double c{i} = {_CHAIN[op].format(*a, v=v)};"
+    if op == "pow" and names.pl.carries[i]:
+        base = f"fmax({a[0]}, 1e-300)" if names.pl.carries[args[0]] else a[0]
+        return f"const double c{i} = {a[1]} * pow({a[0]}, {a[1]} - 1), e{i} = {v} * log({base});"
+    return None
+
+
+def _deriv_line(tape: Tape, names: _Names, i: int) -> str | None:
+    if not names.pl.carries[i]:
+        return None
+    op, *args = _op_of(tape, i), *tape.nodes[i][1:]
+    chain = _chain(op, i, [names.value(j) for j in args], [names.deriv(j) for j in args], names.value(i))
+    target = names.deriv(i)
+    return f"{target} = {chain};" if names.pl.invariant[i] else f"const double {target} = {chain};"
+
+
+def _chain(op: str, i: int, a: list[str], da: list[str | None], v: str) -> str:
+    """The derivative along one direction, in the order ``pidyn.autodiff.Dual`` computes it."""
     if op == "add":
-        return " + ".join(x for x in da if x) if all(da) else (da[0] or da[1])
+        return f"{da[0]} + {da[1]}" if all(da) else str(da[0] or da[1])
     if op == "sub":
         return f"{da[0]} - {da[1]}" if all(da) else (da[0] or f"-{da[1]}")
     if op == "neg":
@@ -175,17 +183,25 @@ def _chain(op: str, a: list[str], ds: list[str | None], v: str) -> str:
             return f"-{da[1]} * ({v} / {a[1]})"
         return f"({da[0]} - {da[1]} * {v}) / {a[1]}"
     if op == "pow":
-        if da[1] is None:
-            return f"{da[0]} * ({a[1]} * pow({a[0]}, {a[1]} - 1))"
-        if da[0] is None:
-            return f"{da[1]} * ({v} * log({a[0]}))"
-        return f"{da[0]} * ({a[1]} * pow({a[0]}, {a[1]} - 1)) + {da[1]} * ({v} * log(fmax({a[0]}, 1e-300)))"
+        parts = [f"{da[0]} * c{i}" if da[0] else None, f"{da[1]} * e{i}" if da[1] else None]
+        return " + ".join(x for x in parts if x)
     if op in ("max", "min"):
         cmp = ">=" if op == "max" else "<="
         return f"({a[0]} {cmp} {a[1]} ? {da[0] or '0.0'} : {da[1] or '0.0'})"
     if op == "select":
         return f"({a[0]} != 0.0 ? {da[1] or '0.0'} : {da[2] or '0.0'})"
-    return f"{da[0]} * {_CHAIN[op].format(*a, v=v)}"
+    return f"{da[0]} * c{i}"
+
+
+def _block(tape: Tape, names: _Names, nodes: list[int], dual: bool, tail: list[str]) -> str:
+    """Values first; with derivatives, the chain factors and then one loop over the directions
+    (scalar locals, one direction at a time: short code that compiles quickly)."""
+    lines = [_value_line(tape, names, i) for i in nodes]
+    if dual:
+        lines += [x for i in nodes if (x := _factor_line(tape, names, i))]
+        inner = [x for i in nodes if (x := _deriv_line(tape, names, i))]
+        lines += ["for (int k = 0; k < D; k++) {", *["    " + x for x in inner + tail], "}"]
+    return "\n    ".join(lines)
 
 
 def source(tape: Tape, n_param: int, n_state: int, n_input: int) -> str:
@@ -195,27 +211,15 @@ def source(tape: Tape, n_param: int, n_state: int, n_input: int) -> str:
     body = [i for i, (op, *_) in enumerate(tape.nodes) if op not in LEAVES]
     inv = [i for i in body if pl.invariant[i]]
     var = [i for i in body if not pl.invariant[i]]
-
-    def block(nodes: list[int], prologue: bool, dual: bool) -> str:
-        return "\n    ".join(line for i in nodes for line in _node_code(tape, names, i, prologue, dual))
-
-    def outputs(dual: bool) -> str:
-        lines = []
-        for j, i in enumerate(tape.outputs):
-            lines.append(f"out[{j}] = {names.value(i, False)};")
-            if dual:
-                d = names.deriv(i)
-                lines.append(f"for (int k = 0; k < D; k++) outd[{j} * D + k] = {d + '[k]' if d else '0.0'};")
-        return "\n    ".join(lines)
-
+    out = [f"out[{j}] = {names.value(i)};" for j, i in enumerate(tape.outputs)]
+    outd = [f"outd[{j} * D + k] = {names.deriv(i) or '0.0'};" for j, i in enumerate(tape.outputs)]
     return TEMPLATE.format(
         NP=n_param,
         NS=n_state,
         NW=n_input,
         NI=max(len(names.inv), 1),
-        NSLOT=max(len(names.slot), 1),
-        prologue=block(inv, True, False),
-        prologue_d=block(inv, True, True),
-        rate=block(var, False, False) + "\n    " + outputs(False),
-        rate_d=block(var, False, True) + "\n    " + outputs(True),
+        prologue=_block(tape, names, inv, False, []),
+        prologue_d=_block(tape, names, inv, True, []),
+        rate=_block(tape, names, var, False, []) + "\n    " + "\n    ".join(out),
+        rate_d="\n    ".join([_block(tape, names, var, True, outd), *out]),
     )

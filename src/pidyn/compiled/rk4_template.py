@@ -11,7 +11,6 @@ TEMPLATE = r"""/* A compiled RK4 loop for one system (pidyn.compiled.codegen fil
 #define NS {NS}
 #define NW {NW}
 #define NI {NI}
-#define NSLOT {NSLOT}
 
 static void prologue(const double *P, const double *K, double *I) {{
     (void)P; (void)K; (void)I;
@@ -31,8 +30,8 @@ static void rate(double t, const double *y, const double *f, const double *P, co
 
 static void rate_d(int D, double t, const double *y, const double *yd, const double *f, const double *P,
                    const double *dP, const double *I, const double *Id, const double *K, double *out,
-                   double *outd, double *w) {{
-    (void)t; (void)y; (void)yd; (void)f; (void)P; (void)dP; (void)I; (void)Id; (void)K; (void)w;
+                   double *outd) {{
+    (void)t; (void)y; (void)yd; (void)f; (void)P; (void)dP; (void)I; (void)Id; (void)K;
     {rate_d}
 }}
 
@@ -91,10 +90,10 @@ int run_d(int N, int B, int S, int D, const double *tl, const double *TT, const 
           const double *P, const double *dP, const double *K, const double *Y0, const double *dY0, double *Y,
           double *dY) {{
     size_t nd = (size_t)NS * D;
-    double *buf = malloc(sizeof(double) * ((size_t)NI * D + 6 * nd + (size_t)NSLOT * D + 1));
+    double *buf = malloc(sizeof(double) * ((size_t)NI * D + 6 * nd + 1));
     if (!buf) return 1;
     double *Id = buf, *yd = Id + (size_t)NI * D, *k1d = yd + nd, *k2d = k1d + nd, *k3d = k2d + nd;
-    double *k4d = k3d + nd, *ud = k4d + nd, *w = ud + nd;
+    double *k4d = k3d + nd, *ud = k4d + nd;
     double I[NI], y[NS], k1[NS], k2[NS], k3[NS], k4[NS], u[NS], fa[NW], fm[NW], fb[NW];
     for (int b = 0; b < B; b++) {{
         const double *Pb = P + (size_t)b * NP, *dPb = dP + (size_t)b * NP * D;
@@ -112,16 +111,16 @@ int run_d(int N, int B, int S, int D, const double *tl, const double *TT, const 
             for (int s = 0; s < S; s++) {{
                 double ta = TT[(size_t)i * B + b] + s * h;
                 inputs(B, S, i, s, b, F, ST, fa, fm, fb);
-                rate_d(D, ta, y, yd, fa, Pb, dPb, I, Id, K, k1, k1d, w);
+                rate_d(D, ta, y, yd, fa, Pb, dPb, I, Id, K, k1, k1d);
                 for (int j = 0; j < NS; j++) u[j] = y[j] + (0.5 * h) * k1[j];
                 for (size_t q = 0; q < nd; q++) ud[q] = yd[q] + k1d[q] * (0.5 * h);
-                rate_d(D, ta + 0.5 * h, u, ud, fm, Pb, dPb, I, Id, K, k2, k2d, w);
+                rate_d(D, ta + 0.5 * h, u, ud, fm, Pb, dPb, I, Id, K, k2, k2d);
                 for (int j = 0; j < NS; j++) u[j] = y[j] + (0.5 * h) * k2[j];
                 for (size_t q = 0; q < nd; q++) ud[q] = yd[q] + k2d[q] * (0.5 * h);
-                rate_d(D, ta + 0.5 * h, u, ud, fm, Pb, dPb, I, Id, K, k3, k3d, w);
+                rate_d(D, ta + 0.5 * h, u, ud, fm, Pb, dPb, I, Id, K, k3, k3d);
                 for (int j = 0; j < NS; j++) u[j] = y[j] + h * k3[j];
                 for (size_t q = 0; q < nd; q++) ud[q] = yd[q] + k3d[q] * h;
-                rate_d(D, ta + h, u, ud, fb, Pb, dPb, I, Id, K, k4, k4d, w);
+                rate_d(D, ta + h, u, ud, fb, Pb, dPb, I, Id, K, k4, k4d);
                 for (int j = 0; j < NS; j++) y[j] = y[j] + (h / 6.0) * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
                 for (size_t q = 0; q < nd; q++)
                     yd[q] = yd[q] + (k1d[q] + k2d[q] * 2.0 + k3d[q] * 2.0 + k4d[q]) * (h / 6.0);

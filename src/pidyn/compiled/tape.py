@@ -214,6 +214,8 @@ class Traced(np.lib.mixins.NDArrayOperatorsMixin):
         return self.a
 
     def __array_ufunc__(self, ufunc: np.ufunc, method: str, *inputs: Any, **kw: Any) -> Any:
+        if ufunc is np.matmul and method == "__call__" and not kw:  # a network's layer: sums of products
+            return _wrap(np.matmul(*[_objects(x) for x in inputs]))
         fn = _VECTORISED.get(ufunc)
         if method != "__call__" or kw or fn is None:
             raise NotTraceable(f"np.{ufunc.__name__}" + ("" if method == "__call__" else f".{method}"))

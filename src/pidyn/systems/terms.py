@@ -728,7 +728,7 @@ class LearnedForce(ForceTerm):
             # a float64 solve (the drift of an accelerometer record) through a float32 network: evaluated in the
             # network's precision, returned in the caller's
             return self.net(u.to(dtype))[..., 0].to(u.dtype) * self.f_scale
-        u = np.stack([np.asarray(x, float) / self.x_scale, np.asarray(v, float) / self.v_scale], axis=-1)
+        u = np.stack([x / self.x_scale, v / self.v_scale], axis=-1)
         layers = self._numpy_layers()  # the same weights, evaluated in NumPy for simulations
         for i, (w, b) in enumerate(layers):
             u = u @ w + b
