@@ -183,32 +183,43 @@ def storey_scaling() -> list[dict]:
 
 def simulation_ms(reps: int = 3) -> list[dict]:
     """What simulation costs, the work behind data, refinement, output error and diagnosis:
-    ground truth (LSODA, rtol 1e-10) of 25 s at dt 0.01 s, and over the same record one
-    output-error step (residuals and finite-difference Jacobian, one RK4 batch) and one
-    refinement linearisation (residuals and exact Jacobian by dual numbers, 1 s segments)."""
+    ground truth (LSODA, rtol 1e-10) of 25 s at dt 0.01 s, and over the same record one free run,
+    one output-error step (residuals and finite-difference Jacobian, one RK4 batch) and one
+    refinement linearisation (residuals and exact Jacobian by dual numbers, 1 s segments), each
+    by the compiled loop (``pidyn.compiled``) and by the loop in Python (``PIDYN_COMPILED=0``)."""
+    import os
+
     import numpy as np
 
     from pidyn.data.sources import synthetic_from_motion
     from pidyn.excitation import prepare
+    from pidyn.integrate import rk4
     from pidyn.refine import RefineSettings, ShootingProblem
     from pidyn.refine.setup import build_problem
     from pidyn.simulate import simulate
     from pidyn.systems import BoucWen, Duffing, ShearBuilding
 
     gm = prepare("el_centro", dt=0.01, duration=25.0)
+    hysteretic = ShearBuilding(5, storey_terms={2: {"term": "hysteresis", "beta": 5.0, "gamma": 5.0}})
+    hysteretic.name = "5-storey shear building, hysteretic storey 2"
     out = []
-    for system in (Duffing(), BoucWen(), ShearBuilding()):
+    for system in (Duffing(), BoucWen(), ShearBuilding(), hysteretic):
         truth = system.true_values()
         row = {"system": system.name, "truth_ms": _best(lambda: simulate(system, truth, gm, gm.t), reps)}
         rec = synthetic_from_motion(system, gm, noise=0.0, data_seed=0, params=truth)
         oe = ShootingProblem.from_rest(system, rec, 4)
         th = oe.pack(truth, np.zeros((1, system.n_state)))[: oe.n_theta]
-        row["output_error_step_ms"] = _best(lambda: oe.residuals_and_fd_jacobian(th), reps)
         problem = build_problem(system, rec, RefineSettings(initial_state="free"))
         b = problem.bounds[:-1]
         states = np.hstack([rec.clean.x[b], rec.clean.v[b]] + ([rec.clean.z[b]] if system.n_latent else []))
         u = problem.pack(truth, states)
-        row["linearisation_ms"] = _best(lambda: problem.linearize(u), reps)
+        y0 = np.zeros((1, system.n_state))
+        for suffix, flag in (("", "1"), ("_python", "0")):
+            os.environ["PIDYN_COMPILED"] = flag
+            row["free_run_ms" + suffix] = _best(lambda: rk4(system, truth, gm.t, gm.acc, y0), reps)
+            row["output_error_step_ms" + suffix] = _best(lambda: oe.residuals_and_fd_jacobian(th), reps)
+            row["linearisation_ms" + suffix] = _best(lambda: problem.linearize(u), reps)
+        os.environ.pop("PIDYN_COMPILED")
         out.append(row)
         print(row, flush=True)
     return out
@@ -219,6 +230,8 @@ def linear_map_ms(reps: int = 3) -> list[dict]:
     (dual numbers, what an output-error fit does at each step), 25 s of El Centro at dt 0.01 s:
     by its RK4 scheme's one-sample map (``pidyn.integrate_linear``) and by the general loop,
     and the largest difference of the two as a share of the response."""
+    import os
+
     import numpy as np
 
     from pidyn import integrate, integrate_linear
@@ -249,6 +262,9 @@ def linear_map_ms(reps: int = 3) -> list[dict]:
             return integrate.rk4(system, p, gm.t, f, y0)
 
         row = {"system": f"{label} ({len(names)} parameters)"}
+        row["compiled_ms"] = _best(run, reps)
+        compiled = run()[0]
+        os.environ["PIDYN_COMPILED"] = "0"  # the one-sample map, then the loop in Python
         row["map_ms"] = _best(run, reps)
         fast = run()[0]
         general = integrate_linear.applies
@@ -258,7 +274,10 @@ def linear_map_ms(reps: int = 3) -> list[dict]:
             slow = run()[0]
         finally:
             integrate_linear.applies = general
-        row["difference"] = float(np.abs(fast.v - slow.v).max() / np.abs(slow.v).max())
+            os.environ.pop("PIDYN_COMPILED")
+        scale = np.abs(slow.v).max()
+        row["difference"] = float(np.abs(fast.v - slow.v).max() / scale)
+        row["compiled_difference"] = float(np.abs(compiled.v - slow.v).max() / scale)
         out.append(row)
         print(row, flush=True)
     return out
@@ -508,25 +527,40 @@ def _simulation_lines(res: dict) -> list[str]:
         lines += [
             "",
             f"## Simulation (El Centro 25 s at dt 0.01 s, RK4 with 4 substeps; best of 3{when})\n",
-            "| system | ground truth (LSODA) ms | output-error step (residuals + FD Jacobian) ms | "
+            "Each cell: the compiled loop (`pidyn.compiled`, the default where a C compiler is found) / "
+            "the loop in Python (`PIDYN_COMPILED=0`). The first use of a model compiles it once "
+            "(0.1-1 s, kept on disk).\n",
+            "| system | ground truth (LSODA) ms | free run ms | output-error step (residuals + FD Jacobian) ms | "
             "refinement linearisation (residuals + exact Jacobian, 1 s segments) ms |",
-            "|---|---|---|---|",
+            "|---|---|---|---|---|",
         ]
+
+        def pair(r: dict, key: str) -> str:
+            if key + "_python" not in r:
+                return f"{r[key]:.0f}" if key in r else "-"
+            return f"{r[key]:.1f} / {r[key + '_python']:.0f}"
+
         lines += [
-            f"| {r['system']} | {r['truth_ms']:.0f} | {r['output_error_step_ms']:.0f} | {r['linearisation_ms']:.0f} |"
+            f"| {r['system']} | {r['truth_ms']:.0f} | {pair(r, 'free_run_ms')} | "
+            f"{pair(r, 'output_error_step_ms')} | {pair(r, 'linearisation_ms')} |"
             for r in res["simulation"]
         ]
     if "linear_map" in res:
         lines += [
             "",
-            "### Linear models: the RK4 scheme's one-sample map against the general loop\n",
+            "### Linear models: the compiled loop, the RK4 scheme's one-sample map and the loop in Python\n",
             "The same scheme and the same sensitivities (25 s, exact Jacobian to every parameter by dual numbers, "
-            "what an output-error fit does at each step); the difference is the largest, as a share of the response.\n",
-            "| system | one-sample map ms | general loop ms | difference |",
-            "|---|---|---|---|",
+            "what an output-error fit does at each step); the differences are the largest from the loop in Python, "
+            "as a share of the response. The compiled loop is the default; the map stands in where there is no "
+            "C compiler.\n",
+            "| system | compiled loop ms | one-sample map ms | loop in Python ms | difference: compiled, map |",
+            "|---|---|---|---|---|",
         ]
         lines += [
-            f"| {r['system']} | {r['map_ms']:.1f} | {r['loop_ms']:.0f} | {r['difference']:.1e} |"
+            f"| {r['system']} | {r['compiled_ms']:.1f} | {r['map_ms']:.1f} | {r['loop_ms']:.0f} | "
+            f"{r['compiled_difference']:.1e}, {r['difference']:.1e} |"
+            if "compiled_ms" in r
+            else f"| {r['system']} | - | {r['map_ms']:.1f} | {r['loop_ms']:.0f} | -, {r['difference']:.1e} |"
             for r in res["linear_map"]
         ]
     return lines

@@ -82,7 +82,7 @@ def test_identify_returns_a_result_a_notebook_can_use(tmp_path):
         pidyn.predict(res, "el_centro", iteration=10)
 
 
-@pytest.mark.slow
+@pytest.mark.second_proof  # the API is proven by test_identify_returns_a_result_a_notebook_can_use
 def test_walkthrough_example_runs(tmp_path):
     """examples/api_walkthrough.py --quick: identification, prediction and diagnosis through the API."""
     run = subprocess.run(

@@ -58,7 +58,7 @@ def test_physics_only_prediction_tracks_the_true_response():
     assert all(p.requires_grad for p in module.net.physical_parameters())
 
 
-@pytest.mark.slow
+@pytest.mark.second_proof  # the prediction, L-BFGS finish included, is proven by test_physics_only_prediction_tracks_the_true_response
 def test_lbfgs_finish_solves_a_strongly_nonlinear_window_that_adam_alone_does_not():
     """Kobe x1.5 drives the Duffing to k3 x^2 / k1 ~ 0.8; a short Adam budget per window
     leaves the forward problem unsolved, and the wrong state is handed on."""

@@ -7,7 +7,7 @@ from pidyn.notes import code_of  # noqa: E402
 from pidyn.tasks.train import train  # noqa: E402
 
 
-@pytest.mark.slow
+@pytest.mark.second_proof  # identification is proven by test_noisy_duffing_still_within_a_few_percent
 def test_duffing_identified_from_one_kobe_window(tmp_path):
     """Default recipe, Kobe 1995 first 12 s, one informative window (~30 s on one core)."""
     cfg = make_cfg(["excitation.duration=12", "model.schedule.max_windows=1", "logger=none"], tmp_path)

@@ -45,6 +45,9 @@ def _dual(p: dict, names: list[str], y0: np.ndarray) -> tuple[dict, Dual]:
 
 
 def _both(monkeypatch, system, p, t, f, y0):
+    monkeypatch.setenv(
+        "PIDYN_COMPILED", "0"
+    )  # the map where no C compiler is found, against the loop in Python
     fast = integrate.rk4(system, p, t, f, y0)
     monkeypatch.setattr(integrate_linear, "applies", lambda *a, **k: False)
     slow = integrate.rk4(system, p, t, f, y0)

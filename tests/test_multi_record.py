@@ -129,7 +129,15 @@ def test_bouc_wen_from_two_earthquakes_predicts_a_third(tmp_path):
     r2 = Record.simulate("bouc_wen", "kobe", scale=1.0, noise=0.01, seed=2, **kw)
     r3 = Record.simulate("bouc_wen", "northridge", scale=0.8, **kw)
     res = pidyn.identify(
-        [r1, r2], "bouc_wen", out_dir=tmp_path / "run", model__schedule__max_windows=2, baselines="none"
+        [r1, r2],
+        "bouc_wen",
+        out_dir=tmp_path / "run",
+        model__schedule__max_windows=2,
+        baselines="none",
+        # PIDynNet brings the start into the basin, the refinement on both records does the rest
+        model__schedule__pretrain_iters=300,
+        model__schedule__pretrain_iters_window=300,
+        model__schedule__max_iters=500,
     )
     frame = res.to_frame()
     for name, row in frame.iterrows():

@@ -12,7 +12,9 @@ whose input was low-pass filtered before sampling). A record sampled a few times
 the dynamics needs the second: the linear hold passes a tone at frequency f with the gain
 sinc(f/fs)^2, 0.96 at the Silverbox circuit's resonance (9 samples a period), and a fit
 absorbs that 4 % into the mass. A linear time-invariant system under the linear hold is
-stepped by the same scheme's one-sample map (``pidyn.integrate_linear``).
+stepped by the same scheme's one-sample map (``pidyn.integrate_linear``) where the loop is not
+compiled. The loop itself runs compiled (``pidyn.compiled``) wherever a C compiler is found and
+the system's state rate can be recorded, which is every system and term of the library.
 """
 
 from __future__ import annotations
@@ -132,11 +134,13 @@ def rk4(
     ) -> tuple[np.ndarray, np.ndarray | None]:
         return _steps(system, pl, tl, tl - tl[0], fl, None, yl, substeps, D)
 
-    if stages is None and integrate_linear.applies(system, p, t, y0):
+    done = kernel.steps(system, p, t, tt, ff, stages, y0, substeps, D)  # compiled: any system, fastest
+    if done is not None:
+        Yv, Yd = done
+    elif stages is None and integrate_linear.applies(system, p, t, y0):
         Yv, Yd = integrate_linear.propagate(system, np.asarray(t, float), ff, per_trajectory, y0, p, loop)
     else:
-        done = kernel.steps(system, p, t, tt, ff, stages, y0, substeps, D)
-        Yv, Yd = done if done is not None else _steps(system, p, t, tt, ff, stages, y0, substeps, D)
+        Yv, Yd = _steps(system, p, t, tt, ff, stages, y0, substeps, D)
     shape = Yv.shape[1:]
     Y: Any = Dual(Yv, Yd) if Yd is not None else Yv
     T = tt if np.ndim(tt) == 2 else np.broadcast_to(np.asarray(tt)[:, None], (N, shape[0]))
