@@ -185,3 +185,25 @@ def test_no_compiler_means_python(monkeypatch, tmp_path):
     t = np.arange(N) * DT
     assert kernel.steps(system, system.true_values(), t, t, np.sin(t), None, np.zeros((1, 2)), 4, 0) is None
     assert not list(tmp_path.rglob("*.so"))
+
+
+@pytest.mark.parametrize("name", ["hysteresis", "deck", "building"])
+def test_the_ground_truths_right_hand_side_is_the_same(name, monkeypatch):
+    """LSODA's right-hand side, compiled, gives the ground truth the Python one gives (bitwise here)."""
+    from pidyn.excitation import GroundMotion
+    from pidyn.simulate import simulate
+
+    system = SYSTEMS[name]
+    rng = np.random.default_rng(4)
+    p = {k: float(v[0]) for k, v in _params(system, 1, rng).items()}
+    y = np.array([0.01 * (j + 1) for j in range(system.n_state)])
+    rate = kernel.rate_function(system, p)
+    f = np.linspace(0.3, 1.2, system.excitation_width) if system.n_inputs > 1 else 0.7
+    assert np.allclose(rate(0.4, y, f), system.rhs(0.4, y, p, lambda t: f), rtol=1e-13, atol=1e-15)
+    if system.n_inputs == 1:
+        gm = GroundMotion("probe", DT, _excitation(system, 1, rng)[:300, 0])
+        fast = simulate(system, p, gm, gm.t[:200])
+        monkeypatch.setenv("PIDYN_COMPILED", "0")
+        slow = simulate(system, p, gm, gm.t[:200])
+        _close(fast.x, slow.x, rtol=1e-9)
+        _close(fast.a, slow.a, rtol=1e-9)

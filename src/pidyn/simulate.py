@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.integrate import odeint, solve_ivp
 
+from pidyn.compiled import kernel
 from pidyn.integrate import input_hold, piece_starts, rk4, stage_excitation
 from pidyn.systems.base import StructuralSystem
 
@@ -66,10 +67,13 @@ def simulate(
         f_scalar = lambda t: np.asarray(excitation(t), dtype=float)  # noqa: E731
     else:
         f_scalar = lambda t: float(excitation(t))  # noqa: E731
-    y = _integrate(
-        lambda t, y: system.rhs(t, y, params, f_scalar), y0, t_eval, rtol, atol, step, method, system.name
-    )
-    dy = np.array([system.rhs(t, yi, params, f_scalar) for t, yi in zip(t_eval, y)])
+    compiled = kernel.rate_function(system, params)  # the same right-hand side, at compiled speed
+    if compiled is not None:
+        fun = lambda t, y: compiled(t, y, f_scalar(t))  # noqa: E731
+    else:
+        fun = lambda t, y: system.rhs(t, y, params, f_scalar)  # noqa: E731
+    y = _integrate(fun, y0, t_eval, rtol, atol, step, method, system.name)
+    dy = np.array([fun(t, yi) for t, yi in zip(t_eval, y)])
     x, v = y[:, :n], y[:, n : 2 * n]
     a = dy[:, n : 2 * n]
     z = y[:, 2 * n :] if nz else None

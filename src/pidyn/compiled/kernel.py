@@ -44,6 +44,40 @@ def _kernel(tape: Tape, n_param: int, n_state: int, n_input: int) -> tuple[Any, 
     return _KERNELS[key]
 
 
+def rate_function(system: Any, params: dict[str, float]) -> Any:
+    """``f(t, y, excitation) -> dy/dt`` for one plain state, compiled, or None: what a variable-step
+    integrator (the ground truth's LSODA) calls tens of thousands of times per record."""
+    if not enabled():
+        return None
+    names = list(params)
+    try:
+        tape = record(system, names, system.excitation_width)
+    except Exception as exc:  # noqa: BLE001 - integrated with the Python right-hand side
+        log.debug("%s: not compiled (%s)", system.name, exc)
+        return None
+    found = _kernel(tape, len(names), system.n_state, system.excitation_width)
+    if found is None:
+        return None
+    lib, K = found
+    P = np.array([float(params[n]) for n in names])
+    inv = np.empty(max(int(lib.n_invariants()), 1))
+    lib.invariants(_ptr(P), _ptr(K), _ptr(inv))
+    fbuf, out = np.empty(system.excitation_width), np.empty(system.n_state)
+    call = lib.rhs
+    call.argtypes = [ctypes.c_double] + [ctypes.c_void_p] * 6
+    call.restype = None
+    fixed = (fbuf.ctypes.data, P.ctypes.data, inv.ctypes.data, K.ctypes.data, out.ctypes.data)
+
+    def rate(t: float, y: np.ndarray, f: Any) -> np.ndarray:
+        yy = np.ascontiguousarray(y, dtype=float)
+        fbuf[:] = f
+        call(float(t), yy.ctypes.data, *fixed)
+        return out.copy()
+
+    rate.keep = (P, inv, fbuf, out, K, lib)  # type: ignore[attr-defined]  # the buffers the pointers point into
+    return rate
+
+
 def _ptr(a: np.ndarray | None) -> Any:
     return None if a is None else a.ctypes.data_as(_DOUBLE_P)
 

@@ -56,6 +56,14 @@ static void inputs(int B, int S, int i, int s, int b, const double *F, const dou
     }}
 }}
 
+/* one evaluation of the state rate (a variable-step integrator's right-hand side) */
+int n_invariants(void) {{ return NI; }}
+void invariants(const double *P, const double *K, double *I) {{ prologue(P, K, I); }}
+void rhs(double t, const double *y, const double *f, const double *P, const double *I, const double *K,
+         double *out) {{
+    rate(t, y, f, P, I, K, out);
+}}
+
 int run(int N, int B, int S, const double *tl, const double *TT, const double *F, const double *ST,
         const double *P, const double *K, const double *Y0, double *Y) {{
     double I[NI], y[NS], k1[NS], k2[NS], k3[NS], k4[NS], u[NS], fa[NW], fm[NW], fb[NW];
