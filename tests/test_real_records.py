@@ -181,6 +181,9 @@ def test_a_two_support_sdof_is_recovered_with_its_influences(tmp_path):
         baselines="none",
         out_dir=tmp_path,
         model__schedule__max_windows=1,
+        # a short PIDynNet stage: the data's start and the refinement after it are under test
+        model__schedule__pretrain_iters=200,
+        model__schedule__max_iters=300,
     )
     # within three standard errors of the truth (1.5 half-widths of the 95 % interval): for eight
     # parameters from one noise draw, a 95 % interval alone misses one of them one time in three

@@ -103,6 +103,9 @@ def test_the_support_stiffnesses_are_recovered_within_their_intervals(tmp_path):
         baselines="none",
         out_dir=tmp_path,
         model__schedule__max_windows=1,
+        # a short PIDynNet stage: the data's start and the refinement after it are under test
+        model__schedule__pretrain_iters=200,
+        model__schedule__max_iters=300,
         overrides=[
             "system.inputs=[1,2,3]",
             "system.outputs=[4,5]",

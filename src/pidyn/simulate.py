@@ -14,6 +14,7 @@ import numpy as np
 from scipy.integrate import odeint, solve_ivp
 
 from pidyn.compiled import kernel
+from pidyn.excitation.ground_motion import GroundMotion
 from pidyn.integrate import input_hold, piece_starts, rk4, stage_excitation
 from pidyn.systems.base import StructuralSystem
 
@@ -67,8 +68,12 @@ def simulate(
         f_scalar = lambda t: np.asarray(excitation(t), dtype=float)  # noqa: E731
     else:
         f_scalar = lambda t: float(excitation(t))  # noqa: E731
-    compiled = kernel.rate_function(system, params)  # the same right-hand side, at compiled speed
-    if compiled is not None:
+    # the same right-hand side at compiled speed; a record's samples read in it, as GroundMotion reads them
+    samples = (excitation.acc, excitation.dt) if type(excitation) is GroundMotion else None
+    compiled = kernel.rate_function(system, params, samples)
+    if compiled is not None and samples is not None and system.n_inputs == 1:
+        fun = compiled
+    elif compiled is not None:
         fun = lambda t, y: compiled(t, y, f_scalar(t))  # noqa: E731
     else:
         fun = lambda t, y: system.rhs(t, y, params, f_scalar)  # noqa: E731

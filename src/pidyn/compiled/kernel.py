@@ -44,9 +44,13 @@ def _kernel(tape: Tape, n_param: int, n_state: int, n_input: int) -> tuple[Any, 
     return _KERNELS[key]
 
 
-def rate_function(system: Any, params: dict[str, float]) -> Any:
+def rate_function(
+    system: Any, params: dict[str, float], sampled: tuple[np.ndarray, float] | None = None
+) -> Any:
     """``f(t, y, excitation) -> dy/dt`` for one plain state, compiled, or None: what a variable-step
-    integrator (the ground truth's LSODA) calls tens of thousands of times per record."""
+    integrator (the ground truth's LSODA) calls tens of thousands of times per record. With
+    ``sampled`` = (samples, dt) of the one input, ``f(t, y)`` reads the excitation itself, linear
+    between samples and zero outside them, as ``np.interp`` reads it (``GroundMotion``)."""
     if not enabled():
         return None
     names = list(params)
@@ -62,20 +66,34 @@ def rate_function(system: Any, params: dict[str, float]) -> Any:
     P = np.array([float(params[n]) for n in names])
     inv = np.empty(max(int(lib.n_invariants()), 1))
     lib.invariants(_ptr(P), _ptr(K), _ptr(inv))
-    fbuf, out = np.empty(system.excitation_width), np.empty(system.n_state)
+    out = np.empty(system.n_state)
+    tail = (P.ctypes.data, inv.ctypes.data, K.ctypes.data, out.ctypes.data)
+    if sampled is not None and system.excitation_width == 1:
+        acc = np.ascontiguousarray(sampled[0], dtype=float)
+        call = lib.rhs_sampled
+        call.argtypes = [ctypes.c_double, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_double]
+        call.argtypes += [ctypes.c_void_p] * 4
+        call.restype = None
+        head = (acc.ctypes.data, ctypes.c_int(len(acc)), ctypes.c_double(float(sampled[1])))
+
+        def rate(t: float, y: np.ndarray) -> np.ndarray:
+            call(t, (y if y.flags.c_contiguous else np.ascontiguousarray(y)).ctypes.data, *head, *tail)
+            return out.copy()
+
+        rate.keep = (P, inv, out, K, acc, lib)  # type: ignore[attr-defined]  # what the pointers point into
+        return rate
+    fbuf = np.empty(system.excitation_width)
     call = lib.rhs
     call.argtypes = [ctypes.c_double] + [ctypes.c_void_p] * 6
     call.restype = None
-    fixed = (fbuf.ctypes.data, P.ctypes.data, inv.ctypes.data, K.ctypes.data, out.ctypes.data)
 
-    def rate(t: float, y: np.ndarray, f: Any) -> np.ndarray:
-        yy = np.ascontiguousarray(y, dtype=float)
+    def rate_at(t: float, y: np.ndarray, f: Any) -> np.ndarray:
         fbuf[:] = f
-        call(float(t), yy.ctypes.data, *fixed)
+        call(t, (y if y.flags.c_contiguous else np.ascontiguousarray(y)).ctypes.data, fbuf.ctypes.data, *tail)
         return out.copy()
 
-    rate.keep = (P, inv, fbuf, out, K, lib)  # type: ignore[attr-defined]  # the buffers the pointers point into
-    return rate
+    rate_at.keep = (P, inv, out, K, fbuf, lib)  # type: ignore[attr-defined]
+    return rate_at
 
 
 def _ptr(a: np.ndarray | None) -> Any:

@@ -64,6 +64,31 @@ void rhs(double t, const double *y, const double *f, const double *P, const doub
     rate(t, y, f, P, I, K, out);
 }}
 
+/* the same with the excitation read from its samples as np.interp(t, grid, acc, left=0, right=0) reads
+   them (one input, a uniform grid of step dt): no call back into Python for it */
+void rhs_sampled(double t, const double *y, const double *acc, int n, double dt, const double *P, const double *I,
+                 const double *K, double *out) {{
+    double f[NW > 0 ? NW : 1];
+    if (!(t >= 0.0) || t > (n - 1) * dt) {{
+        f[0] = 0.0;
+    }} else if (t == (n - 1) * dt) {{
+        f[0] = acc[n - 1];
+    }} else {{
+        int j = (int)(t / dt);
+        if (j > n - 2) j = n - 2;
+        while (j > 0 && j * dt > t) j--;
+        while (j < n - 2 && (j + 1) * dt <= t) j++;
+        double x0 = j * dt, x1 = (j + 1) * dt;
+        double slope = (acc[j + 1] - acc[j]) / (x1 - x0);
+        f[0] = slope * (t - x0) + acc[j];
+        if (f[0] != f[0]) {{
+            f[0] = slope * (t - x1) + acc[j + 1];
+            if (f[0] != f[0] && acc[j] == acc[j + 1]) f[0] = acc[j];
+        }}
+    }}
+    rate(t, y, f, P, I, K, out);
+}}
+
 int run(int N, int B, int S, const double *tl, const double *TT, const double *F, const double *ST,
         const double *P, const double *K, const double *Y0, double *Y) {{
     double I[NI], y[NS], k1[NS], k2[NS], k3[NS], k4[NS], u[NS], fa[NW], fm[NW], fb[NW];
