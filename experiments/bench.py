@@ -393,6 +393,7 @@ def end_to_end(args: list[str]) -> dict:
         "max_error_pct": m["max_error_pct"],
         "iterations": m["iterations"],
         "windows": m["windows"],
+        "stage_seconds": m.get("stage_seconds", {}),
     }
 
 
@@ -574,13 +575,14 @@ def _end_to_end_lines(res: dict) -> list[str]:
             "## End to end"
             + (f" (from the full run of {res['end_to_end_date']})" if res.get("end_to_end_date") else "")
             + "\n",
-            "| command | wall s | windows | iterations | errors % |",
-            "|---|---|---|---|---|",
+            "| command | wall s | windows | iterations | errors % | s by stage (metrics.json's stage_seconds) |",
+            "|---|---|---|---|---|---|",
         ]
         for e in res["end_to_end"]:
             errs = ", ".join(f"{k} {v:.2g}" for k, v in e["error_pct"].items())
+            stages = ", ".join(f"{k} {v:.1f}" for k, v in e.get("stage_seconds", {}).items()) or "-"
             lines.append(
-                f"| `{e['command']}` | {e['wall_s']:.0f} | {e['windows']} | {e['iterations']} | {errs} |"
+                f"| `{e['command']}` | {e['wall_s']:.0f} | {e['windows']} | {e['iterations']} | {errs} | {stages} |"
             )
     return lines
 

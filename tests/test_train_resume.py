@@ -40,6 +40,10 @@ def test_run_folder_holds_everything(tmp_path):
     table = yaml.safe_load((tmp_path / "identified_params.yaml").read_text())["params"]
     assert set(table) == {"c", "k1", "k3"} and table["k3"]["truth"] == 120.0 and "error_pct" in table["k3"]
     assert set(metrics["baselines"]) == {"equation_error", "ukf"}
+    # where the time went, stage by stage (make bench reads it)
+    stages = metrics["stage_seconds"]
+    assert set(stages) == {"build", "pidynnet", "baselines_wait", "refinement", "report"}
+    assert all(v >= 0 for v in stages.values()) and stages["pidynnet"] > 0
     # the excitation keys that separate the cells of a scaling sweep when it is aggregated
     assert (metrics["eq_scale"], metrics["eq_stretch"]) == (cfg.eq_scale, cfg.eq_stretch)
     assert metrics["windows"] == 2 and json.loads((tmp_path / "metrics.json").read_text())["iterations"] > 0

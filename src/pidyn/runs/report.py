@@ -39,8 +39,11 @@ def write_report(
     baselines: list[dict],
     refined: Any,
     t_wall: float,
+    stages: dict[str, float] | None = None,
 ) -> dict[str, Any]:
-    """identified_params.yaml, metrics.json, refinement.json, windows.json, figures, TensorBoard, log."""
+    """identified_params.yaml, metrics.json, refinement.json, windows.json, figures, TensorBoard, log.
+    ``stages``: seconds each stage before the report took (``stage_seconds``, the report's own added)."""
+    t_report = time.perf_counter()
     system, record, run_dir = run.system, run.record, run.run_dir
     params = run.module.net.params
     names = params.trainable_names
@@ -79,6 +82,8 @@ def write_report(
             log.warning(text)
         metrics["notes"] = list(metrics.get("notes") or []) + support_notes
     _figures(run, results, truths, baselines, refined, sim, metrics)
+    if stages is not None:
+        metrics["stage_seconds"] = {**stages, "report": time.perf_counter() - t_report}
     write_json(run_dir / "metrics.json", metrics)
     write_run_report(run_dir, system.describe(final), metrics)
     _log_summary(system.describe(final), errors, pidyn_errors, metrics, run_dir)

@@ -51,21 +51,26 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     ``record``: data already built from ``cfg.data.source`` (a caller that identifies
     several models on one record builds it once)."""
     t_wall = time.perf_counter()
+    stages: dict[str, float] = {}  # where the time goes (metrics.json's stage_seconds, make bench)
     check_settings(cfg)
     run = build_run(cfg, record)
     # the classical baselines need nothing from PIDynNet: they run beside it on another core
     pending = start_baselines(cfg, run.system, run.record, run.hold_out)
+    t = _lap(stages, "build", t_wall)
     try:
         results = run.ident.run(resume=cfg.get("resume", True))
     except BaseException:
         pending.cancel()
         raise
+    t = _lap(stages, "pidynnet", t)
     # after PIDynNet: the baselines' results, then the refinement stage
     params = run.module.net.params
     pidyn_values = {n: params.as_floats()[n] for n in params.trainable_names}
     baselines = run_baselines(cfg, run.system, run.record, run.run_dir, params.as_floats(), pending)
+    t = _lap(stages, "baselines_wait", t)
     refined = run_refinement(cfg, run.system, run.record, pidyn_values, baselines, results, run.start)
-    metrics = write_report(cfg, run, results, pidyn_values, baselines, refined, t_wall)
+    _lap(stages, "refinement", t)
+    metrics = write_report(cfg, run, results, pidyn_values, baselines, refined, t_wall, stages)
     objects = {
         "module": run.module,
         "system": run.system,
@@ -77,3 +82,10 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
         "windows": [r.__dict__ for r in results],
     }
     return metrics, objects
+
+
+def _lap(stages: dict[str, float], name: str, since: float) -> float:
+    """Seconds since ``since`` as stage ``name``; returns now, the next stage's start."""
+    now = time.perf_counter()
+    stages[name] = now - since
+    return now
