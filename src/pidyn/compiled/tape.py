@@ -10,6 +10,7 @@ an operation it does not know) raises ``NotTraceable``, and the caller integrate
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -70,7 +71,14 @@ class Node:
     __pow__ = lambda self, o: _pow(self, o)  # noqa: E731
 
 
-_TAPE: list[Tape] = []  # the tape being recorded (one at a time per thread of tracing)
+class _Recording(threading.local):
+    """The tapes being recorded, innermost last: one stack per thread, so threads trace apart."""
+
+    def __init__(self) -> None:
+        self.tapes: list[Tape] = []
+
+
+_RECORDING = _Recording()
 
 
 def _number(x: Any) -> float:
@@ -83,7 +91,7 @@ def _arg(x: Any) -> int:
     """An operand's node index (a float becomes a constant node)."""
     if isinstance(x, Node):
         return x.i
-    return _TAPE[-1].node("const", _number(x).hex())
+    return _RECORDING.tapes[-1].node("const", _number(x).hex())
 
 
 _FOLD = {
@@ -101,7 +109,7 @@ def _op(name: str, *xs: Any) -> Any:
         args = [_number(x) for x in xs]
         fold = _FOLD.get(name)
         return float(fold(*args)) if fold is not None else float(_NUMPY[name](*args))
-    return Node(_TAPE[-1].node(name, *[_arg(x) for x in xs]))
+    return Node(_RECORDING.tapes[-1].node(name, *[_arg(x) for x in xs]))
 
 
 def _pow(a: Any, b: Any) -> Any:
@@ -253,7 +261,7 @@ _FUNCTIONS: dict[Any, Any] = {
 
 
 def leaf(kind: str, j: int | None = None) -> Node:
-    tape = _TAPE[-1]
+    tape = _RECORDING.tapes[-1]
     return Node(tape.node(kind) if j is None else tape.node(kind, j))
 
 
@@ -261,7 +269,7 @@ def record(system: Any, param_names: list[str], n_inputs: int) -> Tape:
     """The tape of ``system.state_rate`` for one trajectory: parameters ``param_names`` (in that
     order), the state, the excitation's ``n_inputs`` columns and the time as leaves."""
     tape = Tape()
-    _TAPE.append(tape)
+    _RECORDING.tapes.append(tape)
     try:
         t = Traced(np.array([leaf("time")], dtype=object))
         y = Traced(np.array([[leaf("state", j) for j in range(system.n_state)]], dtype=object))
@@ -276,5 +284,5 @@ def record(system: Any, param_names: list[str], n_inputs: int) -> Tape:
             )
         tape.outputs = [_arg(x) for x in out.a[0]]
     finally:
-        _TAPE.pop()
+        _RECORDING.tapes.pop()
     return tape
