@@ -31,6 +31,7 @@ def test_run_folder_holds_everything(tmp_path):
         "subperiod_state.json",
         "figures/param_convergence.png",
         "figures/response.png",
+        "figures/transfer_function.png",
         "checkpoints/last.pt",
         "baselines.json",
         "cramer_rao.json",
@@ -40,6 +41,7 @@ def test_run_folder_holds_everything(tmp_path):
     table = yaml.safe_load((tmp_path / "identified_params.yaml").read_text())["params"]
     assert set(table) == {"c", "k1", "k3"} and table["k3"]["truth"] == 120.0 and "error_pct" in table["k3"]
     assert set(metrics["baselines"]) == {"equation_error", "ukf"}
+    assert metrics["transfer_function"]["channel"] == "x" and metrics["transfer_function"]["segments"] >= 1
     # where the time went, stage by stage (make bench reads it)
     stages = metrics["stage_seconds"]
     assert set(stages) == {"build", "pidynnet", "baselines_wait", "refinement", "report"}

@@ -25,6 +25,7 @@ from pidyn.reporting import (
 from pidyn.runs.build import Run
 from pidyn.runs.metrics import channel_nrmse, record_noise, relative_errors, sim_nrmse_x
 from pidyn.runs.supports import support_lines, support_table
+from pidyn.runs.transfer_figure import transfer_figure
 from pidyn.simulate import simulate_response
 from pidyn.systems.base import StructuralSystem
 
@@ -333,6 +334,9 @@ def _figures(
         series,
         title=f"{system.name}: NRMSE {metrics['sim_nrmse'][label]:.3g} ({label})",
     )
+    spectrum = transfer_figure(fig_dir / "transfer_function.png", record, system, sim)
+    if spectrum is not None:
+        metrics["transfer_function"] = spectrum
     tb_figures(run.logger, fig_dir, int(run.module.iteration), metrics, refined)
 
 
