@@ -32,6 +32,7 @@ def test_run_folder_holds_everything(tmp_path):
         "figures/param_convergence.png",
         "figures/response.png",
         "figures/transfer_function.png",
+        "figures/restoring_force.png",
         "checkpoints/last.pt",
         "baselines.json",
         "cramer_rao.json",

@@ -36,3 +36,23 @@ def test_a_building_reads_its_top_floor_and_a_short_record_draws_nothing(tmp_pat
         is None
     )
     assert not (tmp_path / "none.png").exists()
+
+
+def test_a_single_degree_of_freedoms_loop_is_its_force_terms_along_the_response(tmp_path):
+    """The loop is the sum of the force terms at the simulated response; a building draws none."""
+    from pidyn.runs.loop_figure import loop_figure, restoring_loop
+    from pidyn.systems import BoucWen
+
+    system = BoucWen()
+    rec = synthetic(system, "el_centro", duration=8.0, channels=("x",))
+    x, force = restoring_loop(system, system.true_values(), rec)
+    p = system.true_values()
+    clean = rec.clean
+    assert np.allclose(x[:, 0], clean.x[:, 0], rtol=0, atol=1e-4 * np.abs(clean.x).max())
+    # Bouc-Wen's restoring force is c x' + k z: its loop is open (energy dissipated per cycle)
+    assert np.allclose(
+        force[:, 0], p["c"] * clean.v[:, 0] + p["k"] * clean.z[:, 0], atol=1e-3 * np.abs(force).max()
+    )
+    assert loop_figure(tmp_path / "loop.png", system, p, rec) and (tmp_path / "loop.png").is_file()
+    building = ShearBuilding(n_storeys=2)
+    assert not loop_figure(tmp_path / "no.png", building, building.true_values(), rec)

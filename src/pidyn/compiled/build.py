@@ -12,8 +12,10 @@ import ctypes
 import hashlib
 import logging
 import os
+import platform
 import shutil
 import subprocess
+import sys
 import sysconfig
 import tempfile
 from pathlib import Path
@@ -50,7 +52,9 @@ def _say_once(key: str, message: str) -> None:
 
 def load(source: str) -> ctypes.CDLL | None:
     """The library built from ``source`` (cached in memory and on disk), or None."""
-    key = hashlib.sha256(source.encode()).hexdigest()[:24]
+    # a home folder shared by machines of other kinds keeps each kind's library apart
+    where = f"{platform.machine()} {sys.implementation.cache_tag} {compiler()}"
+    key = hashlib.sha256((source + where).encode()).hexdigest()[:24]
     if key in _LOADED:
         return _LOADED[key]
     lib = None

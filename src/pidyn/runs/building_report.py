@@ -142,9 +142,11 @@ def plot_storey_loops(
     force: np.ndarray,
     truth: tuple[np.ndarray, np.ndarray] | None,
     title: str = "",
+    panels: list[str] | None = None,
+    xlabel: str = "drift (m)",
 ) -> None:
-    """Restoring force against drift, one panel per storey: the identified model simulated over
-    the record, and the true structure's when known."""
+    """Restoring force against drift, one panel per storey (or per ``panels`` name): the identified
+    model simulated over the record, and the true structure's when known."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -159,8 +161,8 @@ def plot_storey_loops(
         if truth is not None:
             ax.plot(truth[0][:, i], truth[1][:, i], color="0.6", lw=2.0, label="true")
         ax.plot(plottable(drift[:, i]), plottable(force[:, i]), color="C3", lw=0.7, label="identified")
-        ax.set_title(f"storey {i + 1}")
-        ax.set_xlabel("drift (m)")
+        ax.set_title(f"storey {i + 1}" if panels is None else panels[i])
+        ax.set_xlabel(xlabel)
         ax.set_ylabel("restoring force (N)")
     for j in range(n, rows * cols):
         axes[j // cols][j % cols].axis("off")

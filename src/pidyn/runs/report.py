@@ -23,6 +23,7 @@ from pidyn.reporting import (
     write_yaml,
 )
 from pidyn.runs.build import Run
+from pidyn.runs.loop_figure import loop_figure
 from pidyn.runs.metrics import channel_nrmse, record_noise, relative_errors, sim_nrmse_x
 from pidyn.runs.supports import support_lines, support_table
 from pidyn.runs.transfer_figure import transfer_figure
@@ -82,7 +83,7 @@ def write_report(
         for text in support_notes:
             log.warning(text)
         metrics["notes"] = list(metrics.get("notes") or []) + support_notes
-    _figures(run, results, truths, baselines, refined, sim, metrics)
+    _figures(run, results, truths, baselines, refined, sim, metrics, final)
     if stages is not None:
         metrics["stage_seconds"] = {**stages, "report": time.perf_counter() - t_report}
     write_json(run_dir / "metrics.json", metrics)
@@ -307,6 +308,7 @@ def _figures(
     refined: Any,
     sim: dict[str, np.ndarray],
     metrics: dict,
+    final: dict[str, float],
 ) -> None:
     system, record = run.system, run.record
     fig_dir = run.run_dir / "figures"
@@ -334,6 +336,8 @@ def _figures(
         series,
         title=f"{system.name}: NRMSE {metrics['sim_nrmse'][label]:.3g} ({label})",
     )
+    state0 = None if refined is None else np.array(refined.initial_state)
+    loop_figure(fig_dir / "restoring_force.png", system, final, record, state0)
     spectrum = transfer_figure(fig_dir / "transfer_function.png", record, system, sim)
     if spectrum is not None:
         metrics["transfer_function"] = spectrum
