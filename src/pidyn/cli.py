@@ -15,6 +15,7 @@ import hydra
 from omegaconf import DictConfig
 
 from pidyn.config import CONF_DIR as _CONF_PATH
+from pidyn.config import check_settings
 
 #: the package's config directory, for ``hydra.initialize_config_dir``
 CONF_DIR = str(_CONF_PATH)
@@ -100,11 +101,18 @@ def _write_failure(cfg: DictConfig, exc: BaseException) -> None:
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def _train(cfg: DictConfig) -> float | None:
-    from pidyn.tasks.train import train
-
-    metrics = _guarded(train, cfg) or {}
+    metrics = _guarded(_checked_train, cfg) or {}
     value = metrics.get(cfg.get("optimized_metric", "max_error_pct"))
     return float(value) if value is not None else None
+
+
+def _checked_train(cfg: DictConfig) -> dict:
+    """The settings refused before the task is imported: a bad value is named in a second or
+    two, not after the seconds Lightning and its kin take to import."""
+    check_settings(cfg)
+    from pidyn.tasks.train import train  # imported once the settings hold (see above)
+
+    return train(cfg)
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="generalize")
