@@ -74,3 +74,25 @@ def test_new_parameter_values_are_not_served_from_the_store():
     p["k2"] = 2.0 * p["k2"]
     again = b.state_rate(t, y, p, f)
     assert not np.allclose(first, again) and np.allclose(again, b._state_rate_by_term(t, y, p, f))
+
+
+@pytest.mark.parametrize("name", list(buildings()))
+def test_torch_tensors_take_the_vector_rate_with_their_gradients(name):
+    """A learned force trained through the simulation passes torch states and parameters: the same
+    rate as term by term, and the same gradient."""
+    import torch
+
+    b = buildings()[name]
+    t, y, p, f = inputs(b, "per_trajectory", np.random.default_rng(2))
+    p = {k: float(np.mean(v)) for k, v in p.items()}
+
+    def rates(fn):
+        pt = {k: torch.tensor(v, dtype=torch.float64, requires_grad=True) for k, v in p.items()}
+        yt, ft = torch.tensor(y, requires_grad=True), torch.tensor(f)
+        out = fn(torch.tensor(t), yt, pt, ft)
+        out.pow(2).sum().backward()
+        return out.detach().numpy(), yt.grad.numpy(), {k: float(v.grad) for k, v in pt.items()}
+
+    (fast, gy, gp), (slow, sy, sp) = rates(b.state_rate), rates(b._state_rate_by_term)
+    assert np.allclose(fast, slow, rtol=1e-12, atol=1e-12) and np.allclose(gy, sy, rtol=1e-10, atol=1e-12)
+    assert all(np.isclose(gp[k], sp[k], rtol=1e-10, atol=1e-12) for k in gp)

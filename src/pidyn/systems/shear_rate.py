@@ -15,8 +15,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import torch
 
 from pidyn.autodiff import Dual
+from pidyn.systems.base import stack_last
 from pidyn.systems.terms import LinearStiffness, ViscousDamping
 
 
@@ -63,10 +65,10 @@ def _minus_neighbour(u: Any, sides: tuple[slice, slice]) -> Any:
     """u_i - u_{i-1} (``_BELOW``) or u_i - u_{i+1} (``_ABOVE``) along the floors: a plain
     array's last axis, a dual array's values and its derivatives' axis before the directions."""
     put, take = sides
-    if not isinstance(u, (Dual, np.ndarray)):  # another array type (a traced one): by slices
+    if not isinstance(u, (Dual, np.ndarray)):  # another array type (traced, torch): by slices
         if sides is _BELOW:
-            return np.concatenate([u[..., :1], u[..., 1:] - u[..., :-1]], axis=-1)
-        return np.concatenate([u[..., :-1] - u[..., 1:], u[..., -1:]], axis=-1)
+            return _cat([u[..., :1], u[..., 1:] - u[..., :-1]], u)
+        return _cat([u[..., :-1] - u[..., 1:], u[..., -1:]], u)
     if isinstance(u, Dual):
         v, d = u.v.copy(), u.d.copy()
         v[..., put] -= u.v[..., take]
@@ -77,10 +79,21 @@ def _minus_neighbour(u: Any, sides: tuple[slice, slice]) -> Any:
     return out
 
 
+def _cat(parts: list, like: Any) -> Any:
+    """``parts`` joined along the last axis: torch where ``like`` is a tensor, NumPy otherwise."""
+    if isinstance(like, torch.Tensor):
+        return torch.cat(parts, dim=-1)
+    return np.concatenate(parts, axis=-1)
+
+
 def _vector(p: dict, names: tuple[str | None, ...]) -> Any:
     """The parameters ``names`` on a last axis (0 where None); scalars beside per-trajectory
     values (an output-error step's perturbed copies) are broadcast to the trajectories."""
     vals = [0.0 if n is None else p[n] for n in names]
+    tensor = next((v for v in vals if isinstance(v, torch.Tensor)), None)
+    if tensor is not None:  # a learned force trained through the simulation: the parameters in torch
+        vals = [torch.as_tensor(v, dtype=tensor.dtype) for v in vals]
+        return torch.stack(torch.broadcast_tensors(*vals), dim=-1)
     shapes = [v.shape if hasattr(v, "shape") else () for v in vals]
     widest = max(shapes, key=len)
     if any(sh != widest for sh in shapes):
@@ -109,11 +122,14 @@ class Vectors:
 
 
 def state_rate(building: Any, lay: Layout, cache: Vectors, t: Any, y: Any, p: dict, f: Any) -> Any:
-    """(x', v', z') of a ground-driven shear building: NumPy or dual arrays, ``y`` (..., n_state)."""
+    """(x', v', z') of a ground-driven shear building: NumPy, dual, traced or torch arrays, ``y``
+    (..., n_state)."""
     n = building.n_dof
     x, v, z = y[..., :n], y[..., n : 2 * n], y[..., 2 * n :]
     d, dv = _minus_neighbour(x, _BELOW), _minus_neighbour(v, _BELOW)
     damp, spring, per_mass = cache.get(p, lay)
+    if isinstance(y, torch.Tensor):  # parameters held fixed beside trained ones come as NumPy
+        damp, spring, per_mass = (torch.as_tensor(a, dtype=y.dtype) for a in (damp, spring, per_mass))
     force = damp * dv + spring * d
     latent = []
     if lay.others:
@@ -126,6 +142,7 @@ def state_rate(building: Any, lay: Layout, cache: Vectors, t: Any, y: Any, p: di
                 latent.append(term.latent_rate(t, d[..., i], dv[..., i], zi, p))
         zero = 0.0 * d[..., 0]
         extra = [cols[i] + zero if i in cols else zero for i in range(n)]
-        force = force + np.stack(extra, axis=-1)
-    acc = -np.asarray(f)[..., None] - _minus_neighbour(force, _ABOVE) * per_mass
-    return np.concatenate([v, acc, *latent], axis=-1)
+        force = force + stack_last(extra, zero)
+    ground = f[..., None] if isinstance(f, torch.Tensor) else np.asarray(f)[..., None]
+    acc = -ground - _minus_neighbour(force, _ABOVE) * per_mass
+    return _cat([v, acc, *latent], v)
