@@ -2,7 +2,8 @@
 
 A redrawn progress bar written to a file is megabytes of carriage returns. Where Lightning
 shows no bar (stdout is not a terminal, or ``trainer.enable_progress_bar=false``), this
-callback logs one line every ``every_s`` seconds: window, phase, iteration, losses and the
+callback logs one line every ``every_s`` seconds: the window as k of n, the phase, the
+iteration as k of n with the time this fit has left at its pace so far, the losses and the
 physical parameters.
 """
 
@@ -25,7 +26,8 @@ class LineProgress(L.Callback):
         self._last = 0.0
 
     def on_train_start(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
-        self._last = time.monotonic()
+        self._last = self._start = time.monotonic()
+        self._first = int(getattr(pl_module, "window_iteration", 0))
 
     def on_train_batch_end(
         self, trainer: L.Trainer, pl_module: L.LightningModule, outputs: Any, batch: Any, batch_idx: int
@@ -36,16 +38,31 @@ class LineProgress(L.Callback):
         if now - self._last < self.every_s:
             return
         self._last = now
+        log.info("%s", self.line(pl_module, now))
+
+    def line(self, pl_module: Any, now: float) -> str:
+        """``window 2/5 identify: iteration 400/1500 (~1 min 10 s left), loss ...; c=0.5, ...``."""
         window = getattr(pl_module, "window", None)
+        n = getattr(pl_module, "n_windows", None)
+        where = f"{getattr(window, 'index', -1) + 1}/{n}" if n else str(getattr(window, "index", "?"))
+        done, budget = int(getattr(pl_module, "window_iteration", 0)), int(getattr(pl_module, "budget", 0))
         losses = getattr(pl_module, "last_losses", {}) or {}
         net = getattr(pl_module, "net", None)
         params = net.params.as_floats() if net is not None and hasattr(net, "params") else {}
-        log.info(
-            "window %s %s: iteration %d/%d, loss %s; %s",
-            getattr(window, "index", "?"),
-            getattr(pl_module, "phase", ""),
-            getattr(pl_module, "window_iteration", 0),
-            getattr(pl_module, "budget", 0),
-            ", ".join(f"{k} {v:.3g}" for k, v in losses.items()),
-            ", ".join(f"{k}={v:.5g}" for k, v in params.items()),
+        return (
+            f"window {where} {getattr(pl_module, 'phase', '')}: iteration {done}/{budget}"
+            f"{self._left(now, done, budget)}, loss "
+            + ", ".join(f"{k} {v:.3g}" for k, v in losses.items())
+            + "; "
+            + ", ".join(f"{k}={v:.5g}" for k, v in params.items())
+        )
+
+    def _left(self, now: float, done: int, budget: int) -> str:
+        """The time this fit has left at the pace of its iterations so far ('' before any)."""
+        ran = done - getattr(self, "_first", 0)
+        if ran <= 0 or budget <= done:
+            return ""
+        left = (now - getattr(self, "_start", now)) / ran * (budget - done)
+        return (
+            f" (~{int(left // 60)} min {int(left % 60)} s left)" if left >= 60 else f" (~{left:.0f} s left)"
         )

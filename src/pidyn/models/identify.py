@@ -202,7 +202,7 @@ class SubperiodIdentifier:
 
     # ------------------------------------------------------------------ phases
     def _fit(self, w: Window, phase: str, iters: int, physics: bool, callbacks: list[L.Callback]) -> None:
-        self.module.start(w, phase, iters)  # type: ignore[arg-type]
+        self.module.start(w, phase, iters, len(self.dm.windows))  # type: ignore[arg-type]
         inner = self.module.inner_steps
         self.dm.activate(w.index, iters, inner, physics)
         trainer = self.make_trainer(max_steps=-1, callbacks=callbacks + self.extra_callbacks)

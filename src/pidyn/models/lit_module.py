@@ -61,6 +61,7 @@ class PIDynNetModule(L.LightningModule):
         self.lbfgs_tol = lbfgs_tol
         self.phase: Phase = "identify"
         self.window: Window | None = None
+        self.n_windows: int | None = None
         self.budget = 1000  # iterations planned for the current fit (sets the LR decay)
         self.register_buffer("iteration", torch.zeros((), dtype=torch.long))
         self.window_iteration = 0
@@ -68,8 +69,11 @@ class PIDynNetModule(L.LightningModule):
         self.last_losses: dict[str, float] = {}
 
     # ------------------------------------------------------------ configuration
-    def start(self, window: Window, phase: Phase, budget: int) -> None:
+    def start(self, window: Window, phase: Phase, budget: int, n_windows: int | None = None) -> None:
+        """The next fit: its window, phase and iteration budget; ``n_windows`` the run's windows
+        (the progress line's k of n)."""
         self.window, self.phase, self.budget = window, phase, max(int(budget), 1)
+        self.n_windows = n_windows
         self.window_iteration = 0
         self.trajectory = []
 
