@@ -38,7 +38,12 @@ def test_run_folder_holds_everything(tmp_path):
         "cramer_rao.json",
     ]:
         assert (tmp_path / f).exists(), f
-    assert list((tmp_path / "tensorboard").glob("events.out.tfevents.*"))
+    events = list((tmp_path / "tensorboard").glob("events.out.tfevents.*"))
+    assert events
+    # the HParams tab: the run's knobs beside its scores, a multirun's jobs side by side
+    written = b"".join(e.read_bytes() for e in events)
+    assert b"_hparams_/session_start_info" in written and b"hparams/max_error_pct" in written
+    assert b"eq_scale" in written and b"noise" in written
     table = yaml.safe_load((tmp_path / "identified_params.yaml").read_text())["params"]
     assert set(table) == {"c", "k1", "k3"} and table["k3"]["truth"] == 120.0 and "error_pct" in table["k3"]
     assert set(metrics["baselines"]) == {"equation_error", "ukf"}

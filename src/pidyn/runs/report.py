@@ -23,6 +23,7 @@ from pidyn.reporting import (
     write_yaml,
 )
 from pidyn.runs.build import Run
+from pidyn.runs.hparams import log_hparams
 from pidyn.runs.loop_figure import loop_figure
 from pidyn.runs.metrics import channel_nrmse, record_noise, relative_errors, sim_nrmse_x
 from pidyn.runs.supports import support_lines, support_table
@@ -342,6 +343,7 @@ def _figures(
     if spectrum is not None:
         metrics["transfer_function"] = spectrum
     tb_figures(run.logger, fig_dir, int(run.module.iteration), metrics, refined)
+    log_hparams(run.logger, metrics)
 
 
 def _log_summary(equation: str, errors: dict, pidyn_errors: dict, metrics: dict, run_dir: Path) -> None:
