@@ -108,3 +108,25 @@ def test_cramer_rao_matches_relative_finite_difference_sensitivities():
     expect = 100 * np.sqrt(np.diag(np.linalg.inv(F)))
     for i, k in enumerate(names):
         assert got[k] == pytest.approx(expect[i], rel=0.02), (k, got, expect)
+
+
+def test_a_realization_is_simulated_as_its_recursion():
+    """The peers' realizations (SRIM, OKID-ERA) are run by scipy.signal.dlsim: the recursion
+    y_k = C x_k + D u_k, x_k+1 = A x_k + B u_k from rest, for several inputs and outputs."""
+    from pidyn.baselines.peers import simulate_realization
+
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(4, 4))
+    A /= 1.1 * np.max(np.abs(np.linalg.eigvals(A)))
+    B, C, D, U = (
+        rng.normal(size=(4, 3)),
+        rng.normal(size=(2, 4)),
+        rng.normal(size=(2, 3)),
+        rng.normal(size=(3, 200)),
+    )
+    x, expected = np.zeros(4), np.empty((2, 200))
+    for k in range(200):
+        expected[:, k] = C @ x + D @ U[:, k]
+        x = A @ x + B @ U[:, k]
+    assert np.allclose(simulate_realization(A, B, C, D, U), expected, rtol=1e-12, atol=1e-12)
+    assert np.abs(simulate_realization(3.0 * A, B, C, D, U)).max() > 1e50  # unstable: it grows without bound

@@ -208,14 +208,13 @@ def _modes(real) -> list[dict]:
 def simulate_realization(
     A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, U: np.ndarray
 ) -> np.ndarray:
-    """y_k = C x_k + D u_k, x_{k+1} = A x_k + B u_k from rest: (p, N)."""
-    x = np.zeros(A.shape[0])
-    out = np.empty((C.shape[0], U.shape[1]))
+    """y_k = C x_k + D u_k, x_{k+1} = A x_k + B u_k from rest: (p, N), by ``scipy.signal.dlsim``
+    (an unstable realization overflows to inf, which the caller scores as a failed fit)."""
+    from scipy.signal import dlsim
+
     with np.errstate(all="ignore"):
-        for k in range(U.shape[1]):
-            out[:, k] = C @ x + D @ U[:, k]
-            x = A @ x + B @ U[:, k]
-    return out
+        _, y, _ = dlsim((A, B, C, D, 1.0), np.asarray(U, float).T)
+    return np.asarray(y, float).reshape(U.shape[1], C.shape[0]).T
 
 
 def _mean_nrmse(out: np.ndarray, Y: np.ndarray, mask: np.ndarray) -> float:
