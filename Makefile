@@ -35,7 +35,7 @@ format: $(STAMP)
 test: $(STAMP) lint
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n auto --dist worksteal --durations=15 -m "not second_proof" $(ARGS)
 
-test-all: $(STAMP) lint  # the second end-to-end cases too (about 6 min more on 2 cores)
+test-all: $(STAMP) lint  # the second end-to-end cases too (about 7 min more on 2 cores)
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n auto --dist worksteal --durations=15 $(ARGS)
 
 test-fast: $(STAMP)
