@@ -45,14 +45,15 @@ def test_a_single_degree_of_freedoms_loop_is_its_force_terms_along_the_response(
 
     system = BoucWen()
     rec = synthetic(system, "el_centro", duration=8.0, channels=("x",))
-    x, force = restoring_loop(system, system.true_values(), rec)
     p = system.true_values()
+    sim = simulate_response(system, p, rec)
+    x, force = restoring_loop(system, p, rec.t, sim)
     clean = rec.clean
     assert np.allclose(x[:, 0], clean.x[:, 0], rtol=0, atol=1e-4 * np.abs(clean.x).max())
     # Bouc-Wen's restoring force is c x' + k z: its loop is open (energy dissipated per cycle)
     assert np.allclose(
         force[:, 0], p["c"] * clean.v[:, 0] + p["k"] * clean.z[:, 0], atol=1e-3 * np.abs(force).max()
     )
-    assert loop_figure(tmp_path / "loop.png", system, p, rec) and (tmp_path / "loop.png").is_file()
+    assert loop_figure(tmp_path / "loop.png", system, p, rec, sim) and (tmp_path / "loop.png").is_file()
     building = ShearBuilding(n_storeys=2)
-    assert not loop_figure(tmp_path / "no.png", building, building.true_values(), rec)
+    assert not loop_figure(tmp_path / "no.png", building, building.true_values(), rec, sim)

@@ -69,9 +69,9 @@ def simulate(
     else:
         f_scalar = lambda t: float(excitation(t))  # noqa: E731
     # the same right-hand side at compiled speed; a record's samples read in it, as GroundMotion reads them
-    samples = (excitation.acc, excitation.dt) if type(excitation) is GroundMotion else None
-    compiled = kernel.rate_function(system, params, samples)
-    if compiled is not None and samples is not None and system.n_inputs == 1:
+    sampled = type(excitation) is GroundMotion and system.n_inputs == 1
+    compiled = kernel.rate_function(system, params, (excitation.acc, excitation.dt) if sampled else None)
+    if compiled is not None and sampled:
         fun = compiled
     elif compiled is not None:
         fun = lambda t, y: compiled(t, y, f_scalar(t))  # noqa: E731

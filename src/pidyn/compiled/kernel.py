@@ -1,6 +1,6 @@
 """The RK4 loop of ``pidyn.integrate`` at compiled speed, for any system whose state rate a tape
-can record (``pidyn.compiled.tape``): every system and force term of the library but a learned
-force (a network evaluated in NumPy), which stays in Python.
+can record (``pidyn.compiled.tape``): every system and force term of the library, a learned
+force's network included; a term that branches on a value in Python stays in Python.
 
 ``steps`` takes what ``pidyn.integrate._steps`` takes and returns the same arrays, or None
 where it does not apply (a state rate it cannot record, no C compiler, ``PIDYN_COMPILED=0``,
@@ -44,22 +44,28 @@ def _kernel(tape: Tape, n_param: int, n_state: int, n_input: int) -> tuple[Any, 
     return _KERNELS[key]
 
 
+def _library(system: Any, names: list[str]) -> tuple[Any, np.ndarray] | None:
+    """The compiled library of ``system``'s state rate with parameters ``names`` and its constants,
+    or None where there is none (code a tape cannot follow, no C compiler)."""
+    try:
+        tape = record(system, names, system.excitation_width)
+    except Exception as exc:  # noqa: BLE001 - any code a tape cannot follow is integrated in Python
+        log.debug("%s: not compiled (%s)", system.name, exc)
+        return None
+    return _kernel(tape, len(names), system.n_state, system.excitation_width)
+
+
 def rate_function(
     system: Any, params: dict[str, float], sampled: tuple[np.ndarray, float] | None = None
 ) -> Any:
     """``f(t, y, excitation) -> dy/dt`` for one plain state, compiled, or None: what a variable-step
     integrator (the ground truth's LSODA) calls tens of thousands of times per record. With
-    ``sampled`` = (samples, dt) of the one input, ``f(t, y)`` reads the excitation itself, linear
-    between samples and zero outside them, as ``np.interp`` reads it (``GroundMotion``)."""
-    if not enabled():
-        return None
+    ``sampled`` = (samples, dt) of a system's one input, ``f(t, y)`` reads the excitation itself,
+    linear between samples and zero outside them, as ``np.interp`` reads it (``GroundMotion``)."""
+    if sampled is not None and system.excitation_width != 1:
+        raise ValueError(f"{system.name}: sampled excitation is for a system of one input")
     names = list(params)
-    try:
-        tape = record(system, names, system.excitation_width)
-    except Exception as exc:  # noqa: BLE001 - integrated with the Python right-hand side
-        log.debug("%s: not compiled (%s)", system.name, exc)
-        return None
-    found = _kernel(tape, len(names), system.n_state, system.excitation_width)
+    found = _library(system, names) if enabled() else None
     if found is None:
         return None
     lib, K = found
@@ -68,7 +74,7 @@ def rate_function(
     lib.invariants(_ptr(P), _ptr(K), _ptr(inv))
     out = np.empty(system.n_state)
     tail = (P.ctypes.data, inv.ctypes.data, K.ctypes.data, out.ctypes.data)
-    if sampled is not None and system.excitation_width == 1:
+    if sampled is not None:
         acc = np.ascontiguousarray(sampled[0], dtype=float)
         call = lib.rhs_sampled
         call.argtypes = [ctypes.c_double, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_double]
@@ -146,15 +152,9 @@ def steps(
     if N - 1 < MIN_INTERVALS or not enabled():
         return None
     multi = system.n_inputs > 1
-    width = system.excitation_width
     per_trajectory = ff.ndim == (3 if multi else 2)
     names = list(p)
-    try:
-        tape = record(system, names, width)
-    except Exception as exc:  # noqa: BLE001 - any code a tape cannot follow is integrated in Python
-        log.debug("%s: not compiled (%s)", system.name, exc)
-        return None
-    found = _kernel(tape, len(names), system.n_state, width)
+    found = _library(system, names)
     if found is None:
         return None
     lib, K = found
@@ -175,7 +175,7 @@ def steps(
         dY0[...] = y0.d
     Yd = np.empty((N, B, system.n_state, D))
     rc = lib.run_d(
-        *common[:3],
+        *common,
         ctypes.c_int(D),
         *map(_ptr, (tl, TT, F, ST, P, dP, K, Y0v, dY0, Yv, Yd)),
     )

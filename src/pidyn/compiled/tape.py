@@ -94,21 +94,12 @@ def _arg(x: Any) -> int:
     return _RECORDING.tapes[-1].node("const", _number(x).hex())
 
 
-_FOLD = {
-    "add": lambda a, b: a + b,
-    "sub": lambda a, b: a - b,
-    "mul": lambda a, b: a * b,
-    "div": lambda a, b: a / b if b else np.float64(a) / np.float64(b),
-    "neg": lambda a: -a,
-}
-
-
 def _op(name: str, *xs: Any) -> Any:
-    """A scalar operation: folded to a float when every operand is one, else a node."""
+    """A scalar operation: folded to a float when every operand is one (as NumPy computes it on
+    float64), else a node."""
     if not any(isinstance(x, Node) for x in xs):
-        args = [_number(x) for x in xs]
-        fold = _FOLD.get(name)
-        return float(fold(*args)) if fold is not None else float(_NUMPY[name](*args))
+        with np.errstate(all="ignore"):
+            return float(_NUMPY[name](*[np.float64(_number(x)) for x in xs]))
     return Node(_RECORDING.tapes[-1].node(name, *[_arg(x) for x in xs]))
 
 
@@ -118,9 +109,15 @@ def _pow(a: Any, b: Any) -> Any:
     return _op("pow", a, b)
 
 
+#: what each operation computes, for folding constants (the C of each: ``pidyn.compiled.codegen``)
 _NUMPY = {
-    "pow": lambda a, b: float(np.power(a, b)),
-    "abs": lambda a: abs(a),
+    "add": np.add,
+    "sub": np.subtract,
+    "mul": np.multiply,
+    "div": np.true_divide,
+    "neg": np.negative,
+    "pow": np.power,
+    "abs": np.absolute,
     "tanh": np.tanh,
     "exp": np.exp,
     "log": np.log,
@@ -133,48 +130,23 @@ _NUMPY = {
     "max": lambda a, b: a if a >= b else b,
     "min": lambda a, b: a if a <= b else b,
     "sign": np.sign,
-    "lt": lambda a, b: float(a < b),
-    "le": lambda a, b: float(a <= b),
-    "gt": lambda a, b: float(a > b),
-    "ge": lambda a, b: float(a >= b),
-    "eq": lambda a, b: float(a == b),
-    "ne": lambda a, b: float(a != b),
+    "lt": np.less,
+    "le": np.less_equal,
+    "gt": np.greater,
+    "ge": np.greater_equal,
+    "eq": np.equal,
+    "ne": np.not_equal,
     "select": lambda c, a, b: a if c else b,
 }
+#: the ufuncs a traced array records, by the operation's name (max, min and select aside)
+_RECORDED = {u: name for name, u in _NUMPY.items() if isinstance(u, np.ufunc)}
 
 _UFUNCS: dict[Any, Any] = {
-    np.add: lambda a, b: _op("add", a, b),
-    np.subtract: lambda a, b: _op("sub", a, b),
-    np.multiply: lambda a, b: _op("mul", a, b),
-    np.true_divide: lambda a, b: _op("div", a, b),
+    **{u: (lambda n: lambda *xs: _op(n, *xs))(n) for u, n in _RECORDED.items()},
     np.power: _pow,
-    np.negative: lambda a: _op("neg", a),
     np.positive: lambda a: a,
-    np.absolute: lambda a: _op("abs", a),
     np.maximum: lambda a, b: _op("max", a, b),
     np.minimum: lambda a, b: _op("min", a, b),
-    np.sign: lambda a: _op("sign", a),
-    **{
-        u: (lambda n: lambda a: _op(n, a))(n)
-        for u, n in ((np.tanh, "tanh"), (np.exp, "exp"), (np.log, "log"))
-    },
-    **{
-        u: (lambda n: lambda a: _op(n, a))(n)
-        for u, n in ((np.sqrt, "sqrt"), (np.sin, "sin"), (np.cos, "cos"))
-    },
-    **{u: (lambda n: lambda a: _op(n, a))(n) for u, n in ((np.arctan, "arctan"), (np.sinh, "sinh"))},
-    np.cosh: lambda a: _op("cosh", a),
-    **{
-        u: (lambda n: lambda a, b: _op(n, a, b))(n)
-        for u, n in (
-            (np.less, "lt"),
-            (np.less_equal, "le"),
-            (np.greater, "gt"),
-            (np.greater_equal, "ge"),
-            (np.equal, "eq"),
-            (np.not_equal, "ne"),
-        )
-    },
 }
 _VECTORISED = {u: np.frompyfunc(fn, u.nin, 1) for u, fn in _UFUNCS.items()}
 _SELECT = np.frompyfunc(lambda c, a, b: _op("select", c, a, b), 3, 1)

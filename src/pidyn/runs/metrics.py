@@ -11,6 +11,14 @@ from pidyn.errors import errors_pct
 from pidyn.reporting import nrmse
 
 
+def reference_channel(record: Record, n_dof: int) -> tuple[str, int, str]:
+    """(kind, floor, label) of the channel a run's figures show: the record's reference kind at its
+    highest measured floor (it moves the most); the label as ``channel_nrmse`` names it."""
+    kind, _ = record.reference()
+    floor = max(record.sensors()[kind])
+    return kind, floor, f"{kind}{floor}" if n_dof > 1 else kind
+
+
 def channel_nrmse(sim: dict[str, np.ndarray], record: Record) -> dict[str, float]:
     """NRMSE of the simulated response against every measured channel (``x``, or ``a3`` for
     floor 3 of a building)."""

@@ -25,7 +25,7 @@ from pidyn.reporting import (
 from pidyn.runs.build import Run
 from pidyn.runs.hparams import log_hparams
 from pidyn.runs.loop_figure import loop_figure
-from pidyn.runs.metrics import channel_nrmse, record_noise, relative_errors, sim_nrmse_x
+from pidyn.runs.metrics import channel_nrmse, record_noise, reference_channel, relative_errors, sim_nrmse_x
 from pidyn.runs.supports import support_lines, support_table
 from pidyn.runs.transfer_figure import transfer_figure
 from pidyn.simulate import simulate_response
@@ -324,9 +324,8 @@ def _figures(
         other=None if ukf is None else ("UKF", ukf["trajectory"]),
         final=None if refined is None else refined.intervals,
     )
-    kind, meas = record.reference()
-    floor = max(record.sensors()[kind])  # the highest measured floor moves the most
-    label = f"{kind}{floor}" if system.n_dof > 1 else kind
+    kind, floor, label = reference_channel(record, system.n_dof)
+    meas = getattr(record, kind)
     series = {
         f"measured {label}": meas[:, floor - 1],
         "identified model (simulated)": sim[kind][:, floor - 1],
@@ -337,8 +336,7 @@ def _figures(
         series,
         title=f"{system.name}: NRMSE {metrics['sim_nrmse'][label]:.3g} ({label})",
     )
-    state0 = None if refined is None else np.array(refined.initial_state)
-    loop_figure(fig_dir / "restoring_force.png", system, final, record, state0)
+    loop_figure(fig_dir / "restoring_force.png", system, final, record, sim)
     spectrum = transfer_figure(fig_dir / "transfer_function.png", record, system, sim)
     if spectrum is not None:
         metrics["transfer_function"] = spectrum

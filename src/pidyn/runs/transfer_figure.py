@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from pidyn.runs.metrics import reference_channel
 from pidyn.signals import TransferFunction, transfer_function
 
 
@@ -19,15 +20,13 @@ def response_pair(
     """(label, ground acceleration, measured and simulated response) of the highest measured
     floor: absolute accelerations where the record is of accelerometers (a transmissibility),
     the record's own channel otherwise; the ground is the mean of several supports."""
-    kind, meas = record.reference()
-    floor = max(record.sensors()[kind])
+    kind, floor, label = reference_channel(record, system.n_dof)
     f = np.asarray(record.f, float)
     several = f.ndim == 2
     ground = f[:, : f.shape[1] // 2].mean(axis=1) if several else f
-    y_meas, y_model = meas[:, floor - 1], sim[kind][:, floor - 1]
+    y_meas, y_model = getattr(record, kind)[:, floor - 1], sim[kind][:, floor - 1]
     if kind == "a" and not several:  # the record keeps accelerations relative to its one ground
         y_meas, y_model = y_meas + ground, y_model + ground
-    label = f"{kind}{floor}" if system.n_dof > 1 else kind
     return label, ground, y_meas, y_model
 
 

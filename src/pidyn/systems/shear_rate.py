@@ -112,12 +112,17 @@ class Vectors:
         self.key: tuple = ()
         self.value: tuple = ()
 
-    def get(self, p: dict, lay: Layout) -> tuple:
-        key = (p, *(None if k is None else p[k] for k in lay.dampers + lay.springs + lay.masses))
+    def get(self, p: dict, lay: Layout, like: Any = None) -> tuple:
+        """The vectors; torch tensors of ``like``'s precision where ``like`` is one (parameters
+        held fixed beside trained ones come as floats)."""
+        tensor = isinstance(like, torch.Tensor)
+        key = (p, tensor, *(None if k is None else p[k] for k in lay.dampers + lay.springs + lay.masses))
         if len(key) == len(self.key) and all(a is b for a, b in zip(key, self.key)):
             return self.value
         self.key = key
         self.value = (_vector(p, lay.dampers), _vector(p, lay.springs), 1.0 / _vector(p, lay.masses))
+        if tensor:
+            self.value = tuple(torch.as_tensor(a, dtype=like.dtype) for a in self.value)
         return self.value
 
 
@@ -127,9 +132,7 @@ def state_rate(building: Any, lay: Layout, cache: Vectors, t: Any, y: Any, p: di
     n = building.n_dof
     x, v, z = y[..., :n], y[..., n : 2 * n], y[..., 2 * n :]
     d, dv = _minus_neighbour(x, _BELOW), _minus_neighbour(v, _BELOW)
-    damp, spring, per_mass = cache.get(p, lay)
-    if isinstance(y, torch.Tensor):  # parameters held fixed beside trained ones come as NumPy
-        damp, spring, per_mass = (torch.as_tensor(a, dtype=y.dtype) for a in (damp, spring, per_mass))
+    damp, spring, per_mass = cache.get(p, lay, y)
     force = damp * dv + spring * d
     latent = []
     if lay.others:
