@@ -82,15 +82,21 @@ def transmissibility(freq: np.ndarray, fn: float, zeta: float) -> np.ndarray:
     return (wn**2 + 2j * zeta * wn * w) / (wn**2 - w**2 + 2j * zeta * wn * w)
 
 
+def powered(tf: TransferFunction, sel: np.ndarray) -> np.ndarray:
+    """The frequencies of ``sel`` where the input carries power, above 1e-3 of its peak there: a
+    band-limited record's H beyond its band is noise over nothing."""
+    if tf.input_power is None or not sel.any():
+        return sel
+    return sel & (tf.input_power >= 1e-3 * float(np.max(tf.input_power[sel])))
+
+
 def dominant_peak(tf: TransferFunction, band: tuple[float, float]) -> tuple[float, float]:
     """(frequency, damping ratio by the half-power width; NaN when the peak is no wider than the
     frequency bins) of the largest |H| in ``band`` (Hz),
     on |H| weighted by the coherence, where the input carries power (above 1e-3 of its peak: a
     band-limited record's H beyond its band is noise over nothing), so that a peak of noise does
     not win; the frequency refined by a parabola through the log-magnitude's three top bins."""
-    sel = (tf.freq >= band[0]) & (tf.freq <= band[1])
-    if tf.input_power is not None:
-        sel &= tf.input_power >= 1e-3 * float(np.max(tf.input_power[sel])) if sel.any() else sel
+    sel = powered(tf, (tf.freq >= band[0]) & (tf.freq <= band[1]))
     if not sel.any():
         raise ValueError(f"no frequency of the transfer function in {band} Hz")
     mag = np.abs(tf.h) * np.sqrt(np.clip(tf.coherence, 0.0, 1.0))

@@ -23,7 +23,8 @@ class LineProgress(L.Callback):
         if every_s <= 0:
             raise ValueError(f"LineProgress: every_s must be positive, got {every_s}")
         self.every_s = float(every_s)
-        self._last = 0.0
+        self._last = self._start = 0.0
+        self._first = 0  # the fit's iteration when it started (a resumed fit starts past 0)
 
     def on_train_start(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
         self._last = self._start = time.monotonic()
@@ -59,10 +60,10 @@ class LineProgress(L.Callback):
 
     def _left(self, now: float, done: int, budget: int) -> str:
         """The time this fit has left at the pace of its iterations so far ('' before any)."""
-        ran = done - getattr(self, "_first", 0)
+        ran = done - self._first
         if ran <= 0 or budget <= done:
             return ""
-        left = (now - getattr(self, "_start", now)) / ran * (budget - done)
+        left = (now - self._start) / ran * (budget - done)
         return (
             f" (~{int(left // 60)} min {int(left % 60)} s left)" if left >= 60 else f" (~{left:.0f} s left)"
         )

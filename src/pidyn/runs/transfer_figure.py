@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from pidyn.runs.metrics import reference_channel
-from pidyn.signals import TransferFunction, transfer_function
+from pidyn.signals import TransferFunction, powered, transfer_function
 
 
 def response_pair(
@@ -41,22 +41,13 @@ def transfer_figure(
         return None
     measured = transfer_function(ground[ok], y_meas[ok], record.dt)
     model = transfer_function(ground[ok], y_model[ok], record.dt)
-    band = _band(measured)
+    band = powered(measured, measured.freq > 0)
     _draw(path, measured, model, band, label, record.name, _unit(label[0]))
     peak = {
         name: float(tf.freq[band][np.argmax(np.abs(tf.h[band]))])
         for name, tf in (("measured", measured), ("model", model))
     }
     return {"channel": label, "peak_hz": peak, "segments": measured.segments}
-
-
-def _band(tf: TransferFunction) -> np.ndarray:
-    """Frequencies above zero where the ground carries power (above 1e-3 of its peak): beyond
-    a record's band its H1 is noise over nothing."""
-    sel = tf.freq > 0
-    if tf.input_power is not None and sel.any():
-        sel &= tf.input_power >= 1e-3 * float(np.max(tf.input_power[sel]))
-    return sel
 
 
 def _unit(kind: str) -> str:
