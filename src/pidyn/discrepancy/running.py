@@ -101,12 +101,14 @@ def _window_system(system, values: dict[str, float]):
 
 
 def _warm_start(warm, i0: int, theta0: np.ndarray, n_state: int) -> np.ndarray:
-    """A window's unknowns (log k, log c, initial state): the previous window's fit and its
-    simulated state at this window's start where they overlap (the windows overlap by half or
-    more, so the fit starts next to its end); else the whole record's values from rest."""
+    """A window's unknowns (log k, log c, initial state): the whole record's k and c, and the
+    previous window's simulated state at this window's start where they overlap (the windows
+    overlap by half or more, so the fit starts next to its end); else from rest. Each window
+    starts from the record's values, not the previous window's: a quiet window that drove the
+    damping towards zero (log c without bound) would otherwise hand that on to every later one."""
     if warm is not None and 0 <= i0 - warm[0] < len(warm[2]):
-        j0, u, states = warm
-        return np.concatenate([u[: len(theta0)], states[i0 - j0]])
+        j0, _, states = warm
+        return np.concatenate([theta0, states[i0 - j0]])
     return np.concatenate([theta0, np.zeros(n_state)])
 
 
