@@ -238,3 +238,12 @@ def test_a_users_accelerometer_file_identifies_a_two_storey_building(tmp_path):
         lo, hi = ident["params"][n]["ci95"]
         assert lo < v < hi
         assert abs(v - truth[n]) < 4 * metrics["std"][n], (n, v, truth[n], metrics["std"][n])
+    # a measured building's modes: the stabilisation diagram, and its shapes beside the data's with MAC
+    figures = tmp_path / "run" / "figures"
+    for name in ("stabilization.png", "mode_shapes.png"):
+        assert (figures / name).stat().st_size > 10_000, name
+    true_hz = modal_properties(*sb.linear_matrices(truth))["frequency_hz"]
+    stood = [m["frequency_hz"] for m in metrics["stabilization"]["stable_modes"]]
+    assert all(min(abs(f - g) / g for f in stood) < 0.02 for g in true_hz), stood
+    assert [r["mode"] for r in metrics["mode_shapes"]] == [1, 2]
+    assert all(r["subspace"]["mac"] > 0.99 for r in metrics["mode_shapes"]), metrics["mode_shapes"]

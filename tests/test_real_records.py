@@ -161,6 +161,18 @@ def test_a_measured_record_starts_pidynnet_from_the_data(tmp_path):
         "damping_ratio",
         "damping_ci95",
     }
+    # a measured record's modes: its stabilisation diagram stands at the one mode; the period
+    # window by window against the amplitude, flat for a linear structure
+    figures = tmp_path / "data" / "figures"
+    for name in ("stabilization.png", "period_vs_amplitude.png"):
+        assert (figures / name).stat().st_size > 10_000, name
+    metrics = json.loads((tmp_path / "data" / "metrics.json").read_text())
+    f_n = np.sqrt(1500.0) / (2 * np.pi)
+    assert any(abs(m["frequency_hz"] / f_n - 1) < 0.01 for m in metrics["stabilization"]["stable_modes"])
+    pva = metrics["period_vs_amplitude"]
+    period = 2 * np.pi / np.sqrt(1500.0)
+    assert len(pva["period"]) >= 4 and np.median(pva["period"]) == pytest.approx(period, rel=0.005)
+    assert np.mean([lo <= period <= hi for lo, hi in zip(pva["period_lo"], pva["period_hi"])]) >= 0.8
     res = pidyn.identify(
         measured, "linear", baselines="none", debug="smoke", init={"k": 900.0}, out_dir=tmp_path / "user"
     )

@@ -30,6 +30,7 @@ import numpy as np
 
 from pidyn.baselines.realization import realization_params
 from pidyn.baselines.registry import estimator
+from pidyn.baselines.subspace import real_shape
 from pidyn.reporting import nrmse
 from pidyn.signals import dominant_peak, transfer_function, transmissibility
 
@@ -188,7 +189,9 @@ def _order_row(mdof, method: str, order: int, U, Y, fit, held, dt: float, option
 
 
 def _modes(real) -> list[dict]:
-    """The realization's modes, longest period first (mdof's own modal analysis)."""
+    """The realization's modes, longest period first (mdof's own modal analysis), with the shape
+    at the outputs (made real: ``subspace.real_shape``), its modal phase collinearity (MPC) and
+    mdof's energy-condensed output EMAC, by which a mode is told from a noise pole."""
     rows = []
     for m in real.modes().values():
         freq = float(m["freq"])
@@ -200,6 +203,9 @@ def _modes(real) -> list[dict]:
                     "frequency_hz": freq,
                     "damping_ratio": float(m["damp"]),
                     "damping_ci95": [None, None],
+                    "mode_shape": real_shape(np.asarray(m["modeshape"])).tolist(),
+                    "mpc": float(m["mpc"]),
+                    "emac": float(m["energy_condensed_emaco"]),
                 }
             )
     return sorted(rows, key=lambda r: -r["period_s"])

@@ -3,6 +3,7 @@ refinement.json, windows.json, modal.json, the figures, TensorBoard and the log'
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from pathlib import Path
@@ -22,10 +23,13 @@ from pidyn.reporting import (
     write_text_atomic,
     write_yaml,
 )
+from pidyn.runs.amplitude_figure import amplitude_figure
 from pidyn.runs.build import Run
 from pidyn.runs.hparams import log_hparams
 from pidyn.runs.loop_figure import loop_figure
 from pidyn.runs.metrics import channel_nrmse, record_noise, reference_channel, relative_errors, sim_nrmse_x
+from pidyn.runs.mode_shape_figure import mode_shape_figure
+from pidyn.runs.stabilization_figure import stabilization_figure
 from pidyn.runs.supports import support_lines, support_table
 from pidyn.runs.transfer_figure import transfer_figure
 from pidyn.simulate import simulate_response
@@ -340,8 +344,49 @@ def _figures(
     spectrum = transfer_figure(fig_dir / "transfer_function.png", record, system, sim)
     if spectrum is not None:
         metrics["transfer_function"] = spectrum
+    _modal_figures(run, fig_dir, metrics, baselines, final, sim)
     tb_figures(run.logger, fig_dir, int(run.module.iteration), metrics, refined)
     log_hparams(run.logger, metrics)
+
+
+def _modal_figures(
+    run: Run, fig_dir: Path, metrics: dict, baselines: list[dict], final: dict[str, float], sim: dict
+) -> None:
+    """The figures of a measured record's modes, where they apply: the stabilisation diagram, the
+    mode shapes beside the peers' with MAC (several floors), the period and damping against the
+    amplitude (one degree of freedom); their numbers go to metrics.json. A figure that fails is a
+    note, not the loss of the run's results."""
+    system, record = run.system, run.record
+    if record.truth:  # a simulated record: the truth, not a peer, is what its modes are held to
+        return
+    modal = run.run_dir / "modal.json"
+    modes = json.loads(modal.read_text()).get("modes") if modal.exists() else None
+    srim = next((b.get("modes") for b in baselines if b["method"] == "srim"), None)
+    figures = {
+        "stabilization": lambda: stabilization_figure(fig_dir / "stabilization.png", record, system.n_dof),
+        "mode_shapes": lambda: (
+            mode_shape_figure(fig_dir / "mode_shapes.png", record, modes, srim)
+            if modes and system.n_dof > 1
+            else None
+        ),
+        "period_vs_amplitude": lambda: (
+            amplitude_figure(
+                fig_dir / "period_vs_amplitude.png", record, system, final, sim, modes[0]["period_s"]
+            )
+            if modes and system.n_dof == 1
+            else None
+        ),
+    }
+    for key, draw in figures.items():
+        try:
+            out = draw()
+        except Exception as exc:  # noqa: BLE001  (a figure's failure must not cost the run its results)
+            text = note("figure_failed", f"figures/{key}.png was not drawn: {type(exc).__name__}: {exc}")
+            log.warning(text)
+            metrics.setdefault("notes", []).append(text)
+            continue
+        if out is not None:
+            metrics[key] = out
 
 
 def _log_summary(equation: str, errors: dict, pidyn_errors: dict, metrics: dict, run_dir: Path) -> None:

@@ -39,9 +39,10 @@ def modal_properties(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> dict:
 
 
 def mac(a: np.ndarray, b: np.ndarray) -> float:
-    """Modal assurance criterion of two mode shapes (1: the same shape)."""
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    return float((a @ b) ** 2 / max((a @ a) * (b @ b), 1e-300))
+    """Modal assurance criterion of two mode shapes, real or complex (1: the same shape)."""
+    a, b = np.asarray(a), np.asarray(b)
+    den = float(np.real(np.vdot(a, a)) * np.real(np.vdot(b, b)))
+    return float(abs(np.vdot(a, b)) ** 2 / max(den, 1e-300))
 
 
 def compare_modes(system, identified: Mapping[str, float], truth: Mapping[str, float] | None) -> dict:
