@@ -174,7 +174,7 @@ FAST = [
     "model.schedule.pretrain_iters=150",
     "model.schedule.pretrain_iters_window=150",
     "model.schedule.max_iters=200",
-    "model.schedule.max_windows=4",
+    "model.schedule.max_windows=2",
     "logger=none",
 ]
 
