@@ -141,3 +141,23 @@ def test_a_notebook_without_logging_sees_the_progress_lines_and_a_configured_pro
             assert not logging.getLogger("pidyn").handlers  # the program's own handler decides
     finally:
         root.handlers[:] = saved
+
+
+def test_a_notebooks_diagnosis_shows_its_steps_with_the_time_left(capfd, tmp_path):
+    """``pidyn.diagnose`` in a notebook (nobody configured logging): the diagnosis's steps as k of
+    6 and its output-error checks as k of n, with the time left at the pace so far, on stderr."""
+    import logging
+
+    import pidyn
+
+    root = logging.getLogger()
+    saved = root.handlers[:]
+    root.handlers.clear()
+    try:
+        pidyn.diagnose(None, "linear", debug="smoke", data__source__effect="none", out_dir=tmp_path / "d")
+    finally:
+        root.handlers[:] = saved
+    err = capfd.readouterr().err
+    for k, label in enumerate(["the nominal model", "screening", "held-out check", "the first cause"], 1):
+        assert f"diagnosis {k}/6: {label}" in err, err[-3000:]
+    assert "s left at this pace" in err and "diagnosis 6/6: simulations and modes" in err

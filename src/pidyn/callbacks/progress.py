@@ -15,6 +15,8 @@ from typing import Any
 
 import lightning as L
 
+from pidyn.progress import time_left
+
 log = logging.getLogger("pidyn.progress")
 
 
@@ -63,7 +65,4 @@ class LineProgress(L.Callback):
         ran = done - self._first
         if ran <= 0 or budget <= done:
             return ""
-        left = (now - self._start) / ran * (budget - done)
-        return (
-            f" (~{int(left // 60)} min {int(left % 60)} s left)" if left >= 60 else f" (~{left:.0f} s left)"
-        )
+        return f" ({time_left((now - self._start) / ran * (budget - done))})"

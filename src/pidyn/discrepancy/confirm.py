@@ -39,6 +39,7 @@ import numpy as np
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy.screening import Thresholds
+from pidyn.progress import Steps
 from pidyn.refine.output_error import fit_output_error
 from pidyn.refine.problem import ShootingProblem
 
@@ -129,7 +130,9 @@ def confirm(
     values, base, out.nominal = _refit_nominal(
         record, seg, system, values, (fit, held), th, substeps, max_nfev, tol
     )
+    progress = Steps("output-error check", len(candidates), log)
     for row in candidates:
+        progress.step(row["effect"])
         t0 = time.perf_counter()
         row = located_start(seg, build, values, row, substeps)
         ext = build(row)

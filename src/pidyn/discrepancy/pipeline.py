@@ -64,6 +64,7 @@ from pidyn.discrepancy.nominal import (
 )
 from pidyn.discrepancy.screening import EXCLUSIVE, Screening, screen
 from pidyn.discrepancy.verdicts import Verdict, unearned_names
+from pidyn.progress import Steps
 from pidyn.reporting import nrmse
 from pidyn.simulate import simulate_response
 from pidyn.systems.sdof import SDOFSystem
@@ -95,18 +96,23 @@ STEP_EVIDENCE = (
 
 def run(case: Case) -> Outcome:
     """Steps 1-5 on a prepared case."""
+    progress = Steps("diagnosis", 6, log)
+    progress.step("the nominal model")
     values0, period = starting_point(case)
     nom = identify_nominal(case, values0, period)
     from pidyn.discrepancy.residual import unexplained_force
 
+    progress.step("screening")
     sc = case.screen(nom.system, nom.values, nom.s, nom.weak)
     pointwise = unexplained_force(nom.system, nom.values, case.record.t, case.x_raw, case.weak_f, nom.period)
     forced = case.settings.force_effect
     log.info("screening: %s", ", ".join(f"{r['effect']} {r['score']:.1f}" for r in sc.ranking[:4]))
     # does the nominal model hold on the held-out part? if not, when did the structure change?
+    progress.step("held-out check and running period")
     x_nom = case.free_run(nom.system, nom.values, float(nom.s.v[0]))
     check, change_row = check_heldout(case, nom, sc, x_nom, bool(forced))
     running = running_period(case, nom)
+    progress.step("the first cause")
     cause, confirmation, change_row = _first_cause(case, nom, sc, check, change_row, forced, running)
     if (
         case.from_accelerometers
@@ -117,10 +123,12 @@ def run(case: Case) -> Outcome:
     if cause is None and case.settings.learn_unexplained and not forced and structured:
         cause = LEARNED  # structured, but nothing in the library explains it: learn the force
     row = _cause_row(cause, sc, change_row, confirmation)
+    progress.step("extensions")
     ext = names_earn_or_learn(
         case, nom, sc, extend_until_explained(case, nom, cause, row, bool(forced)), bool(forced)
     )
     causes = ext["causes"] if case.settings.extend else ([] if cause is None else [cause])
+    progress.step("simulations and modes")
     x_ext = (
         case.free_run(ext["system"], ext["values"], float(nom.s.v[0])) if ext["system"] is not None else None
     )

@@ -57,6 +57,7 @@ from pidyn.discrepancy.storey_ranking import (
 from pidyn.discrepancy.storey_steps import building_gain, next_step, refusal_notes
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.notes import note
+from pidyn.progress import Steps
 from pidyn.simulate import simulate_response
 from pidyn.systems.shear_building import ShearBuilding
 
@@ -79,11 +80,12 @@ def diagnose_building(
     fit, held = split_spans(record, float(settings.fit_share))
     log.info("building diagnosis of '%s': fit %.4g-%.4g s, held out %.4g-%.4g s", record.name, *fit, *held)
     study = Study(record, system, settings, refine_settings, fit, held)
+    progress = Steps("building diagnosis", int(settings.max_effects) * bool(settings.extend) + 2, log)
+    progress.step("the nominal building")
     nominal, current = nominal_state(study, start)
-    found: list[Found] = []
-    steps: list[dict] = []
-    refused = None
+    found, steps, refused = [], [], None  # effects found, each step's report, the step refused
     while len(found) < int(settings.max_effects) and settings.extend:
+        progress.step(f"screening the storeys for effect {len(found) + 1}")
         views, screenings = study.screen(current, found)
         step = next_step(study, current, found, views, screenings)
         if step is None:
@@ -94,6 +96,7 @@ def diagnose_building(
             break
         found.append(step["found"])
         current = step["current"]
+    progress.step("the final screening and the verdict", last=True)
     views, screenings = study.screen(current, found)
     verdict, unexplained, notes, test = building_verdict(study, current, found, screenings)
     nominal["heldout_test"] = test
