@@ -45,7 +45,10 @@ def covariance(
     """Covariance of the parameters' unconstrained coordinates, and the condition number of
     the information matrix (continuity eliminated). With the residuals ``r`` and ``lags`` > 0 it
     is the sandwich for correlated residuals (``sandwich``), in the residuals' own units; else
-    the inverse information in noise units."""
+    the inverse information in noise units. A Jacobian with non-finite entries (a trajectory that
+    blows up next to the solution) gives no covariance: NaN, and an infinite condition number."""
+    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(C))):
+        return np.full((problem.n_theta, problem.n_theta), np.nan), float("inf")
     N = null_space(C) if C.shape[0] else np.eye(J.shape[1])
     JN = J @ N
     info = JN.T @ JN
