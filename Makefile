@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # the default index would serve a CUDA build.
 TORCH_INDEX ?=
 
-.PHONY: install train test test-all test-fast lint format bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench discrepancy-bench-building heldout-calibration heldout-calibration-building adequacy-calibration fit-test-calibration basin hayward robustness efficiency benchmarks real
+.PHONY: install train test test-all docs test-fast lint format bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench discrepancy-bench-building heldout-calibration heldout-calibration-building adequacy-calibration fit-test-calibration basin hayward robustness efficiency benchmarks real
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -31,11 +31,16 @@ format: $(STAMP)
 	$(VENV)/bin/ruff check --fix .
 	$(VENV)/bin/ruff format .
 
+# the documentation site (mkdocs.yml): the guides and a reference from the docstrings, every
+# warning an error (a broken link, a docstring that names a parameter the code does not have)
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict -q
+
 # one BLAS/OpenMP thread per test worker: the workers already fill the cores
-test: $(STAMP) lint
+test: $(STAMP) lint docs
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n auto --dist worksteal --durations=15 -m "not second_proof" $(ARGS)
 
-test-all: $(STAMP) lint  # the second end-to-end cases too (about 7 min more on 2 cores)
+test-all: $(STAMP) lint docs  # the second end-to-end cases too (about 7 min more on 2 cores)
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n auto --dist worksteal --durations=15 $(ARGS)
 
 test-fast: $(STAMP)

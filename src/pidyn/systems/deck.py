@@ -56,8 +56,10 @@ class RigidDeck(PlacedTerms, StructuralSystem):
         positions: each support's position along the deck (m from the first end).
         length: the deck's length between its ends (m).
         gyration: the deck's radius of gyration in plan (m); None: a uniform deck, L / sqrt(12).
-        stiffnesses, dampings: starting values per support, per kg of deck (s^-2, s^-1); a
-            scalar means every support.
+        stiffnesses: starting values per support, per kg of deck (s^-2); a scalar means every
+            support.
+        dampings: starting values per support, per kg of deck (s^-1); a scalar means every
+            support.
         support_terms: ``{support: [{term: hysteresis, ...}, ...]}`` (1-based, as storeys of a
             ``ShearBuilding``): a support's spring takes any force term of the library.
         sensors: the deck channels' positions by name (``ch7``: m), where the model is read

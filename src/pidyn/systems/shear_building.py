@@ -73,9 +73,11 @@ class ShearBuilding(PlacedTerms, StructuralSystem):
 
     Args:
         n_storeys: number of storeys (None: the length of the per-storey lists).
-        masses, dampings, stiffnesses: per storey (kg, N s/m, N/m); a scalar means every storey.
-            ``masses="unknown"``: floor 1's mass is the unit and the others' ratios to it are
-            identified; dampings and stiffnesses are then per kg of floor 1 (s^-1, s^-2).
+        masses: per storey (kg); a scalar means every storey. ``masses="unknown"``: floor 1's
+            mass is the unit and the others' ratios to it are identified; dampings and
+            stiffnesses are then per kg of floor 1 (s^-1, s^-2).
+        dampings: per storey (N s/m); a scalar means every storey.
+        stiffnesses: per storey (N/m); a scalar means every storey.
         stiffness_taper: with a scalar stiffness, the top storey's stiffness as a share of the
             first's, linear in between (1: uniform).
         storey_terms: ``{storey: [ {term: hysteresis, beta: .., gamma: .., n: ..}, ...]}``
