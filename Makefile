@@ -46,7 +46,9 @@ test-all: $(STAMP) lint docs  # the second end-to-end cases too (about 7 min mor
 test-fast: $(STAMP)
 	$(PY) -m pytest -q -m "not slow" $(ARGS)
 
+# the real-records section first (resumable: events already in results/bench_real.csv are kept)
 bench: $(STAMP)
+	$(PY) experiments/bench_real.py --direction both
 	$(PY) experiments/bench.py $(ARGS)
 
 tb: $(STAMP)

@@ -457,6 +457,9 @@ def write_markdown(res: dict) -> None:
     ]
     lines += [f"| {k} | {v:.2f} |" for k, v in res["ms_per_iteration"].items()]
     lines += _gpu_lines(res) + _overhead_lines(res) + _simulation_lines(res) + _end_to_end_lines(res)
+    real = OUT / "bench_real.md"  # experiments/bench_real.py: the Painter Street events side by side
+    if real.exists():
+        lines += ["", real.read_text().rstrip()]
     (OUT / "bench.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

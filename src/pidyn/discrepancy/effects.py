@@ -12,7 +12,7 @@ what is its own:
   benchmark that hide an effect in simulated data and require the diagnosis to find it.
 * ``admissible`` (optional): which fits describe a physical structure.
 
-To add an effect: the force term in ``terms.py``, one subclass here registered in ``EFFECTS``,
+To add an effect: the force term in a file of ``systems/terms/``, one subclass here registered in ``EFFECTS``,
 and a test that hides it (see the README's "Adding a force effect or an estimator").
 """
 

@@ -1,0 +1,76 @@
+"""A stiffness and damping that move with the response's recent amplitude."""
+
+from __future__ import annotations
+
+from pidyn.params import ParamSpec
+from pidyn.systems.terms.base import Array, ForceTerm
+
+
+def _inside(value: float, lo: float, hi: float) -> float:
+    """``value`` moved just inside (lo, hi): a box parameter's start must lie strictly within."""
+    margin = 1e-6 * (hi - lo)
+    return float(min(max(float(value), lo + margin), hi - margin))
+
+
+class AmplitudeSoftening(ForceTerm):
+    """- soft k e x + gain c e x': a stiffness that falls and a damping that rises with the
+    response's recent amplitude e, and recover as it decays (soil at a bridge's abutments that
+    softens in strong shaking and stiffens again in the coda; an equivalent-linear structure
+    whose amplitude is a state, not a choice made per record).
+
+    e' = (A / a_ref - e) / tau, with A = sqrt(x^2 + (x' / w0)^2) the oscillation's amplitude at
+    the nominal circular frequency w0 (smooth; |x| ripples at twice the frequency) and ``a_ref``
+    a typical amplitude of the record, so that e is about 1 in the strongest shaking and ``soft``
+    and ``gain`` are the shares by which k and c have changed there."""
+
+    name = "amplitude_softening"
+    n_latent = 1
+    linear = ("soft", "gain")
+
+    def __init__(
+        self,
+        soft: float = 0.1,
+        gain: float = 0.1,
+        tau: float = 2.0,
+        a_ref: float = 1.0,
+        w0: float = 1.0,
+        stiffness: str = "k",
+        damping: str = "c",
+        tau_range: tuple[float, float] = (0.05, 60.0),
+    ) -> None:
+        if not (a_ref > 0 and w0 > 0):
+            raise ValueError(f"{self.name}: a_ref and w0 must be > 0, got {a_ref}, {w0}")
+        self.tau_range = (float(tau_range[0]), float(tau_range[1]))
+        # a fit that ended on a bound starts the next one just inside it (a box needs init inside)
+        self.soft = _inside(soft, -0.5, 0.95)
+        self.gain = _inside(gain, -0.9, 10.0)
+        self.tau = _inside(tau, *self.tau_range)
+        self.a_ref, self.w0 = float(a_ref), float(w0)
+        self.stiffness, self.damping = stiffness, damping
+
+    def specs(self):
+        lo, hi = self.tau_range
+        return [  # the bounds here are _inside's in __init__
+            ParamSpec("soft", init=self.soft, true=self.soft, transform="box", lower=-0.5, upper=0.95),
+            ParamSpec("gain", init=self.gain, true=self.gain, transform="box", lower=-0.9, upper=10.0),
+            ParamSpec("tau", init=self.tau, true=self.tau, transform="box", lower=lo, upper=hi, unit="s"),
+        ]
+
+    def force(self, t, x, v, z, p):
+        e = z[..., 0]
+        return -p["soft"] * p[self.stiffness] * e * x + p["gain"] * p[self.damping] * e * v
+
+    def at_envelope(self, p: dict, e: Array) -> tuple[Array, Array]:
+        """The structure's stiffness and damping where the envelope is ``e``: k (1 - soft e) and
+        c (1 + gain e), what an equivalent-linear model at that amplitude would have."""
+        return p[self.stiffness] * (1 - p["soft"] * e), p[self.damping] * (1 + p["gain"] * e)
+
+    def latent_rate(self, t, x, v, z, p):
+        amp = (x * x + (v / self.w0) ** 2 + (1e-9 * self.a_ref) ** 2) ** 0.5
+        return ((amp / self.a_ref - z[..., 0]) / p["tau"])[..., None]
+
+    def formula(self, p):
+        return (
+            f"- {p['soft']:.4g} {p[self.stiffness]:.5g} e x + {p['gain']:.4g} {p[self.damping]:.5g} e x'"
+            f" (e' = (A/{self.a_ref:.3g} - e)/{p['tau']:.3g})"
+        )
