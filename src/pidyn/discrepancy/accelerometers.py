@@ -115,7 +115,8 @@ def _nominal_influence(
     against the other basins of the period (``pidyn.refine.period_scan``): no start need lie in the
     lowest one. With one input nothing is fitted here (the start is ranked by its own cost, and the
     refits after it take the identification's refinement, which scans the period itself)."""
-    from pidyn.baselines.data_start import start_from_data, with_start
+    from pidyn.baselines.data_start import start_from_data
+    from pidyn.baselines.start_policy import with_start
 
     seg = record.segment(*fit)
     values = {s.name: float(s.init) for s in system.param_specs()}

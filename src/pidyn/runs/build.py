@@ -204,8 +204,8 @@ def _hold_out(cfg: DictConfig, record: Record) -> bool:
 def data_start(
     cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path
 ) -> tuple[StructuralSystem, Any]:
-    """``model.start`` (see ``pidyn.baselines.data_start.start_policy``); the start goes to data_start.json."""
-    from pidyn.baselines.data_start import start_policy
+    """``model.start`` (see ``pidyn.baselines.start_policy.start_policy``); the start goes to data_start.json."""
+    from pidyn.baselines.start_policy import start_policy
     from pidyn.config import user_settings
 
     system, start, used = start_policy(str(cfg.model.get("start", "auto")), system, record, user_settings())

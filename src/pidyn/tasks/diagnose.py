@@ -85,7 +85,7 @@ def diagnose_building_task(cfg: DictConfig, record: Record | None = None) -> dic
     run_dir.mkdir(parents=True, exist_ok=True)
     start, chosen = None, str(cfg.model.get("start", "auto"))
     if chosen not in ("auto", "data", "config"):  # model.start=<an earlier run's folder>
-        from pidyn.baselines.data_start import start_from_run
+        from pidyn.baselines.start_policy import start_from_run
 
         start = start_from_run(chosen, system).values
     d = diagnose_building(record, system, settings, refine_settings, start, run_dir)
