@@ -152,7 +152,7 @@ def test_a_learned_force_is_kept_only_when_it_predicts_the_held_out_part_better(
     (here the hidden cubic spring itself) predicts the held-out part better and is kept; one
     started at a force the structure does not have (a softening cubic twice as strong, an extra
     linear spring) predicts it worse and is not."""
-    from pidyn.discrepancy.learned_fit import learned_predicts
+    from pidyn.discrepancy.learned_step import learned_predicts
     from pidyn.systems.terms import LearnedForce
 
     case = hidden_case("cubic_stiffness", 5, noise=0.0, sign=1.0)

@@ -47,7 +47,7 @@ from pidyn.discrepancy.extend import (  # noqa: F401
     release_held,
     system_node,
 )
-from pidyn.discrepancy.learned_fit import (
+from pidyn.discrepancy.learned_step import (
     LEARNED,
     learned_row,
     refuse_learned,

@@ -11,7 +11,7 @@ import numpy as np
 from pidyn.discrepancy.case import Case, Outcome
 from pidyn.discrepancy.changes import running_estimate
 from pidyn.discrepancy.effects import EFFECTS, Signals
-from pidyn.discrepancy.learned_fit import LEARNED
+from pidyn.discrepancy.learned_step import LEARNED
 from pidyn.discrepancy.report import (
     plot_learned_force,
     plot_ranking,
