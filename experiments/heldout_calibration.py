@@ -11,7 +11,7 @@ held-out part (104 records).
 On each, the nominal model is what the diagnosis's polish makes of it: the linear model
 fitted by output error to the fitting part (``pidyn.refine.output_error``) from a start 20 %
 off, simulated over the whole record from the measured initial state. Then the held-out check
-of the diagnosis (``pidyn.discrepancy.changes.heldout_check``), with the sensitivities of the
+of the diagnosis (``pidyn.discrepancy.heldout_check.heldout_check``), with the sensitivities of the
 simulated response to the fitted parameters, as ``diagnose`` runs it; beside it the earlier
 rule (the ratio of the two parts' simulation errors above the noise, failing beyond 3).
 
@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from pidyn.data.sources import synthetic_from_motion  # noqa: E402
-from pidyn.discrepancy.changes import (  # noqa: E402
+from pidyn.discrepancy.heldout_check import (  # noqa: E402
     HELDOUT_BAND,
     SETTLE_PERIODS,
     heldout_check,

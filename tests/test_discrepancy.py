@@ -356,7 +356,8 @@ def test_a_change_in_time_is_located_before_and_after_the_split(t_d):
     check fails when the change is after the split (the nominal model is fine on the fitting
     part, wrong after it); the whole-record search finds the time inside its interval and the
     size of the drop; the same search on a record with nothing hidden finds nothing."""
-    from pidyn.discrepancy.changes import StepRegression, heldout_check, locate_change
+    from pidyn.discrepancy.changes import StepRegression, locate_change
+    from pidyn.discrepancy.heldout_check import heldout_check
     from pidyn.simulate import simulate_response
 
     case = hidden_case("stiffness_loss", 21, noise=0.02, params={"t_d": t_d})

@@ -149,7 +149,7 @@ def test_the_held_out_check_holds_on_a_quiet_held_out_part_with_nothing_hidden()
     is a quarter of the signal there. The raw-minus-smoothed noise estimate, low by the share
     the smoother keeps, left a quarter of that noise to read as model error: the check failed
     (ratio 3.8) with the true model, and a record with nothing hidden got a learned force."""
-    from pidyn.discrepancy.changes import heldout_check
+    from pidyn.discrepancy.heldout_check import heldout_check
     from pidyn.discrepancy.hidden import hidden_case
     from pidyn.weak_form import measurement_noise, smooth_signals
 
@@ -180,7 +180,7 @@ def test_the_held_out_check_says_so_when_the_held_out_part_holds_no_motion():
     at 40 s): the held-out share of almost no signal read 5e146 and the check failed. The
     calibrated test compares absolute errors: noise against noise there holds; the same record
     with motion there is judged, and fails only where the model misses the held-out part."""
-    from pidyn.discrepancy.changes import heldout_check
+    from pidyn.discrepancy.heldout_check import heldout_check
 
     t = np.arange(0.0, 40.0, 0.01)
     fit, held = t < 26.0, t >= 26.0

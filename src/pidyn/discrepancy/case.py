@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from pidyn.data.sources import Record
-from pidyn.discrepancy.changes import HeldoutCheck
 from pidyn.discrepancy.confirm import Confirmation
 from pidyn.discrepancy.effects import EFFECTS, LIBRARY, Signals
+from pidyn.discrepancy.heldout_check import HeldoutCheck
 from pidyn.discrepancy.screening import Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.simulate import simulate_response

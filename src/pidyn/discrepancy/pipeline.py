@@ -29,14 +29,7 @@ from typing import Any
 import numpy as np
 
 from pidyn.discrepancy.case import Case, Nominal, Outcome
-from pidyn.discrepancy.changes import (
-    HELDOUT_BAND,
-    SETTLE_PERIODS,
-    HeldoutCheck,
-    heldout_check,
-    locate_step,
-    simulation_sensitivity,
-)
+from pidyn.discrepancy.changes import locate_step
 from pidyn.discrepancy.confirm import Confirmation, confirm, undecided
 from pidyn.discrepancy.effects import Signals
 from pidyn.discrepancy.extend import (  # noqa: F401
@@ -46,6 +39,13 @@ from pidyn.discrepancy.extend import (  # noqa: F401
     extension_node,
     release_held,
     system_node,
+)
+from pidyn.discrepancy.heldout_check import (
+    HELDOUT_BAND,
+    SETTLE_PERIODS,
+    HeldoutCheck,
+    heldout_check,
+    simulation_sensitivity,
 )
 from pidyn.discrepancy.learned_step import (
     LEARNED,

@@ -494,7 +494,7 @@ def _check_lines(d: dict) -> list[str]:
         lines += [f"Not named: {d['unearned']['note']}.", ""]
     hc = d.get("heldout_check")
     if hc:
-        from pidyn.discrepancy.changes import HeldoutCheck
+        from pidyn.discrepancy.heldout_check import HeldoutCheck
 
         why = HeldoutCheck(**hc).sentence()
         lines += [f"Held-out check: {why}.", ""]

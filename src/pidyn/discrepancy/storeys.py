@@ -211,11 +211,16 @@ def building_verdict(
 
 
 def building_heldout_test(study: Study, current: dict) -> dict:
-    """The calibrated held-out test (``pidyn.discrepancy.changes.heldout_check``) on every measured
+    """The calibrated held-out test (``pidyn.discrepancy.heldout_check.heldout_check``) on every measured
     floor's relative acceleration, simulated from rest, with the sensitivities to the building's
     trainable parameters; a floor fails below the test's level shared among the floors
     (Bonferroni)."""
-    from pidyn.discrepancy.changes import HELDOUT_BAND, SETTLE_PERIODS, heldout_check, simulation_sensitivity
+    from pidyn.discrepancy.heldout_check import (
+        HELDOUT_BAND,
+        SETTLE_PERIODS,
+        heldout_check,
+        simulation_sensitivity,
+    )
 
     record, system, values = study.record, current["system"], current["values"]
     floors = measured_floors(record)
