@@ -45,7 +45,7 @@ def _settings(saved: dict | str | None, overrides: list[str]) -> dict:
 
 
 def refine_job(job: Path, overrides: list[str]) -> dict:
-    from pidyn.models.identify import WindowResult
+    from pidyn.models.schedule import WindowResult
     from pidyn.reporting import write_json, write_yaml
     from pidyn.runs.build import build_record
     from pidyn.runs.methods import run_refinement

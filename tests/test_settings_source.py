@@ -85,8 +85,8 @@ def test_every_target_default_agrees_with_its_config():
 def _settings_classes():
     from pidyn.discrepancy.screening import Thresholds
     from pidyn.discrepancy.settings import DiagnosisSettings
-    from pidyn.models.identify import Schedule
     from pidyn.models.predict import PredictSettings
+    from pidyn.models.schedule import Schedule
     from pidyn.refine import RefineSettings
 
     # (dataclass, config, key, config keys the task itself reads beside the dataclass)

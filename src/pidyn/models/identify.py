@@ -22,7 +22,6 @@ import json
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -43,57 +42,10 @@ from pidyn.models.latent_start import (
     teach_current_path,
 )
 from pidyn.models.lit_module import PIDynNetModule
+from pidyn.models.schedule import Schedule, WindowResult
 from pidyn.notes import note
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class Schedule:
-    """How much work each window gets and how windows hand over to each other."""
-
-    pretrain_iters: int = 1000  # supervised-only iterations before the first window
-    pretrain_iters_window: int = 1000  # the same before every later window (its local time is new)
-    max_iters: int = 1500  # physics + data iterations per window
-    ls_init: str = "first"  # least-squares init of linear parameters: none | first | every
-    skip_uninformative: bool = True  # skip windows below data.min_peak_fraction of the peak response
-    fusion: str = "information"  # information | last (paper: carry the last window's values)
-    max_windows: int | None = None
-    transfer_lnn: bool = True  # LNN <- RPN after pretraining (paper's transfer-learning init)
-    latent_init: bool = (
-        False  # with ls_init: start latent shape parameters (beta, gamma, n) by variable projection
-    )
-
-    def __post_init__(self) -> None:
-        """A misspelled option fails here, naming the valid ones, instead of silently changing behaviour."""
-        for name, allowed in (("ls_init", ("none", "first", "every")), ("fusion", ("information", "last"))):
-            value = getattr(self, name)
-            if value not in allowed:
-                raise ValueError(f"model.schedule.{name}: '{value}' is not one of {', '.join(allowed)}")
-        for name in ("pretrain_iters", "pretrain_iters_window", "max_iters"):
-            if int(getattr(self, name)) < 0:
-                raise ValueError(f"model.schedule.{name} must be >= 0, got {getattr(self, name)}")
-        if self.max_windows is not None and int(self.max_windows) < 1:
-            raise ValueError(f"model.schedule.max_windows must be >= 1 or null, got {self.max_windows}")
-
-
-@dataclass
-class WindowResult:
-    index: int
-    t0: float
-    t1: float
-    iterations: int
-    seconds: float
-    estimate: dict[str, float]
-    fused: dict[str, float]
-    losses: dict[str, float]
-    stopped_early: bool
-    clamp_bounds: dict[str, list[float]] = field(default_factory=dict)
-    z_end: list[float] | None = None  # latent state at the window's end (the next window starts from it)
-    states: list[list[float]] | None = (
-        None  # [t, x, x', z] from the networks every 10th sample (refinement starts)
-    )
-    notes: list[str] = field(default_factory=list)  # what the data decided that a user should know
 
 
 class SubperiodIdentifier:

@@ -19,9 +19,10 @@ from pidyn.data.checks import check_floors, check_record
 from pidyn.data.datamodule import SubperiodDataModule
 from pidyn.data.multi import concatenate
 from pidyn.data.sources import Record
-from pidyn.models.identify import Schedule, SubperiodIdentifier
+from pidyn.models.identify import SubperiodIdentifier
 from pidyn.models.lit_module import PIDynNetModule
 from pidyn.models.pidynnet import PIDynNet
+from pidyn.models.schedule import Schedule
 from pidyn.reporting import write_json
 from pidyn.runs.methods import check_method_names
 from pidyn.runs.runtime import in_multirun, quiet_framework_warnings
