@@ -164,7 +164,7 @@ def test_the_extension_draws_its_own_period_through_the_record(tmp_path):
     the windows' periods."""
     from types import SimpleNamespace
 
-    from pidyn.discrepancy.report import plot_running_period
+    from pidyn.discrepancy.report_figures import plot_running_period
     from pidyn.discrepancy.summary import amplitude_path
 
     k, c = 400.0, 2.0

@@ -12,13 +12,13 @@ from pidyn.discrepancy.case import Case, Outcome
 from pidyn.discrepancy.changes import running_estimate
 from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.learned_step import LEARNED
-from pidyn.discrepancy.report import (
+from pidyn.discrepancy.report import write_report
+from pidyn.discrepancy.report_figures import (
     plot_learned_force,
     plot_ranking,
     plot_residual,
     plot_response,
     plot_running_estimate,
-    write_report,
 )
 from pidyn.discrepancy.screening import weak_system
 from pidyn.discrepancy.verdicts import Verdict
@@ -261,7 +261,7 @@ def _running_figures(case: Case, o: Outcome, fig) -> None:
         signal=(record.t, case.x_raw),
     )
     if o.running is not None:
-        from pidyn.discrepancy.report import plot_running_period
+        from pidyn.discrepancy.report_figures import plot_running_period
 
         meas = record.a[:, 0] + np.asarray(record.meta.get("sensor_ground", 0.0))
         plot_running_period(
