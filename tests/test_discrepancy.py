@@ -392,7 +392,7 @@ def test_a_step_found_over_the_whole_record_must_persist():
     fitting part far worse than no step; that step does not persist and nothing is named, the
     split unchanged. A real loss at 9 s is located, and its step fits the held-out rows better."""
     from pidyn.discrepancy.changes import locate_step
-    from pidyn.discrepancy.screening import Thresholds
+    from pidyn.discrepancy.screening_rules import Thresholds
 
     def locate(case):
         r = case.record
@@ -561,7 +561,7 @@ def test_the_true_friction_model_screens_clean(seed):
 def test_ridge_fit_survives_a_column_silent_in_the_fitting_rows():
     """A stop whose polished gap lies beyond the motion of the fitting part gives a zero column;
     the ridge fit (the generic force's yardstick) used to fail there with a singular matrix."""
-    from pidyn.discrepancy.screening import lstsq
+    from pidyn.discrepancy.regression import lstsq
 
     rng = np.random.default_rng(0)
     A, y = rng.normal(size=(50, 6)), rng.normal(size=50)
@@ -681,7 +681,7 @@ def test_a_stiffness_that_rises_in_time_is_no_stiffness_loss():
     an effect outside the library; the screening now fits only losses, and a located step
     that is a rise is not named."""
     from pidyn.discrepancy.changes import Change, is_stiffening
-    from pidyn.discrepancy.screening import fit_candidate
+    from pidyn.discrepancy.regression import fit_candidate
 
     t = np.linspace(0.0, 20.0, 2001)
     x = np.sin(2 * np.pi * 0.6 * t) * np.exp(-0.05 * t)

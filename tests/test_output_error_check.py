@@ -11,7 +11,8 @@ from pidyn.discrepancy.confirm import confirm, independent_samples, undecided
 from pidyn.discrepancy.effects import Signals
 from pidyn.discrepancy.extend import extended_system
 from pidyn.discrepancy.hidden import hidden_case
-from pidyn.discrepancy.screening import Thresholds, pair_lead
+from pidyn.discrepancy.screening import pair_lead
+from pidyn.discrepancy.screening_rules import Thresholds
 from pidyn.systems import LinearSDOF
 
 

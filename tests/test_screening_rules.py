@@ -7,15 +7,8 @@ import numpy as np
 import pytest
 
 from pidyn.discrepancy.effects import EFFECTS, Signals
-from pidyn.discrepancy.screening import (
-    Thresholds,
-    _cv_rss,
-    _folds,
-    _mark_heldout_miss,
-    _passes,
-    _tie_break,
-    _verdict,
-)
+from pidyn.discrepancy.regression import _cv_rss, _folds
+from pidyn.discrepancy.screening_rules import Thresholds, _mark_heldout_miss, _passes, _tie_break, _verdict
 
 
 def _row(effect: str, score: float, cv: float, ho: float | None = 0.5, step: bool = False) -> dict:
@@ -220,7 +213,7 @@ def test_a_library_name_must_earn_its_place_on_the_held_out_part():
     """An effect outside the library (a stiffness that drops only inside a band of displacement)
     came out as ``stiffness_loss`` with the held-out NRMSE 1.061 -> 1.033: no name is kept for so
     little, and the note says why. A name whose model predicts the held-out part better keeps it."""
-    from pidyn.discrepancy.screening import Thresholds
+    from pidyn.discrepancy.screening_rules import Thresholds
     from pidyn.discrepancy.verdicts import unearned_names
     from pidyn.notes import code_of
 

@@ -83,7 +83,7 @@ def test_every_target_default_agrees_with_its_config():
 
 
 def _settings_classes():
-    from pidyn.discrepancy.screening import Thresholds
+    from pidyn.discrepancy.screening_rules import Thresholds
     from pidyn.discrepancy.settings import DiagnosisSettings
     from pidyn.models.predict import PredictSettings
     from pidyn.models.schedule import Schedule

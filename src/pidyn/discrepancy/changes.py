@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from pidyn.discrepancy.screening import lstsq
+from pidyn.discrepancy.regression import lstsq
 
 log = logging.getLogger(__name__)
 

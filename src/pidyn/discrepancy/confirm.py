@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pidyn.data.sources import Record
-from pidyn.discrepancy.screening import Thresholds
+from pidyn.discrepancy.screening_rules import Thresholds
 from pidyn.progress import Steps
 from pidyn.refine.output_error import fit_output_error
 from pidyn.refine.problem import ShootingProblem

@@ -41,47 +41,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pidyn.discrepancy.effects import LIBRARY, Candidate, Effect, Signals
+from pidyn.discrepancy.regression import _cv_rss, _folds, fit_candidate, lstsq
+from pidyn.discrepancy.screening_rules import (
+    Thresholds,
+    _mark_fleeting_step,
+    _mark_heldout_miss,
+    _passes,
+    _verdict,
+)
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.systems.sdof import SDOFSystem
 from pidyn.systems.terms import latent_path
 from pidyn.weak_form import WeakForm
-
-
-@dataclass
-class Thresholds:
-    """When an effect counts as found (defaults calibrated on clean and 5 %-noise data)."""
-
-    min_delta_bic: float = 10.0  # "very strong" evidence on Kass & Raftery's scale
-    min_cv_gain: float = 0.05
-    min_force_share: float = 1e-6
-    min_structure_gain: float = (
-        0.3  # a generic f(x, x') removing this share (CV) marks the residual as structured
-    )
-    min_library_share: float = 0.5  # the named effect must explain this share of what the generic one does
-    pair_margin: float = (
-        2.0  # BIC by which a pair must beat the pairs holding the best single effect ("positive")
-    )
-    #: a step in time found in the fitting part must persist: its held-out gain may not fall below this
-    min_step_heldout_gain: float = -0.1
-    #: an effect that makes the held-out prediction worse than this, where a generic f(x, x')
-    #: improves it by min_structure_gain, is refused (the held-out part has structure it misses)
-    min_heldout_gain: float = 0.0
-    #: ... and an effect that predicts less than this share of what that generic f(x, x') predicts
-    #: there explains none of the held-out structure: it is not named (pairs are not refused by it:
-    #: the second effect of a pair may predict little alone)
-    min_heldout_share: float = 0.1
-    #: a library name is kept only when the extended model's held-out error is at least this share
-    #: below the nominal model's (else the verdict is ``unexplained``)
-    min_name_gain: float = 0.05
-    #: between passing effects this close in BIC (below "strong", 6, on Kass & Raftery's
-    #: scale) the one with the clearly better blocked cross-validation gain is named
-    tie_delta_bic: float = 6.0
-    tie_cv_margin: float = 0.1
-
-    def step_persists(self, heldout_gain: float | None) -> bool:
-        """A step in time lasts into the rows no fit used (no rows: nothing to refute it)."""
-        return heldout_gain is None or heldout_gain >= self.min_step_heldout_gain
-
 
 #: effects never fitted together (one step in time is found at a time)
 EXCLUSIVE = ({"stiffness_loss", "damping_change"},)
@@ -154,27 +125,6 @@ def weak_system(
 
 def _is_linear_only(term) -> bool:
     return {sp.name for sp in term.specs()} == set(term.linear)
-
-
-def lstsq(
-    A: np.ndarray, y: np.ndarray, ridge: np.ndarray | None = None, scale: np.ndarray | None = None
-) -> np.ndarray:
-    """Least squares on unit-norm columns; ``ridge`` (per column, on that scale) damps the
-    columns of a flexible basis so that near-collinear ones cannot take huge opposite values.
-    ``scale``: fixed column scales (the whole record's), so that a column nearly silent in a
-    cross-validation training block is not blown up to unit norm there."""
-    if scale is None:
-        scale = np.sqrt((A**2).sum(0))
-    scale = np.where(scale == 0, 1.0, scale)
-    As = A / scale
-    if ridge is None:
-        sol, *_ = np.linalg.lstsq(As, y, rcond=None)
-    else:
-        # the ridge as extra rows: the same solution, and a column silent in these rows (a stop
-        # never reached in the fitting part) leaves it rank deficient instead of singular
-        aug = np.vstack([As, np.diag(np.sqrt(ridge))])
-        sol, *_ = np.linalg.lstsq(aug, np.r_[y, np.zeros(len(ridge))], rcond=None)
-    return sol / scale
 
 
 def screen(
@@ -453,39 +403,6 @@ def pair_lead(ranking: list[dict], pairs: list[dict], structure: dict, th: Thres
     return {**best, "lead": lead, "why": why}
 
 
-def _verdict(ranking: list[dict], structure: dict, th: Thresholds) -> tuple[Verdict, str | None]:
-    """``discrepancy`` when the top effect passes and explains a fair share of what a generic
-    f(x, x') explains; ``unexplained`` when the residual is structured but no effect does;
-    else ``none``. Marks ``structure['structured']`` (and a note when the top effect is refused)."""
-    top = ranking[0] if ranking else None
-    structured = structure["cv_gain"] >= th.min_structure_gain  # blocked CV: flexibility is not rewarded
-    structure["structured"] = bool(structured)
-    pair = structure.get("pair")
-    if pair is not None:  # two effects explain it together: name the pair's lead first
-        return Verdict.DISCREPANCY, pair["lead"]
-    found = top is not None and _passes(top, th)
-    if found and structured and top["cv_gain"] < th.min_library_share * structure["cv_gain"]:
-        # the best library effect explains only a small part of a clearly structured residual:
-        # naming it would be naming the wrong thing
-        structure["note"] = (
-            f"{top['effect']} passes but explains {top['cv_gain']:.2f} of the residual in "
-            f"cross-validation against {structure['cv_gain']:.2f} for a generic f(x, x')"
-        )
-        found = False
-    if found:
-        rival = _tie_break(ranking, th)
-        if rival is not None:
-            structure["tie_break"] = (
-                f"{rival['effect']} (score {rival['score']:.1f}, cross-validation gain "
-                f"{rival['cv_gain']:.2f}) named before {top['effect']} ({top['score']:.1f}, "
-                f"{top['cv_gain']:.2f}): BIC does not decide between them, "
-                "cross-validation does"
-            )
-            return Verdict.DISCREPANCY, rival["effect"]
-        return Verdict.DISCREPANCY, top["effect"]
-    return (Verdict.UNEXPLAINED if structured else Verdict.NONE), None
-
-
 def generic_columns(s: Signals, knots: int = 11) -> np.ndarray:
     """A generic force f1(x) + f2(x') with no physics in it: piecewise-linear hat functions on
     ``knots`` points over the range of x and of x' (bounded: they cannot blow up where a
@@ -518,139 +435,4 @@ def _structure(s: Signals, weak: WeakForm, base: _NominalFit) -> dict:
         "delta_bic": float(n_eff * np.log(rss / max(rss0, 1e-300)) + G.shape[1] * np.log(n_eff)),
         "heldout_gain": None if rss0_ho is None else float(1 - np.sum(r[ho] ** 2) / max(rss0_ho, 1e-300)),
         "columns": int(G.shape[1]),
-    }
-
-
-def _mark_fleeting_step(r: dict, th: Thresholds) -> None:
-    """Mark a step in time that does not last (``persists: False``, with a note): a stiffness
-    lower only in the strong motion is one that depends on the amplitude (softening), not damage."""
-    if r.get("step_in_time") and not th.step_persists(r.get("heldout_gain")):
-        r["persists"] = False
-        r["note"] = (
-            f"a step at t = {r['parameters'].get('t_d', float('nan')):.2f} s that does not persist: "
-            f"held-out gain {r['heldout_gain']:.2f}"
-        )
-
-
-def _mark_heldout_miss(r: dict, structure: dict, th: Thresholds) -> None:
-    """Mark an effect (not a step in time: ``_mark_fleeting_step`` rules those) that predicts the
-    held-out part worse than the nominal model does, where a generic f(x, x') predicts it
-    clearly better: the effect fits the fitting part's force by a shape the structure does not
-    have (an even spring standing in for a trilinear one under a one-sided pulse). Mark it as
-    ``heldout_small`` when it predicts less than ``min_heldout_share`` of what the generic force
-    predicts there: a quadratic spring fitted to a symmetric trilinear one gains 0.01 where the
-    generic force gains 0.77."""
-    ho, generic = r.get("heldout_gain"), structure.get("heldout_gain")
-    if r.get("step_in_time") or r.get("score") is None or ho is None or generic is None:
-        return
-    if generic < th.min_structure_gain:
-        return
-    if ho < th.min_heldout_gain:
-        r["heldout_miss"] = True
-        r["note"] = (
-            f"held-out gain {ho:.2f} against {generic:.2f} for a generic f(x, x'): "
-            "it does not predict the rows no fit used"
-        )
-    elif ho < th.min_heldout_share * generic:
-        r["heldout_small"] = True
-        r["note"] = (
-            f"held-out gain {ho:.2f} against {generic:.2f} for a generic f(x, x'): "
-            "it explains almost none of the structure in the rows no fit used"
-        )
-
-
-def _tie_break(ranking: list[dict], th: Thresholds) -> dict | None:
-    """The passing effect to name instead of the top one, when BIC does not decide between them
-    (within ``tie_delta_bic``) and blocked cross-validation clearly does; None: the top one."""
-    passing = [r for r in ranking if r.get("passes")]
-    if len(passing) < 2 or passing[0] is not ranking[0]:
-        return None
-    top = passing[0]
-    rivals = [
-        r
-        for r in passing[1:]
-        if top["score"] - r["score"] < th.tie_delta_bic and r["cv_gain"] - top["cv_gain"] >= th.tie_cv_margin
-    ]
-    return max(rivals, key=lambda r: r["cv_gain"]) if rivals else None
-
-
-def _passes(r: dict, th: Thresholds) -> bool:
-    if (
-        r.get("score") is None
-        or r.get("persists") is False
-        or r.get("heldout_miss")
-        or r.get("heldout_small")
-    ):
-        return False
-    return (
-        r["delta_bic"] <= -th.min_delta_bic
-        and r["force_share"] >= th.min_force_share
-        and r["cv_gain"] >= th.min_cv_gain
-    )
-
-
-def _folds(fit: np.ndarray, k: int) -> list[np.ndarray]:
-    """k contiguous blocks of the fitting rows (boolean masks)."""
-    idx = np.flatnonzero(fit)
-    out = []
-    for part in np.array_split(idx, k):
-        m = np.zeros_like(fit)
-        m[part] = True
-        out.append(m)
-    return out
-
-
-#: in cross-validation, a column with less than this share of its energy (over the fitting rows)
-#: in a fold's training rows is one those rows cannot estimate: it is left out of that fold
-CV_MIN_TRAIN_SHARE = 1e-3
-
-
-def _cv_rss(
-    A: np.ndarray,
-    y: np.ndarray,
-    folds: list[np.ndarray],
-    ridge: np.ndarray | None = None,
-    n_fixed: int | None = None,
-) -> float:
-    """Residual sum of squares of each block predicted from the others.
-
-    Without a ridge, a column after the first ``n_fixed`` (the nominal ones, always kept;
-    None keeps every column) that is nearly silent in a fold's training rows (a stop reached
-    almost only in the test block, a step in time just before its end) is left out of that
-    fold: its coefficient, estimated from a handful of rows, would blow the prediction up by
-    orders of magnitude; left out, the fold predicts what the nominal model does: no gain."""
-    total = 0.0
-    everything = np.logical_or.reduce(folds)
-    energy = (A[everything] ** 2).sum(0)
-    scale = None if ridge is None else np.sqrt(energy)
-    for test in folds:
-        train = everything & ~test
-        cols = np.arange(A.shape[1])
-        if ridge is None and n_fixed is not None:
-            share = (A[train] ** 2).sum(0) / np.where(energy > 0, energy, 1.0)
-            cols = cols[(cols < n_fixed) | (share >= CV_MIN_TRAIN_SHARE)]
-        theta = lstsq(
-            A[train][:, cols],
-            y[train],
-            None if ridge is None else ridge[cols],
-            None if scale is None else scale[cols],
-        )
-        total += float(np.sum((y[test] - A[test][:, cols] @ theta) ** 2))
-    return total
-
-
-def fit_candidate(cand: Candidate, A0, B, y, fit, ho) -> dict | None:
-    A = np.column_stack([A0, B])
-    theta = lstsq(A[fit], y[fit])
-    coef = theta[A0.shape[1] :]
-    pos = cand.positive or (False,) * len(coef)
-    if any(p and c <= 0 for p, c in zip(pos, coef)):
-        return None
-    r = y - A @ theta
-    return {
-        "rss_fit": float(np.sum(r[fit] ** 2)),
-        "rss_ho": float(np.sum(r[ho] ** 2)) if ho.any() else None,
-        "coef": dict(zip(cand.coef_names, map(float, coef))),
-        "fixed": dict(cand.fixed),
-        "theta": [float(v) for v in theta],
     }

@@ -8,7 +8,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from pidyn.discrepancy.screening import Thresholds
+from pidyn.discrepancy.screening_rules import Thresholds
 
 
 @dataclass

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from pidyn.data.sources import Record
-from pidyn.discrepancy.screening import Thresholds
+from pidyn.discrepancy.screening_rules import Thresholds
 from pidyn.discrepancy.storey_extension import step_outcome
 from pidyn.discrepancy.storey_model import BuildingDiagnosis, StoreyView, score_text, storey_system
 from pidyn.systems.shear_building import ShearBuilding
