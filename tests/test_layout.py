@@ -151,3 +151,13 @@ def test_no_function_is_longer_than_60_lines():
                 if n > 60:
                     long.append(f"{f.relative_to(root)}:{node.lineno} {node.name} ({n} lines)")
     assert not long, long
+
+
+def test_no_file_is_longer_than_500_lines():
+    """A file a newcomer reads in one sitting: what grows past it is split where it has a seam."""
+    long = [
+        f"{f.relative_to(SRC.parent)} ({n} lines)"
+        for f in sorted(SRC.rglob("*.py"))
+        if (n := len(f.read_text().splitlines())) > 500
+    ]
+    assert not long, long
