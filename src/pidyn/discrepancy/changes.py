@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from pidyn.discrepancy.effects import EFFECTS, get_effect
 from pidyn.discrepancy.regression import lstsq
 
 log = logging.getLogger(__name__)
@@ -61,12 +62,10 @@ class Change:
 
     def effect_parameters(self) -> dict[str, float]:
         """The library effect's parameters (what the extension starts from)."""
-        if self.effect == "stiffness_loss":
-            return {"drop": -self.fraction, "t_d": self.t_change}
-        return {"change": self.fraction, "t_d": self.t_change}
+        return get_effect(self.effect).from_change(self.fraction, self.t_change)
 
     def sentence(self, unit: str = "s") -> str:
-        what = "stiffness" if self.effect == "stiffness_loss" else "damping"
+        what = get_effect(self.effect).changes
         how = "fell" if self.fraction < 0 else "rose"
         return (
             f"the structure changed at t = {self.t_change:.2f} {unit} (95 % interval {self.ci95[0]:.2f}-"
@@ -308,8 +307,6 @@ def _step_search(regression: tuple, s, weak, candidates: dict[str, str], values:
 def _nameable(change: Change | None, candidates: dict[str, str], values: dict[str, float], th) -> bool:
     """The best step is one the library can name: inside its range, no stiffening, and passing
     the screening's thresholds."""
-    from pidyn.discrepancy.effects import EFFECTS
-
     if change is not None and not EFFECTS[change.effect].admissible(change.effect_parameters(), values):
         log.info(
             "the best step in time, %s, is not one the library can name (outside its range)",
@@ -334,8 +331,6 @@ def _search_again(
     """A change found on the whole record, late in or beyond the fitting part: the split moves to
     halfway between it and the record's end and the change is estimated again on the new fitting
     part. None when the new estimate is a stiffening or outside the library's range."""
-    from pidyn.discrepancy.effects import EFFECTS
-
     cut = max(fit[1], change.t_change + 0.5 * (t_end - change.t_change))
     if cut > fit[1]:
         log.info(
@@ -366,7 +361,7 @@ def is_stiffening(change: Change) -> bool:
     the mark of a stiffness that depends on the amplitude (softening in the strong motion,
     stiffer again as the motion dies down), which no change in time explains. Say so, name
     nothing."""
-    if change.effect != "stiffness_loss" or change.fraction <= 0:
+    if get_effect(change.effect).changes != "stiffness" or change.fraction <= 0:
         return False
     log.info(
         "the best step in time is a stiffness rise (%s): that is an amplitude-dependent stiffness, not damage; "

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pidyn.data.sources import Record, synthetic_from_motion
-from pidyn.discrepancy.effects import Signals, get_effect
+from pidyn.discrepancy.effects import EFFECTS, LIBRARY, Signals, get_effect
 from pidyn.excitation.ground_motion import prepare
 from pidyn.simulate import simulate
 from pidyn.systems.sdof import LinearSDOF, SDOFSystem
@@ -54,10 +54,7 @@ OUTSIDE = {"trilinear_spring": _trilinear, "stribeck_friction": _stribeck}
 #: benchmark accepts beside ``unexplained``): a trilinear spring softens beyond x1 and hardens
 #: beyond x2, a stop beyond a displacement with a (softening) cubic spring for the branch
 #: before it; Stribeck friction is dry friction with a drop at low speed
-EQUIVALENT = {
-    "trilinear_spring": {"gap_contact", "cubic_stiffness"},
-    "stribeck_friction": {"coulomb_friction"},
-}
+EQUIVALENT = {outside: {n for n, e in EFFECTS.items() if outside in e.stands_for} for outside in OUTSIDE}
 
 
 def _outside_term(name: str, p: dict[str, float]):
@@ -212,8 +209,12 @@ def hidden_case(
     return HiddenCase(rec, effect, hidden, truth_nom, level, motion, fit_end)
 
 
+#: the effect a hidden record holds when none is named: the library's first (a cubic spring)
+DEFAULT_EFFECT = next(iter(LIBRARY))
+
+
 def hidden_record(
-    effect: str | None = "cubic_stiffness",
+    effect: str | None = DEFAULT_EFFECT,
     seed: int = 0,
     noise: float | None = None,
     duration: float = 25.0,

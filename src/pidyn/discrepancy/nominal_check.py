@@ -9,6 +9,7 @@ import numpy as np
 
 from pidyn.discrepancy.case import Case, Nominal
 from pidyn.discrepancy.changes import locate_step
+from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.heldout_check import (
     HELDOUT_BAND,
     SETTLE_PERIODS,
@@ -65,7 +66,9 @@ def check_heldout(
     log.info("%s", check.sentence())
     time_effects = {
         n: p_
-        for n, p_ in {"stiffness_loss": case.stiff, "damping_change": "c"}.items()
+        for n, p_ in {
+            n: case.stiff if e.changes == "stiffness" else "c" for n, e in EFFECTS.items() if e.step_in_time
+        }.items()
         if n in case.effects and p_ in nom.values
     }
     if forced or not time_effects or not ((check.failed and sc.cause is None) or sc.cause in time_effects):

@@ -30,7 +30,7 @@ import numpy as np
 
 from pidyn.discrepancy.case import Case, Nominal, Outcome
 from pidyn.discrepancy.confirm import Confirmation, confirm, undecided
-from pidyn.discrepancy.effects import Signals
+from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.extend import (  # noqa: F401
     EXTENSION,
     build_system,
@@ -188,8 +188,8 @@ def _change_candidate(change_row: dict) -> dict:
     }
 
 
-#: the amplitude-dependent structure (``effects.Amplitude``), tried where the period moves
-AMPLITUDE = "amplitude_softening"
+#: the amplitude-dependent structure, tried where the period moves (``Effect.tried_where_period_moves``)
+AMPLITUDE = next(n for n, e in EFFECTS.items() if e.tried_where_period_moves)
 
 
 def _amplitude_candidate() -> dict:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from pidyn.discrepancy.effects import get_effect
 from pidyn.discrepancy.verdicts import Verdict
 
 
@@ -254,7 +255,7 @@ def _change_and_truth_lines(d: dict) -> list[str]:
     lines: list[str] = []
     ch = d.get("change")
     if ch:
-        what = "stiffness" if ch["effect"] == "stiffness_loss" else "damping"
+        what = get_effect(ch["effect"]).changes
         lines += [
             "## Change in time",
             "",

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pidyn.discrepancy.effects import LIBRARY, Candidate, Effect, Signals
+from pidyn.discrepancy.effects import EFFECTS, LIBRARY, Candidate, Effect, Signals
 from pidyn.discrepancy.regression import _cv_rss, _folds, fit_candidate, lstsq
 from pidyn.discrepancy.screening_rules import (
     Thresholds,
@@ -54,8 +54,12 @@ from pidyn.systems.sdof import SDOFSystem
 from pidyn.systems.terms import latent_path
 from pidyn.weak_form import WeakForm
 
-#: effects never fitted together (one step in time is found at a time)
-EXCLUSIVE = ({"stiffness_loss", "damping_change"},)
+#: effects that exclude each other in one model, by their ``exclusive_group`` (one change in time
+#: at a time)
+EXCLUSIVE = tuple(
+    {n for n, e in EFFECTS.items() if e.exclusive_group == g}
+    for g in dict.fromkeys(e.exclusive_group for e in EFFECTS.values() if e.exclusive_group)
+)
 
 
 @dataclass

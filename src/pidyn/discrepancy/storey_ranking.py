@@ -26,9 +26,6 @@ from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.storey_model import Found, building_with, storey_signals
 from pidyn.simulate import input_hold, simulate_batch
 
-#: effects whose size may take either sign (a spring that hardens or softens, a damping that
-#: rises or falls): the projected step may run against the weak form's sign
-SIGNED = frozenset({"cubic_stiffness", "quadratic_stiffness", "damping_change"})
 #: a step in time is tried at this many times over its search span
 STEP_TIMES = 16
 
@@ -109,19 +106,14 @@ def trial_values(values: dict[str, float], storey: int, row: dict) -> dict[str, 
 
 
 def _trials(row: dict, span: tuple[float, float], drift_peak: float, k: float) -> list[dict]:
-    """The row's parameters; for a step in time the same size at every grid time, and for a stop
-    every gap of the weak form's grid (shares of the storey's peak drift) with a contact as stiff
-    as the storey at least: a stop that never engages at the weak form's gap has no gradient to
-    bring it in (a stop in storey 4 of four, benchmark case 48, refined from it to no gain)."""
+    """The starts of a row's trial: for a step in time the same size at every grid time, else
+    what the effect asks for (``Effect.storey_trials``: a stop tries every gap of its grid)."""
     params = dict(row["parameters"])
     eff = EFFECTS[row["effect"]]
     if eff.step_in_time:
         lo = span[0] + 0.05 * (span[1] - span[0])
         return [{**params, "t_d": float(t)} for t in np.linspace(lo, span[1], STEP_TIMES + 2)[1:-1]]
-    if row["effect"] == "gap_contact" and drift_peak > 0:
-        kg = max(float(params.get("kg", 0.0)), k)
-        return [params] + [{**params, "kg": kg, "gap": float(g * drift_peak)} for g in eff.gap_shares]
-    return [params]
+    return eff.storey_trials(params, drift_peak, k)
 
 
 def rank_candidates(
@@ -218,5 +210,12 @@ def _one(storey: int, row: dict, params: dict, d: np.ndarray, q: np.ndarray, r: 
     if dd <= 0:
         return None
     step = float(r @ pd_) / dd
-    chi2 = step * float(r @ pd_) if (step > 0 or row["effect"] in SIGNED) else 0.0
+    chi2 = step * float(r @ pd_) if (step > 0 or _sign_free(row["effect"])) else 0.0
     return Ranked(storey, {**row, "parameters": params, "linear_step": step}, chi2, chi2 / total, pd_)
+
+
+def _sign_free(effect: str) -> bool:
+    """Whether a row's fitted size may take either sign (``Effect.sign_free``; a learned force's
+    row is no library effect)."""
+    eff = EFFECTS.get(effect)
+    return bool(eff is not None and eff.sign_free)

@@ -74,7 +74,7 @@ def storey_term(spec: Mapping[str, Any], k: float) -> ForceTerm:
     if name not in TERMS or name in ("viscous_damping", "linear_stiffness", "learned_force"):
         allowed = sorted(set(TERMS) - {"viscous_damping", "linear_stiffness", "learned_force"})
         raise ValueError(f"shear_building: storey term '{name}' is not one of {', '.join(allowed)}")
-    if name == "hysteresis":
+    if TERMS[name].is_the_spring:
         spec.setdefault("k", k)  # the storey's stiffness becomes the hysteretic spring's
     try:
         return TERMS[name](**spec)

@@ -16,6 +16,7 @@ class Amplitude(Effect):
 
     name, key, tolerance = "amplitude_softening", "soft", 0.3
     order = 9
+    tried_where_period_moves = True
     n_grid = 1
     library = False
     taus = (0.5, 1.0, 2.0, 4.0, 8.0)

@@ -103,6 +103,19 @@ class Effect(ABC):
     #: screened by default; False for a model tried only where a finding asks for it (the
     #: amplitude-dependent structure, where the running period moves)
     library: bool = True
+    #: tried by the output-error check where the running period moves beyond its windows'
+    #: intervals (a structure whose properties follow the amplitude)
+    tried_where_period_moves: bool = False
+    #: the fitted size may take either sign (a hardening or softening spring, a damping that rises
+    #: or falls): a building's linearised score counts a step of either sign
+    sign_free: bool = False
+    #: effects of one group exclude each other in a model (one change in time at a time)
+    exclusive_group: str | None = None
+    #: for a change in time: the property that changes (``stiffness``, ``damping``), as reports say it
+    changes: str | None = None
+    #: effects outside the library (``pidyn.discrepancy.hidden.OUTSIDE``) this one is physically
+    #: equivalent to: the name a test or the benchmark accepts for them beside ``unexplained``
+    stands_for: tuple[str, ...] = ()
 
     @abstractmethod
     def candidates(self, s: Signals) -> Iterator[Candidate]:
@@ -113,6 +126,15 @@ class Effect(ABC):
     ) -> dict[str, float]:
         """The effect's physical parameters from regression coefficients (what is reported)."""
         return {**coef, **fixed}
+
+    def from_change(self, fraction: float, t_change: float) -> dict[str, float]:
+        """A change in time's parameters from a located step (its relative size and time)."""
+        raise NotImplementedError(f"{self.name} is not a change in time")
+
+    def storey_trials(self, params: dict[str, float], drift_peak: float, k: float) -> list[dict[str, float]]:
+        """The starts a building's trial of this effect in a storey refines from (the storey's peak
+        drift ``drift_peak``, its stiffness ``k``); the screening's estimate alone by default."""
+        return [params]
 
     def admissible(self, params: dict[str, float], nominal: dict[str, float]) -> bool:
         """Whether a fit (the effect's ``params``, the ``nominal`` parameters refitted with it)

@@ -16,6 +16,7 @@ WIDTH_RANGE = (0.5, 3.0)
 class Coulomb(Effect):
     name, key, tolerance = "coulomb_friction", "Fc", 0.25
     order = 3
+    stands_for = ("stribeck_friction",)  # dry friction with a drop at low speed
 
     def candidates(self, s):
         # near rest, noise flips the sign of the measured velocity: a column no sharper than

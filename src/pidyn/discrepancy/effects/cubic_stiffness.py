@@ -11,6 +11,8 @@ from pidyn.systems.terms import CubicStiffness
 class Cubic(Effect):
     name, key, tolerance = "cubic_stiffness", "k3", 0.2
     order = 1
+    sign_free = True
+    stands_for = ("trilinear_spring",)  # a softening branch before a stop
 
     def candidates(self, s):
         col = CubicStiffness(1.0, signed=True).columns(s.t, s.x, s.v, None, {})["k3"]

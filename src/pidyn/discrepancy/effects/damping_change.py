@@ -14,6 +14,8 @@ class DampChange(Damage):
 
     name, key, tolerance = "damping_change", "change", 0.35
     order = 7
+    sign_free = True
+    changes = "damping"
     signal, coef = "v", "dc"
     base = ViscousDamping(1.0)
     column_sign, positive = 1.0, False  # damping may rise or fall
@@ -28,6 +30,9 @@ class DampChange(Damage):
         # ... and no more than the term can represent (a tenfold damping): beyond it the located
         # step is a force of another shape (dry friction in a quiet tail reads as a huge damping)
         return nominal.get("c", 1.0) > 0 and -1.0 < params["change"] <= MAX_DAMPING_CHANGE
+
+    def from_change(self, fraction, t_change):
+        return {"change": fraction, "t_d": t_change}
 
     def term(self, p, s):
         change = min(max(p["change"], -0.9), MAX_DAMPING_CHANGE)

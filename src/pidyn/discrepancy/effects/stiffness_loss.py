@@ -13,6 +13,8 @@ class Damage(Effect):
 
     name, key, tolerance = "stiffness_loss", "drop", 0.25
     order = 6
+    exclusive_group = "change in time"
+    changes = "stiffness"
     n_grid = 1
     step_in_time = True
     n_times = 40
@@ -39,6 +41,9 @@ class Damage(Effect):
     def parameters(self, coef, fixed, nominal):
         k = nominal.get("k", nominal.get("k1", 1.0))
         return {"drop": coef["dk"] / k, "t_d": fixed["t_d"]}
+
+    def from_change(self, fraction, t_change):
+        return {"drop": -fraction, "t_d": t_change}  # a loss: the stiffness's fraction is negative
 
     def term(self, p, s):
         drop = min(max(p["drop"], 0.01), 0.9)

@@ -60,6 +60,9 @@ class ForceTerm(ABC):
     proportional: bool = False
     #: the term's column as a regression library names it (``x^3``); empty for a term that has none
     symbol: str = ""
+    #: in a storey or at a support, the term is the spring itself (its stiffness the place's k,
+    #: in place of the linear spring) rather than a force beside it
+    is_the_spring: bool = False
 
     def __init_subclass__(cls, **kw: Any) -> None:
         super().__init_subclass__(**kw)

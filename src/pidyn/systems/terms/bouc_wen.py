@@ -14,6 +14,7 @@ class BoucWenHysteresis(ForceTerm):
 
     name = "hysteresis"
     n_latent = 1
+    is_the_spring = True
 
     def __init__(
         self,
