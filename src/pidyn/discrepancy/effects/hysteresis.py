@@ -13,6 +13,8 @@ class Hysteresis(Effect):
 
     name, key, tolerance = "hysteresis", "kh", 0.3
     order = 5
+    #: one hysteretic spring in a model: another would share its loop's parameters
+    exclusive_group = "hysteretic spring"
     n_grid = 2
     spring_at_rest = True
     yield_shares = (0.15, 0.3, 0.6)  # z's ceiling (beta + gamma)^(-1/n) over the peak |x|
