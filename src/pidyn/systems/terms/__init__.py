@@ -6,10 +6,14 @@ regression columns (derived from the force) and, for hysteresis, the rate of its
 Every force is written here once: the systems, the screening effects of the diagnosis
 (``pidyn.discrepancy.effects``), the SINDy library and the hidden effects of the tests take their
 forces and columns from these classes. A new force is one file here (a ``ForceTerm`` subclass,
-``base.py``) and its line in ``TERMS``.
+``base.py``), found by its name when the package is imported.
 """
 
 from __future__ import annotations
+
+import importlib
+import inspect
+import pkgutil
 
 from pidyn.systems.terms.amplitude import AmplitudeSoftening
 from pidyn.systems.terms.base import Array, ForceTerm, heun_along, latent_path
@@ -26,25 +30,27 @@ from pidyn.systems.terms.steps import DampingChange, StepInTime, StiffnessLoss
 from pidyn.systems.terms.stribeck import StribeckFriction
 from pidyn.systems.terms.trilinear import TrilinearSpring
 
-TERMS: dict[str, type[ForceTerm]] = {
-    cls.name: cls
-    for cls in (
-        ViscousDamping,
-        LinearStiffness,
-        CubicStiffness,
-        BoucWenHysteresis,
-        QuadraticStiffness,
-        CoulombFriction,
-        QuadraticDamping,
-        StiffnessLoss,
-        DampingChange,
-        GapContact,
-        TrilinearSpring,
-        StribeckFriction,
-        AmplitudeSoftening,
-        LearnedForce,
-    )
-}
+
+def _discover() -> dict[str, type[ForceTerm]]:
+    """Every concrete ``ForceTerm`` with a name of its own, defined in a module of this package:
+    a new term is its file."""
+    found: dict[str, type[ForceTerm]] = {}
+    for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
+        module = importlib.import_module(f"{__name__}.{info.name}")
+        for obj in vars(module).values():
+            if (
+                inspect.isclass(obj)
+                and issubclass(obj, ForceTerm)
+                and obj.__module__ == module.__name__
+                and not inspect.isabstract(obj)
+                and obj.name != ForceTerm.name
+            ):
+                found[obj.name] = obj
+    return found
+
+
+TERMS: dict[str, type[ForceTerm]] = _discover()
+"""Every force term by its name (``storey_terms``, ``support_terms`` and configs name them so)."""
 
 __all__ = [
     "TERMS",
