@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import logging
 import platform
-import sys
 import time
 from pathlib import Path
 
@@ -33,7 +32,6 @@ import numpy as np
 import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "src"))
 
 from calibration_grid import calibration_args, finished, run_grid  # noqa: E402
 

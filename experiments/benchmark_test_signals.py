@@ -24,13 +24,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "src"))
 
 #: The benchmark's own system in the project's notation (see bouc_wen_benchmark/PROVENANCE.md)
 BOUC_WEN_TRUTH = {"m": 2.0, "c": 10.0, "k": 5e4, "kh": 5e4, "beta": -1100.0, "gamma": 800.0, "n": 1.0}

@@ -32,7 +32,6 @@ import numpy as np
 import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "src"))
 
 from pidyn.discrepancy.effects import EFFECTS, LIBRARY  # noqa: E402
 from pidyn.discrepancy.hidden import EQUIVALENT  # noqa: E402

@@ -31,7 +31,6 @@ import numpy as np
 import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "src"))
 
 from pidyn.discrepancy.effects import EFFECTS, LIBRARY, Signals  # noqa: E402
 from pidyn.discrepancy.hidden import EQUIVALENT, OUTSIDE, RECORDS, _outside_term  # noqa: E402

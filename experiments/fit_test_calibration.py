@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import logging
 import platform
-import sys
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -30,7 +29,6 @@ import numpy as np
 import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "src"))
 
 from calibration_grid import calibration_args, finished, run_grid  # noqa: E402
 from discrepancy_bench_building import draw_building, draw_sensors  # noqa: E402

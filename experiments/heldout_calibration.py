@@ -33,7 +33,6 @@ import numpy as np
 import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "src"))
 
 from pidyn.data.sources import synthetic_from_motion  # noqa: E402
 from pidyn.discrepancy.heldout_check import (  # noqa: E402

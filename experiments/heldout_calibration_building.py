@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import logging
 import platform
-import sys
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -31,7 +30,6 @@ import numpy as np
 import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "src"))
 
 from calibration_grid import calibration_args, finished, run_grid  # noqa: E402
 

@@ -21,15 +21,12 @@ import argparse
 import json
 import math
 import os
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "src"))
-sys.path.insert(0, str(ROOT / "experiments"))
 
 #: candidate force terms: label -> (kind, powers); kind "effect" names a library effect
 CANDIDATES: dict[str, tuple[str, tuple[int, int]]] = {

@@ -14,14 +14,12 @@ to stdout and the rows to ``<csv stem>_trivial.csv``.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "src"))
 
 
 def trivial_heldout(path: Path, station: str, direction: str) -> tuple[float, str]:
