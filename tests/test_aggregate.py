@@ -198,3 +198,18 @@ def test_submitit_launcher_runs_a_multirun_locally(tmp_path):
     jobs = sorted(p for p in tmp_path.iterdir() if (p / "metrics.json").exists())
     assert len(jobs) == 2, list(tmp_path.iterdir())
     assert (tmp_path / ".submitit").is_dir()
+    # the sweep's progress, counted across the jobs' processes: 2 of 2 ended
+    assert json.loads((tmp_path / "sweep_progress.json").read_text())["jobs"] == 2
+    assert sorted((tmp_path / "sweep_progress.log").read_text().split()) == [
+        "0",
+        "1",
+        "COMPLETED",
+        "COMPLETED",
+    ]
+
+
+def test_a_sweep_counts_its_jobs_in_advance():
+    from pidyn.runs.sweep_progress import sweep_size
+
+    assert sweep_size(["noise=0,0.025,0.05", "seed=range(3)", "system=duffing"]) == 9
+    assert sweep_size(["system=duffing"]) == 1
