@@ -36,7 +36,7 @@ def test_a_learned_force_goes_to_the_storey_the_linear_model_misses(tmp_path):
         record=record,
         fit=(0.0, 10.0),
         held=(10.0, 15.0),
-        settings=SimpleNamespace(learned=LearnedSettings(max_evaluations=32)),
+        settings=SimpleNamespace(learned=LearnedSettings(max_evaluations=16)),
     )
     current = {
         "system": linear,
