@@ -7,29 +7,13 @@ effect by name in the library's order, ``LIBRARY`` those screened by default.
 
 from __future__ import annotations
 
-import importlib
-import inspect
-import pkgutil
-
+from pidyn.discovery import defined_in
 from pidyn.discrepancy.effects.base import Candidate, Effect, Signals
 
 
 def _discover() -> list[Effect]:
-    """One instance of every concrete ``Effect`` subclass defined in a module of this package."""
-    found: list[Effect] = []
-    for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
-        if info.name == "base":
-            continue
-        module = importlib.import_module(f"{__name__}.{info.name}")
-        for obj in vars(module).values():
-            if (
-                inspect.isclass(obj)
-                and issubclass(obj, Effect)
-                and obj.__module__ == module.__name__
-                and not inspect.isabstract(obj)
-            ):
-                found.append(obj())
-    return sorted(found, key=lambda e: (e.order, e.name))
+    """One instance of every effect of this package's modules, in the library's order."""
+    return sorted((cls() for cls in defined_in(__name__, __path__, Effect)), key=lambda e: (e.order, e.name))
 
 
 EFFECTS: dict[str, Effect] = {e.name: e for e in _discover()}

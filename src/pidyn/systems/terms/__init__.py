@@ -11,10 +11,7 @@ forces and columns from these classes. A new force is one file here (a ``ForceTe
 
 from __future__ import annotations
 
-import importlib
-import inspect
-import pkgutil
-
+from pidyn.discovery import defined_in
 from pidyn.systems.terms.amplitude import AmplitudeSoftening
 from pidyn.systems.terms.base import Array, ForceTerm, heun_along, latent_path
 from pidyn.systems.terms.bouc_wen import BoucWenHysteresis
@@ -30,26 +27,9 @@ from pidyn.systems.terms.steps import DampingChange, StepInTime, StiffnessLoss
 from pidyn.systems.terms.stribeck import StribeckFriction
 from pidyn.systems.terms.trilinear import TrilinearSpring
 
-
-def _discover() -> dict[str, type[ForceTerm]]:
-    """Every concrete ``ForceTerm`` with a name of its own, defined in a module of this package:
-    a new term is its file."""
-    found: dict[str, type[ForceTerm]] = {}
-    for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
-        module = importlib.import_module(f"{__name__}.{info.name}")
-        for obj in vars(module).values():
-            if (
-                inspect.isclass(obj)
-                and issubclass(obj, ForceTerm)
-                and obj.__module__ == module.__name__
-                and not inspect.isabstract(obj)
-                and obj.name != ForceTerm.name
-            ):
-                found[obj.name] = obj
-    return found
-
-
-TERMS: dict[str, type[ForceTerm]] = _discover()
+TERMS: dict[str, type[ForceTerm]] = {
+    cls.name: cls for cls in defined_in(__name__, __path__, ForceTerm) if cls.name != ForceTerm.name
+}
 """Every force term by its name (``storey_terms``, ``support_terms`` and configs name them so)."""
 
 __all__ = [
