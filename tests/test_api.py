@@ -135,6 +135,9 @@ def test_a_notebook_without_logging_sees_the_progress_lines_and_a_configured_pro
             logging.getLogger("pidyn.models.identify").info("window 1 of 8")
         assert "window 1 of 8" in capfd.readouterr().err
         assert not logging.getLogger("pidyn").handlers  # removed after the call
+        with _progress(False):  # a call's progress=False: silent
+            logging.getLogger("pidyn.models.identify").info("window 2 of 8")
+        assert "window 2 of 8" not in capfd.readouterr().err
         mine = logging.StreamHandler()
         root.addHandler(mine)
         with _progress():

@@ -159,15 +159,16 @@ class Result:
 
 
 @contextlib.contextmanager
-def _progress():
+def _progress(show: bool = True):
     """A notebook or script whose logging nobody configured sees pidyn's progress lines (windows,
     refinement, diagnosis steps) on stderr for the call; a program that set up its own logging
-    (a handler on ``pidyn`` or on the root logger) keeps it as it is."""
+    (a handler on ``pidyn`` or on the root logger) keeps it as it is, and ``show=False`` (the
+    calls' ``progress=False``) keeps the call silent but for warnings."""
     import logging
     import sys
 
     logger = logging.getLogger("pidyn")
-    if logger.handlers or logging.getLogger().handlers:
+    if not show or logger.handlers or logging.getLogger().handlers:
         yield
         return
     handler = logging.StreamHandler(sys.stderr)
@@ -205,6 +206,7 @@ def identify(
     init: dict[str, float] | None = None,
     out_dir: str | Path | None = None,
     overrides: Iterable[str] = (),
+    progress: bool = True,
     **options: Any,
 ) -> Result:
     """Identify ``system`` (a name from ``conf/system``) from ``record`` (default: the
@@ -213,21 +215,22 @@ def identify(
 
     ``init``: starting guesses (``{"k3": 50.0}``). ``options``: config settings by key, ``__``
     for a dot (``seed=1``, ``refine="none"``, ``baselines="none"``,
-    ``model__schedule__max_windows=4``); ``overrides``: raw Hydra override strings.
+    ``model__schedule__max_windows=4``); ``overrides``: raw Hydra override strings;
+    ``progress=False``: no progress lines in a notebook (warnings still show).
     """
     from pidyn.tasks.train import identify_run as run_identification
 
     if record is not None and not isinstance(record, Record):
         from pidyn.data.multi import concatenate
 
-        with _user_errors(), _progress():
+        with _user_errors(), _progress(progress):
             record = concatenate(list(record))
     groups, values = _split_options(options)
     values.update({f"system.params.{k}.init": float(v) for k, v in (init or {}).items()})
     values.setdefault("trainer.enable_progress_bar", False)
     values.setdefault("raise_errors", True)
     run_dir = _run_dir(out_dir, "train", system)
-    with _user_errors(), _progress():
+    with _user_errors(), _progress(progress):
         cfg = compose(
             "train",
             groups={"system": system, **groups},
@@ -380,11 +383,12 @@ def diagnose(
     mass: float | None = 1.0,
     out_dir: str | Path | None = None,
     overrides: Iterable[str] = (),
+    progress: bool = True,
     **options: Any,
 ) -> Diagnosis:
     """Diagnose what ``nominal`` (a system name) misses on ``record`` (default: the configured
     record with a hidden effect). ``mass``: the known mass (None identifies it, force excitation
-    only). ``options`` as for ``identify`` (``diagnosis__fit_share=0.6``)."""
+    only). ``options`` and ``progress`` as for ``identify`` (``diagnosis__fit_share=0.6``)."""
     from pidyn.tasks.diagnose import diagnose as run_diagnosis
 
     groups, values = _split_options(options)
@@ -400,7 +404,7 @@ def diagnose(
         overrides=overrides,
         output_dir=run_dir,
     )
-    with _user_errors(), _progress():
+    with _user_errors(), _progress(progress):
         d = run_diagnosis(cfg, record=record)
     return Diagnosis(
         verdict=d["verdict"],
