@@ -36,11 +36,12 @@ SYSTEMS = {
     "linear": ["system=linear"],
     "duffing": ["system=duffing", "system.signed_k3=true"],
     "rigid_deck": ["system=rigid_deck"],  # every deck channel, each support its own spring (transverse)
+    "amplitude": ["system=amplitude"],  # stiffness and damping that follow the response's recent amplitude
 }
 #: models of the deck's motion across it only (along it, a rigid deck is the linear model)
 ACROSS_ONLY = {"rigid_deck"}
 #: the linear model of each model's own layout, scored beside it (a linear model is its own)
-LINEAR_OF = {"duffing": "linear"}
+LINEAR_OF = {"duffing": "linear", "amplitude": "linear"}
 #: a strong event (the issue's bar: the nonlinear model must beat the linear one there)
 STRONG_G = 0.2
 

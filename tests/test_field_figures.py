@@ -125,3 +125,22 @@ def test_srims_modes_keep_their_shapes_mpc_and_emac(building):
     true = modal_properties(*sb.linear_matrices(sb.true_values()))
     for m, shape in zip(res.modes, true["mode_shapes"]):  # fundamental first
         assert mac(m["mode_shape"], shape) > 0.99 and 0.9 < m["mpc"] <= 1.0 and np.isfinite(m["emac"])
+
+
+def test_the_amplitude_law_is_drawn_through_the_windows_of_a_softening_structure(tmp_path):
+    """A structure whose stiffness falls with its recent amplitude (AmplitudeSoftening): the
+    windows' periods rise with the shaking's peak, and the law's own period at each window's
+    simulated envelope follows them."""
+    from pidyn.systems import AmplitudeDependent
+
+    sys_ = AmplitudeDependent(c=0.6, k=400.0, soft=0.4, gain=0.5, tau=1.0, a_ref=0.05, w0=20.0)
+    rec = synthetic(sys_, "el_centro", noise=0.01, channels=("a",), duration=25.0, eq_scale=2.0)
+    measured = replace(rec, truth=None, clean=None)
+    values = sys_.true_values()
+    sim = simulate_response(sys_, values, measured)
+    out = amplitude_figure(tmp_path / "p.png", measured, sys_, values, sim, 2 * np.pi / np.sqrt(400.0))
+    assert (tmp_path / "p.png").stat().st_size > 10_000 and len(out["law_period"]) == len(out["period"])
+    peak, period, law = (np.asarray(out[k]) for k in ("peak", "period", "law_period"))
+    strong, weak = peak >= np.quantile(peak, 0.75), peak <= np.quantile(peak, 0.25)
+    assert period[strong].mean() > period[weak].mean() and law[strong].mean() > law[weak].mean()
+    assert np.corrcoef(period, law)[0, 1] > 0.5

@@ -3,7 +3,7 @@ record fitted one by one by the linear part of the identified model (``pidyn.dis
 each window's estimate with its 95 % interval, over the peak the sensor read in it. A structure
 whose soil or joints soften in strong shaking shows a period that grows with the amplitude; a
 linear one, a flat row. Where the model carries an amplitude law (``AmplitudeSoftening``), the
-law's own period at each window's simulated envelope is drawn through the windows' estimates, so
+law's own period at each window's simulated envelope is drawn beside the windows' estimates, so
 the law is seen against what each part of the record says by itself."""
 
 from __future__ import annotations
@@ -74,7 +74,8 @@ def amplitude_figure(
 
 
 def _law(record: Any, system: Any, values: dict[str, float], sim: dict, centres: np.ndarray, width: float):
-    """The amplitude law's period at each window's largest simulated envelope (None without a law)."""
+    """The amplitude law's period at each window's mean simulated envelope (what a window's one
+    period averages over; None without a law)."""
     term = next((t for t in getattr(system, "terms", []) if hasattr(t, "at_envelope")), None)
     if term is None or sim.get("z") is None or sim["z"].shape[1] == 0:
         return None
@@ -85,7 +86,7 @@ def _law(record: Any, system: Any, values: dict[str, float], sim: dict, centres:
     for i, tc in enumerate(centres):
         sel = np.abs(record.t - tc) <= width / 2
         if sel.any() and np.isfinite(e[sel]).all():
-            k, _ = term.at_envelope(values, float(np.max(e[sel])))
+            k, _ = term.at_envelope(values, float(np.mean(e[sel])))
             out[i] = 2 * np.pi * np.sqrt(m / k) if k > 0 else np.nan
     return out
 
@@ -137,9 +138,10 @@ def _draw(path: Path, record: Any, rows: dict[str, np.ndarray], law: np.ndarray 
             )
         axis.set_ylabel(label)
         axis.grid(True, lw=0.3, alpha=0.5)
-    if law is not None:
-        order = np.argsort(peak)
-        ax.plot(peak[order], law[ok][order], "-", color="C3", lw=1.4, label="the model's amplitude law")
+    if law is not None:  # a marker per window: the law reads the envelope, not the peak
+        ax.plot(
+            peak, law[ok], "D", ms=4, mfc="none", color="C3", label="the model's law at the window's envelope"
+        )
     ax.legend(fontsize=8)
     axd.set_xscale("log")  # shaking spans decades between the coda and the strong motion
     axd.set_xlabel(f"peak of the response in the window ({_unit(record)})")
