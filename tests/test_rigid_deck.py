@@ -127,6 +127,7 @@ def test_the_support_stiffnesses_are_recovered_within_their_intervals(tmp_path):
         for r in metrics["supports"]
     )
     assert "## Supports" in (tmp_path / "report.md").read_text()
+    assert (tmp_path / "figures" / "support_loops.png").stat().st_size > 10_000  # each support's loop
 
 
 def test_supports_the_data_cannot_tell_apart_are_said_so_and_their_values_not_reported():

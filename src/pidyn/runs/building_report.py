@@ -144,6 +144,7 @@ def plot_storey_loops(
     title: str = "",
     panels: list[str] | None = None,
     xlabel: str = "drift (m)",
+    ylabel: str = "restoring force (N)",
 ) -> None:
     """Restoring force against drift, one panel per storey (or per ``panels`` name): the identified
     model simulated over the record, and the true structure's when known."""
@@ -163,7 +164,7 @@ def plot_storey_loops(
         ax.plot(plottable(drift[:, i]), plottable(force[:, i]), color="C3", lw=0.7, label="identified")
         ax.set_title(f"storey {i + 1}" if panels is None else panels[i])
         ax.set_xlabel(xlabel)
-        ax.set_ylabel("restoring force (N)")
+        ax.set_ylabel(ylabel)
     for j in range(n, rows * cols):
         axes[j // cols][j % cols].axis("off")
     axes[0][0].legend(fontsize=8)

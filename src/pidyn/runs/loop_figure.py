@@ -1,7 +1,8 @@
 """A single degree of freedom's restoring force against its displacement over the record (the
 hysteresis loop an engineer reads a nonlinear structure by: its slope is the stiffness, its
 area the energy dissipated per cycle), the identified model's beside the true structure's when
-the record carries it. A building draws one per storey (``building_report.plot_storey_loops``)."""
+the record carries it. A building draws one per storey (``building_report.plot_storey_loops``), a
+bridge deck one per support (``support_loops``)."""
 
 from __future__ import annotations
 
@@ -40,5 +41,30 @@ def loop_figure(
     x, force = restoring_loop(system, values, record.t, sim)
     plot_storey_loops(
         path, x, force, truth, f"{system.name} under {record.name}", ["restoring force"], "displacement (m)"
+    )
+    return True
+
+
+def support_loops(
+    path: Path, system: Any, values: Mapping[str, float], record: Any, sim: Mapping[str, np.ndarray]
+) -> bool:
+    """Draw each support's force against its deformation along ``sim`` (a deck on its supports,
+    ``support_response``); False (nothing drawn) for another structure."""
+    if not hasattr(system, "support_response"):
+        return False
+    f = np.asarray(record.f, float)
+    d, forces = system.support_response(record.t, sim["x"], sim["v"], sim["z"], f, dict(values))
+    deformation = np.stack([np.broadcast_to(x, record.t.shape) for x in d], axis=1)
+    force = np.stack([np.broadcast_to(q, record.t.shape) for q in forces], axis=1)
+    names = [f"support {j + 1} ({name})" for j, name in enumerate(system.inputs)]
+    plot_storey_loops(
+        path,
+        deformation,
+        force,
+        None,
+        f"{system.name} under {record.name}",
+        names,
+        "support deformation (m)",
+        "force per kg of deck (m/s$^2$)",
     )
     return True

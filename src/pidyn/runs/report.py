@@ -26,7 +26,7 @@ from pidyn.reporting import (
 from pidyn.runs.amplitude_figure import amplitude_figure
 from pidyn.runs.build import Run
 from pidyn.runs.hparams import log_hparams
-from pidyn.runs.loop_figure import loop_figure
+from pidyn.runs.loop_figure import loop_figure, support_loops
 from pidyn.runs.metrics import channel_nrmse, record_noise, reference_channel, relative_errors, sim_nrmse_x
 from pidyn.runs.mode_shape_figure import mode_shape_figure
 from pidyn.runs.stabilization_figure import stabilization_figure
@@ -341,6 +341,7 @@ def _figures(
         title=f"{system.name}: NRMSE {metrics['sim_nrmse'][label]:.3g} ({label})",
     )
     loop_figure(fig_dir / "restoring_force.png", system, final, record, sim)
+    support_loops(fig_dir / "support_loops.png", system, final, record, sim)
     spectrum = transfer_figure(fig_dir / "transfer_function.png", record, system, sim)
     if spectrum is not None:
         metrics["transfer_function"] = spectrum

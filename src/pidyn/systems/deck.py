@@ -182,6 +182,21 @@ class RigidDeck(PlacedTerms, StructuralSystem):
             q1 = xi * force if q1 is None else q1 + xi * force
         return [q0, q1]
 
+    def support_response(self, t, x, v, z, f, p) -> tuple[list, list]:
+        """Each support's deformation and its force (spring, dashpot and any term, per kg of
+        deck) along a motion of the deck ends ``x``, ``v`` and the latent states ``z``: what its
+        hysteresis loop draws."""
+        R = self.influence(p)
+        d, dv = self._support_motion(x, v, f, p, R)
+        forces = []
+        for j, (support, slices) in enumerate(zip(self.supports, self._slices)):
+            parts = [
+                term.force(t, d[j], dv[j], None if sl is None else z[..., sl], p)
+                for term, sl in zip(support, slices)
+            ]
+            forces.append(sum_of(parts))
+        return d, forces
+
     # ------------------------------------------------------------------ equations
     def residual(self, k: Kinematics, f: torch.Tensor, p: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
         if self.n_latent and k.z is None:
