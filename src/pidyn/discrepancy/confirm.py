@@ -4,8 +4,8 @@ The screening regresses the weak form of the equation of motion, which integrate
 measured response against smooth test functions. It is fast and needs no simulation, but on
 noisy records it loses power: an effect can lean its way (a positive score) and still stay
 below the evidence threshold, while the response a model simulates shows the effect plainly.
-A softening cubic next to dry friction, after the friction is named, scores 4.1 in the weak
-form and 3675 BIC units on the simulated displacement (case 123 of the diagnosis benchmark).
+A softening cubic next to dry friction, once the friction is named, can score 4 in the weak
+form and thousands of BIC units on the simulated displacement.
 
 So when a screening's verdict is ``none``, each effect it scored between 0 and the evidence
 threshold (not a step in time: the change search locates those; not one a screening rule

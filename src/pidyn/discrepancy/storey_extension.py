@@ -38,7 +38,7 @@ def try_extension(
     from pidyn.refine.stage import refine
 
     # the refinement identifies the shapes the screening fixed from the record (a friction's
-    # width: benchmark case 64's friction settled 23 % low at the width its filtered drifts gave)
+    # width read from filtered drifts is biased, and the friction's size follows its width)
     cand = replace(cand, ctx={**cand.ctx, "free_width": True})
     ext, start = building_with(
         nominal_system, trial_values(current["values"], cand.storey, cand.row), [*found, cand]

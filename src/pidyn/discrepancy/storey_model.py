@@ -152,7 +152,8 @@ def building_with(
     start = dict(values)
     dampers = [f"c{i + 1}" for i in range(system.n_dof) if f"c{i + 1}" in start]
     largest = max((start[c] for c in dampers), default=0.0)
-    # the median of those that have not collapsed (three of four had, on benchmark case 18)
+    # the median of those that have not collapsed (most of them can have: one storey's damper
+    # then carries the building's whole dissipation)
     typical = float(np.median([start[c] for c in dampers if start[c] >= COLLAPSED * largest] or [0.0]))
     for c in dampers:
         # a damper the nominal fit ran to zero cannot come back in log space (its gradient is

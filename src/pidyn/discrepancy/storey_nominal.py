@@ -73,7 +73,8 @@ def nominal_fit(
             deferred = {"config": starts.pop("config")}
     best = _refined_best(record, system, starts, settings, fit, config)
     if deferred and (best is None or best[0] > POOR_FIT):
-        # a clean 5-storey building (benchmark case 33) ended at NRMSE 0.97 from the data's start
+        # the data's start can sit in a poor basin of a tall building's cost (a clean one ended at
+        # NRMSE 0.97 from it): the config's start is tried then too
         best = min(
             (b for b in (best, _refined_best(record, system, deferred, settings, fit, config)) if b),
             key=lambda b: b[0],

@@ -26,8 +26,7 @@ class Gap(Effect):
     def storey_trials(self, params, drift_peak, k):
         """Every gap of the weak form's grid (shares of the storey's peak drift) with a contact as
         stiff as the storey at least: a stop that never engages at the weak form's gap has no
-        gradient to bring it in (a stop in storey 4 of four, benchmark case 48, refined from it
-        to no gain)."""
+        gradient to bring it in, so a refinement from that gap alone can end where it started."""
         if drift_peak <= 0:
             return [params]
         kg = max(float(params.get("kg", 0.0)), k)
