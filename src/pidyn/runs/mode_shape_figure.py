@@ -1,6 +1,6 @@
 """A building's mode shapes as ``modal.json`` gives them (the identified model's, with their 95 %
 intervals as bands), beside those of a linear state-space model fitted to the same fitting part
-(the subspace realization, and mdof's SRIM where the run fitted it), each pair with its MAC: the
+(the subspace realization, and mdof's SRIM where it is installed), each pair with its MAC: the
 check an engineer makes first, that the physical model's shapes are the data's.
 
 The peers see only the measured floors, so shapes are compared there, each scaled to 1 at the
@@ -41,6 +41,18 @@ def peer_shapes(record: Any, n_dof: int) -> list[dict[str, Any]]:
     return []
 
 
+def srim_shapes(record: Any, n_modes: int) -> list[dict[str, Any]] | None:
+    """mdof's SRIM at the order of ``n_modes`` modes (its modes with their shapes), or None where
+    mdof is not installed or the realization does not simulate stably."""
+    try:
+        import mdof  # noqa: F401  (an optional peer: pip install 'pidyn[peer]')
+    except ImportError:
+        return None
+    from pidyn.baselines.peers import srim
+
+    return srim(record, orders=(2 * n_modes,)).modes or None
+
+
 def match(ours: list[np.ndarray], theirs: list[dict[str, Any]]) -> list[tuple[int | None, float]]:
     """For each of our shapes, the peer mode of highest MAC (index, MAC), each peer mode used once."""
     taken: set[int] = set()
@@ -71,6 +83,8 @@ def mode_shape_figure(
         peers = {"subspace": peer_shapes(record, len(shaped))}
     except (ValueError, np.linalg.LinAlgError):
         return None
+    if srim_modes is None:  # the run did not fit SRIM: fit it here where mdof is installed
+        srim_modes = srim_shapes(record, len(shaped))
     if srim_modes and all(m.get("mode_shape") is not None for m in srim_modes):
         peers["SRIM"] = srim_modes
     matched = {name: match(ours, rows) for name, rows in peers.items()}
