@@ -15,6 +15,7 @@ from typing import Any
 
 from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
+from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from pidyn.progress import time_left
@@ -55,7 +56,7 @@ class SweepProgress(Callback):
         except ValueError:
             return
         folder = Path(str(hc.sweep.dir))
-        if str(hc.mode) != "RunMode.MULTIRUN" or not (folder / STATE).exists():
+        if hc.mode != RunMode.MULTIRUN or not (folder / STATE).exists():
             return
         state = json.loads((folder / STATE).read_text())
         status = getattr(getattr(job_return, "status", None), "name", "")
