@@ -169,33 +169,32 @@ class RigidDeck(PlacedTerms, StructuralSystem):
             dv.append((1 - xi) * (v[..., 0] + end_v[0]) + xi * (v[..., 1] + end_v[1]) - vg[j])
         return d, dv
 
+    def _support_forces(self, t, d, dv, z, p) -> list:
+        """Each support's force (spring, dashpot and any term, per kg of deck) at its deformation
+        ``d`` and deformation rate ``dv``."""
+        return [
+            sum_of(
+                [
+                    term.force(t, d[j], dv[j], None if sl is None else z[..., sl], p)
+                    for term, sl in zip(support, slices)
+                ]
+            )
+            for j, (support, slices) in enumerate(zip(self.supports, self._slices))
+        ]
+
     def _generalised_forces(self, t, d, dv, z, p) -> list:
         """The supports' forces on the two end coordinates, sum_j b_j F_j."""
-        q0 = q1 = None
-        for j, (support, slices) in enumerate(zip(self.supports, self._slices)):
-            force = None
-            for term, sl in zip(support, slices):
-                part = term.force(t, d[j], dv[j], None if sl is None else z[..., sl], p)
-                force = part if force is None else force + part
-            xi = self.xi[j]
-            q0 = (1 - xi) * force if q0 is None else q0 + (1 - xi) * force
-            q1 = xi * force if q1 is None else q1 + xi * force
-        return [q0, q1]
+        forces = self._support_forces(t, d, dv, z, p)
+        return [
+            sum_of([(1 - xi) * F for xi, F in zip(self.xi, forces)]),
+            sum_of([xi * F for xi, F in zip(self.xi, forces)]),
+        ]
 
     def support_response(self, t, x, v, z, f, p) -> tuple[list, list]:
-        """Each support's deformation and its force (spring, dashpot and any term, per kg of
-        deck) along a motion of the deck ends ``x``, ``v`` and the latent states ``z``: what its
-        hysteresis loop draws."""
-        R = self.influence(p)
-        d, dv = self._support_motion(x, v, f, p, R)
-        forces = []
-        for j, (support, slices) in enumerate(zip(self.supports, self._slices)):
-            parts = [
-                term.force(t, d[j], dv[j], None if sl is None else z[..., sl], p)
-                for term, sl in zip(support, slices)
-            ]
-            forces.append(sum_of(parts))
-        return d, forces
+        """Each support's deformation and its force along a motion of the deck ends ``x``, ``v``
+        and the latent states ``z``: what its hysteresis loop draws."""
+        d, dv = self._support_motion(x, v, f, p, self.influence(p))
+        return d, self._support_forces(t, d, dv, z, p)
 
     # ------------------------------------------------------------------ equations
     def residual(self, k: Kinematics, f: torch.Tensor, p: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
