@@ -49,9 +49,9 @@ def running_modes(
     }
     m = float(values.get("m", 1.0))
     theta = to_theta([s for s in local.param_specs() if s.trainable], values)
-    # the last fitted window: start, u, trajectory (the whole window's: a failed window's successor starts
-    # further on, still inside it)
-    warm: tuple[int, np.ndarray, np.ndarray] | None = None
+    # the last fitted window: its start and simulated states (the whole window's: a failed window's
+    # successor starts further on, still inside it)
+    warm: tuple[int, np.ndarray] | None = None
     for i, i0 in enumerate(starts):
         i1 = i0 + n_win
         rows["t"][i] = 0.5 * (t[i0] + t[i1])
@@ -61,10 +61,10 @@ def running_modes(
             res = _window_fit(local, t, record.f, channels, i0, i1, u0, substeps, input_hold(record))
         except (ValueError, np.linalg.LinAlgError, FloatingPointError):
             continue
-        (k, c), cov, u, states = res
+        (k, c), cov, states = res
         if not (k > 0 and np.all(np.isfinite(cov))):
             continue
-        warm = (int(i0), u, states) if np.all(np.isfinite(states)) else None
+        warm = (int(i0), states) if np.all(np.isfinite(states)) else None
         # log coordinates (the specs' log transforms): the intervals map monotonically
         sk, sc = np.sqrt(max(cov[0, 0], 0.0)), np.sqrt(max(cov[1, 1], 0.0))
         rho = cov[0, 1] / max(sk * sc, 1e-300)
@@ -106,8 +106,8 @@ def _warm_start(warm, i0: int, theta0: np.ndarray, n_state: int) -> np.ndarray:
     overlap by half or more, so the fit starts next to its end); else from rest. Each window
     starts from the record's values, not the previous window's: a quiet window that drove the
     damping towards zero (log c without bound) would otherwise hand that on to every later one."""
-    if warm is not None and 0 <= i0 - warm[0] < len(warm[2]):
-        j0, _, states = warm
+    if warm is not None and 0 <= i0 - warm[0] < len(warm[1]):
+        j0, states = warm
         return np.concatenate([theta0, states[i0 - j0]])
     return np.concatenate([theta0, np.zeros(n_state)])
 
@@ -115,9 +115,9 @@ def _warm_start(warm, i0: int, theta0: np.ndarray, n_state: int) -> np.ndarray:
 def _window_fit(
     system, t, f, channels, i0: int, i1: int, u0: np.ndarray, substeps: int, hold: str = "linear"
 ):
-    """(k, c), their covariance in log coordinates, the fitted unknowns and the simulated states on
-    samples i0..i1, the window's initial state free (the sandwich where the residuals are a
-    model's smooth error, as a measured record's are)."""
+    """(k, c), their covariance in log coordinates and the simulated states on samples i0..i1,
+    the window's initial state free (the sandwich where the residuals are a model's smooth error,
+    as a measured record's are)."""
     seg_channels = [
         type(ch)(ch.kind, ch.dof, ch.data[i0 : i1 + 1], max(float(np.nanstd(ch.data[i0 : i1 + 1])), 1e-300))
         for ch in channels
@@ -143,7 +143,7 @@ def _window_fit(
     ik, ic = names.index(_name(system, "k")), names.index(_name(system, "c"))
     cov_kc = cov[np.ix_([ik, ic], [ik, ic])]
     states = np.asarray(problem.simulate(sol.x)[0])[:, 0, :]
-    return (vals[names[ik]], vals[names[ic]]), cov_kc, sol.x, states
+    return (vals[names[ik]], vals[names[ic]]), cov_kc, states
 
 
 def _name(system, which: str) -> str:
