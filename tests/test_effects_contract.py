@@ -59,7 +59,13 @@ def test_every_effect_keeps_the_contract(name, signals):
         p = eff.from_change(-0.2 if eff.changes == "stiffness" else 0.5, 8.0)
         assert p["t_d"] == 8.0 and eff.key in p
     assert set(eff.stands_for) <= set(OUTSIDE)
-    assert eff.storey_trials(dict(drawn), 0.1, 15.0)[0] == drawn
+    trials = eff.storey_trials(dict(drawn), (0.0, 16.0), 0.1, 15.0)
+    if eff.step_in_time:  # the drawn size at every time of a grid inside the span
+        assert len(trials) > 1 and all(
+            {**t, "t_d": drawn["t_d"]} == drawn and 0 < t["t_d"] < 16 for t in trials
+        )
+    else:
+        assert trials[0] == drawn
 
 
 def test_effects_of_a_group_exclude_each_other():

@@ -26,9 +26,6 @@ from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.storey_model import Found, building_with, storey_signals
 from pidyn.simulate import input_hold, simulate_batch
 
-#: a step in time is tried at this many times over its search span
-STEP_TIMES = 16
-
 
 @dataclass
 class Ranked:
@@ -106,14 +103,9 @@ def trial_values(values: dict[str, float], storey: int, row: dict) -> dict[str, 
 
 
 def _trials(row: dict, span: tuple[float, float], drift_peak: float, k: float) -> list[dict]:
-    """The starts of a row's trial: for a step in time the same size at every grid time, else
-    what the effect asks for (``Effect.storey_trials``: a stop tries every gap of its grid)."""
-    params = dict(row["parameters"])
-    eff = EFFECTS[row["effect"]]
-    if eff.step_in_time:
-        lo = span[0] + 0.05 * (span[1] - span[0])
-        return [{**params, "t_d": float(t)} for t in np.linspace(lo, span[1], STEP_TIMES + 2)[1:-1]]
-    return eff.storey_trials(params, drift_peak, k)
+    """The starts of a row's trial, as its effect asks (``Effect.storey_trials``: a step in time
+    at every time of a grid, a stop at every gap of its grid)."""
+    return EFFECTS[row["effect"]].storey_trials(dict(row["parameters"]), span, drift_peak, k)
 
 
 def rank_candidates(

@@ -131,9 +131,12 @@ class Effect(ABC):
         """A change in time's parameters from a located step (its relative size and time)."""
         raise NotImplementedError(f"{self.name} is not a change in time")
 
-    def storey_trials(self, params: dict[str, float], drift_peak: float, k: float) -> list[dict[str, float]]:
-        """The starts a building's trial of this effect in a storey refines from (the storey's peak
-        drift ``drift_peak``, its stiffness ``k``); the screening's estimate alone by default."""
+    def storey_trials(
+        self, params: dict[str, float], span: tuple[float, float], drift_peak: float, k: float
+    ) -> list[dict[str, float]]:
+        """The starts a building's trial of this effect in a storey refines from (the fitting
+        ``span``, the storey's peak drift ``drift_peak``, its stiffness ``k``); the screening's
+        estimate alone by default."""
         return [params]
 
     def admissible(self, params: dict[str, float], nominal: dict[str, float]) -> bool:

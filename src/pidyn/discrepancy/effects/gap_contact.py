@@ -23,7 +23,7 @@ class Gap(Effect):
             col = GapContact(1.0, gap).columns(s.t, s.x, s.v, None, {"gap": gap})["kg"]
             yield Candidate(self.name, col[:, None], ("kg",), fixed={"gap": float(gap)}, positive=(True,))
 
-    def storey_trials(self, params, drift_peak, k):
+    def storey_trials(self, params, span, drift_peak, k):
         """Every gap of the weak form's grid (shares of the storey's peak drift) with a contact as
         stiff as the storey at least: a stop that never engages at the weak form's gap has no
         gradient to bring it in, so a refinement from that gap alone can end where it started."""

@@ -18,6 +18,7 @@ class Damage(Effect):
     n_grid = 1
     step_in_time = True
     n_times = 40
+    storey_times = 16  # a building's trial tries the step at this many times over the span
 
     def _span(self, s):
         t_end = s.t_fit_end if s.t_fit_end is not None else float(s.t[-1])
@@ -44,6 +45,12 @@ class Damage(Effect):
 
     def from_change(self, fraction, t_change):
         return {"drop": -fraction, "t_d": t_change}  # a loss: the stiffness's fraction is negative
+
+    def storey_trials(self, params, span, drift_peak, k):
+        """The same size at every time of a grid over the span (a step's time has no gradient
+        where the step is far from it)."""
+        lo = span[0] + 0.05 * (span[1] - span[0])
+        return [{**params, "t_d": float(t)} for t in np.linspace(lo, span[1], self.storey_times + 2)[1:-1]]
 
     def term(self, p, s):
         drop = min(max(p["drop"], 0.01), 0.9)
