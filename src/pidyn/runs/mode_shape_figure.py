@@ -78,7 +78,7 @@ def mode_shape_figure(
     floors = [f - 1 for f in (record.sensors().get("a") or [])]
     if len(shaped) < 2 or len(floors) < 2:
         return None
-    ours = [_at(np.asarray(m["mode_shape"], float), floors) for m in shaped]
+    ours = [real_shape(np.asarray(m["mode_shape"], float)[floors]) for m in shaped]  # 1 at the top sensor
     try:
         peers = {"subspace": peer_shapes(record, len(shaped))}
     except (ValueError, np.linalg.LinAlgError):
@@ -105,12 +105,6 @@ def mode_shape_figure(
     ]
 
 
-def _at(shape: np.ndarray, floors: list[int]) -> np.ndarray:
-    """A shape at the measured floors, 1 at the highest."""
-    s = shape[floors]
-    return s / s[-1] if abs(s[-1]) > 1e-12 else s / np.max(np.abs(s))
-
-
 def _draw(path: Path, record: Any, shaped, ours, floors, peers, matched) -> None:
     import matplotlib
 
@@ -134,8 +128,7 @@ def _draw(path: Path, record: Any, shaped, ours, floors, peers, matched) -> None
             j, score = matched[name][r]
             if j is None:
                 continue
-            peer = np.asarray(rows[j]["mode_shape"], float)
-            peer = peer / peer[-1] if abs(peer[-1]) > 1e-12 else peer
+            peer = np.asarray(rows[j]["mode_shape"], float)  # real_shape's: 1 at the top sensor
             ax.plot(
                 np.r_[0.0, peer],
                 level,
