@@ -79,7 +79,7 @@ def _law(record: Any, system: Any, values: dict[str, float], sim: dict, centres:
     term = next((t for t in getattr(system, "terms", []) if hasattr(t, "at_envelope")), None)
     if term is None or sim.get("z") is None or sim["z"].shape[1] == 0:
         return None
-    col = [t.name for t in system.terms if t.n_latent].index(term.name)
+    col = sum(t.n_latent for t in system.terms[: system.terms.index(term)])  # the law's own latent column
     e = sim["z"][:, col]
     m = float(values.get("m", 1.0))
     out = np.full(len(centres), np.nan)
