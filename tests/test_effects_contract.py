@@ -59,6 +59,9 @@ def test_every_effect_keeps_the_contract(name, signals):
         p = eff.from_change(-0.2 if eff.changes == "stiffness" else 0.5, 8.0)
         assert p["t_d"] == 8.0 and eff.key in p
     assert set(eff.stands_for) <= set(OUTSIDE)
+    if eff.signed:  # a sign is a finding: the sampler draws the one it is given
+        for sign in (-1.0, 1.0):
+            assert np.sign(eff.sample(np.random.default_rng(1), signals, sign=sign)[eff.key]) == sign
     trials = eff.storey_trials(dict(drawn), (0.0, 16.0), 0.1, 15.0)
     if eff.step_in_time:  # the drawn size at every time of a grid inside the span
         assert len(trials) > 1 and all(

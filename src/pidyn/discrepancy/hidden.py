@@ -90,7 +90,7 @@ def _draw(
     if sign is not None and not eff.signed and n_effects == 1:
         raise ValueError(
             f"hidden effect '{name}': its sign is fixed by physics; sign={sign} applies only to "
-            "cubic_stiffness and quadratic_stiffness"
+            + ", ".join(n for n, e in EFFECTS.items() if e.signed)
         )
     drawn = eff.sample(rng, s, sign=sign if eff.signed else None)
     if set(drawn) & set(hidden):

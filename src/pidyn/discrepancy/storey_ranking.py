@@ -202,12 +202,12 @@ def _one(storey: int, row: dict, params: dict, d: np.ndarray, q: np.ndarray, r: 
     if dd <= 0:
         return None
     step = float(r @ pd_) / dd
-    chi2 = step * float(r @ pd_) if (step > 0 or _sign_free(row["effect"])) else 0.0
+    chi2 = step * float(r @ pd_) if (step > 0 or _signed(row["effect"])) else 0.0
     return Ranked(storey, {**row, "parameters": params, "linear_step": step}, chi2, chi2 / total, pd_)
 
 
-def _sign_free(effect: str) -> bool:
-    """Whether a row's fitted size may take either sign (``Effect.sign_free``; a learned force's
+def _signed(effect: str) -> bool:
+    """Whether a row's fitted size may take either sign (``Effect.signed``; a learned force's
     row is no library effect)."""
     eff = EFFECTS.get(effect)
-    return bool(eff is not None and eff.sign_free)
+    return bool(eff is not None and eff.signed)

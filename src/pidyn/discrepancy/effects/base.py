@@ -106,9 +106,6 @@ class Effect(ABC):
     #: tried by the output-error check where the running period moves beyond its windows'
     #: intervals (a structure whose properties follow the amplitude)
     tried_where_period_moves: bool = False
-    #: the fitted size may take either sign (a hardening or softening spring, a damping that rises
-    #: or falls): a building's linearised score counts a step of either sign
-    sign_free: bool = False
     #: effects of one group exclude each other in a model (one change in time at a time)
     exclusive_group: str | None = None
     #: for a change in time: the property that changes (``stiffness``, ``damping``), as reports say it
@@ -156,7 +153,9 @@ class Effect(ABC):
         ``sign`` (+1 / -1) fixes the sign of an effect whose sign is a finding (cubic and
         quadratic stiffness); None draws it. Effects whose sign physics fixes ignore it."""
 
-    #: the effect's sign is a finding (its coefficient is identified with either sign)
+    #: the effect's sign is a finding: its size is identified with either sign (a spring that
+    #: hardens or softens, a damping that rises or falls), a building's linearised score counts a
+    #: step of either sign, and its sampler takes a sign
     signed: bool = False
 
     #: the parameter the tests check, and its relative tolerance

@@ -11,7 +11,6 @@ from pidyn.systems.terms import CubicStiffness
 class Cubic(Effect):
     name, key, tolerance = "cubic_stiffness", "k3", 0.2
     order = 1
-    sign_free = True
     stands_for = ("trilinear_spring",)  # a softening branch before a stop
 
     def candidates(self, s):

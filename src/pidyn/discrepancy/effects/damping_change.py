@@ -14,7 +14,7 @@ class DampChange(Damage):
 
     name, key, tolerance = "damping_change", "change", 0.35
     order = 7
-    sign_free = True
+    signed = True
     changes = "damping"
     signal, coef = "v", "dc"
     base = ViscousDamping(1.0)
@@ -41,8 +41,10 @@ class DampChange(Damage):
         )
 
     def sample(self, rng, s, sign=None):
-        # damage raises the dissipation: the damping doubles to triples
+        # damage raises the dissipation: the damping doubles to triples; sign -1: it falls by a third to a half
         return {
-            "change": float(rng.uniform(1.0, 2.0)),
+            "change": float(rng.uniform(1.0, 2.0))
+            if sign is None or sign > 0
+            else -float(rng.uniform(0.33, 0.5)),
             "t_d": self._time_of_share(s, float(rng.uniform(0.2, 0.6))),
         }

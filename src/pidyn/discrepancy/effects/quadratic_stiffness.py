@@ -11,7 +11,6 @@ from pidyn.systems.terms import QuadraticStiffness
 class Quadratic(Effect):
     name, key, tolerance = "quadratic_stiffness", "k2", 0.25
     order = 2
-    sign_free = True
 
     def candidates(self, s):
         col = QuadraticStiffness(1.0).columns(s.t, s.x, s.v, None, {})["k2"]
