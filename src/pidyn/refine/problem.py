@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import csr_matrix
 
 from pidyn.autodiff import Dual
 from pidyn.integrate import input_hold, piece_starts, rk4, stage_excitation
@@ -298,25 +299,45 @@ class ShootingProblem:
         cols = self.n_theta + k[:, None] * self.ns + np.arange(self.ns)[None, :]
         return np.where(k[:, None] >= 0, cols, -1)
 
-    def linearize(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """r, J = dr/du, c, C = dc/du, all exact."""
+    def linearize(
+        self, u: np.ndarray, sparse: bool = False
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """r, J = dr/du, c, C = dc/du, all exact. ``sparse``: J and C as scipy CSR matrices (a
+        sample's row holds the parameters' and its own segment's columns only)."""
         Y, _, A = self.simulate(u, dual=True)
         r = self._data_res(Y, A)
-        nt, ns, n_u = self.n_theta, self.ns, self.n_unknowns
-        blocks = []
-        for ch in self.channels:
-            sim = self._channel_sim(Y, A, ch)
-            blocks.append(sim.d[self.sel_j, self.sel_s] / ch.sigma)  # (M_c, D)
-        G = np.concatenate(blocks)
-        J = np.zeros((len(r), n_u))
-        J[:, :nt] = G[:, :nt]
-        seg = np.tile(self.sel_s, len(self.channels))
-        cols = self._state_cols(seg)
-        ok = cols[:, 0] >= 0
-        rows = np.nonzero(ok)[0]
-        J[rows[:, None], cols[ok]] = G[ok, nt:]
+        nt, n_u = self.n_theta, self.n_unknowns
+        G = np.concatenate(
+            [self._channel_sim(Y, A, ch).d[self.sel_j, self.sel_s] / ch.sigma for ch in self.channels]
+        )  # (M, D): d r / d (theta, own segment's state)
+        G[np.abs(r) >= RESIDUAL_CAP] = 0.0  # a capped (blown-up) residual is flat in u
+        G[~(np.abs(G) < BLOWN_UP)] = 0.0
+        cols = self._state_cols(np.tile(self.sel_s, len(self.channels)))
+        rows = np.arange(len(r))
+        if sparse:
+            ok = cols >= 0
+            J = csr_matrix(
+                (
+                    np.concatenate([G[:, :nt].ravel(), G[:, nt:][ok]]),
+                    (
+                        np.concatenate([np.repeat(rows, nt), np.broadcast_to(rows[:, None], cols.shape)[ok]]),
+                        np.concatenate([np.tile(np.arange(nt), len(r)), cols[ok]]),
+                    ),
+                ),
+                shape=(len(r), n_u),
+            )
+        else:
+            J = np.zeros((len(r), n_u))
+            J[:, :nt] = G[:, :nt]
+            ok = cols[:, 0] >= 0
+            J[rows[ok][:, None], cols[ok]] = G[ok, nt:]
         c = self._defects(u, Y)
-        C = np.zeros((len(c), n_u))
+        C = self._defect_jacobian(Y, c)
+        return r, J, c, (csr_matrix(C) if sparse else C)
+
+    def _defect_jacobian(self, Y, c: np.ndarray) -> np.ndarray:
+        nt, ns = self.n_theta, self.ns
+        C = np.zeros((len(c), self.n_unknowns))
         if self.S > 1 and self.link.any():
             s = np.nonzero(self.link)[0]
             end_d = Y.d[self.ends[s], s] / self.state_scale[None, :, None]  # (links, ns, D)
@@ -328,12 +349,10 @@ class ShootingProblem:
                 C[np.ix_(rr[k], own[k])] = -end_d[k, :, nt:]
             nxt = self._state_cols(s + 1)
             C[rr.ravel(), nxt.ravel()] = 1.0
-        # a capped (blown-up) residual or defect is flat in u: its row carries no derivative
-        J[np.abs(r) >= RESIDUAL_CAP] = 0.0
+        # a capped (blown-up) defect is flat in u: its row carries no derivative
         C[np.abs(c) >= RESIDUAL_CAP] = 0.0
-        J[~(np.abs(J) < BLOWN_UP)] = 0.0
         C[~(np.abs(C) < BLOWN_UP)] = 0.0
-        return r, J, c, C
+        return C
 
     def residuals_and_fd_jacobian(self, u: np.ndarray, step: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
         """Residuals and their forward-difference Jacobian from one batched plain simulation.

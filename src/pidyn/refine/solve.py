@@ -21,7 +21,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import null_space
 from scipy.optimize import least_squares
+from scipy.sparse import vstack as sparse_vstack
 
+from pidyn.refine.normal_lm import levenberg_marquardt
 from pidyn.refine.problem import ShootingProblem
 
 log = logging.getLogger(__name__)
@@ -40,20 +42,40 @@ class SolveReport:
     history: list[dict] = field(default_factory=list)
 
 
-def _penalised(problem: ShootingProblem, mu: float):
+def _penalised(problem: ShootingProblem, mu: float, sparse: bool = False):
     sq = np.sqrt(mu)
-    cache: dict[str, np.ndarray] = {}
 
     def fun(u: np.ndarray) -> np.ndarray:
         r, c = problem.residuals(u)
         return np.concatenate([r, sq * c])
 
-    def jac(u: np.ndarray) -> np.ndarray:
-        r, J, c, C = problem.linearize(u)
-        cache["u"] = u.copy()
-        return np.vstack([J, sq * C])
+    def jac(u: np.ndarray):
+        r, J, c, C = problem.linearize(u, sparse=sparse)
+        return sparse_vstack([J, sq * C], format="csr") if sparse else np.vstack([J, sq * C])
 
     return fun, jac
+
+
+#: above this many operations of a dense QR of the penalised Jacobian (rows x unknowns^2),
+#: stage 1 solves the sparse normal equations (``pidyn.refine.normal_lm``): several records
+#: at once, a long building record. Below it MINPACK's LM, whose QR costs little there.
+DENSE_QR_LIMIT = 1e9
+
+
+def _least_squares(fun, jac, u: np.ndarray, max_nfev: int, big: bool) -> tuple[np.ndarray, int, int]:
+    if big:
+        out = levenberg_marquardt(fun, jac, u, max_nfev=max_nfev)
+        return out.x, out.nfev, out.njev
+    sol = least_squares(
+        fun, u, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=max_nfev, x_scale="jac"
+    )
+    return sol.x, int(sol.nfev), int(sol.njev or 0)
+
+
+def is_big(problem: ShootingProblem) -> bool:
+    """Is a dense QR of the problem's Jacobian the refinement's main cost?"""
+    rows = len(problem.sel_s) * len(problem.channels)
+    return rows * float(problem.n_unknowns) ** 2 > DENSE_QR_LIMIT
 
 
 def solve_penalty(
@@ -70,15 +92,13 @@ def solve_penalty(
     u = np.asarray(u0, float).copy()
     nfev = njev = 0
     per_sample = max(len(problem.sel_s), 1) / max(problem.S, 1)  # samples per segment
+    big = is_big(problem)
     for k in range(max_rounds):
         mu = mu0 * per_sample * growth**k
-        fun, jac = _penalised(problem, mu)
-        sol = least_squares(
-            fun, u, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=max_nfev, x_scale="jac"
-        )
-        u = sol.x
-        nfev += sol.nfev
-        njev += int(sol.njev or 0)
+        fun, jac = _penalised(problem, mu, sparse=big)
+        u, nf, nj = _least_squares(fun, jac, u, max_nfev, big)
+        nfev += nf
+        njev += nj
         r, c = problem.residuals(u)
         dmax = float(np.max(np.abs(c))) if c.size else 0.0
         if history is not None:
@@ -88,10 +108,10 @@ def solve_penalty(
                     "mu": mu,
                     "cost": float(r @ r),
                     "max_defect": dmax,
-                    "nfev": int(sol.nfev),
+                    "nfev": nf,
                 }
             )
-        log.debug("penalty mu=%.3g: cost %.6g, max defect %.3g (%d evaluations)", mu, r @ r, dmax, sol.nfev)
+        log.debug("penalty mu=%.3g: cost %.6g, max defect %.3g (%d evaluations)", mu, r @ r, dmax, nf)
         if dmax < penalty_tol:
             break
     return u, nfev, njev
