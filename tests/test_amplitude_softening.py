@@ -60,7 +60,7 @@ def test_a_moving_period_adds_the_amplitude_dependent_structure_to_the_check(mon
     the user lists the effects to screen, it does not."""
     from types import SimpleNamespace
 
-    from pidyn.discrepancy import pipeline
+    from pidyn.discrepancy import sdof_steps as pipeline
     from pidyn.discrepancy.confirm import Confirmation
 
     seen = {}

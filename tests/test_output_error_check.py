@@ -182,7 +182,7 @@ def _located_change(rec, fit_end: float, drop: float, t_d: float) -> tuple[dict,
     """A located change as the diagnosis passes it to the check, and the check's output."""
     from types import SimpleNamespace
 
-    from pidyn.discrepancy.pipeline import _change_candidate
+    from pidyn.discrepancy.sdof_steps import _change_candidate
 
     nominal = LinearSDOF(c=0.5, k=15.0)
     s = Signals(rec.t, rec.x[:, 0], rec.v[:, 0], 1.0, 15.0, "k", t_fit_end=fit_end)
@@ -241,7 +241,7 @@ def test_the_first_cause_keeps_a_located_change_only_when_the_check_names_it(mon
     check names something else, or nothing, no change is reported."""
     from types import SimpleNamespace
 
-    from pidyn.discrepancy import pipeline
+    from pidyn.discrepancy import sdof_steps as pipeline
     from pidyn.discrepancy.confirm import Confirmation
 
     seen = {}

@@ -199,6 +199,11 @@ def test_the_diagnosis_of_a_deck_support_by_support_is_refused_by_name(tmp_path)
     from pidyn.config import compose
     from pidyn.tasks.diagnose import _diagnose
 
-    cfg = compose("diagnose", groups={"data": "csmip", "system": "rigid_deck"}, output_dir=tmp_path)
-    with pytest.raises(ValueError, match="diagnosis support by support"):
+    cfg = compose(
+        "diagnose",
+        groups={"data": "csmip", "system": "rigid_deck"},
+        values={"data.station": "CE89324"},
+        output_dir=tmp_path,
+    )
+    with pytest.raises(ValueError, match="diagnosis support by support"):  # no subject takes a deck
         _diagnose(cfg, None)

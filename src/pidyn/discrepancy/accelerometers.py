@@ -17,7 +17,7 @@ only measured channel (identification, output error and every held-out judgement
 sensors read it), and the integrated motion in ``meta['motion']`` for the weak-form screening,
 which needs x and x'. On a stiff structure the relative motion is a small difference of two large
 accelerations and its integral is a poor measurement: the screening then only proposes, and an
-output-error fit of each candidate to the accelerations decides (``pipeline``). The combination
+output-error fit of each candidate to the accelerations decides (``sdof_steps``). The combination
 and the filter are kept in the record's ``meta['accelerometers']``.
 """
 

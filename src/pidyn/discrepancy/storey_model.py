@@ -31,9 +31,6 @@ log = logging.getLogger(__name__)
 #: at 0.5; a stop and a stiffness loss rose alike (52 -> 146, 79 -> 157); two clean buildings
 #: stayed below 0.3 at every corner. At 0.1 f1 a clean building read as hysteretic everywhere
 CORNER_SHARE = 0.5
-
-
-CORNER_SHARE = 0.5
 #: the weak form's windows span this share of the fundamental period: a storey's drift carries
 #: the higher modes too, and a stop that engages briefly is seen in short windows (the gap of
 #: that building scored 13 at one period, 36-55 at half of it)
@@ -82,7 +79,6 @@ class BuildingDiagnosis:
     screenings: list[Screening]
     values: dict[str, float]
     corner_hz: float
-    seconds: float
     notes: list[str] = field(default_factory=list)
     learned: dict | None = None  # the learned storey force of an unexplained verdict (storey_learned)
 

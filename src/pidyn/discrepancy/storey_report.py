@@ -59,7 +59,6 @@ def summarize_building(
         "highpass_hz": d.corner_hz,
         "noise": (record.meta or {}).get("noise"),
         "thresholds": dataclasses.asdict(thresholds),
-        "wall_seconds": d.seconds,
         "notes": d.notes,
     }
 

@@ -29,23 +29,17 @@ cross-validation) while no library effect both passes and earns its held-out gai
 from __future__ import annotations
 
 import logging
-import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from pidyn.data.sources import Record
-from pidyn.discrepancy.case import split_spans
 from pidyn.discrepancy.screening import Screening
-from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_choice import Study, building_fit_test, structured_storey
 from pidyn.discrepancy.storey_learned import learned_storey_force
 from pidyn.discrepancy.storey_model import (
     CORNER_SHARE,
     WINDOW_SHARE,
-    BuildingDiagnosis,
     Found,
     StoreyView,
 )
@@ -54,78 +48,14 @@ from pidyn.discrepancy.storey_ranking import (
     measured_floors,
     storey_order,
 )
-from pidyn.discrepancy.storey_steps import building_gain, next_step, refusal_notes
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.notes import note
-from pidyn.progress import Steps
 from pidyn.simulate import simulate_response
-from pidyn.systems.shear_building import ShearBuilding
 
 log = logging.getLogger(__name__)
 
 
-def diagnose_building(
-    record: Record,
-    system: ShearBuilding,
-    settings: DiagnosisSettings,
-    refine_settings: Any,
-    start: dict | None = None,
-    run_dir: Path | None = None,
-) -> BuildingDiagnosis:
-    """The loop of the module's docstring; ``system``: the nominal (linear) building; ``start``:
-    its starting values (default: read from the data); ``run_dir``: where a learned storey
-    force's weights go."""
-
-    t_wall = time.perf_counter()
-    fit, held = split_spans(record, float(settings.fit_share))
-    log.info("building diagnosis of '%s': fit %.4g-%.4g s, held out %.4g-%.4g s", record.name, *fit, *held)
-    study = Study(record, system, settings, refine_settings, fit, held)
-    progress = Steps("building diagnosis", int(settings.max_effects) * bool(settings.extend) + 2, log)
-    progress.step("the nominal building")
-    nominal, current = nominal_state(study, start)
-    found, steps, refused = [], [], None  # effects found, each step's report, the step refused
-    while len(found) < int(settings.max_effects) and settings.extend:
-        progress.step(f"screening the storeys for effect {len(found) + 1}")
-        views, screenings = study.screen(current, found)
-        step = next_step(study, current, found, views, screenings)
-        if step is None:
-            break
-        steps.append(step["report"])
-        if not step["accepted"]:
-            refused = step["report"]
-            break
-        found.append(step["found"])
-        current = step["current"]
-    progress.step("the final screening and the verdict", last=True)
-    views, screenings = study.screen(current, found)
-    verdict, unexplained, notes, test = building_verdict(study, current, found, screenings)
-    nominal["heldout_test"] = test
-    notes = refusal_notes(refused) + notes
-    learned = None
-    if verdict == Verdict.UNEXPLAINED and settings.learn_unexplained:
-        current, learned = _learned(study, current, found, (views, screenings), unexplained, run_dir)
-    extended = _extended(current, found, bool(learned and learned["kept"]))
-    return BuildingDiagnosis(
-        verdict,
-        found,
-        nominal,
-        extended,
-        steps,
-        building_gain(nominal, current, extended is not None),
-        unexplained,
-        views,
-        screenings,
-        current["values"],
-        study.corner,
-        time.perf_counter() - t_wall,
-        notes,
-        None
-        if learned is None
-        else {k: v for k, v in learned.items() if k not in ("system", "values", "heldout")},
-    )
-
-
-def _learned(
+def learned_step(
     study: Study,
     current: dict,
     found: list[Found],
@@ -150,7 +80,7 @@ def _learned(
     return current, learned
 
 
-def _extended(current: dict, found: list[Found], learned_kept: bool) -> dict | None:
+def extended_entry(current: dict, found: list[Found], learned_kept: bool) -> dict | None:
     """The extended model's entry: the named effects', or a kept learned force's."""
     if not found and not learned_kept:
         return None

@@ -12,7 +12,7 @@ class Amplitude(Effect):
     """A stiffness and a damping that follow the response's recent amplitude (a latent envelope
     with its time constant, ``AmplitudeSoftening``): a period that lengthens in strong shaking and
     recovers in the coda. Not screened by default: tried where the running period moves beyond
-    its windows' intervals (``pipeline.run``), or when ``diagnosis.effects`` lists it."""
+    its windows' intervals (``subjects.single_dof``), or when ``diagnosis.effects`` lists it."""
 
     name, key, tolerance = "amplitude_softening", "soft", 0.3
     order = 9

@@ -1,4 +1,5 @@
-"""The diagnosis loop: what does the nominal model get wrong, why, and what does fixing it gain?
+"""The steps of a single degree of freedom's diagnosis (``subjects.single_dof`` runs them in the
+diagnosis loop, ``pidyn.discrepancy.loop``):
 
 1. a data-driven start, then the nominal model on the fitting part (``identify``: PIDynNet,
    then optionally an output-error polish);
@@ -7,14 +8,14 @@
    leans to without deciding is fitted by output error and named when the simulated response
    decides for it (``pidyn.discrepancy.confirm``);
 3. the held-out check, and where the structure changed when the model fails there
-   (``pidyn.discrepancy.changes``);
-4. the model extended with the named effect and identified again, screened again, until
-   nothing more passes the evidence (a structured remainder no library effect explains gets a
-   learned force, ``pidyn.discrepancy.learned_fit``);
+   (``pidyn.discrepancy.changes``); the first cause (``_first_cause``);
+4. the model extended with the named effect and identified again (``extension_step``), screened
+   again (``next_cause``), until nothing more passes the evidence (a structured remainder no
+   library effect explains gets a learned force, ``pidyn.discrepancy.learned_fit``);
 5. nominal and extended models simulated over the held-out part and compared.
 
 The case and what it ends with are ``pidyn.discrepancy.case``; the nominal model's start, fit,
-modes and running period ``pidyn.discrepancy.nominal``; this module is the loop.
+modes and running period ``pidyn.discrepancy.nominal``.
 
 ``identify(node, folder, fit) -> (metrics, system, values)`` identifies the model a config
 node describes on the fitting span ``fit`` and writes its run to ``folder``: the task passes
@@ -28,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from pidyn.discrepancy.case import Case, Nominal, Outcome
+from pidyn.discrepancy.case import Case, Nominal
 from pidyn.discrepancy.confirm import Confirmation, confirm, undecided
 from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.extend import (  # noqa: F401
@@ -48,16 +49,10 @@ from pidyn.discrepancy.learned_step import (
 )
 from pidyn.discrepancy.nominal import (
     fit_budget,
-    identify_nominal,
-    nominal_modes,
     polish,
-    running_period,
-    starting_point,
 )
-from pidyn.discrepancy.nominal_check import check_heldout
-from pidyn.discrepancy.screening import EXCLUSIVE, Screening, screen
-from pidyn.discrepancy.verdicts import Verdict, unearned_names
-from pidyn.progress import Steps
+from pidyn.discrepancy.screening import Screening, screen
+from pidyn.discrepancy.verdicts import Verdict
 from pidyn.reporting import nrmse
 from pidyn.systems.sdof import SDOFSystem
 from pidyn.weak_form import WeakForm
@@ -84,64 +79,6 @@ STEP_EVIDENCE = (
     "parameters",
     "source",
 )
-
-
-def run(case: Case) -> Outcome:
-    """Steps 1-5 on a prepared case."""
-    progress = Steps("diagnosis", 6, log)
-    progress.step("the nominal model")
-    values0, period = starting_point(case)
-    nom = identify_nominal(case, values0, period)
-    from pidyn.discrepancy.residual import unexplained_force
-
-    progress.step("screening")
-    sc = case.screen(nom.system, nom.values, nom.s, nom.weak)
-    pointwise = unexplained_force(nom.system, nom.values, case.record.t, case.x_raw, case.weak_f, nom.period)
-    forced = case.settings.force_effect
-    log.info("screening: %s", ", ".join(f"{r['effect']} {r['score']:.1f}" for r in sc.ranking[:4]))
-    # does the nominal model hold on the held-out part? if not, when did the structure change?
-    progress.step("held-out check and running period")
-    x_nom = case.free_run(nom.system, nom.values, float(nom.s.v[0]))
-    check, change_row = check_heldout(case, nom, sc, x_nom, bool(forced))
-    running = running_period(case, nom)
-    progress.step("the first cause")
-    cause, confirmation, change_row = _first_cause(case, nom, sc, check, change_row, forced, running)
-    if (
-        case.from_accelerometers
-    ):  # the period that moves beyond its windows' intervals refutes one linear model
-        structured = check.failed or bool(running and running.get("variation", {}).get("varies"))
-    else:
-        structured = sc.verdict == Verdict.UNEXPLAINED or check.failed
-    if cause is None and case.settings.learn_unexplained and not forced and structured:
-        cause = LEARNED  # structured, but nothing in the library explains it: learn the force
-    row = _cause_row(cause, sc, change_row, confirmation)
-    progress.step("extensions")
-    ext = names_earn_or_learn(
-        case, nom, sc, extend_until_explained(case, nom, cause, row, bool(forced)), bool(forced)
-    )
-    causes = ext["causes"] if case.settings.extend else ([] if cause is None else [cause])
-    progress.step("simulations and modes")
-    x_ext = (
-        case.free_run(ext["system"], ext["values"], float(nom.s.v[0])) if ext["system"] is not None else None
-    )
-    sims = _acceleration_sims(case, nom, ext) if case.from_accelerometers else {}
-    return Outcome(
-        nom,
-        sc,
-        check,
-        change_row,
-        ext,
-        causes,
-        cause,
-        bool(forced),
-        confirmation,
-        pointwise,
-        x_nom,
-        x_ext,
-        sims,
-        nominal_modes(case, nom),
-        running,
-    )
 
 
 def _first_cause(
@@ -230,72 +167,6 @@ def _acceleration_sims(case: Case, nom: Nominal, ext: dict) -> dict:
     }
 
 
-def extend_until_explained(
-    case: Case, nom: Nominal, cause: str | None, row: dict | None, forced: bool
-) -> dict[str, Any]:
-    """Extend the model with ``cause``, identify it (PIDynNet, polish), screen the extended
-    model against the effects not yet in it, and repeat while one passes the thresholds, up to
-    ``diagnosis.max_effects``. Each step's evidence is kept; the last model carries every
-    named effect. Step k's run is in ``extended/`` (k = 1) or ``extended_<k>/``."""
-    st = case.settings
-    out: dict[str, Any] = {
-        "system": None,
-        "values": None,
-        "metrics": None,
-        "causes": [],
-        "steps": [],
-        "note": None,
-        "refused": None,
-        "learned_fit": None,
-    }
-    node, values = nom.node, nom.values
-    limit = 1 if forced else int(st.max_effects)
-    while cause is not None and row is not None and st.extend:
-        step = _extension_step(case, nom, node, values, cause, row, out)
-        if step is None:  # a learned force that predicts the held-out part worse: not kept
-            break
-        node, values, system = step
-        k = len(out["causes"])
-        if k >= limit:
-            if not forced:
-                log.info("stopping at diagnosis.max_effects=%d effects", limit)
-            break
-        if cause == LEARNED:
-            break  # the learned force takes whatever is left: nothing to screen after it
-        present = set(out["causes"]) | {t.name for t in system.terms}
-        blocked = set().union(*[g for g in EXCLUSIVE if g & present])
-        remaining = {n: e for n, e in case.effects.items() if n not in present | blocked}
-        if not remaining:
-            break
-        cause, row = next_cause(case, system, values, node, remaining, out, nom.s, nom.weak)
-        if cause == LEARNED and LEARNED in out["causes"]:
-            break
-    return out
-
-
-def names_earn_or_learn(
-    case: Case, nom: Nominal, sc: Screening, ext: dict[str, Any], forced: bool
-) -> dict[str, Any]:
-    """The library names of an extension must earn their place together (``unearned_names``, on
-    the held-out errors the diagnosis reports): the members of a pair may help only together (a
-    gap alone once predicted 1.82 -> 2.17, gap and friction 0.99). When they do not, the extension
-    is not kept (``unearned``, with its steps) and a learned force is tried from the nominal model
-    in their place; a forced effect's model is kept, its name still refused."""
-    names = [c for c in ext["causes"] if c != LEARNED]
-    if not names or ext["system"] is None:
-        return ext
-    refused = unearned_names(names, heldout_errors(case, nom, ext), case.thresholds)
-    if refused is None or forced:
-        return {**ext, "unearned": refused}
-    log.info("%s", refused["note"])
-    learned = case.settings.learn_unexplained and LEARNED not in ext["causes"]
-    new = extend_until_explained(
-        case, nom, LEARNED if learned else None, learned_row(sc.structure) if learned else None, False
-    )
-    new["unearned"] = {**refused, "steps": ext["steps"]}
-    return new
-
-
 def heldout_errors(case: Case, nom: Nominal, ext: dict[str, Any]) -> dict[str, float | None]:
     """The nominal and extended models' held-out NRMSE as ``diagnosis.json``'s ``gain`` gives it:
     of the displacement, or of the accelerations as the sensors read them."""
@@ -309,7 +180,7 @@ def heldout_errors(case: Case, nom: Nominal, ext: dict[str, Any]) -> dict[str, f
     return {k: None if s is None else nrmse(s["x"][held, 0], case.x_raw[held]) for k, s in sims.items()}
 
 
-def _extension_step(
+def extension_step(
     case: Case, nom: Nominal, node: dict, values: dict[str, float], cause: str, row: dict, out: dict[str, Any]
 ) -> tuple[dict, dict[str, float], SDOFSystem] | None:
     """Step k: the current model extended with ``cause``, identified, polished (and a learned
