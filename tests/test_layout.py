@@ -161,3 +161,20 @@ def test_no_file_is_longer_than_500_lines():
         if (n := len(f.read_text().splitlines())) > 500
     ]
     assert not long, long
+
+
+def test_an_import_inside_a_function_says_why():
+    """Imports live at the top of a module; the few inside a function (a heavy or optional library
+    loaded on first use, a task imported once the settings hold) carry their reason in a comment."""
+    bare = []
+    for f in SRC.rglob("*.py"):
+        lines = f.read_text().splitlines()
+        for node in ast.walk(ast.parse("\n".join(lines))):
+            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            for sub in ast.walk(node):
+                if isinstance(sub, (ast.Import, ast.ImportFrom)):
+                    near = lines[sub.lineno - 2 : sub.end_lineno]
+                    if not any("#" in ln for ln in near):
+                        bare.append(f"{f.relative_to(SRC)}:{sub.lineno}")
+    assert not bare, bare

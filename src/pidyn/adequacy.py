@@ -28,9 +28,11 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from pidyn.assessment import ground_acceleration, measured_convention
 from pidyn.reporting import nrmse
+from pidyn.systems.modal import linear_matrices
 
 
 @dataclass(frozen=True)
@@ -93,7 +95,6 @@ def _measured(record, kind: str, fl: int) -> np.ndarray:
 
 def ljung_box(r: np.ndarray, lags: int) -> tuple[float, float]:
     """Ljung-Box Q over ``lags`` lags and its p-value (chi-square, ``lags`` degrees of freedom)."""
-    from scipy import stats
 
     r = np.asarray(r, float) - np.mean(r)
     n = len(r)
@@ -121,7 +122,6 @@ def rk4_stability(system, values: dict[str, float], dt: float, substeps: int = 4
     ``1 + z + z^2/2 + z^3/6 + z^4/24``. A storey of tiny mass and large damping has a rate far
     beyond the step; its simulation blows up whatever the data say. None for a model without a
     linear part about rest."""
-    from pidyn.systems.modal import linear_matrices
 
     try:
         M, C, K = (np.atleast_2d(np.asarray(a, float)) for a in linear_matrices(system, values))

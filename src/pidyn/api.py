@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import shutil
+import sys
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -28,9 +30,17 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import yaml
+from hydra.errors import HydraException
+from omegaconf.errors import OmegaConfBaseException
 
+from pidyn.assessment import measured_convention
 from pidyn.config import compose, group_options
+from pidyn.data.multi import concatenate
 from pidyn.data.sources import Record
+from pidyn.excitation.ground_motion import prepare
+from pidyn.reporting import plot_convergence
+from pidyn.runs.folder import COMPLETE, is_complete
+from pidyn.simulate import simulate
 
 #: short names for settings a notebook user sets often (any other key: ``model__schedule__max_windows=4``)
 ALIASES = {
@@ -84,7 +94,6 @@ class Result:
     def load(cls, run_dir: str | Path, objects: dict[str, Any] | None = None) -> Result:
         """A run folder written by ``identify`` or ``pidyn-train``, read back."""
         run_dir = Path(run_dir)
-        from pidyn.runs.folder import COMPLETE, is_complete
 
         if not (run_dir / "metrics.json").exists() or not is_complete(run_dir):
             failed = run_dir / "failed.json"
@@ -136,7 +145,6 @@ class Result:
     def plot(self, path: str | Path | None = None):
         """PIDynNet's estimate over record time with the window edges, the truth when known and
         the final estimate with its 95 % interval; returns the figure (or writes ``path``)."""
-        from pidyn.reporting import plot_convergence
 
         final = {n: {"value": v, "ci95": self.ci95[n]} for n, v in self.params.items() if n in self.ci95}
         return plot_convergence(
@@ -164,8 +172,6 @@ def _progress(show: bool = True):
     refinement, diagnosis steps) on stderr for the call; a program that set up its own logging
     (a handler on ``pidyn`` or on the root logger) keeps it as it is, and ``show=False`` (the
     calls' ``progress=False``) keeps the call silent but for warnings."""
-    import logging
-    import sys
 
     logger = logging.getLogger("pidyn")
     if not show or logger.handlers or logging.getLogger().handlers:
@@ -187,8 +193,6 @@ def _progress(show: bool = True):
 def _user_errors():
     """A setting Hydra or OmegaConf refuses (a wrong value in ``init``, a misspelled override)
     comes out as a ``ValueError`` with the cause's message: the API raises no framework's type."""
-    from hydra.errors import HydraException
-    from omegaconf.errors import OmegaConfBaseException
 
     try:
         yield
@@ -218,11 +222,11 @@ def identify(
     ``model__schedule__max_windows=4``); ``overrides``: raw Hydra override strings;
     ``progress=False``: no progress lines in a notebook (warnings still show).
     """
-    from pidyn.tasks.train import identify_run as run_identification
+    from pidyn.tasks.train import (
+        identify_run as run_identification,  # lazy: torch and Lightning load (seconds) on the first call that needs them
+    )
 
     if record is not None and not isinstance(record, Record):
-        from pidyn.data.multi import concatenate
-
         with _user_errors(), _progress(progress):
             record = concatenate(list(record))
     groups, values = _split_options(options)
@@ -287,8 +291,11 @@ class RecordPrediction:
 
 
 def _predict_record(result: Result, record: Record) -> RecordPrediction:
-    from pidyn.assessment import measured_convention
-    from pidyn.runs.prediction import Identified, channel_names, predict_record
+    from pidyn.runs.prediction import (  # lazy: torch and Lightning load (seconds) on the first call that needs them
+        Identified,
+        channel_names,
+        predict_record,
+    )
 
     with _user_errors(), _progress():
         run = Identified.load(result.run_dir)
@@ -326,9 +333,10 @@ def predict(
     (``iterations``, ``lbfgs_steps``, ``split_tol``, ``min_window``, ``start_from``)."""
     if isinstance(excitation, Record):
         return _predict_record(result, excitation)
-    from pidyn.excitation.ground_motion import prepare
-    from pidyn.models.predict import PredictSettings, predict_response
-    from pidyn.simulate import simulate
+    from pidyn.models.predict import (  # lazy: torch and Lightning load (seconds) on the first call that needs them
+        PredictSettings,
+        predict_response,
+    )
 
     obj = result._objects
     if not obj:
@@ -389,7 +397,9 @@ def diagnose(
     """Diagnose what ``nominal`` (a system name) misses on ``record`` (default: the configured
     record with a hidden effect). ``mass``: the known mass (None identifies it, force excitation
     only). ``options`` and ``progress`` as for ``identify`` (``diagnosis__fit_share=0.6``)."""
-    from pidyn.tasks.diagnose import diagnose as run_diagnosis
+    from pidyn.tasks.diagnose import (
+        diagnose as run_diagnosis,  # lazy: torch and Lightning load (seconds) on the first call that needs them
+    )
 
     groups, values = _split_options(options)
     if record is not None:

@@ -3,12 +3,14 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from pidyn.reporting import nrmse, write_json
+from pidyn.systems.modal import modes_with_intervals
 
 #: what a strong-motion record says of itself, kept in metrics.json
 RECORD_META = (
@@ -53,7 +55,6 @@ def assess(
     """modal.json, and the metrics to add: the modes, the held-out scores (a record identified on
     its fitting part only), what a strong-motion record says of itself. The modes of a model that
     does not describe its record (``pidyn.adequacy``) are marked as the fit's, not the structure's."""
-    import logging
 
     out: dict[str, Any] = {}
     modes = modal_summary(system, final, refined)
@@ -129,7 +130,6 @@ def reported_damping(mode: dict | None) -> tuple[float | None, list | None]:
 def modal_summary(system, values: dict[str, float], refined: Any = None) -> list[dict] | None:
     """The identified model's modes about rest, fundamental first, with intervals from the
     refinement's covariance (None for a model without a stiffness about rest)."""
-    from pidyn.systems.modal import modes_with_intervals
 
     cov = getattr(refined, "covariance", None) if refined is not None else None
     names = getattr(refined, "names", None) if refined is not None else None

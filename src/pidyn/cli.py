@@ -12,10 +12,16 @@ import sys
 from pathlib import Path
 
 import hydra
+from hydra.core.hydra_config import HydraConfig
+from hydra.errors import HydraException
+from hydra.types import RunMode
 from omegaconf import DictConfig
+from omegaconf.errors import OmegaConfBaseException
 
 from pidyn.config import CONF_DIR as _CONF_PATH
 from pidyn.config import check_settings
+from pidyn.reporting import write_json
+from pidyn.runs.folder import FAILED, RunFolderBusy
 
 #: the package's config directory, for ``hydra.initialize_config_dir``
 CONF_DIR = str(_CONF_PATH)
@@ -29,8 +35,6 @@ _STARTED = False
 def _user_error(exc: BaseException) -> BaseException | None:
     """The user's error behind ``exc`` (a bad file, a bad value, a misspelled setting), or None for
     a fault of the program. Hydra and OmegaConf wrap such errors in their own types."""
-    from hydra.errors import HydraException
-    from omegaconf.errors import OmegaConfBaseException
 
     if isinstance(exc, (ValueError, FileNotFoundError, RuntimeError)):
         return exc
@@ -77,8 +81,6 @@ def _config_errors_exit_2(main) -> None:
 
 
 def _in_multirun() -> bool:
-    from hydra.core.hydra_config import HydraConfig
-    from hydra.types import RunMode
 
     try:
         return HydraConfig.get().mode == RunMode.MULTIRUN
@@ -89,8 +91,6 @@ def _in_multirun() -> bool:
 def _write_failure(cfg: DictConfig, exc: BaseException) -> None:
     """The reason, where the run folder's own record (``pidyn.runs.folder``) did not write one: a
     folder another run holds is not touched."""
-    from pidyn.reporting import write_json
-    from pidyn.runs.folder import FAILED, RunFolderBusy
 
     folder = Path(cfg.paths.output_dir)
     if isinstance(exc, RunFolderBusy) or (folder / FAILED).exists():
@@ -117,7 +117,7 @@ def _checked_train(cfg: DictConfig) -> dict:
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="generalize")
 def _generalize(cfg: DictConfig) -> float | None:
-    from pidyn.tasks.generalize import generalize
+    from pidyn.tasks.generalize import generalize  # imported once the settings hold
 
     summary = _guarded(generalize, cfg)
     return summary.get("share_gamma_ge_0.95_pidynnet")
@@ -125,7 +125,7 @@ def _generalize(cfg: DictConfig) -> float | None:
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="diagnose")
 def _diagnose(cfg: DictConfig) -> float | None:
-    from pidyn.tasks.diagnose import diagnose
+    from pidyn.tasks.diagnose import diagnose  # imported once the settings hold
 
     result = _guarded(diagnose, cfg)
     if not result:
@@ -135,7 +135,7 @@ def _diagnose(cfg: DictConfig) -> float | None:
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="predict")
 def _predict(cfg: DictConfig) -> float | None:
-    from pidyn.tasks.predict import predict
+    from pidyn.tasks.predict import predict  # imported once the settings hold
 
     out = _guarded(predict, cfg) or {}
     return out.get("mean_nrmse_a")

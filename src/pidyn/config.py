@@ -9,11 +9,18 @@ option names the valid ones instead of being silently ignored.
 from __future__ import annotations
 
 import difflib
+import math
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+import hydra
+from hydra import compose as hydra_compose
+from hydra import initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf, open_dict
+from omegaconf.errors import OmegaConfBaseException
 
 CONF_DIR = Path(__file__).resolve().parent / "conf"
 
@@ -76,10 +83,6 @@ def compose(
     checked to exist and applied after composition, so any Python value works;
     ``overrides``: raw Hydra override strings, passed through.
     """
-    from hydra import compose as hydra_compose
-    from hydra import initialize_config_dir
-    from hydra.core.global_hydra import GlobalHydra
-    from hydra.core.hydra_config import HydraConfig
 
     groups = dict(groups or {})
     for group, value in groups.items():
@@ -109,7 +112,6 @@ def compose(
 def make_system(name: str, **values: Any):
     """A structural system from ``conf/system/<name>.yaml``; ``values`` set its keys
     (``make_system("shear_building", n_storeys=5)``, ``make_system("duffing", **{"params.k3.init": 50})``)."""
-    import hydra
 
     cfg = compose("train", groups={"system": name}, values={f"system.{k}": v for k, v in values.items()})
     return hydra.utils.instantiate(cfg.system)
@@ -118,7 +120,6 @@ def make_system(name: str, **values: Any):
 def user_settings() -> list[str]:
     """The keys the user set for this run (command-line overrides, and ``compose``'s values),
     without Hydra's prefixes: what the config's own defaults must not overrule."""
-    from hydra.core.hydra_config import HydraConfig
 
     try:
         task = list(HydraConfig.get().overrides.task)
@@ -141,9 +142,6 @@ def check_settings(cfg: DictConfig) -> None:
     """Every setting resolvable and finite, the sweep knobs of their type: a NaN, an infinity, a
     word where a number belongs or an interpolation to a missing key is refused by name before
     any work (``noise=nan`` would otherwise pass a ``>= 0`` check and run without noise)."""
-    import math
-
-    from omegaconf.errors import OmegaConfBaseException
 
     for key in cfg:
         if key == "hydra":

@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from scipy.signal import resample_poly
 
 from pidyn import integrate_linear
 from pidyn.autodiff import Dual
@@ -53,7 +54,6 @@ def stage_excitation(f: np.ndarray, substeps: int, hold: str = "linear") -> np.n
         raise ValueError(f"unknown excitation hold '{hold}' (choose from {', '.join(HOLDS)})")
     if hold == "linear":
         return None
-    from scipy.signal import resample_poly
 
     ff = np.asarray(f, float)
     up = 2 * int(substeps)

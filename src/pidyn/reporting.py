@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -85,22 +87,28 @@ def diverged(a: Any) -> bool:
         return bool(a.size and not np.all(np.abs(a) < BLOWN_UP))
 
 
+def pyplot():
+    """matplotlib's pyplot, on the Agg backend unless pyplot is loaded already (a notebook has chosen
+    its backend). Imported on the first figure, not with the package: it costs about half a second
+    at start-up, and the tasks draw only at their end."""
+    import matplotlib  # lazy: see the docstring
+
+    if "matplotlib.pyplot" not in sys.modules:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # lazy: see the docstring
+
+    return plt
+
+
 def _param_grid(n_params: int):
     """One row per parameter: estimate (left), relative error (right), shared record-time axis."""
-    import sys
-
-    import matplotlib
-
-    if "matplotlib.pyplot" not in sys.modules:  # a notebook has chosen its backend already
-        matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     return plt.subplots(n_params, 2, figsize=(10, 2.2 * n_params), squeeze=False, sharex=True)
 
 
 def _finish_grid(fig, axes, title: str, path: Path | None, dpi: int, palette: bool = False) -> None:
     """Label and save the grid; ``path=None`` leaves the figure open for the caller."""
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     axes[-1][0].set_xlabel("record time (s)")
     axes[-1][1].set_xlabel("record time (s)")
@@ -208,9 +216,8 @@ def plot_convergence_seeds(
 
 def _save_small(fig, path: Path, dpi: int) -> None:
     """PNG with a 64-colour palette: many thin overlapping curves are several times smaller so."""
-    import io
 
-    from PIL import Image
+    from PIL import Image  # lazy: with matplotlib, on the first figure (see pyplot)
 
     buf = io.BytesIO()
     fig.savefig(buf, dpi=dpi, format="png")
@@ -222,10 +229,7 @@ def plot_response(
     path: Path, t: np.ndarray, series: dict[str, np.ndarray], title: str = "", ylabel: str = "x (m)"
 ) -> None:
     """Measured vs predicted time histories on one axis."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, ax = plt.subplots(figsize=(10, 3.2))
     for i, (name, y) in enumerate(series.items()):

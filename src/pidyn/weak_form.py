@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import savgol_filter
+from scipy.signal import savgol_coeffs, savgol_filter
 
 
 def bump(half: int, dt: float, power: int = 4) -> tuple[np.ndarray, np.ndarray]:
@@ -120,7 +120,6 @@ def velocity_noise(t: np.ndarray, x: np.ndarray, v: np.ndarray | None, period: f
     The raw-minus-smoothed signal estimates the white measurement noise; the smoothing
     filter's noise gain (the 2-norm of its coefficients) carries it to the smoothed x'.
     """
-    from scipy.signal import savgol_coeffs
 
     win = _sg_window(t, period)
     dt = float(t[1] - t[0])
@@ -137,7 +136,6 @@ def measurement_noise(t: np.ndarray, raw: np.ndarray, period: float) -> float:
     of its variance (h: the filter's coefficients; a least-squares smoother is a projection);
     uncorrected, the estimate is low by that share, and in a quiet part of a record, where the
     noise is a large share of the signal, the shortfall reads as model error."""
-    from scipy.signal import savgol_coeffs
 
     win = _sg_window(t, period)
     h0 = savgol_coeffs(win, 3)

@@ -31,9 +31,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import torch
+from scipy.signal import cont2discrete, dlsim
 
 from pidyn.params import in_range
 from pidyn.signals import dominant_peak, integrate, transfer_function
+from pidyn.systems.base import Kinematics
+from pidyn.systems.lstsq import forward_jacobian, solve_linear_params
+from pidyn.systems.modal import damping_params, linear_matrices, modal_properties, stiffness_params
+from pidyn.systems.sdof import feedthrough_name, influence_name, support_damping_name
 
 log = logging.getLogger(__name__)
 
@@ -181,9 +186,6 @@ def _differentiate(y: np.ndarray, dt: float, times: int) -> np.ndarray:
 
 
 def _equation_error(record, system, corner: float, fn: float) -> DataStart | None:
-    from pidyn.systems.base import Kinematics
-    from pidyn.systems.lstsq import solve_linear_params
-    from pidyn.systems.sdof import feedthrough_name, influence_name, support_damping_name
 
     dt = record.dt
     ch = _filtered_channels(record, corner)
@@ -238,8 +240,6 @@ def _bilinear_fit(
     """Several supports: the linear parameters and the supports' influence, feedthrough and
     damping together (the relative motion is the absolute minus the supports' motion weighted by
     their influence: bilinear), by Gauss-Newton from the linear fit at the config's influence."""
-    from pidyn.systems.base import Kinematics
-    from pidyn.systems.lstsq import forward_jacobian, solve_linear_params
 
     t, f, dt = T(record.t), np.asarray(record.f, float), record.dt
     F, FV, FD = (integrate(f, dt, k, corner) for k in (0, 1, 2))
@@ -275,7 +275,6 @@ def _out_of_range(est: dict[str, float], specs: dict) -> dict[str, float]:
 
 def _damping_names(system) -> set[str]:
     """The viscous dampers' parameters (a building's storeys, or a single degree of freedom's)."""
-    from pidyn.systems.modal import damping_params
 
     if hasattr(system, "terms") and hasattr(system, "storeys"):
         return {t.damping_param for t in system.terms if t.damping_param}
@@ -284,7 +283,6 @@ def _damping_names(system) -> set[str]:
 
 def modal_of(system, values: dict[str, float]) -> tuple[float | None, float | None]:
     """The first mode's frequency (Hz) and damping ratio of the model at ``values``."""
-    from pidyn.systems.modal import linear_matrices, modal_properties
 
     try:
         modes = modal_properties(*linear_matrices(system, values))
@@ -352,7 +350,6 @@ def _from_scan(
 def _linear_misfit(record, system, values: dict[str, float], measured: dict[str, list[int]]) -> float:
     """The linear part's free response from rest against the measured channels: the sum over
     channels of the squared error over the squared signal (relative motion, one ground)."""
-    from scipy.signal import cont2discrete, dlsim
 
     m, c, k = system.linear_matrices(values)
     n = m.shape[0]
@@ -384,8 +381,6 @@ def _from_peak(system, fn: float, zeta: float) -> DataStart:
     if hasattr(system, "start_at"):  # modes: the fundamental at the peak, the others in proportion
         values = system.start_at(fn, zeta)
     elif hasattr(system, "linear_matrices"):
-        from pidyn.systems.modal import modal_properties
-
         w0 = 2 * np.pi * modal_properties(*system.linear_matrices(init))["frequency_hz"][0]
         scale = (w / max(w0, 1e-12)) ** 2
         for term in system.terms:
@@ -402,8 +397,6 @@ def _from_peak(system, fn: float, zeta: float) -> DataStart:
                 )
                 values[cp] = 2 * zeta / w * values.get(kp, init[kp])
     else:
-        from pidyn.systems.modal import damping_params, stiffness_params
-
         m = init.get("m", 1.0)
         ks, cs = stiffness_params(system), damping_params(system)
         for p in ks:

@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from pidyn.baselines.common import BaselineResult
+from pidyn.baselines.data_start import equation_error_integrated
 from pidyn.baselines.registry import estimator, row
 from pidyn.data.sources import Record
 from pidyn.notes import note
@@ -34,7 +35,6 @@ def equation_error(record: Record, system) -> BaselineResult:
         )
     if record.x is None or np.isnan(record.x).any() or (record.v is not None and np.isnan(record.v).any()):
         # no displacement sensor: the accelerations (and the inputs) high-passed and integrated alike
-        from pidyn.baselines.data_start import equation_error_integrated
 
         est = equation_error_integrated(record, system)
         if est is None:

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import logging
 
+from pidyn.baselines.peers import okid_era, realization_start, srim
+
 log = logging.getLogger(__name__)
 
 
@@ -18,7 +20,6 @@ def peer_starts(record, system) -> dict[str, dict[str, float]]:
         import mdof  # noqa: F401
     except ImportError:
         return {}
-    from pidyn.baselines.peers import okid_era, realization_start, srim
 
     order = 2 * int(system.n_dof)
     out: dict[str, dict[str, float]] = {}

@@ -27,6 +27,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import least_squares
+from scipy.signal import dlsim
 
 from pidyn.baselines.realization import realization_params
 from pidyn.baselines.registry import estimator
@@ -216,7 +218,6 @@ def simulate_realization(
 ) -> np.ndarray:
     """y_k = C x_k + D u_k, x_{k+1} = A x_k + B u_k from rest: (p, N), by ``scipy.signal.dlsim``
     (an unstable realization overflows to inf, which the caller scores as a failed fit)."""
-    from scipy.signal import dlsim
 
     with np.errstate(all="ignore"):
         _, y, _ = dlsim((A, B, C, D, 1.0), np.asarray(U, float).T)
@@ -231,7 +232,6 @@ def _mean_nrmse(out: np.ndarray, Y: np.ndarray, mask: np.ndarray) -> float:
 
 def transfer_function_estimate(record, band_halfwidth: float = 0.35) -> PeerResult:
     """The fundamental mode from the transmissibility (see the module's docstring)."""
-    from scipy.optimize import least_squares
 
     t0 = time.perf_counter()
     U, Y = io_arrays(record)

@@ -15,12 +15,16 @@ D_c is what the sensor reads of each support directly (e_j). One to one.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import expm, logm
+
+from pidyn.systems.modal import damping_params, stiffness_params
+from pidyn.systems.modes import ModesOnSupports
+from pidyn.systems.sdof import feedthrough_name, influence_name, support_damping_name
 
 
 def hold_integrals(Ac: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """The first-order hold's integrals of exp(A_c s) over a step (scipy's ``cont2discrete``
     'foh' blocks with B = I): P1 = int_0^dt exp(A_c s) ds, P2 its ramp-weighted part."""
-    from scipy.linalg import expm
 
     n = Ac.shape[0]
     em = np.zeros((3 * n, 3 * n))
@@ -33,7 +37,6 @@ def continuous_modes(realization: tuple, dt: float) -> tuple[list[dict], np.ndar
     """The realization's modes in continuous time, longest period first: each ``{c, k, alpha,
     beta}`` (alpha, beta per input), and D_c. None when a pole is real, the log of A is not
     real, or a mode is not a damped oscillator."""
-    from scipy.linalg import logm
 
     A, B, C, D = (np.atleast_2d(np.asarray(x, float)) for x in realization)
     if A.shape[0] % 2 or C.shape[0] != 1 or np.any(np.abs(np.linalg.eigvals(A).imag) < 1e-12):
@@ -61,7 +64,6 @@ def realization_params(system, realization: tuple, dt: float) -> dict[str, float
     """A realization of one output mapped onto ``system``'s parameters (empty when it does not
     map: another order than twice the model's modes, a real pole pair, a negative stiffness).
     A single degree of freedom with one input keeps only c and k (its input terms are fixed)."""
-    from pidyn.systems.modes import ModesOnSupports
 
     modal = isinstance(system, ModesOnSupports)
     if not modal and not _plain_sdof(system):
@@ -79,14 +81,11 @@ def realization_params(system, realization: tuple, dt: float) -> dict[str, float
 
 
 def _plain_sdof(system) -> bool:
-    from pidyn.systems.modal import damping_params, stiffness_params
 
     return len(stiffness_params(system)) == 1 and len(damping_params(system)) == 1
 
 
 def _sdof_params(system, mode: dict, Dc: np.ndarray, inputs: list[str]) -> dict[str, float]:
-    from pidyn.systems.modal import damping_params, stiffness_params
-    from pidyn.systems.sdof import feedthrough_name, influence_name, support_damping_name
 
     m = next((s.init for s in system.param_specs() if s.name == "m"), 1.0)
     c, k = mode["c"], mode["k"]

@@ -15,10 +15,11 @@ import time
 import numpy as np
 
 from pidyn.baselines.common import BaselineResult
+from pidyn.baselines.data_start import fundamental
 from pidyn.baselines.registry import estimator, row
 from pidyn.data.sources import Record
 from pidyn.notes import note
-from pidyn.signals import dominant_period
+from pidyn.signals import dominant_period, integrate
 from pidyn.systems.terms import (
     CoulombFriction,
     CubicStiffness,
@@ -104,8 +105,6 @@ def _motion(record: Record) -> tuple | str:
         return t, record.x[:, 0], None if record.v is None else record.v[:, 0], excitation
     if record.a is None or np.isnan(record.a[:, 0]).any():
         return "not applicable: needs a displacement or acceleration channel"
-    from pidyn.baselines.data_start import fundamental
-    from pidyn.signals import integrate
 
     peak = fundamental(record)
     if peak is None:

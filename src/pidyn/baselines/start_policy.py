@@ -3,9 +3,14 @@ the values a user gave kept in any case."""
 
 from __future__ import annotations
 
+import glob
+import json
 import logging
+import re
+from pathlib import Path
 
 from pidyn.baselines.data_start import DataStart, modal_of, start_from_data
+from pidyn.systems.base import merge_specs
 
 log = logging.getLogger(__name__)
 
@@ -13,7 +18,6 @@ log = logging.getLogger(__name__)
 def with_start(system, values: dict[str, float], keep: set[str] | frozenset = frozenset()):
     """``system`` with its trainable parameters started at ``values`` (their scales with them),
     except those in ``keep`` (a start the user gave)."""
-    from pidyn.systems.base import merge_specs
 
     trainable = {s.name for s in system.param_specs() if s.trainable}
     chosen = {n: {"init": float(v)} for n, v in values.items() if n in trainable and n not in keep}
@@ -24,7 +28,6 @@ def with_start(system, values: dict[str, float], keep: set[str] | frozenset = fr
 
 def user_started(system, settings: list[str]) -> set[str]:
     """The parameters whose start the user set (``system.params.<name>...``, ``system.guess``)."""
-    import re
 
     names = [s.name for s in system.param_specs()]
     out: set[str] = set()
@@ -47,12 +50,8 @@ def start_from_run(folder: str, system) -> DataStart:
     the same structure whose input does not show its resonance (a sine below it) starts from a
     broadband record's estimate; the record at hand then decides. A pattern (``*``) must match one
     folder. A single mode's run starts a modes model (``from_single_mode``)."""
-    import json
-    from pathlib import Path
 
     if any(ch in folder for ch in "*?["):  # a pattern (a sweep names each job's earlier run by its options)
-        import glob
-
         found = sorted(glob.glob(folder))
         if len(found) != 1:
             raise ValueError(f"model.start: the pattern '{folder}' matches {len(found)} run folders, not one")

@@ -10,6 +10,7 @@ twice. ``fork`` is no answer either: it copies torch's thread pools mid-flight.
 
 from __future__ import annotations
 
+import logging
 import os
 import pickle
 import subprocess
@@ -94,8 +95,6 @@ class BaselineJob:
 
     def result(self) -> list[dict]:
         if self._proc is not None:
-            import logging
-
             try:
                 while self._proc.poll() is None:
                     time.sleep(0.5)

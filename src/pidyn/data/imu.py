@@ -25,6 +25,7 @@ all zeros but the counters. What is done, each step said in the record's ``meta`
 
 from __future__ import annotations
 
+import datetime as _dt
 import gzip
 import io
 import re
@@ -33,8 +34,10 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy.signal import butter, sosfiltfilt
 
 from pidyn.data.sources import READERS, DataError, Record, checked_hold
+from pidyn.data.strong_motion import _resample, shaking_span
 from pidyn.notes import note
 
 NOMINAL_STEP_US = 1e6 / 120.0
@@ -245,7 +248,6 @@ def start_seconds(start_time: str) -> float | None:
     m = re.search(r"(\d{4})-(\d{2})-(\d{2})_(\d{2}):(\d{2}):(\d{2})_(\d{3})", start_time or "")
     if not m:
         return None
-    import datetime as _dt
 
     y, mo, d, h, mi, sec, ms = (int(g) for g in m.groups())
     return _dt.datetime(y, mo, d, h, mi, sec, ms * 1000).timestamp()
@@ -253,7 +255,6 @@ def start_seconds(start_time: str) -> float | None:
 
 def band(sig: np.ndarray, dt: float, lo: float, hi: float) -> np.ndarray:
     """Zero-phase band-pass (4th-order Butterworth, forward and back)."""
-    from scipy.signal import butter, sosfiltfilt
 
     sos = butter(4, [lo, min(hi, 0.45 / dt)], btype="bandpass", fs=1.0 / dt, output="sos")
     return sosfiltfilt(sos, sig, axis=0)
@@ -446,10 +447,7 @@ def xsens_record(
     step = float(t[1] - t[0])
     notes: list[str] = list(report.notes)
     if dt is not None and dt > step * 1.001:
-        from pidyn.data.strong_motion import _resample
-
         data, _, step = _resample(data, data[:, :0], step, dt, notes)
-    from pidyn.data.strong_motion import shaking_span
 
     i0, i1, pre_rms = shaking_span(data[:, :1], data[:, 1:], step, span, pre, post)
     data = data[i0:i1]

@@ -21,6 +21,7 @@ import numpy as np
 
 from pidyn.data.errors import DataError
 from pidyn.data.stations import station_entry, station_layout
+from pidyn.systems import LinearSDOF
 from pidyn.systems.deck import RigidDeck, sensor_row
 
 
@@ -61,7 +62,6 @@ def station_deck(
 def _along(inputs: list[int], direction: str, **kwargs: Any) -> Any:
     """Along the deck (longitudinal) a deck rigid in its plane only translates: every deck channel
     reads one motion, a single degree of freedom on the supports (``SDOFSystem`` with inputs)."""
-    from pidyn.systems import LinearSDOF
 
     if kwargs.get("support_terms"):
         raise DataError(

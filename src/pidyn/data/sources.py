@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from pidyn.config import make_system
 from pidyn.data.csv_table import (
     channel_columns,
     check_values,
@@ -18,7 +19,9 @@ from pidyn.data.csv_table import (
     uniform_time,
 )
 from pidyn.data.errors import DataError, needed
+from pidyn.data.windows import spread_by_integration
 from pidyn.excitation.ground_motion import GroundMotion, prepare
+from pidyn.integrate import HOLDS
 from pidyn.simulate import Trajectory, add_noise, simulate
 from pidyn.systems.base import StructuralSystem
 
@@ -130,7 +133,6 @@ class Record:
         """Spread of the displacement and the velocity per degree of freedom: measured where a
         sensor gives it, else integrated (and detrended) from velocity or acceleration, else
         the nearest floor's. Scales for filters and solvers, never data."""
-        from pidyn.data.windows import spread_by_integration
 
         def spread(order: int) -> np.ndarray:
             return spread_by_integration(self.t, [(k, getattr(self, k)) for k in CHANNEL_KINDS], order)
@@ -187,8 +189,6 @@ class Record:
         ``excitation`` (a shipped record's name or an AT2 path), measured with noise of std
         ``noise`` x RMS on each channel (seeded by ``seed``)."""
         if isinstance(system, str):
-            from pidyn.config import make_system  # names resolve through the configs, at the edge
-
             system = make_system(system, **system_values)
         elif system_values:
             raise ValueError(f"settings {sorted(system_values)} need a system name, not a system object")
@@ -216,7 +216,6 @@ class Record:
 
     def segment(self, t0: float | None, t1: float | None) -> Record:
         """The samples with t0 <= t <= t1 (times kept absolute; the truth travels along)."""
-        from dataclasses import replace
 
         lo = -np.inf if t0 is None else t0 - 1e-9
         hi = np.inf if t1 is None else t1 + 1e-9
@@ -418,7 +417,6 @@ def from_csv(
 
 def checked_hold(hold: str, what: str) -> str:
     """``hold`` if the integrator knows it, else a DataError naming ``what``."""
-    from pidyn.integrate import HOLDS
 
     if hold not in HOLDS:
         raise DataError(f"{what} must be one of {', '.join(HOLDS)}, got '{hold}'")

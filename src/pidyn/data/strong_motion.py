@@ -25,7 +25,9 @@ subtract); with one, the convention of every record: relative to it.
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Sequence
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +39,7 @@ from pidyn.data.layout import end_motions, observation
 from pidyn.data.sources import READERS, DataError, Record, checked_hold
 from pidyn.data.stations import STATIONS_FILE, station_number, stations
 from pidyn.notes import note
+from pidyn.signals import integrate
 
 log = logging.getLogger(__name__)
 
@@ -78,7 +81,6 @@ def channel_sets(
 
 def _station_of(archive: Archive) -> str | None:
     """``CE<number>`` from the files' ``Station No.`` line (CSMIP's network code is CE)."""
-    import re
 
     for ch in archive.channels.values():
         for line in ch.header:
@@ -258,7 +260,6 @@ def _velocities(
 ) -> np.ndarray:
     """The supports' velocities as the V2 files give them (integrated and band-passed with the
     accelerations by the processing); integrated here (spectrally, above 0.05 Hz) where a file has none."""
-    from pidyn.signals import integrate
 
     cols = []
     for j, c in enumerate(ins):
@@ -300,7 +301,6 @@ def _resample(
     """Down to ``dt`` by zero-phase polyphase filtering (an integer or simple rational ratio)."""
     if dt is None or dt <= step * (1 + 1e-9):
         return acc_in, acc_out, step
-    from fractions import Fraction
 
     ratio = Fraction(dt / step).limit_denominator(16)
     if abs(float(ratio) - dt / step) > 1e-6 * dt / step:

@@ -29,8 +29,16 @@ from typing import Any
 
 import numpy as np
 
+from pidyn.baselines.data_start import fundamental, start_from_data
+from pidyn.baselines.peer_start import peer_starts
+from pidyn.baselines.start_policy import with_start
 from pidyn.data.sources import Record
+from pidyn.discrepancy.heteroscedastic import envelope, scale_test
+from pidyn.refine.output_error import fit_output_error, output_error_cost, output_error_problem
+from pidyn.refine.period_scan import scan_period
+from pidyn.reporting import nrmse
 from pidyn.signals import integrate
+from pidyn.systems.modal import linear_matrices, modal_properties
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +54,6 @@ def motion_view(
     """The record as the relative motion of an accelerometer-measured structure (see the module's
     docstring); ``system``: the nominal model with the record's inputs (influence coefficients);
     ``tol``: the supports' output-error fits stop there (``DiagnosisSettings.polish_tol``)."""
-    from pidyn.baselines.data_start import fundamental
 
     if record.a is None:
         raise ValueError(f"record '{record.name}': neither a displacement nor an acceleration channel")
@@ -115,8 +122,6 @@ def _nominal_influence(
     against the other basins of the period (``pidyn.refine.period_scan``): no start need lie in the
     lowest one. With one input nothing is fitted here (the start is ranked by its own cost, and the
     refits after it take the identification's refinement, which scans the period itself)."""
-    from pidyn.baselines.data_start import start_from_data
-    from pidyn.baselines.start_policy import with_start
 
     seg = record.segment(*fit)
     values = {s.name: float(s.init) for s in system.param_specs()}
@@ -153,9 +158,6 @@ def _envelope_refit(seg: Record, system, values: dict[str, float], tol: float):
     """The supports' fit under the noise model its residuals support (``pidyn.discrepancy.heteroscedastic``):
     where their scale follows the measured response's envelope (over four periods), the fit redone
     from ``values`` with each residual divided by it; else ``values`` as they are. (values, the test)."""
-    from pidyn.discrepancy.heteroscedastic import envelope, scale_test
-    from pidyn.refine.output_error import fit_output_error, output_error_problem
-    from pidyn.systems.modal import linear_matrices, modal_properties
 
     window = 4.0 * float(modal_properties(*linear_matrices(system, values))["period_s"][0])
     w = envelope(seg.a, seg.dt, window)
@@ -179,7 +181,6 @@ def _envelope_refit(seg: Record, system, values: dict[str, float], tol: float):
 def _moved_by_scan(seg: Record, system, fits: dict, options: dict, best: str, tol: float) -> str:
     """The kept fit checked against the other basins of the period; where the scan's start fits
     the fitting part lower, it is added to ``fits`` and ``options`` under a label that says so."""
-    from pidyn.refine.period_scan import scan_period
 
     scan = scan_period(system, seg, fits[best][0])
     if scan is None or scan.values is None:
@@ -201,7 +202,6 @@ def _scan_words(scan) -> str:
 
 def _influence_fit(seg: Record, system, values: dict[str, float], tol: float):
     """Output error on ``seg`` from ``values``: (the fitted values, the fit)."""
-    from pidyn.refine.output_error import fit_output_error
 
     trainable = {s.name for s in system.param_specs() if s.trainable}
     res = fit_output_error(
@@ -213,7 +213,6 @@ def _influence_fit(seg: Record, system, values: dict[str, float], tol: float):
 def _peer_options(seg: Record, system, values: dict[str, float]) -> dict[str, dict[str, float]]:
     """The peer whose realization on ``seg`` simulates it best (its other parameters from
     ``values``), or none without mdof or a realization that maps onto the model."""
-    from pidyn.baselines.peer_start import peer_starts
 
     peers = {f"{k}'s realization": {**values, **v} for k, v in peer_starts(seg, system).items()}
     if not peers:
@@ -224,7 +223,6 @@ def _peer_options(seg: Record, system, values: dict[str, float]) -> dict[str, di
 
 def _cheapest(seg: Record, system, options: dict[str, dict[str, float]]) -> str:
     """The option with the lowest output-error cost on ``seg`` (said in the log when there is a choice)."""
-    from pidyn.refine.output_error import output_error_cost
 
     if len(options) == 1:
         return next(iter(options))
@@ -241,7 +239,6 @@ def _cheapest(seg: Record, system, options: dict[str, dict[str, float]]) -> str:
 def acceleration_gain(record: Record, sims: dict[str, dict | None], held: np.ndarray) -> dict:
     """``heldout_nrmse_a`` of each simulated model (``{"nominal": sim, "extended": sim}``): the
     absolute acceleration (relative + ground, as the accelerometer reads it) on ``held``."""
-    from pidyn.reporting import nrmse
 
     ground = np.asarray(
         (record.meta or {}).get("sensor_ground", record.f), float

@@ -6,10 +6,16 @@ nominal system as a nested node) rebuilds the extended model exactly.
 
 from __future__ import annotations
 
+import copy
 from typing import Any
+
+import hydra
+import numpy as np
+from omegaconf import DictConfig, OmegaConf
 
 from pidyn.discrepancy.effects import get_effect
 from pidyn.systems.sdof import SDOFSystem
+from pidyn.systems.terms import LearnedForce
 
 
 def extended_system(
@@ -33,8 +39,6 @@ def extended_system(
     if (
         effect == "learned_force"
     ):  # outside the library: a network f(x, x') (a universal differential equation)
-        from pidyn.systems.terms import LearnedForce
-
         ctx = dict(context)
         term = LearnedForce(
             ctx.get("x_scale", 1.0),
@@ -44,8 +48,6 @@ def extended_system(
         )
         start = dict(effect_params).get("init_from")
         if start:  # the force the model could not explain, saved in the run folder: the network's start
-            import numpy as np
-
             with np.load(start) as d:
                 term.fit_to(d["x"], d["v"], d["force"])
         return nominal.with_term(term)
@@ -130,8 +132,6 @@ def release_held(node: Any) -> dict:
 
 def build_system(node: Any) -> SDOFSystem:
     """The system a node describes."""
-    import hydra
-    from omegaconf import OmegaConf
 
     return hydra.utils.instantiate(OmegaConf.create(_plain(node)))
 
@@ -154,9 +154,6 @@ def node_with_values(node: Any, values: dict[str, float]) -> dict:
 
 def _plain(node: Any) -> dict:
     """A deep plain-dict copy of a node (a DictConfig resolved)."""
-    import copy
-
-    from omegaconf import DictConfig, OmegaConf
 
     out = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else copy.deepcopy(node)
     assert isinstance(out, dict)

@@ -19,6 +19,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
+from pidyn.discrepancy.confirm import independent_samples
+
 
 @dataclass
 class ScaleTest:
@@ -49,7 +51,6 @@ def scale_test(
     r: np.ndarray, w: np.ndarray, window_s: float, floor: float = 0.1, min_gain: float = 10.0
 ) -> ScaleTest:
     """Does the residual ``r`` (N,) follow the envelope ``w`` (N, geometric mean 1)?"""
-    from pidyn.discrepancy.confirm import independent_samples
 
     r = np.asarray(r, float)
     n = len(r)

@@ -17,6 +17,7 @@ from pidyn.discrepancy.effects import EFFECTS, LIBRARY, Signals, get_effect
 from pidyn.excitation.ground_motion import prepare
 from pidyn.simulate import simulate
 from pidyn.systems.sdof import LinearSDOF, SDOFSystem
+from pidyn.systems.terms import StribeckFriction, TrilinearSpring
 
 #: records whose strong motion lies in their first 25 s
 RECORDS = (
@@ -58,7 +59,6 @@ EQUIVALENT = {outside: {n for n, e in EFFECTS.items() if outside in e.stands_for
 
 
 def _outside_term(name: str, p: dict[str, float]):
-    from pidyn.systems.terms import StribeckFriction, TrilinearSpring
 
     if name == "trilinear_spring":
         return TrilinearSpring(p["dk1"], p["x1"], p["dk2"], p["x2"])

@@ -31,6 +31,7 @@ from scipy.signal import savgol_filter
 
 from pidyn.data.sources import Record
 from pidyn.params import ParamSpec, from_raw, to_raw
+from pidyn.simulate import input_hold, simulate_states
 from pidyn.systems.base import StructuralSystem
 from pidyn.systems.terms import LearnedForce
 
@@ -114,7 +115,6 @@ def _starts(
     displacement smoothed over a tenth of the period, else from the model's simulation; latent
     states from the model's simulation. They are trained with the rest; this is only where
     they start."""
-    from pidyn.simulate import input_hold, simulate_states
 
     n = system.n_dof
     width = max(5, int(round(0.1 * period / record.dt)) | 1)

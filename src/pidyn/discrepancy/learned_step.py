@@ -9,6 +9,9 @@ import torch
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy.learned_fit import fit_learned_force
+from pidyn.discrepancy.residual import unexplained_force
+from pidyn.reporting import nrmse
+from pidyn.simulate import simulate_response
 from pidyn.systems.terms import LearnedForce
 
 log = logging.getLogger(__name__)
@@ -46,7 +49,6 @@ def save_unexplained(
     """The force ``system`` cannot explain on the fitting part (band-limited, the ringing ends
     left out), with x and x' beside it: what a learned force term starts from. ``f``: the
     excitation paired with ``x_raw`` (default the record's)."""
-    from pidyn.discrepancy.residual import unexplained_force
 
     period = 2 * np.pi * np.sqrt(values["m"] / max(values.get(system.stiffness_name, 1.0), 1e-300))
     pw = unexplained_force(system, values, record.t, x_raw, record.f if f is None else f, period)
@@ -108,8 +110,6 @@ def learned_predicts(
     extends? A network trained on the fitting part can fit it and still extrapolate wrongly
     (a trilinear spring reached further in the held-out part): kept only if it predicts better.
     The held-out part decides here, as it does for the screening's held-out rules."""
-    from pidyn.reporting import nrmse
-    from pidyn.simulate import simulate_response
 
     mask = (record.t >= held[0]) & (record.t <= held[1])
     kind = "x" if record.x is not None else "a"  # an accelerometer record is judged on its accelerations

@@ -9,10 +9,13 @@ import numpy as np
 
 from pidyn.discrepancy.case import Case, Nominal
 from pidyn.discrepancy.extend import system_node
+from pidyn.discrepancy.running import period_varies, running_modes
+from pidyn.refine import RefineSettings, refine
 from pidyn.refine.output_error import fit_output_error, output_error_costs
 from pidyn.reporting import nrmse
 from pidyn.signals import dominant_period
 from pidyn.simulate import simulate_response
+from pidyn.systems.modal import modes_with_intervals
 from pidyn.systems.sdof import SDOFSystem
 
 log = logging.getLogger(__name__)
@@ -26,7 +29,6 @@ def running_period(case: Case, nom: Nominal) -> dict | None:
     two with motion, where the quarter-width one found the period moving)."""
     if not case.from_accelerometers:
         return None
-    from pidyn.discrepancy.running import period_varies, running_modes
 
     width = max(12.0 * nom.period, 2.0)
     try:
@@ -58,8 +60,6 @@ def running_period(case: Case, nom: Nominal) -> dict | None:
 def nominal_modes(case: Case, nom: Nominal) -> list[dict] | None:
     """The nominal model's modes with 95 % intervals: its fitting part refined by multiple shooting
     (from the polished values and the measured or integrated states) for the covariance."""
-    from pidyn.refine import RefineSettings, refine
-    from pidyn.systems.modal import modes_with_intervals
 
     try:
         seg = case.record.segment(*case.fit)

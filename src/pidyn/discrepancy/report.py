@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pidyn.discrepancy.effects import get_effect
+from pidyn.discrepancy.heldout_check import HeldoutCheck
 from pidyn.discrepancy.verdicts import Verdict
 
 
@@ -243,8 +244,6 @@ def _check_lines(d: dict) -> list[str]:
         lines += [f"Not named: {d['unearned']['note']}.", ""]
     hc = d.get("heldout_check")
     if hc:
-        from pidyn.discrepancy.heldout_check import HeldoutCheck
-
         why = HeldoutCheck(**hc).sentence()
         lines += [f"Held-out check: {why}.", ""]
     return lines

@@ -6,14 +6,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pidyn.reporting import plottable
+import numpy as np
+from scipy.signal import welch
+
+from pidyn.reporting import plottable, pyplot
 
 
 def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     return plt
 
@@ -68,7 +68,6 @@ def plot_residual(path: Path, t, r_raw, x, v, fit, cause, fitted, units: dict, p
 
     The residual and x, x' are band-limited alike (``residual.unexplained_force``); one
     natural period at each end, where the spectral derivative rings, is left out."""
-    from scipy.signal import welch
 
     plt = _plt()
     dt = float(t[1] - t[0])
@@ -149,7 +148,6 @@ def plot_running_estimate(
     the ``stiffness`` parameter named, a second panel gives the running natural period
     2 pi sqrt(m / k(t)) (and the damping ratio) beside the motion's envelope (``signal``: t, x),
     so a period that lengthens in the strong motion and recovers in the coda shows as such."""
-    import numpy as np
 
     plt = _plt()
     names = [n for n in running if n != "t" and n in nominal and n != "m"]
@@ -189,7 +187,6 @@ def plot_running_estimate(
 
 def _period_panel(a2, running: dict, nominal: dict, fit, held, stiffness: str, signal: tuple | None) -> None:
     """The running natural period (and damping ratio) beside the motion's envelope."""
-    import numpy as np
 
     m = float(nominal.get("m", 1.0))
     k = np.asarray(running[stiffness], float)
@@ -222,7 +219,6 @@ def _period_panel(a2, running: dict, nominal: dict, fit, held, stiffness: str, s
 def plot_learned_force(path: Path, x, v, residual, learned, surface: dict, units: dict) -> None:
     """The learned force beside the force the nominal model could not explain: against x and x'
     (the loops a structural engineer reads), and the learned f(x, x') as a surface."""
-    import numpy as np
 
     plt = _plt()
     ux, uf = units.get("x", "m"), units.get("u", "N")
@@ -257,7 +253,6 @@ def plot_learned_force(path: Path, x, v, residual, learned, surface: dict, units
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
-    del np
 
 
 def plot_running_period(
@@ -272,7 +267,6 @@ def plot_running_period(
     """Period and damping ratio window by window (output error on the sensors' readings), each with
     its 95 % interval, over the motion's envelope; ``model`` (t, period, zeta): an
     amplitude-dependent model's own, along its simulated response."""
-    import numpy as np
 
     plt = _plt()
     t = np.asarray(running["t"])

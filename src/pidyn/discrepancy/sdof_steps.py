@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from pidyn.discrepancy.accelerometers import acceleration_gain
 from pidyn.discrepancy.case import Case, Nominal
 from pidyn.discrepancy.confirm import Confirmation, confirm, undecided
 from pidyn.discrepancy.effects import EFFECTS, Signals
@@ -173,8 +174,6 @@ def heldout_errors(case: Case, nom: Nominal, ext: dict[str, Any]) -> dict[str, f
     held = case.mask(case.held)
     sims = _acceleration_sims(case, nom, ext)
     if case.from_accelerometers:
-        from pidyn.discrepancy.accelerometers import acceleration_gain
-
         gain = acceleration_gain(case.record, sims, held)
         return {"nominal": gain["nominal"], "extended": gain["extended"]}
     return {k: None if s is None else nrmse(s["x"][held, 0], case.x_raw[held]) for k, s in sims.items()}

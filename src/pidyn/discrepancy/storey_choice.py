@@ -30,6 +30,7 @@ from pidyn.discrepancy.storey_ranking import (
 )
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.simulate import simulate_response
+from pidyn.systems.modal import linear_matrices, modal_properties
 from pidyn.systems.shear_building import ShearBuilding
 
 log = logging.getLogger(__name__)
@@ -289,7 +290,6 @@ def building_fit_test(
 ) -> dict:
     """The fit test (``pidyn.discrepancy.fit_test``) of every measured floor's absolute
     acceleration on ``span``, simulated from rest; the noise read above the model's modes."""
-    from pidyn.systems.modal import linear_matrices, modal_properties
 
     sim = simulate_response(system, values, record)["a"]
     ag = np.asarray(record.f, float)

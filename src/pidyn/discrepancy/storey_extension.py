@@ -15,6 +15,7 @@ from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_model import Found, building_with
 from pidyn.discrepancy.storey_nominal import heldout_nrmse
 from pidyn.discrepancy.storey_ranking import floor_noise, measured_floors, trial_values
+from pidyn.refine.stage import refine
 from pidyn.simulate import simulate_response
 from pidyn.systems.places import storey_param
 from pidyn.systems.shear_building import ShearBuilding
@@ -35,7 +36,6 @@ def try_extension(
 ) -> dict:
     """The building with ``cand`` added, refined on the fitting part; accepted when it predicts
     the held-out floor accelerations better than the current model by ``storey_min_gain``."""
-    from pidyn.refine.stage import refine
 
     # the refinement identifies the shapes the screening fixed from the record (a friction's
     # width read from filtered drifts is biased, and the friction's size follows its width)

@@ -14,6 +14,7 @@ from pidyn.data.sources import Record
 from pidyn.discrepancy.screening_rules import Thresholds
 from pidyn.discrepancy.storey_extension import step_outcome
 from pidyn.discrepancy.storey_model import BuildingDiagnosis, StoreyView, score_text, storey_system
+from pidyn.reporting import pyplot
 from pidyn.systems.shear_building import ShearBuilding
 
 
@@ -107,10 +108,7 @@ def storey_residual(view: StoreyView, values: dict[str, float], found) -> np.nda
 
 
 def write_building_figures(run_dir: Path, d: BuildingDiagnosis) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     n = len(d.views)
     fig, axes = plt.subplots(n, 2, figsize=(9, 2.6 * n), squeeze=False)

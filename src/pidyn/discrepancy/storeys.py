@@ -34,6 +34,12 @@ from pathlib import Path
 
 import numpy as np
 
+from pidyn.discrepancy.heldout_check import (
+    HELDOUT_BAND,
+    SETTLE_PERIODS,
+    heldout_check,
+    simulation_sensitivity,
+)
 from pidyn.discrepancy.screening import Screening
 from pidyn.discrepancy.storey_choice import Study, building_fit_test, structured_storey
 from pidyn.discrepancy.storey_learned import learned_storey_force
@@ -145,12 +151,6 @@ def building_heldout_test(study: Study, current: dict) -> dict:
     floor's relative acceleration, simulated from rest, with the sensitivities to the building's
     trainable parameters; a floor fails below the test's level shared among the floors
     (Bonferroni)."""
-    from pidyn.discrepancy.heldout_check import (
-        HELDOUT_BAND,
-        SETTLE_PERIODS,
-        heldout_check,
-        simulation_sensitivity,
-    )
 
     record, system, values = study.record, current["system"], current["values"]
     floors = measured_floors(record)

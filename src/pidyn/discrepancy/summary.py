@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from pidyn.discrepancy.accelerometers import acceleration_gain
 from pidyn.discrepancy.case import Case, Outcome
 from pidyn.discrepancy.changes import running_estimate
 from pidyn.discrepancy.effects import EFFECTS, Signals
@@ -19,6 +21,7 @@ from pidyn.discrepancy.report_figures import (
     plot_residual,
     plot_response,
     plot_running_estimate,
+    plot_running_period,
 )
 from pidyn.discrepancy.screening import weak_system
 from pidyn.discrepancy.verdicts import Verdict
@@ -26,6 +29,7 @@ from pidyn.notes import note
 from pidyn.reporting import nrmse
 from pidyn.signals import band_limited
 from pidyn.systems.sdof import SDOFSystem
+from pidyn.systems.terms import AmplitudeSoftening, latent_path
 
 
 def summarize(case: Case, o: Outcome) -> dict[str, Any]:
@@ -107,8 +111,6 @@ def heldout_gain(case: Case, o: Outcome) -> dict[str, Any]:
         "at rest",
     )
     if case.from_accelerometers:  # the sensors' quantity decides; the displacement's gain is kept beside it
-        from pidyn.discrepancy.accelerometers import acceleration_gain
-
         gain = {**acceleration_gain(record, o.sims, held_mask), "x": gain}
     for key in ("nominal", "extended"):  # beside every held-out score, the prediction that knows nothing
         gain[f"{key}_beats_trivial"] = None if gain.get(key) is None else bool(gain[key] < gain["trivial"])
@@ -117,7 +119,6 @@ def heldout_gain(case: Case, o: Outcome) -> dict[str, Any]:
 
 def log_verdict(d: dict[str, Any]) -> None:
     """The verdict, where, and the held-out errors beside knowing nothing's, in the log."""
-    import logging
 
     gain, storeys = d["gain"], d.get("storeys") or []
     named = [f"{c} in storey {s}" if s else c for c, s in zip(d["causes"], storeys)] or (
@@ -261,8 +262,6 @@ def _running_figures(case: Case, o: Outcome, fig) -> None:
         signal=(record.t, case.x_raw),
     )
     if o.running is not None:
-        from pidyn.discrepancy.report_figures import plot_running_period
-
         meas = record.a[:, 0] + np.asarray(record.meta.get("sensor_ground", 0.0))
         plot_running_period(
             fig / "running_period.png",
@@ -308,7 +307,6 @@ def amplitude_path(case: Case, o: Outcome) -> tuple[np.ndarray, np.ndarray, np.n
     period, zeta): the equivalent-linear structure at the envelope its simulated response
     carries (the free run the gain was measured on), beside the windows' fits. None without
     such a term."""
-    from pidyn.systems.terms import AmplitudeSoftening
 
     system, values = o.extension.get("system"), o.extension.get("values")
     term = next((t for t in getattr(system, "terms", []) if isinstance(t, AmplitudeSoftening)), None)
@@ -342,7 +340,6 @@ def explained_force(
     """What the screening's fit says the residual is: the effect's force plus the change it
     brings to the nominal parameters (which had absorbed part of the effect), on the same
     band-limited signals as the residual."""
-    from pidyn.systems.terms import latent_path
 
     p = {**values, **row["nominal_refit"], **row["parameters"]}
     term = EFFECTS[row["effect"]].term(row["parameters"], s.context())

@@ -7,6 +7,7 @@ from enum import Enum
 from typing import Any
 
 import numpy as np
+import yaml
 
 from pidyn.notes import note
 
@@ -25,7 +26,6 @@ class Verdict(str, Enum):
 
 def _register_yaml() -> None:
     """A verdict in a YAML file is its plain string."""
-    import yaml
 
     yaml.SafeDumper.add_representer(Verdict, lambda dumper, v: dumper.represent_str(v.value))
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 from dataclasses import dataclass, replace
+from fractions import Fraction
 from importlib import resources
 from pathlib import Path
 
@@ -129,7 +130,6 @@ def _tag(name: str, tag: str) -> str:
 
 
 def _rational(x: float, max_den: int = 64) -> tuple[int, int] | None:
-    from fractions import Fraction
 
     f = Fraction(x).limit_denominator(max_den)
     if abs(float(f) - x) > 1e-9 * x:

@@ -14,6 +14,7 @@ import torch
 
 from pidyn.data.windows import Window
 from pidyn.models.pidynnet import PIDynNet
+from pidyn.params import from_raw
 from pidyn.systems.lstsq import forward_jacobian
 
 
@@ -24,7 +25,6 @@ def residual_information(net: PIDynNet, w: Window) -> torch.Tensor:
     t, f = w.t_pool, w.f_pool
     with torch.no_grad():
         k = net.kinematics(t, f, w.q_pool, w.qd_pool)
-    from pidyn.params import from_raw
 
     specs = [net.params.spec(n) for n in names]
     fixed = {n: v.detach() for n, v in net.params.values().items()}

@@ -41,7 +41,7 @@ from pidyn.models.latent_start import (
     motion_on_samples,
     teach_current_path,
 )
-from pidyn.models.lit_module import PIDynNetModule
+from pidyn.models.lit_module import PIDynNetModule, tensorboard_writer
 from pidyn.models.schedule import Schedule, WindowResult
 from pidyn.notes import note
 
@@ -459,7 +459,6 @@ class SubperiodIdentifier:
         )
 
     def _log_window(self, r: WindowResult) -> None:
-        from pidyn.models.lit_module import tensorboard_writer
 
         tb = tensorboard_writer(self.module.logger)  # None when no trainer or no TensorBoard
         if tb is None:

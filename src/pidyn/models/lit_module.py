@@ -17,6 +17,7 @@ import torch
 from pidyn.data.windows import Window
 from pidyn.errors import error_pct
 from pidyn.models.pidynnet import PIDynNet
+from pidyn.params import from_raw
 
 Phase = Literal["pretrain", "identify", "finetune", "finetune_lbfgs"]
 
@@ -230,7 +231,6 @@ class PIDynNetModule(L.LightningModule):
         """Physical-value trajectory of the trainable parameters in this fit, (iters, n)."""
         if not self.trajectory:
             return torch.empty(0, len(self.net.params.trainable_names))
-        from pidyn.params import from_raw
 
         raw = torch.stack(self.trajectory).cpu()
         specs = [self.net.params.spec(n) for n in self.net.params.trainable_names]

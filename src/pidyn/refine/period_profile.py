@@ -28,6 +28,7 @@ from pidyn.params import to_theta, trainable_specs
 from pidyn.refine.output_error import output_error_problem
 from pidyn.refine.period_scan import profile_point, scaled
 from pidyn.refine.uncertainty import bandwidth, residual_correlation, sandwich
+from pidyn.systems.modal import linear_matrices, modal_properties
 
 #: chi^2 with one degree of freedom, its 95 % point
 CHI2_95 = 3.841458820694124
@@ -125,7 +126,6 @@ def _adjustment(problem, J, r, specs, best, powers, held, free) -> tuple[float, 
 
 
 def _period(system, values: dict[str, float]) -> float:
-    from pidyn.systems.modal import linear_matrices, modal_properties
 
     return float(modal_properties(*linear_matrices(system, values))["period_s"][0])
 

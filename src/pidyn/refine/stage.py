@@ -17,8 +17,10 @@ import time
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+from scipy.stats import chi2
 
 from pidyn.notes import note
+from pidyn.params import to_theta
 from pidyn.refine.period_profile import profile_period
 from pidyn.refine.period_scan import scan_period
 from pidyn.refine.problem import ShootingProblem
@@ -198,7 +200,6 @@ def _test_rest(
     free solution's residuals; the drop is divided by it (1 for white noise). Measured: on
     noise-free Bouc-Wen under El Centro x3 an uncorrected drop of 4e3 against 11.3 said "not
     at rest" of a record that starts at rest."""
-    from scipy.stats import chi2
 
     ns = problem.ns
     if int(problem.bounds[0]) > 0:
@@ -319,7 +320,6 @@ class _Starts:
         network_states: np.ndarray | None,
         prefer: str,
     ) -> None:
-        from pidyn.params import to_theta
 
         names = problem.names
         self.cands = {
@@ -368,7 +368,6 @@ class _Starts:
 
     def add(self, label: str, values: dict[str, float]) -> str:
         """One more candidate start (found after the first solve); returns its label."""
-        from pidyn.params import to_theta
 
         self.cands[label] = values
         self.thetas[label] = to_theta(self.problem.specs, values)

@@ -110,7 +110,7 @@ def bandwidth(rho: float, n: int) -> int:
 
 def intervals(specs: list[ParamSpec], theta: np.ndarray, cov: np.ndarray) -> dict[str, dict]:
     """Value, std (delta method), 95 % interval (mapped from the unconstrained coordinates)."""
-    import torch
+    import torch  # lazy: the NumPy core (simulation, refinement) runs without loading torch
 
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     out = {}

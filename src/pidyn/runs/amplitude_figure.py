@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from pidyn.discrepancy.running import running_modes
+from pidyn.reporting import pyplot
 from pidyn.systems.sdof import SDOFSystem
 from pidyn.systems.terms import LinearStiffness, ViscousDamping
 
@@ -99,10 +100,7 @@ def _unit(record: Any) -> str:
 
 
 def _draw(path: Path, record: Any, rows: dict[str, np.ndarray], law: np.ndarray | None) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     ok = np.isfinite(rows["period"])
     peak = rows["peak"][ok]

@@ -4,6 +4,7 @@ else."""
 
 from __future__ import annotations
 
+import inspect
 import logging
 import sys
 from dataclasses import dataclass, replace
@@ -13,8 +14,11 @@ from typing import Any
 import hydra
 import lightning as L
 import torch
+from hydra.errors import InstantiationException
 from omegaconf import DictConfig, OmegaConf, open_dict
 
+from pidyn.baselines.start_policy import start_policy
+from pidyn.config import user_settings
 from pidyn.data.checks import check_floors, check_record
 from pidyn.data.datamodule import SubperiodDataModule
 from pidyn.data.multi import concatenate
@@ -34,7 +38,6 @@ log = logging.getLogger(__name__)
 def instantiate(node: DictConfig, **kwargs: Any) -> Any:
     """``hydra.utils.instantiate``, with a user's error (a bad value, a bad file, a missing channel)
     coming out as itself, not wrapped in Hydra's instantiation error, so it is named as such."""
-    from hydra.errors import InstantiationException
 
     try:
         return hydra.utils.instantiate(node, **kwargs)
@@ -78,7 +81,6 @@ def _one_record(node: DictConfig, system: StructuralSystem) -> Record:
 
 
 def _target_args(node: DictConfig) -> set[str]:
-    import inspect
 
     fn = hydra.utils.get_method(node._target_)
     return set(inspect.signature(fn).parameters)
@@ -206,8 +208,6 @@ def data_start(
     cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path
 ) -> tuple[StructuralSystem, Any]:
     """``model.start`` (see ``pidyn.baselines.start_policy.start_policy``); the start goes to data_start.json."""
-    from pidyn.baselines.start_policy import start_policy
-    from pidyn.config import user_settings
 
     system, start, used = start_policy(str(cfg.model.get("start", "auto")), system, record, user_settings())
     if start is not None:

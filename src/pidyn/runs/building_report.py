@@ -8,13 +8,17 @@ beside the truth, storey hysteresis loops, and the identified equation of every 
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.signal import welch
 
-from pidyn.reporting import diverged, plottable, write_json
+from pidyn.baselines.data_start import fundamental
+from pidyn.discrepancy.storey_model import storey_views
+from pidyn.reporting import diverged, plottable, pyplot, write_json
 from pidyn.simulate import simulate_states
 from pidyn.systems.modal import compare_modes, modal_table
 
@@ -44,7 +48,6 @@ def _drift_and_force(system, values: Mapping[str, float], t: np.ndarray, Y: np.n
 def _interface_modes(path: Path) -> dict:
     """The ``modes`` list (periods and damping ratios with intervals) already in ``modal.json``,
     kept beside the building's own tables."""
-    import json
 
     try:
         return {"modes": json.loads(path.read_text())["modes"]}
@@ -148,10 +151,7 @@ def plot_storey_loops(
 ) -> None:
     """Restoring force against drift, one panel per storey (or per ``panels`` name): the identified
     model simulated over the record, and the true structure's when known."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     n = drift.shape[1]
     cols = min(n, 3)
@@ -229,10 +229,6 @@ def storey_residuals(
     high-passed alike at a fifth of the fundamental). Its RMS share of F_i, its dominant frequency,
     and the share of it each simple force shape would explain (a stiffness, damping, friction or
     cubic error of that storey): where to look, not a verdict."""
-    from scipy.signal import welch
-
-    from pidyn.baselines.data_start import fundamental
-    from pidyn.discrepancy.storey_model import storey_views
 
     if record.a is None or np.isnan(record.a).any() or record.n_inputs != 1:
         return []

@@ -20,6 +20,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from pidyn.reporting import write_json, write_text_atomic
@@ -153,7 +154,6 @@ def _save_hydra_files(folder: Path, cfg: DictConfig) -> None:
     """``.hydra/config.yaml``, ``hydra.yaml`` and ``overrides.yaml``, as Hydra writes them, but only
     once this run holds the folder (``hydra.output_subdir: null``): a refused second run must not
     overwrite the first run's record of itself."""
-    from hydra.core.hydra_config import HydraConfig
 
     if not HydraConfig.initialized():
         return

@@ -5,6 +5,8 @@ table and the figures. ``pidyn.tasks.generalize`` runs them in order and resumes
 from __future__ import annotations
 
 import logging
+import os
+import platform
 from dataclasses import fields
 from pathlib import Path
 from typing import Any
@@ -16,7 +18,7 @@ from omegaconf import DictConfig, OmegaConf
 from pidyn.data.sources import synthetic_from_motion
 from pidyn.excitation.ground_motion import load_record, prepare
 from pidyn.models.predict import PredictSettings, pearson, predict_response
-from pidyn.reporting import write_json
+from pidyn.reporting import pyplot, write_json
 from pidyn.simulate import simulate
 
 log = logging.getLogger(__name__)
@@ -132,13 +134,11 @@ def write_outputs(run_dir: Path, cfg: DictConfig, record, df: pd.DataFrame, summ
 
 def _write_markdown(path: Path, cfg: DictConfig, df: pd.DataFrame, summary: dict[str, Any]) -> None:
     """The run's result as a table a reader can check case by case."""
-    import os
-    import platform
 
-    import torch
+    import torch  # lazy: only for the table's versions line
 
     try:
-        from hydra.core.hydra_config import HydraConfig
+        from hydra.core.hydra_config import HydraConfig  # inside a Hydra run only
 
         overrides = " ".join(HydraConfig.get().overrides.task)
     except ValueError:
@@ -228,10 +228,7 @@ def _examples(pred_dir: Path, df: pd.DataFrame, n: int = 4) -> list:
 
 
 def _figures(fig_dir: Path, record, df: pd.DataFrame, examples: list) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig_dir.mkdir(exist_ok=True)
     # Figure 4: identification window, then predictions under unseen excitations

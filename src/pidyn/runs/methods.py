@@ -11,8 +11,12 @@ from typing import Any
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
+from pidyn import baselines as B
+from pidyn.baselines.registry import STARTS, check_names
 from pidyn.baselines.worker import BaselineJob
 from pidyn.data.sources import Record
+from pidyn.models.identify import network_states
+from pidyn.refine import RefineSettings, refine
 from pidyn.reporting import diverged, write_json
 from pidyn.runs.metrics import record_noise, relative_errors
 from pidyn.runs.runtime import in_multirun
@@ -26,14 +30,12 @@ def default_starts() -> tuple[str, ...]:
     """The refinement's starts when the config names none: the data's, then every estimator that
     ran and gave the model's parameters (``model.refine.starts`` in
     conf/model/refine/multiple_shooting.yaml)."""
-    from pidyn.baselines.registry import STARTS
 
     return ("data", *STARTS)
 
 
 def check_method_names(cfg: DictConfig) -> None:
     """Misspelled names and settings fail before PIDynNet runs, not minutes later (or never)."""
-    from pidyn.baselines.registry import STARTS, check_names
 
     check_names("baselines.run", list((cfg.get("baselines") or {}).get("run") or []))
     plan = refine_plan(cfg)
@@ -49,7 +51,6 @@ def check_method_names(cfg: DictConfig) -> None:
 def refine_plan(cfg: DictConfig) -> tuple[set[str], list[str], Any] | None:
     """``model.refine`` read and checked: (classical starts allowed, state sources to compare,
     RefineSettings), or None when the stage is off."""
-    from pidyn.refine import RefineSettings
 
     node = cfg.model.get("refine") or "none"
     # model.refine=none / =multiple_shooting on the command line sets the method by name (the
@@ -83,8 +84,6 @@ def run_refinement(
     Starts: PIDynNet's estimate with its networks' states, and the classical estimates named
     in ``model.refine.starts`` that ran on the same record; the stage refines the one that
     simulates the record best and says so when that is not PIDynNet's."""
-    from pidyn.models.identify import network_states
-    from pidyn.refine import refine
 
     plan = refine_plan(cfg)
     if plan is None:
@@ -174,7 +173,6 @@ def run_baselines(
 ) -> list[dict]:
     """The configured classical methods on the same record (``pending``: already started),
     logged and written to baselines.json, and the Cramer-Rao bound to cramer_rao.json."""
-    from pidyn import baselines as B
 
     bcfg = cfg.get("baselines") or {}
     out = (pending if pending is not None else start_baselines(cfg, system, record)).result()

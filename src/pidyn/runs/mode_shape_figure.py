@@ -14,8 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from pidyn.baselines.peers import io_arrays, spans
+from pidyn.baselines.peers import io_arrays, spans, srim
 from pidyn.baselines.subspace import poles, real_shape
+from pidyn.reporting import pyplot
 from pidyn.systems.modal import mac
 
 
@@ -48,7 +49,6 @@ def srim_shapes(record: Any, n_modes: int) -> list[dict[str, Any]] | None:
         import mdof  # noqa: F401  (an optional peer: pip install 'pidyn[peer]')
     except ImportError:
         return None
-    from pidyn.baselines.peers import srim
 
     return srim(record, orders=(2 * n_modes,)).modes or None
 
@@ -106,10 +106,7 @@ def mode_shape_figure(
 
 
 def _draw(path: Path, record: Any, shaped, ours, floors, peers, matched) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     n = len(shaped)
     fig, axes = plt.subplots(1, n, figsize=(2.6 * n + 0.6, 4.2), sharey=True, squeeze=False)

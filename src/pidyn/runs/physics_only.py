@@ -12,11 +12,15 @@ from __future__ import annotations
 import logging
 from typing import Any
 
+import hydra
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from pidyn.assessment import heldout_scores
 from pidyn.data.sources import Record
+from pidyn.models.pidynnet import PIDynNet
+from pidyn.models.predict import PredictSettings, predict_response
+from pidyn.reporting import nrmse
 from pidyn.systems.base import StructuralSystem
 
 log = logging.getLogger(__name__)
@@ -45,7 +49,6 @@ def physics_only(
     """prediction.json's ``physics_only`` entry: every measured channel's NRMSE of the networks'
     prediction (``_response``: its accelerations from the model at its motion), its time,
     and the worst window's physics loss; or why it does not apply."""
-    from pidyn.models.predict import PredictSettings, predict_response
 
     why = applies(system, record)
     if why is not None:
@@ -66,7 +69,6 @@ def physics_only(
     response = _response(system, values, record, x)
     scores = heldout_scores(response, record, (float(record.t[0]), float(record.t[-1])))
     acc = [float(s) for k, s in scores["nrmse"].items() if k.startswith("a")]
-    from pidyn.reporting import nrmse
 
     follows = [nrmse(x[:, j], np.asarray(sim["x"])[:, j]) for j in range(x.shape[1])]
     return {
@@ -96,10 +98,7 @@ def _response(system: StructuralSystem, values: dict[str, float], record: Record
 def _networks(cfg: DictConfig, system: StructuralSystem, values: dict[str, float]) -> tuple[Any, Any]:
     """A PIDynNet of the run's architecture on ``system`` with the run's values held, and a
     factory of quiet trainers."""
-    import hydra
-    import lightning as L
-
-    from pidyn.models.pidynnet import PIDynNet
+    import lightning as L  # lazy: the prediction's trainer only
 
     rpn = hydra.utils.instantiate(cfg.model.rpn, out_features=system.n_dof)
     lnn = hydra.utils.instantiate(cfg.model.lnn, out_features=system.n_latent) if system.n_latent else None

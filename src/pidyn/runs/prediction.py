@@ -7,6 +7,7 @@ layout where there is one. ``predict.py`` (``pidyn.tasks.predict``) and ``pidyn.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -14,11 +15,13 @@ from typing import Any
 import numpy as np
 from omegaconf import DictConfig, OmegaConf, open_dict
 
-from pidyn.assessment import heldout_scores
+from pidyn.adequacy import trivial_predictions
+from pidyn.assessment import heldout_scores, measured_convention
 from pidyn.data.layout import sensor_view
 from pidyn.data.sources import Record
 from pidyn.params import fixed_values
-from pidyn.reporting import nrmse
+from pidyn.reporting import nrmse, plottable, pyplot
+from pidyn.runs.build import system_and_record
 from pidyn.runs.folder import COMPLETE, is_complete
 from pidyn.simulate import simulate_response
 from pidyn.systems.base import StructuralSystem
@@ -41,7 +44,6 @@ class Identified:
 
     @classmethod
     def load(cls, run_dir: str | Path) -> Identified:
-        import json
 
         run_dir = Path(run_dir)
         config = run_dir / ".hydra" / "config.yaml"
@@ -60,7 +62,6 @@ class Identified:
         """The run's system and values, and the record (``record``, or the one ``data`` describes,
         read as the run read its own); the system's inputs are the record's where the run took
         them so."""
-        from pidyn.runs.build import system_and_record
 
         cfg = self.cfg.copy()
         if data is not None:
@@ -96,7 +97,6 @@ def check_channels(run: Identified, record: Record) -> None:
 
 def _plain(value: Any) -> Any:
     """JSON's view of a value (dict keys as strings, tuples as lists), to compare with metrics.json."""
-    import json
 
     return json.loads(json.dumps(value))
 
@@ -130,8 +130,6 @@ def score(system: StructuralSystem, values: dict[str, float], record: Record) ->
 def trivial(record: Record) -> dict[str, Any]:
     """The prediction that knows nothing, chosen on the predicted record itself (so it is at least
     as good as any such choice made beforehand)."""
-    from pidyn.adequacy import trivial_predictions
-    from pidyn.assessment import measured_convention
 
     record, _ = sensor_view(record, {})  # a deck's own channels (pidyn.data.layout)
     span = (float(record.t[0]), float(record.t[-1]))
@@ -211,13 +209,7 @@ def _linear(other: Identified | None, data, system, record, ours) -> float | Non
 
 def figure(path: Path, record: Record, sim: dict[str, np.ndarray], run: Identified, out: dict) -> None:
     """Predicted against measured motion, one panel per measured channel."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from pidyn.assessment import measured_convention
-    from pidyn.reporting import plottable
+    plt = pyplot()
 
     path.parent.mkdir(parents=True, exist_ok=True)
     record, sim = sensor_view(record, sim)

@@ -13,6 +13,8 @@ import numpy as np
 import torch
 from omegaconf import DictConfig
 
+from pidyn.adequacy import check_adequacy, describe, rk4_stability
+from pidyn.assessment import assess
 from pidyn.notes import note
 from pidyn.reporting import (
     diverged,
@@ -25,6 +27,7 @@ from pidyn.reporting import (
 )
 from pidyn.runs.amplitude_figure import amplitude_figure
 from pidyn.runs.build import Run
+from pidyn.runs.building_report import write_building_report
 from pidyn.runs.hparams import log_hparams
 from pidyn.runs.loop_figure import loop_figure, support_loops
 from pidyn.runs.metrics import channel_nrmse, record_noise, reference_channel, relative_errors, sim_nrmse_x
@@ -152,7 +155,6 @@ def _metrics(
 def _adequacy(run: Run, final: dict[str, float], sim: dict[str, np.ndarray]) -> dict[str, Any]:
     """Whether the identified model describes the record (``pidyn.adequacy``), on the fitting part
     and on a held-out part, with the integrator's stability at the record's step."""
-    from pidyn.adequacy import check_adequacy, rk4_stability
 
     record = run.record
     split = (record.meta or {}).get("split") if run.hold_out else None
@@ -164,7 +166,6 @@ def _adequacy(run: Run, final: dict[str, float], sim: dict[str, np.ndarray]) -> 
 def _record_adequacy(result: dict[str, Any], metrics: dict) -> None:
     """``adequate`` and ``adequacy`` in metrics.json, the held-out scores beside the prediction that
     knows nothing, and a note when the model does not describe the record."""
-    from pidyn.adequacy import describe
 
     metrics["adequate"] = result["adequate"]
     metrics["adequacy"] = result
@@ -182,7 +183,6 @@ def _record_adequacy(result: dict[str, Any], metrics: dict) -> None:
 
 def write_run_report(run_dir: Path, equation: str, metrics: dict) -> None:
     """``report.md``: the verdict on the model first, then the equation and the parameters."""
-    from pidyn.adequacy import describe
 
     ad = metrics["adequacy"]
     names = str(metrics["record"]).split("+")
@@ -216,7 +216,6 @@ def write_run_report(run_dir: Path, equation: str, metrics: dict) -> None:
 def _building(run: Run, final: dict[str, float], truths: dict, refined: Any, metrics: dict) -> None:
     """A building's modal table, storey equations and loops (``building_report``); its modes go to
     metrics.json."""
-    from pidyn.runs.building_report import write_building_report
 
     modes = write_building_report(
         run.system,
@@ -235,7 +234,6 @@ def _assess(
     run: Run, final: dict[str, float], refined: Any, sim: dict[str, np.ndarray], metrics: dict, adequate: bool
 ) -> None:
     """modal.json and, on a record with a held-out part, how the model predicts it (``pidyn.assessment``)."""
-    from pidyn.assessment import assess
 
     metrics.update(assess(run.system, run.record, final, refined, sim, run.hold_out, run.run_dir, adequate))
     for r, mode in enumerate(metrics.get("modal") or [], start=1):
@@ -404,8 +402,6 @@ def _log_summary(equation: str, errors: dict, pidyn_errors: dict, metrics: dict,
             ", ".join(f"{n} [{lo:.5g}, {hi:.5g}]" for n, (lo, hi) in metrics["ci95"].items()),
         )
     if "adequacy" in metrics:
-        from pidyn.adequacy import describe
-
         (log.info if adequate else log.warning)("%s", describe(metrics["adequacy"]))
     log.info("wall %.1f s, run folder %s", metrics["wall_seconds"], run_dir)
 
@@ -423,7 +419,7 @@ def tb_figures(logger: Any, fig_dir: Path, step: int, metrics: dict, refined: An
             exp.add_scalar(f"noise_std/{c}", sd, step)
         if refined.notes:
             exp.add_text("identifiability", "\n\n".join(refined.notes), step)
-    import matplotlib.image as mpimg
+    import matplotlib.image as mpimg  # lazy: with matplotlib (see reporting.pyplot)
 
     for png in sorted(fig_dir.glob("*.png")):
         img = mpimg.imread(png)[..., :3]

@@ -3,11 +3,14 @@ notices that do not apply to it."""
 
 from __future__ import annotations
 
+import warnings
+
+from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
+
 
 def in_multirun() -> bool:
     """True inside a Hydra multirun job (progress bars of parallel jobs would interleave)."""
-    from hydra.core.hydra_config import HydraConfig
-    from hydra.types import RunMode
 
     try:
         return HydraConfig.get().mode == RunMode.MULTIRUN
@@ -17,7 +20,6 @@ def in_multirun() -> bool:
 
 def quiet_framework_warnings() -> None:
     """Silence Lightning notices that do not apply to a one-window-at-a-time loop."""
-    import warnings
 
     for msg in (
         ".*LeafSpec.*",

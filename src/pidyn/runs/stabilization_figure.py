@@ -18,6 +18,7 @@ import numpy as np
 
 from pidyn.baselines.peers import io_arrays, spans
 from pidyn.baselines.subspace import Pole, poles
+from pidyn.reporting import pyplot
 from pidyn.signals import powered, transfer_function
 from pidyn.systems.modal import mac
 
@@ -106,10 +107,7 @@ def stabilization_figure(path: Path, record: Any, n_dof: int) -> dict[str, Any] 
 
 
 def _draw(path: Path, record: Any, U: np.ndarray, Y: np.ndarray, marked, orders: list[int]) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     tf = transfer_function(U.mean(axis=0), Y[-1], record.dt)
     band = powered(tf, tf.freq > 0)

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from hydra.core.hydra_config import HydraConfig
+from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import DictConfig
@@ -29,7 +30,6 @@ ENDED = "sweep_progress.log"  # one line per job that ended
 def sweep_size(overrides: list[str]) -> int | None:
     """How many jobs the basic sweeper makes of ``overrides`` (the product of every sweep's
     choices); None where a sweep cannot be counted in advance (an interval of another sweeper)."""
-    from hydra.core.override_parser.overrides_parser import OverridesParser
 
     try:
         parsed = OverridesParser.create().parse_overrides(overrides)

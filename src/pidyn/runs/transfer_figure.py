@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from pidyn.reporting import pyplot
 from pidyn.runs.metrics import reference_channel
 from pidyn.signals import TransferFunction, powered, transfer_function
 
@@ -63,10 +64,7 @@ def _draw(
     name: str,
     unit: str,
 ) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, (ax, axc) = plt.subplots(
         2, 1, figsize=(7.5, 5.2), sharex=True, gridspec_kw={"height_ratios": [3, 1]}

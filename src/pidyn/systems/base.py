@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -161,7 +161,6 @@ class StructuralSystem(ABC):
 
 def merge_specs(defaults: list[ParamSpec], overrides: dict | None) -> list[ParamSpec]:
     """Apply config overrides (``{name: {field: value}}``) to default specs; typos fail."""
-    from dataclasses import fields, replace
 
     overrides = dict(overrides or {})
     by_name = {s.name: s for s in defaults}

@@ -30,7 +30,9 @@ dampings per kg (s^-1). Parameters carry their support's number in the order of 
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -39,7 +41,7 @@ import torch
 from pidyn.params import ParamSpec
 from pidyn.systems.base import Kinematics, StructuralSystem, merge_specs, stack_last
 from pidyn.systems.places import OnStorey, PlacedTerms, latent_slices, place_terms
-from pidyn.systems.terms import ForceTerm, LinearStiffness, ViscousDamping
+from pidyn.systems.terms import TERMS, ForceTerm, LinearStiffness, ViscousDamping
 
 
 def sensor_row(position: float, length: float) -> np.ndarray:
@@ -294,9 +296,6 @@ def _per_support(value: float | Sequence[float], n: int, what: str) -> list[floa
 def _own(entry: Mapping[str, Any], j: int) -> dict:
     """A config entry whose term reads the support's spring and dashpot by name (an amplitude
     law scales them) is pointed at support j's own (``k2``, ``c2``)."""
-    import inspect
-
-    from pidyn.systems.terms import TERMS
 
     entry = dict(entry)
     cls = TERMS.get(entry.get("term"))
@@ -309,6 +308,5 @@ def _own(entry: Mapping[str, Any], j: int) -> dict:
 
 
 def _with_unit(spec: ParamSpec, unit: str) -> ParamSpec:
-    from dataclasses import replace
 
     return replace(spec, unit=unit)

@@ -15,6 +15,8 @@ import numpy as np
 from scipy.linalg import eigh
 
 from pidyn.errors import error_pct
+from pidyn.params import from_raw, to_raw
+from pidyn.systems.terms import BoucWenHysteresis, LinearStiffness, ViscousDamping
 
 
 def modal_properties(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> dict:
@@ -95,7 +97,6 @@ def linear_matrices(system, values: Mapping[str, float]) -> tuple[np.ndarray, np
 def stiffness_params(system) -> list[str]:
     """A single degree of freedom's parameters that make up its stiffness about rest (a linear
     spring's k, a Bouc-Wen spring's k since dz/dx = 1 at rest)."""
-    from pidyn.systems.terms import BoucWenHysteresis, LinearStiffness
 
     return [
         t.param for t in getattr(system, "terms", []) if isinstance(t, (LinearStiffness, BoucWenHysteresis))
@@ -103,7 +104,6 @@ def stiffness_params(system) -> list[str]:
 
 
 def damping_params(system) -> list[str]:
-    from pidyn.systems.terms import ViscousDamping
 
     return [t.linear[0] for t in getattr(system, "terms", []) if isinstance(t, ViscousDamping)]
 
@@ -162,9 +162,7 @@ def _drawn_modes(
 ) -> tuple[dict[str, list], list]:
     """The modal quantities and mode shapes of ``draws`` parameter sets drawn from the estimate's
     covariance (unconstrained coordinates); a draw without modes (unstable) is left out."""
-    import torch
-
-    from pidyn.params import from_raw, to_raw
+    import torch  # lazy: the NumPy core (simulation, refinement) runs without loading torch
 
     specs = {s.name: s for s in system.param_specs()}
     theta = np.array([to_raw(specs[k], float(values[k])) for k in names])

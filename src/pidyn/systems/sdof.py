@@ -33,6 +33,7 @@ import torch
 
 from pidyn.params import ParamSpec
 from pidyn.systems.base import ExcitationKind, Kinematics, StructuralSystem, merge_specs, stack_last
+from pidyn.systems.modal import damping_params, stiffness_params
 from pidyn.systems.terms import (
     AmplitudeSoftening,
     BoucWenHysteresis,
@@ -182,7 +183,6 @@ class SDOFSystem(StructuralSystem):
     def stiffness_name(self) -> str:
         """The parameter that is this model's stiffness about rest (a linear spring's k or k1, a
         Bouc-Wen spring's k): what a stiffness loss scales and a period is read from."""
-        from pidyn.systems.modal import stiffness_params
 
         names = stiffness_params(self)
         if not names:
@@ -201,7 +201,6 @@ class SDOFSystem(StructuralSystem):
 
     def support_params(self, p: dict[str, float]) -> dict[str, dict[str, float]]:
         """Each support's own spring and dashpot per unit mass: k_j = r_j k, c_j = g_j + r_j c."""
-        from pidyn.systems.modal import damping_params, stiffness_params
 
         k = sum(float(p[n]) for n in stiffness_params(self))
         c = sum(float(p[n]) for n in damping_params(self))

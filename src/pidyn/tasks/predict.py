@@ -15,6 +15,7 @@ from typing import Any
 
 from omegaconf import DictConfig
 
+from pidyn.config import check_settings
 from pidyn.reporting import write_json
 from pidyn.runs.folder import run_folder
 from pidyn.runs.physics_only import physics_only
@@ -33,7 +34,6 @@ def predict(cfg: DictConfig) -> dict[str, Any]:
 
 
 def predict_in(cfg: DictConfig, folder: Path) -> dict[str, Any]:
-    from pidyn.config import check_settings
 
     check_settings(cfg)
     if cfg.get("run") is None:

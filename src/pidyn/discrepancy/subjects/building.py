@@ -49,7 +49,9 @@ class Building(Subject):
         self.record, self.system, self.settings = record, system, settings
         self.refine_settings, self.start, self._run_dir = refine_settings, start, run_dir
         self.fit, self.held = split_spans(record, float(settings.fit_share))
-        self.progress = Steps("building diagnosis", int(settings.max_effects) * bool(settings.extend) + 2, log)
+        self.progress = Steps(
+            "building diagnosis", int(settings.max_effects) * bool(settings.extend) + 2, log
+        )
 
     @classmethod
     def takes(cls, system: Any) -> bool:

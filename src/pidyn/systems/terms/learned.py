@@ -26,7 +26,7 @@ class LearnedForce(ForceTerm):
         depth: int = 2,
         seed: int = 0,
     ) -> None:
-        from torch import nn
+        from torch import nn  # lazy: the NumPy core (simulation, refinement) runs without loading torch
 
         self.x_scale, self.v_scale, self.f_scale = float(x_scale), float(v_scale), float(f_scale)
         gen = torch.random.fork_rng()
