@@ -43,7 +43,7 @@ def test_a_poor_fit_from_the_data_start_brings_the_config_start_back(monkeypatch
     config start gave 0.031): the config's start is then refined too, and the better kept."""
     from dataclasses import replace
 
-    import pidyn.refine.stage as stage
+    import pidyn.discrepancy.storey_nominal as storey_nominal
     from pidyn.data.sources import synthetic
     from pidyn.discrepancy import storeys
     from pidyn.systems.shear_building import ShearBuilding
@@ -51,7 +51,7 @@ def test_a_poor_fit_from_the_data_start_brings_the_config_start_back(monkeypatch
     truth = ShearBuilding(2, [1.0, 1.0], [0.4, 0.4], [150.0, 100.0])
     rec = synthetic(truth, "el_centro", duration=12.0, dt=0.02, noise=0.01, channels=("a",), data_seed=1)
     model = ShearBuilding(2, [1.0, 1.0], [0.4, 0.4], [140.0, 95.0])  # the config's guesses, close
-    real_refine, labels = stage.refine, []
+    real_refine, labels = storey_nominal.refine, []
 
     def spoiled(system, record, start, *args, **kwargs):
         res = real_refine(system, record, start, *args, **kwargs)
@@ -60,7 +60,7 @@ def test_a_poor_fit_from_the_data_start_brings_the_config_start_back(monkeypatch
             res = replace(res, params={k: v / 3 if k.startswith("k") else v for k, v in res.params.items()})
         return res
 
-    monkeypatch.setattr(stage, "refine", spoiled)
+    monkeypatch.setattr(storey_nominal, "refine", spoiled)  # the nominal fit's refinement
     values, _ = storeys.nominal_fit(rec, model, (0.0, 9.0), None)
     assert labels == ["data", "config"], labels
     assert values["k1"] == pytest.approx(150.0, rel=0.05) and values["k2"] == pytest.approx(100.0, rel=0.05)

@@ -371,7 +371,6 @@ def test_the_nominal_model_of_an_accelerometer_record_starts_from_the_better_of_
     """A real record can hold linear optima far apart: the diagnosis fits its nominal model from the
     data's start and from the peer's realization that simulates the fitting part best, and keeps
     the lower fitted cost (without mdof, from the data's start alone)."""
-    from pidyn.baselines import peer_start
     from pidyn.discrepancy import accelerometers
     from pidyn.systems import LinearSDOF
 
@@ -381,7 +380,9 @@ def test_the_nominal_model_of_an_accelerometer_record_starts_from_the_better_of_
     truth = {"c": p["c"], "k": p["k"], "r_a": p["r_a"], "r_b": p["r_b"]}
     near, worse = {**truth, "k": 0.9 * p["k"]}, {**truth, "k": 0.8 * p["k"]}
     assert accelerometers._cheapest(seg, system, {"near": near, "worse": worse, "truth": truth}) == "truth"
-    monkeypatch.setattr(peer_start, "peer_starts", lambda record, system: {"srim": worse, "okid_era": truth})
+    monkeypatch.setattr(
+        accelerometers, "peer_starts", lambda record, system: {"srim": worse, "okid_era": truth}
+    )
     assert accelerometers._peer_options(seg, system, near) == {"okid_era's realization": truth}
     calls = []
     real_fit = accelerometers._influence_fit
@@ -398,7 +399,7 @@ def test_the_nominal_model_of_an_accelerometer_record_starts_from_the_better_of_
     assert len(calls) == 2 and values["k"] == pytest.approx(p["k"], rel=0.02)
     kept = min(calls, key=lambda c: c[1])
     assert ("okid_era" in note) == (kept[0] == truth["k"])
-    monkeypatch.setattr(peer_start, "peer_starts", lambda record, system: {})
+    monkeypatch.setattr(accelerometers, "peer_starts", lambda record, system: {})
     calls.clear()
     note = accelerometers._nominal_influence(rec, LinearSDOF(inputs=["a", "b"]), (0.0, 13.0), 1e-6)[2]
     assert len(calls) == 1 and note.startswith("start from the data")

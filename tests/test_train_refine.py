@@ -94,7 +94,7 @@ def test_compare_states_refines_from_the_start_the_stage_chose(tmp_path, monkeyp
             seconds=0.0,
         )
 
-    monkeypatch.setattr(pidyn.refine, "refine", fake_refine)
+    monkeypatch.setattr(pidyn.runs.methods, "refine", fake_refine)
     # the fake refinement has no model to simulate: the divergence check is another test's
     monkeypatch.setattr(pidyn.runs.methods, "check_refined", lambda *a, **k: None)
     cfg = make_cfg(
