@@ -217,6 +217,8 @@ def per_event(csv_path: Path) -> dict[tuple[str, str], dict]:
 
 
 def _f(v, fmt=".3f") -> str:
+    if isinstance(v, float) and np.isinf(v):  # the model's simulation blew up: the worst prediction
+        return "diverged"
     return (
         "-"
         if v in (None, "", "nan") or (isinstance(v, float) and not np.isfinite(v))
