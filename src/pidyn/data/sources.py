@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 
-from pidyn.config import make_system
 from pidyn.data.csv_table import (
     channel_columns,
     check_values,
@@ -189,6 +188,8 @@ class Record:
         ``excitation`` (a shipped record's name or an AT2 path), measured with noise of std
         ``noise`` x RMS on each channel (seeded by ``seed``)."""
         if isinstance(system, str):
+            from pidyn.config import make_system  # lazy: names resolve through the configs, at the edge
+
             system = make_system(system, **system_values)
         elif system_values:
             raise ValueError(f"settings {sorted(system_values)} need a system name, not a system object")
