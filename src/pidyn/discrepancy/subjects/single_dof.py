@@ -59,10 +59,8 @@ class SingleDOF(Subject):
     def __init__(self, case: Case) -> None:
         self.case = case
         self.progress = Steps("diagnosis", 6, log)
-        self.ext = _no_extension()
-        self.pending: tuple[str | None, dict | None] = (None, None)
-        self.limit = int(case.settings.max_effects)
-        self.forced = bool(case.settings.force_effect)
+        self.forced = bool(case.settings.force_effect)  # the case's: a forced effect's name is never refused
+        self._begin(None, None, self.forced)
 
     @classmethod
     def takes(cls, system: Any) -> bool:
@@ -128,9 +126,10 @@ class SingleDOF(Subject):
         return self.nom.node, self.nom.values, self.nom.system
 
     def _begin(self, cause: str | None, row: dict | None, forced: bool) -> None:
-        """Extensions from the nominal model with ``cause`` first (its evidence ``row``)."""
+        """Extensions from the nominal model with ``cause`` first (its evidence ``row``); ``forced``:
+        this run extends with the forced effect alone."""
         self.ext = _no_extension()
-        self.pending = (cause, row)
+        self.pending: tuple[str | None, dict | None] = (cause, row)
         self.limit = 1 if forced else int(self.case.settings.max_effects)
         self.forced_run = forced
 
