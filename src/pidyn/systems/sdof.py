@@ -323,14 +323,18 @@ def AmplitudeDependent(
     tau: float = 2.0,
     a_ref: float = 0.005,
     w0: float = 25.0,
+    law: str = "bounded",
     **kw,
 ) -> SDOFSystem:
     """m x'' + c (1 + gain e) x' + k (1 - soft e) x = -m ag, e' = (A / a_ref - e) / tau: a stiffness
     that falls and a damping that rises with the response's recent amplitude e (``AmplitudeSoftening``),
     one model for a structure's weak and strong earthquakes. ``a_ref`` (m) and ``w0`` (rad/s) are the
-    structure's scale (a typical response amplitude, the nominal circular frequency), not identified."""
+    structure's scale (a typical response amplitude, the nominal circular frequency), not identified.
+    The default ``law="bounded"`` softens as k / (1 + soft e): never a negative stiffness on a record
+    stronger than those it was fitted on (``law="linear"``: k (1 - soft e))."""
+    term = AmplitudeSoftening(soft, gain, tau, a_ref=a_ref, w0=w0, law=law)
     return SDOFSystem(
-        [ViscousDamping(c), LinearStiffness(k), AmplitudeSoftening(soft, gain, tau, a_ref=a_ref, w0=w0)],
+        [ViscousDamping(c), LinearStiffness(k), term],
         name=kw.pop("name", "amplitude"),
         **kw,
     )

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 from pidyn.params import ParamSpec
-from pidyn.systems.terms.base import Array, ForceTerm
+from pidyn.systems.terms.base import Array, ForceTerm, _relu
+
+#: how the stiffness and damping factors follow the envelope e
+LAWS = ("linear", "bounded")
 
 
 def _inside(value: float, lo: float, hi: float) -> float:
@@ -21,11 +24,17 @@ class AmplitudeSoftening(ForceTerm):
     e' = (A / a_ref - e) / tau, with A = sqrt(x^2 + (x' / w0)^2) the oscillation's amplitude at
     the nominal circular frequency w0 (smooth; |x| ripples at twice the frequency) and ``a_ref``
     a typical amplitude of the record, so that e is about 1 in the strongest shaking and ``soft``
-    and ``gain`` are the shares by which k and c have changed there."""
+    and ``gain`` are the shares by which k and c have changed there.
+
+    ``law="linear"``: k (1 - soft e) and c (1 + gain e), linear in soft and gain (what a regression
+    screens). ``law="bounded"``: the same slopes at small e, but never a negative stiffness or
+    damping, however far an earthquake drives e beyond the records the law was fitted on: a
+    softening k / (1 + soft e) (the hyperbolic law of soil's modulus reduction, Hardin and
+    Drnevich 1972), a stiffening k (1 + |soft| e); a damping c (1 + gain e) that rises, c / (1 +
+    |gain| e) that falls."""
 
     name = "amplitude_softening"
     n_latent = 1
-    linear = ("soft", "gain")
 
     def __init__(
         self,
@@ -37,12 +46,20 @@ class AmplitudeSoftening(ForceTerm):
         stiffness: str = "k",
         damping: str = "c",
         tau_range: tuple[float, float] = (0.05, 60.0),
+        law: str = "linear",
     ) -> None:
         if not (a_ref > 0 and w0 > 0):
             raise ValueError(f"{self.name}: a_ref and w0 must be > 0, got {a_ref}, {w0}")
+        if law not in LAWS:
+            raise ValueError(f"{self.name}: law must be one of {LAWS}, got {law!r}")
+        self.law = law
+        # linear in soft and gain (regression columns) only under the linear law
+        self.linear = ("soft", "gain") if law == "linear" else ()
+        # the linear law's stiffness turns negative at soft e = 1; the bounded one never does
+        self.soft_range = (-0.5, 0.95) if law == "linear" else (-0.5, 20.0)
         self.tau_range = (float(tau_range[0]), float(tau_range[1]))
         # a fit that ended on a bound starts the next one just inside it (a box needs init inside)
-        self.soft = _inside(soft, -0.5, 0.95)
+        self.soft = _inside(soft, *self.soft_range)
         self.gain = _inside(gain, -0.9, 10.0)
         self.tau = _inside(tau, *self.tau_range)
         self.a_ref, self.w0 = float(a_ref), float(w0)
@@ -50,26 +67,48 @@ class AmplitudeSoftening(ForceTerm):
 
     def specs(self):
         lo, hi = self.tau_range
+        s_lo, s_hi = self.soft_range
         return [  # the bounds here are _inside's in __init__
-            ParamSpec("soft", init=self.soft, true=self.soft, transform="box", lower=-0.5, upper=0.95),
+            ParamSpec("soft", init=self.soft, true=self.soft, transform="box", lower=s_lo, upper=s_hi),
             ParamSpec("gain", init=self.gain, true=self.gain, transform="box", lower=-0.9, upper=10.0),
             ParamSpec("tau", init=self.tau, true=self.tau, transform="box", lower=lo, upper=hi, unit="s"),
         ]
 
+    def factors(self, p: dict, e: Array) -> tuple[Array, Array]:
+        """The factors on k and on c where the envelope is ``e``, by the term's law."""
+        if self.law == "linear":
+            return 1 - p["soft"] * e, 1 + p["gain"] * e
+        soft, gain = p["soft"], p["gain"]
+        stiff = (1 + _relu(-soft) * e) / (1 + _relu(soft) * e)
+        damp = (1 + _relu(gain) * e) / (1 + _relu(-gain) * e)
+        return stiff, damp
+
     def force(self, t, x, v, z, p):
         e = z[..., 0]
-        return -p["soft"] * p[self.stiffness] * e * x + p["gain"] * p[self.damping] * e * v
+        if self.law == "linear":
+            return -p["soft"] * p[self.stiffness] * e * x + p["gain"] * p[self.damping] * e * v
+        stiff, damp = self.factors(p, e)
+        return (stiff - 1) * p[self.stiffness] * x + (damp - 1) * p[self.damping] * v
 
     def at_envelope(self, p: dict, e: Array) -> tuple[Array, Array]:
-        """The structure's stiffness and damping where the envelope is ``e``: k (1 - soft e) and
-        c (1 + gain e), what an equivalent-linear model at that amplitude would have."""
-        return p[self.stiffness] * (1 - p["soft"] * e), p[self.damping] * (1 + p["gain"] * e)
+        """The structure's stiffness and damping where the envelope is ``e`` (by default k (1 -
+        soft e) and c (1 + gain e)): what an equivalent-linear model at that amplitude would have."""
+        stiff, damp = self.factors(p, e)
+        return p[self.stiffness] * stiff, p[self.damping] * damp
 
     def latent_rate(self, t, x, v, z, p):
         amp = (x * x + (v / self.w0) ** 2 + (1e-9 * self.a_ref) ** 2) ** 0.5
         return ((amp / self.a_ref - z[..., 0]) / p["tau"])[..., None]
 
     def formula(self, p):
+        if self.law == "bounded":
+            k, c, soft, gain = p[self.stiffness], p[self.damping], p["soft"], p["gain"]
+            stiff = f"/(1 + {soft:.4g} e)" if soft >= 0 else f" (1 + {-soft:.4g} e)"
+            damp = f" (1 + {gain:.4g} e)" if gain >= 0 else f"/(1 + {-gain:.4g} e)"
+            return (
+                f"stiffness {k:.5g}{stiff}, damping {c:.5g}{damp} in place of k and c"
+                f" (e' = (A/{self.a_ref:.3g} - e)/{p['tau']:.3g})"
+            )
         return (
             f"- {p['soft']:.4g} {p[self.stiffness]:.5g} e x + {p['gain']:.4g} {p[self.damping]:.5g} e x'"
             f" (e' = (A/{self.a_ref:.3g} - e)/{p['tau']:.3g})"
