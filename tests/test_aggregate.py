@@ -175,7 +175,7 @@ def test_tables_smoke_runs_a_multirun_and_aggregates(tmp_path):
     assert mds and "| beta |" in mds[-1].read_text()
 
 
-@pytest.mark.slow
+@pytest.mark.second_proof  # a multirun and its table: test_tables_smoke_runs_a_multirun_and_aggregates
 def test_submitit_launcher_runs_a_multirun_locally(tmp_path):
     """The cluster path: the same multirun through submitit (its local executor, as on a
     SLURM node), each job in its own process and folder."""

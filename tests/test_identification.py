@@ -28,7 +28,7 @@ def test_noisy_duffing_still_within_a_few_percent(tmp_path):
         assert err < 5.0, (name, err, m["params"])
 
 
-@pytest.mark.slow
+@pytest.mark.second_proof  # the box that opens: test_clamp_box_opens_for_a_parameter_the_windows_did_not_determine
 def test_undetermined_k3_is_not_locked_by_the_first_window(tmp_path):
     """The strong part of Kobe at 3 m/s^2, Duffing (0.3, 25, 400) started at k3 = 50: the first
     window does not determine k3 (its least-squares start is rejected). Before, the clamp box
