@@ -54,6 +54,29 @@ def test_the_term_softens_with_the_envelope_and_recovers_as_it_decays():
     assert f[0] == pytest.approx(-0.5 * 100.0 * 0.5 * 0.01 + 1.0 * 1.0 * 0.5 * 0.1)
 
 
+@pytest.mark.parametrize("soft, gain", [(0.5, 1.0), (-0.3, -0.6)])
+def test_the_bounded_law_has_the_linear_slopes_and_never_a_negative_stiffness(soft, gain):
+    """At a small envelope the bounded law is the linear one to first order; at an envelope far
+    beyond the fitted records (where k (1 - soft e) < 0) its stiffness and damping stay positive."""
+    p = {"k": 100.0, "c": 1.0, "soft": soft, "gain": gain, "tau": 2.0}
+    linear = AmplitudeSoftening(soft, gain, 2.0, law="linear")
+    bounded = AmplitudeSoftening(soft, gain, 2.0, law="bounded")
+    assert bounded.linear == () and linear.linear == ("soft", "gain")  # not a regression's columns
+    e = 1e-4
+    for a, b in zip(linear.at_envelope(p, e), bounded.at_envelope(p, e)):
+        assert b == pytest.approx(a, rel=1e-6)
+    e = np.array([0.0, 1.0, 3.0, 30.0])
+    k_e, c_e = bounded.at_envelope(p, e)
+    assert np.all(k_e > 0) and np.all(c_e > 0)
+    assert np.all(np.diff(k_e) < 0) == (soft > 0) and np.all(np.diff(c_e) > 0) == (gain > 0)
+    x, v, z = np.array([0.01]), np.array([0.1]), np.array([[30.0]])
+    restoring = p["k"] * x + p["c"] * v + bounded.force(0.0, x, v, z, p)
+    k30, c30 = bounded.at_envelope(p, 30.0)
+    assert restoring[0] == pytest.approx(k30 * x[0] + c30 * v[0])
+    with pytest.raises(ValueError, match="law"):
+        AmplitudeSoftening(law="cubic")
+
+
 def test_a_moving_period_adds_the_amplitude_dependent_structure_to_the_check(monkeypatch):
     """On an accelerometer record whose running period moves beyond its windows' intervals, the
     output-error check also fits the amplitude-dependent structure; where the period holds, or

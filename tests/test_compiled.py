@@ -13,7 +13,7 @@ from pidyn.compiled.tape import record
 from pidyn.systems.deck import RigidDeck
 from pidyn.systems.sdof import LinearSDOF, SDOFSystem
 from pidyn.systems.shear_building import ShearBuilding
-from pidyn.systems.terms import TERMS, ForceTerm, LinearStiffness, ViscousDamping
+from pidyn.systems.terms import TERMS, AmplitudeSoftening, ForceTerm, LinearStiffness, ViscousDamping
 
 pytestmark = pytest.mark.skipif(build.compiler() is None, reason="no C compiler")
 
@@ -51,6 +51,9 @@ class _Branching(ForceTerm):
 
 def _systems() -> dict[str, object]:
     out = {name: _sdof(name) for name in TERMS if name != "viscous_damping"}
+    # the bounded amplitude law, a softening stiffness and a damping that falls: both branches
+    bounded = AmplitudeSoftening(0.6, -0.4, 0.5, a_ref=0.5, w0=5.0, law="bounded")
+    out["amplitude_bounded"] = LinearSDOF(c=0.4, k=30.0).with_term(bounded)
     out["two_supports_sdof"] = SDOFSystem([ViscousDamping(0.4), LinearStiffness(30.0)], inputs=["a", "b"])
     out["building"] = ShearBuilding(
         n_storeys=3,
