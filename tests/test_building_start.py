@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import pytest
 
-from pidyn.baselines.data_start import fundamental, start_from_data
 from pidyn.data.sources import synthetic
+from pidyn.signals import fundamental
+from pidyn.starts.data import start_from_data
 from pidyn.systems.modal import linear_matrices, modal_properties
 from pidyn.systems.shear_building import ShearBuilding
 

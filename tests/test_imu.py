@@ -119,9 +119,9 @@ def test_masses_unknown_identify_the_frequencies_and_refuse_absolute_stiffness()
     """A 3-storey building with masses 2, 1.5, 1 kg measured by floor accelerometers, identified
     with its masses unknown: the frequencies, mass ratios and stiffness per kg of floor 1 come
     back; absolute N/m are refused without a mass and given with one."""
-    from pidyn.baselines.data_start import start_from_data
     from pidyn.data.sources import synthetic
     from pidyn.refine import RefineSettings, refine
+    from pidyn.starts.data import start_from_data
     from pidyn.systems import ShearBuilding
     from pidyn.systems.modal import modal_properties, modes_with_intervals
     from pidyn.systems.shear_building import UnknownMassError

@@ -175,7 +175,7 @@ def test_a_single_modes_run_starts_the_modes_model_by_pattern(tmp_path):
     one folder; a single mode's estimate there starts the modes model."""
     import json
 
-    from pidyn.baselines.start_policy import start_from_run
+    from pidyn.starts.policy import start_from_run
 
     p = dict(c=1.3, k=400.0, r_a=0.6, r_b=0.45, g_a=0.8, g_b=-0.3, e_a=0.1, e_b=-0.05)
     for name in ("0_event=x", "1_event=y"):

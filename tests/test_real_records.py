@@ -117,9 +117,9 @@ def _two_support_record(noise: float = 0.01, **truth):
 
 
 def test_the_start_from_the_data_finds_the_supports_and_a_stiffness_far_from_the_config():
-    from pidyn.baselines.data_start import start_from_data
     from pidyn.config import make_system
     from pidyn.data.sources import synthetic
+    from pidyn.starts.data import start_from_data
     from pidyn.systems import LinearSDOF
 
     config = make_system("linear")
@@ -372,6 +372,7 @@ def test_the_nominal_model_of_an_accelerometer_record_starts_from_the_better_of_
     data's start and from the peer's realization that simulates the fitting part best, and keeps
     the lower fitted cost (without mdof, from the data's start alone)."""
     from pidyn.discrepancy import accelerometers
+    from pidyn.starts import cheapest
     from pidyn.systems import LinearSDOF
 
     rec, p = _two_support_record(noise=0.02)
@@ -379,7 +380,7 @@ def test_the_nominal_model_of_an_accelerometer_record_starts_from_the_better_of_
     system = LinearSDOF(inputs=["a", "b"])
     truth = {"c": p["c"], "k": p["k"], "r_a": p["r_a"], "r_b": p["r_b"]}
     near, worse = {**truth, "k": 0.9 * p["k"]}, {**truth, "k": 0.8 * p["k"]}
-    assert accelerometers._cheapest(seg, system, {"near": near, "worse": worse, "truth": truth}) == "truth"
+    assert cheapest(seg, system, {"near": near, "worse": worse, "truth": truth}) == "truth"
     monkeypatch.setattr(
         accelerometers, "peer_starts", lambda record, system: {"srim": worse, "okid_era": truth}
     )

@@ -155,3 +155,41 @@ def band_limited(y: np.ndarray, dt: float, f_cut: float) -> tuple[np.ndarray, np
     w = 2j * np.pi * f
     out = [np.fft.irfft(Y * w**k, 2 * n)[:n] for k in range(3)]
     return out[0], out[1], out[2]
+
+
+#: the damping ratio taken when the resonance peak is no wider than the frequency resolution
+UNRESOLVED_DAMPING = 0.02
+
+
+def fundamental(record) -> tuple[float, float] | None:
+    """Frequency (Hz) and damping ratio of the fundamental resonance: the largest peak of the
+    top measured floor's transmissibility from the (mean) input, coherence-weighted."""
+    u, y = _input_output(record)
+    if u is None or y is None or not np.any(y) or not np.any(u):
+        return None
+    dt = record.dt
+    duration = float(record.t[-1] - record.t[0])
+    tf = transfer_function(u, y, dt)
+    band = (max(2.0 / duration, tf.freq[1]), 0.4 / dt)
+    try:
+        fn, zeta = dominant_peak(tf, band)
+    except ValueError:
+        return None
+    if not np.isfinite(zeta):  # narrower than the frequency bins: light damping, its value unresolved
+        zeta = UNRESOLVED_DAMPING
+    return fn, float(np.clip(zeta, 0.005, 0.5))
+
+
+def _input_output(record) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The excitation (several inputs: their mean) and the top measured floor's response: its
+    absolute acceleration where an accelerometer gives it (a transmissibility), else the
+    displacement or velocity as measured (a receptance: its peak sits at the resonance too, and
+    no noisy derivative is taken)."""
+    f = np.asarray(record.f, float)
+    u = f[:, : record.n_inputs].mean(axis=1) if f.ndim == 2 else f  # several: the supports' mean acceleration
+    sensors = record.sensors()
+    if "a" in sensors and record.excitation == "ground":
+        y = record.a[:, max(sensors["a"]) - 1]
+        return u, (y if f.ndim == 2 else y + f)
+    kind = next((k for k in ("x", "v", "a") if k in sensors), None)
+    return (u, None) if kind is None else (u, getattr(record, kind)[:, max(sensors[kind]) - 1])

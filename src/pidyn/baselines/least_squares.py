@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from pidyn.baselines.common import BaselineResult
-from pidyn.baselines.data_start import equation_error_integrated
+from pidyn.baselines.integrated import equation_error_integrated
 from pidyn.baselines.registry import estimator, row
 from pidyn.data.sources import Record
 from pidyn.notes import note

@@ -15,11 +15,10 @@ import time
 import numpy as np
 
 from pidyn.baselines.common import BaselineResult
-from pidyn.baselines.data_start import fundamental
 from pidyn.baselines.registry import estimator, row
 from pidyn.data.sources import Record
 from pidyn.notes import note
-from pidyn.signals import dominant_period, integrate
+from pidyn.signals import dominant_period, fundamental, integrate
 from pidyn.systems.terms import (
     CoulombFriction,
     CubicStiffness,

@@ -29,15 +29,16 @@ from typing import Any
 
 import numpy as np
 
-from pidyn.baselines.data_start import fundamental, start_from_data
-from pidyn.baselines.peer_start import peer_starts
-from pidyn.baselines.start_policy import with_start
 from pidyn.data.sources import Record
 from pidyn.discrepancy.heteroscedastic import envelope, scale_test
-from pidyn.refine.output_error import fit_output_error, output_error_cost, output_error_problem
+from pidyn.refine.output_error import fit_output_error, output_error_problem
 from pidyn.refine.period_scan import scan_period
 from pidyn.reporting import nrmse
-from pidyn.signals import integrate
+from pidyn.signals import fundamental, integrate
+from pidyn.starts.data import start_from_data
+from pidyn.starts.peers import peer_starts
+from pidyn.starts.policy import with_start
+from pidyn.starts.score import cheapest
 from pidyn.systems.modal import linear_matrices, modal_properties
 
 log = logging.getLogger(__name__)
@@ -115,7 +116,7 @@ def _nominal_influence(
     """The nominal model's values from the best start and, with several inputs, the supports'
     influence by output error on the fitting part; with a sentence that says where they came from,
     and the test of the residuals' scale (``_envelope_refit``; None with one input).
-    Starts: the data's, and the peers' realizations mapped onto the model (``peer_start``). The
+    Starts: the data's, and the peers' realizations mapped onto the model (``pidyn.starts.peers``). The
     peer's that simulates the fitting part best is fitted beside the data's, and the lower fitted
     cost is kept: a start's own cost does not rank where its fit ends (on a Painter Street record
     SRIM's start cost half the data's and its fit ended 7 % higher). The kept fit is then checked
@@ -132,7 +133,7 @@ def _nominal_influence(
         name = f"the data ({start.method})"
     options = {name: values, **_peer_options(seg, system, values)}
     if system.n_inputs == 1:
-        best = _cheapest(seg, system, options)
+        best = cheapest(seg, system, options)
         return with_start(system, options[best]), options[best], f"start from {best}", None
     fits = {k: _influence_fit(seg, system, v, tol) for k, v in options.items()}
     best = min(fits, key=lambda k: fits[k][1].cost)
@@ -217,23 +218,8 @@ def _peer_options(seg: Record, system, values: dict[str, float]) -> dict[str, di
     peers = {f"{k}'s realization": {**values, **v} for k, v in peer_starts(seg, system).items()}
     if not peers:
         return {}
-    best = _cheapest(seg, system, peers)
+    best = cheapest(seg, system, peers)
     return {best: peers[best]}
-
-
-def _cheapest(seg: Record, system, options: dict[str, dict[str, float]]) -> str:
-    """The option with the lowest output-error cost on ``seg`` (said in the log when there is a choice)."""
-
-    if len(options) == 1:
-        return next(iter(options))
-    costs = {k: output_error_cost(seg, system, v) for k, v in options.items()}
-    best = min(costs, key=costs.get)
-    log.info(
-        "starts (output-error cost on the fitting part): %s; the cheapest: %s",
-        ", ".join(f"{k} {c:.4g}" for k, c in costs.items()),
-        best,
-    )
-    return best
 
 
 def acceleration_gain(record: Record, sims: dict[str, dict | None], held: np.ndarray) -> dict:

@@ -8,11 +8,11 @@ from typing import Any
 
 import numpy as np
 
-from pidyn.baselines.data_start import start_from_data
 from pidyn.data.sources import Record
 from pidyn.refine.stage import refine
 from pidyn.reporting import nrmse
 from pidyn.simulate import simulate_response
+from pidyn.starts.data import start_from_data
 from pidyn.systems.modal import linear_matrices, modal_properties
 from pidyn.systems.shear_building import ShearBuilding
 

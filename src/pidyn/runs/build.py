@@ -17,7 +17,6 @@ import torch
 from hydra.errors import InstantiationException
 from omegaconf import DictConfig, OmegaConf, open_dict
 
-from pidyn.baselines.start_policy import start_policy
 from pidyn.config import user_settings
 from pidyn.data.checks import check_floors, check_record
 from pidyn.data.datamodule import SubperiodDataModule
@@ -30,6 +29,7 @@ from pidyn.models.schedule import Schedule
 from pidyn.reporting import write_json
 from pidyn.runs.methods import check_method_names
 from pidyn.runs.runtime import in_multirun, quiet_framework_warnings
+from pidyn.starts.policy import start_policy
 from pidyn.systems.base import StructuralSystem
 
 log = logging.getLogger(__name__)
@@ -97,7 +97,7 @@ class Run:
     trainer_factory: Any
     logger: Any
     run_dir: Path
-    start: Any = None  # the start read from the data (``pidyn.baselines.data_start``), or None
+    start: Any = None  # the start read from the data (``pidyn.starts.data``), or None
     hold_out: bool = False  # identified on the record's fitting part; its held-out part judges the model
 
 
@@ -207,7 +207,7 @@ def _hold_out(cfg: DictConfig, record: Record) -> bool:
 def data_start(
     cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path
 ) -> tuple[StructuralSystem, Any]:
-    """``model.start`` (see ``pidyn.baselines.start_policy.start_policy``); the start goes to data_start.json."""
+    """``model.start`` (see ``pidyn.starts.policy.start_policy``); the start goes to data_start.json."""
 
     system, start, used = start_policy(str(cfg.model.get("start", "auto")), system, record, user_settings())
     if start is not None:

@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 from scipy.signal import welch
 
-from pidyn.baselines.data_start import fundamental
 from pidyn.discrepancy.storey_model import storey_views
 from pidyn.reporting import diverged, plottable, pyplot, write_json
+from pidyn.signals import fundamental
 from pidyn.simulate import simulate_states
 from pidyn.systems.modal import compare_modes, modal_table
 

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.linalg import eigh
 
 from pidyn.errors import error_pct
-from pidyn.params import from_raw, to_raw
+from pidyn.params import from_raw, in_range, to_raw
 from pidyn.systems.terms import BoucWenHysteresis, LinearStiffness, ViscousDamping
 
 
@@ -187,3 +187,52 @@ def _drawn_modes(
             out[key].append(m[key])
         shapes.append(m["mode_shapes"])
     return out, shapes
+
+
+def first_mode(system, values: Mapping[str, float]) -> tuple[float | None, float | None]:
+    """The first mode's frequency (Hz) and damping ratio of the model at ``values``."""
+
+    try:
+        modes = modal_properties(*linear_matrices(system, values))
+    except (KeyError, ValueError):
+        return None, None
+    return float(modes["frequency_hz"][0]), float(modes["damping_ratio"][0])
+
+
+def scaled_to(system, fn: float, zeta: float) -> dict[str, float]:
+    """The trainable parameters of the model's linear part scaled so that its first mode has the
+    frequency ``fn`` (Hz) and damping ratio ``zeta``: a building's stiffness profile as the
+    config gives it, with stiffness-proportional damping; a single degree of freedom's springs
+    and dampers shared out alike; a modes model by its own ``start_at``."""
+    specs = {s.name: s for s in system.param_specs()}
+    init = {n: float(s.init) for n, s in specs.items()}
+    w = 2 * np.pi * fn
+    values: dict[str, float] = {}
+    if hasattr(system, "start_at"):  # modes: the fundamental at the peak, the others in proportion
+        values = system.start_at(fn, zeta)
+    elif hasattr(system, "linear_matrices"):
+        w0 = 2 * np.pi * modal_properties(*system.linear_matrices(init))["frequency_hz"][0]
+        scale = (w / max(w0, 1e-12)) ** 2
+        for term in system.terms:
+            kp, cp = term.initial_stiffness_param, term.damping_param
+            if kp and specs[kp].trainable:
+                values[kp] = init[kp] * scale
+        for term in system.terms:  # stiffness-proportional: every mode's ratio grows with its frequency
+            cp = term.damping_param
+            if cp and specs[cp].trainable:
+                kp = next(
+                    t.initial_stiffness_param
+                    for t in system.terms
+                    if t.storey == term.storey and t.initial_stiffness_param
+                )
+                values[cp] = 2 * zeta / w * values.get(kp, init[kp])
+    else:
+        m = init.get("m", 1.0)
+        ks, cs = stiffness_params(system), damping_params(system)
+        for p in ks:
+            if specs[p].trainable:
+                values[p] = m * w**2 / len(ks)
+        for p in cs:
+            if specs[p].trainable:
+                values[p] = 2 * zeta * m * w / len(cs)
+    return {n: v for n, v in values.items() if np.isfinite(v) and in_range(specs[n], v)}

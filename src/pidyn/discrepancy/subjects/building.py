@@ -9,7 +9,6 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from pidyn.baselines.start_policy import start_from_run
 from pidyn.data.checks import check_floors, check_record
 from pidyn.data.sources import Record
 from pidyn.discrepancy.case import split_spans
@@ -22,6 +21,7 @@ from pidyn.discrepancy.storey_steps import building_gain, next_step, refusal_not
 from pidyn.discrepancy.storeys import building_verdict, extended_entry, learned_step, nominal_state
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.progress import Steps
+from pidyn.starts.policy import start_from_run
 from pidyn.systems.shear_building import ShearBuilding
 
 log = logging.getLogger(__name__)

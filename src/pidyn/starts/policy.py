@@ -9,8 +9,9 @@ import logging
 import re
 from pathlib import Path
 
-from pidyn.baselines.data_start import DataStart, modal_of, start_from_data
+from pidyn.starts.data import DataStart, start_from_data
 from pidyn.systems.base import merge_specs
+from pidyn.systems.modal import first_mode
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +72,7 @@ def start_from_run(folder: str, system) -> DataStart:
         values, missing = {n: v for n, v in nested.items() if n in trainable}, []
     if missing:
         raise ValueError(f"model.start: the run in '{folder}' has no estimate of {missing} (another model?)")
-    freq, zeta = modal_of(system, {**{s.name: float(s.init) for s in system.param_specs()}, **values})
+    freq, zeta = first_mode(system, {**{s.name: float(s.init) for s in system.param_specs()}, **values})
     return DataStart(values, "run", freq, zeta, note=f"the estimate of the run in {folder}")
 
 
