@@ -101,14 +101,15 @@ class AmplitudeSoftening(ForceTerm):
         return ((amp / self.a_ref - z[..., 0]) / p["tau"])[..., None]
 
     def formula(self, p):
-        if self.law == "bounded":
+        if self.law == "bounded":  # the same force, written as what it adds to k x and c x'
             k, c, soft, gain = p[self.stiffness], p[self.damping], p["soft"], p["gain"]
-            stiff = f"/(1 + {soft:.4g} e)" if soft >= 0 else f" (1 + {-soft:.4g} e)"
-            damp = f" (1 + {gain:.4g} e)" if gain >= 0 else f"/(1 + {-gain:.4g} e)"
-            return (
-                f"stiffness {k:.5g}{stiff}, damping {c:.5g}{damp} in place of k and c"
-                f" (e' = (A/{self.a_ref:.3g} - e)/{p['tau']:.3g})"
+            sk = f"- {soft:.4g} {k:.5g} e/(1 + {soft:.4g} e) x" if soft >= 0 else f"+ {-soft:.4g} {k:.5g} e x"
+            sc = (
+                f"+ {gain:.4g} {c:.5g} e x'"
+                if gain >= 0
+                else f"- {-gain:.4g} {c:.5g} e/(1 + {-gain:.4g} e) x'"
             )
+            return f"{sk} {sc} (e' = (A/{self.a_ref:.3g} - e)/{p['tau']:.3g})"
         return (
             f"- {p['soft']:.4g} {p[self.stiffness]:.5g} e x + {p['gain']:.4g} {p[self.damping]:.5g} e x'"
             f" (e' = (A/{self.a_ref:.3g} - e)/{p['tau']:.3g})"
