@@ -151,3 +151,18 @@ def test_masses_unknown_identify_the_frequencies_and_refuse_absolute_stiffness()
     assert free.absolute_values(values, m1=2.0)["k1"] == pytest.approx(400.0, rel=0.02)
     specs = {s.name: s for s in free.param_specs()}
     assert not specs["m1"].trainable and specs["m2"].trainable and "per kg of m1" in specs["k1"].unit
+
+
+def test_a_damping_the_draws_leave_undefined_has_no_interval_not_a_nan():
+    """A damper the record does not determine (its log-variance huge, as at a bound): most draws
+    overflow and have no damping ratio; the interval is none (JSON's null), never NaN, and the
+    period, which the draws do determine, keeps its interval."""
+    from pidyn.systems import LinearSDOF
+    from pidyn.systems.modal import modes_with_intervals
+
+    mode = modes_with_intervals(
+        LinearSDOF(c=0.5, k=15.0), {"m": 1.0, "c": 0.5, "k": 15.0}, ["c", "k"], np.diag([1e6, 1e-4])
+    )[0]
+    assert mode["damping_ci95"] == [None, None]
+    lo, hi = mode["period_ci95"]
+    assert lo < mode["period_s"] < hi

@@ -135,10 +135,7 @@ def modes_with_intervals(
         for key, rows in out.items():
             arr = np.asarray(rows, float)
             if len(arr) > 0.9 * draws:
-                ci[key] = [
-                    [float(np.quantile(arr[:, r], 0.025)), float(np.quantile(arr[:, r], 0.975))]
-                    for r in range(n)
-                ]
+                ci[key] = [_quantiles(arr[:, r], draws) for r in range(n)]
         if len(shapes) > 0.9 * draws:  # every floor's value, the top floor's being 1
             arr = np.asarray(shapes, float)
             shape_ci = [np.quantile(arr[:, r, :], [0.025, 0.975], axis=0).T.tolist() for r in range(n)]
@@ -155,6 +152,16 @@ def modes_with_intervals(
         }
         for r in range(n)
     ]
+
+
+def _quantiles(col: np.ndarray, draws: int) -> list:
+    """The 2.5 and 97.5 % quantiles of a modal quantity's draws, or none where more than a tenth
+    of them are not finite (a draw whose mode is overdamped has no damping ratio): a NaN bound
+    is no bound, and JSON has no NaN."""
+    finite = col[np.isfinite(col)]
+    if len(finite) <= 0.9 * draws:
+        return [None, None]
+    return [float(np.quantile(finite, 0.025)), float(np.quantile(finite, 0.975))]
 
 
 def _drawn_modes(
