@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from pidyn.params import in_range
-from pidyn.signals import UNRESOLVED_DAMPING, fundamental, integrate
+from pidyn.signals import fundamental, integrate
 from pidyn.systems.base import Kinematics
 from pidyn.systems.lstsq import forward_jacobian, solve_linear_params
 from pidyn.systems.modal import damping_params, scaled_to
@@ -47,7 +47,7 @@ def equation_error_integrated(record, system) -> IntegratedFit | None:
     peak = fundamental(record)
     if peak is None or not integrated_applies(record, system):
         return None
-    return fit_integrated(record, system, corner_of(record, peak[0]), peak[0])
+    return fit_integrated(record, system, corner_of(record, peak[0]), *peak)
 
 
 def integrated_applies(record, system) -> bool:
@@ -62,10 +62,10 @@ def integrated_applies(record, system) -> bool:
     )
 
 
-def fit_integrated(record, system, corner: float, fn: float) -> IntegratedFit | None:
+def fit_integrated(record, system, corner: float, fn: float, zeta: float) -> IntegratedFit | None:
     """Equation error on the record's signals high-passed at ``corner`` (Hz) and integrated alike;
-    ``fn``: the fundamental frequency (Hz), which sets how much of each end rings and is cut."""
-
+    ``fn``, ``zeta``: the fundamental's frequency (Hz: how much of each end rings and is cut) and
+    damping ratio (the dampers' values where the fit puts them out of range)."""
     dt = record.dt
     ch = _filtered_channels(record, corner)
     f = np.asarray(record.f, float)
@@ -90,8 +90,7 @@ def fit_integrated(record, system, corner: float, fn: float) -> IntegratedFit | 
     if bad and not r_names and set(bad) <= _damping_names(system):
         # dampers are the least determined (a sensor's timing shifts the phase that holds them):
         # fixed at the transmissibility's damping, stiffness-proportional, the rest solved again
-        peak = fundamental(record)
-        fixed = scaled_to(system, fn, peak[1] if peak else UNRESOLVED_DAMPING)
+        fixed = scaled_to(system, fn, zeta)
         held = {n: fixed[n] for n in _damping_names(system) if n in fixed and n in names}
         values.update({n: torch.tensor(v, dtype=torch.float64) for n, v in held.items()})
         est = {
@@ -118,7 +117,6 @@ def _bilinear_fit(
     """Several supports: the linear parameters and the supports' influence, feedthrough and
     damping together (the relative motion is the absolute minus the supports' motion weighted by
     their influence: bilinear), by Gauss-Newton from the linear fit at the config's influence."""
-
     t, f, dt = T(record.t), np.asarray(record.f, float), record.dt
     F, FV, FD = (integrate(f, dt, k, corner) for k in (0, 1, 2))
     Ft, FVt, FDt = T(F), T(FV), T(FD)
@@ -181,7 +179,6 @@ def _out_of_range(est: dict[str, float], specs: dict) -> dict[str, float]:
 
 def _damping_names(system) -> set[str]:
     """The viscous dampers' parameters (a building's storeys, or a single degree of freedom's)."""
-
     if hasattr(system, "terms") and hasattr(system, "storeys"):
         return {t.damping_param for t in system.terms if t.damping_param}
     return set(damping_params(system))

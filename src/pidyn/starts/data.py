@@ -77,7 +77,7 @@ def start_from_data(record, system) -> DataStart | None:
     out = None
     if integrated_applies(record, system):
         try:
-            out = _from_equation_error(record, system, fn)
+            out = _from_equation_error(record, system, fn, zeta)
         except (np.linalg.LinAlgError, RuntimeError, ValueError) as exc:
             log.info("equation-error start failed (%s); the transfer function's peak is used", exc)
     if _scan_applies(record, system):
@@ -91,8 +91,8 @@ def start_from_data(record, system) -> DataStart | None:
     return out
 
 
-def _from_equation_error(record, system, fn: float) -> DataStart | None:
-    fit = fit_integrated(record, system, corner_of(record, fn), fn)
+def _from_equation_error(record, system, fn: float, zeta: float) -> DataStart | None:
+    fit = fit_integrated(record, system, corner_of(record, fn), fn, zeta)
     if fit is None:
         return None
     init = {s.name: float(s.init) for s in system.param_specs()}
@@ -159,7 +159,6 @@ def _from_scan(
 def _linear_misfit(record, system, values: dict[str, float], measured: dict[str, list[int]]) -> float:
     """The linear part's free response from rest against the measured channels: the sum over
     channels of the squared error over the squared signal (relative motion, one ground)."""
-
     m, c, k = system.linear_matrices(values)
     n = m.shape[0]
     minv = np.linalg.inv(m)
