@@ -95,7 +95,6 @@ def _measured(record, kind: str, fl: int) -> np.ndarray:
 
 def ljung_box(r: np.ndarray, lags: int) -> tuple[float, float]:
     """Ljung-Box Q over ``lags`` lags and its p-value (chi-square, ``lags`` degrees of freedom)."""
-
     r = np.asarray(r, float) - np.mean(r)
     n = len(r)
     den = float(np.dot(r, r))
@@ -122,7 +121,6 @@ def rk4_stability(system, values: dict[str, float], dt: float, substeps: int = 4
     ``1 + z + z^2/2 + z^3/6 + z^4/24``. A storey of tiny mass and large damping has a rate far
     beyond the step; its simulation blows up whatever the data say. None for a model without a
     linear part about rest."""
-
     try:
         M, C, K = (np.atleast_2d(np.asarray(a, float)) for a in linear_matrices(system, values))
         Minv = np.linalg.inv(M)

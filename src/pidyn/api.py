@@ -145,7 +145,6 @@ class Result:
     def plot(self, path: str | Path | None = None):
         """PIDynNet's estimate over record time with the window edges, the truth when known and
         the final estimate with its 95 % interval; returns the figure (or writes ``path``)."""
-
         final = {n: {"value": v, "ci95": self.ci95[n]} for n, v in self.params.items() if n in self.ci95}
         return plot_convergence(
             None if path is None else Path(path),
@@ -172,7 +171,6 @@ def _progress(show: bool = True):
     refinement, diagnosis steps) on stderr for the call; a program that set up its own logging
     (a handler on ``pidyn`` or on the root logger) keeps it as it is, and ``show=False`` (the
     calls' ``progress=False``) keeps the call silent but for warnings."""
-
     logger = logging.getLogger("pidyn")
     if not show or logger.handlers or logging.getLogger().handlers:
         yield
@@ -193,7 +191,6 @@ def _progress(show: bool = True):
 def _user_errors():
     """A setting Hydra or OmegaConf refuses (a wrong value in ``init``, a misspelled override)
     comes out as a ``ValueError`` with the cause's message: the API raises no framework's type."""
-
     try:
         yield
     except (HydraException, OmegaConfBaseException) as exc:

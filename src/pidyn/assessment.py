@@ -55,7 +55,6 @@ def assess(
     """modal.json, and the metrics to add: the modes, the held-out scores (a record identified on
     its fitting part only), what a strong-motion record says of itself. The modes of a model that
     does not describe its record (``pidyn.adequacy``) are marked as the fit's, not the structure's."""
-
     out: dict[str, Any] = {}
     modes = modal_summary(system, final, refined)
     if modes is not None:
@@ -130,7 +129,6 @@ def reported_damping(mode: dict | None) -> tuple[float | None, list | None]:
 def modal_summary(system, values: dict[str, float], refined: Any = None) -> list[dict] | None:
     """The identified model's modes about rest, fundamental first, with intervals from the
     refinement's covariance (None for a model without a stiffness about rest)."""
-
     cov = getattr(refined, "covariance", None) if refined is not None else None
     names = getattr(refined, "names", None) if refined is not None else None
     try:

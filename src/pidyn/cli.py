@@ -35,7 +35,6 @@ _STARTED = False
 def _user_error(exc: BaseException) -> BaseException | None:
     """The user's error behind ``exc`` (a bad file, a bad value, a misspelled setting), or None for
     a fault of the program. Hydra and OmegaConf wrap such errors in their own types."""
-
     if isinstance(exc, (ValueError, FileNotFoundError, RuntimeError)):
         return exc
     if isinstance(exc, (HydraException, OmegaConfBaseException)):
@@ -91,7 +90,6 @@ def _in_multirun() -> bool:
 def _write_failure(cfg: DictConfig, exc: BaseException) -> None:
     """The reason, where the run folder's own record (``pidyn.runs.folder``) did not write one: a
     folder another run holds is not touched."""
-
     folder = Path(cfg.paths.output_dir)
     if isinstance(exc, RunFolderBusy) or (folder / FAILED).exists():
         return

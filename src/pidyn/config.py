@@ -83,7 +83,6 @@ def compose(
     checked to exist and applied after composition, so any Python value works;
     ``overrides``: raw Hydra override strings, passed through.
     """
-
     groups = dict(groups or {})
     for group, value in groups.items():
         if group not in GROUPS:
@@ -112,7 +111,6 @@ def compose(
 def make_system(name: str, **values: Any):
     """A structural system from ``conf/system/<name>.yaml``; ``values`` set its keys
     (``make_system("shear_building", n_storeys=5)``, ``make_system("duffing", **{"params.k3.init": 50})``)."""
-
     cfg = compose("train", groups={"system": name}, values={f"system.{k}": v for k, v in values.items()})
     return hydra.utils.instantiate(cfg.system)
 
@@ -120,7 +118,6 @@ def make_system(name: str, **values: Any):
 def user_settings() -> list[str]:
     """The keys the user set for this run (command-line overrides, and ``compose``'s values),
     without Hydra's prefixes: what the config's own defaults must not overrule."""
-
     try:
         task = list(HydraConfig.get().overrides.task)
     except ValueError:  # no Hydra context: nothing was set by the user
@@ -142,7 +139,6 @@ def check_settings(cfg: DictConfig) -> None:
     """Every setting resolvable and finite, the sweep knobs of their type: a NaN, an infinity, a
     word where a number belongs or an interpolation to a missing key is refused by name before
     any work (``noise=nan`` would otherwise pass a ``>= 0`` check and run without noise)."""
-
     for key in cfg:
         if key == "hydra":
             continue

@@ -216,7 +216,6 @@ def plot_convergence_seeds(
 
 def _save_small(fig, path: Path, dpi: int) -> None:
     """PNG with a 64-colour palette: many thin overlapping curves are several times smaller so."""
-
     from PIL import Image  # lazy: with matplotlib, on the first figure (see pyplot)
 
     buf = io.BytesIO()

@@ -120,7 +120,6 @@ def velocity_noise(t: np.ndarray, x: np.ndarray, v: np.ndarray | None, period: f
     The raw-minus-smoothed signal estimates the white measurement noise; the smoothing
     filter's noise gain (the 2-norm of its coefficients) carries it to the smoothed x'.
     """
-
     win = _sg_window(t, period)
     dt = float(t[1] - t[0])
     raw = v if v is not None else x
@@ -136,7 +135,6 @@ def measurement_noise(t: np.ndarray, raw: np.ndarray, period: float) -> float:
     of its variance (h: the filter's coefficients; a least-squares smoother is a projection);
     uncorrected, the estimate is low by that share, and in a quiet part of a record, where the
     noise is a large share of the signal, the shortfall reads as model error."""
-
     win = _sg_window(t, period)
     h0 = savgol_coeffs(win, 3)
     return float(np.std(raw - savgol_filter(raw, win, 3))) / np.sqrt(max(1 - np.sum(h0**2), 1e-12))

@@ -218,7 +218,6 @@ def simulate_realization(
 ) -> np.ndarray:
     """y_k = C x_k + D u_k, x_{k+1} = A x_k + B u_k from rest: (p, N), by ``scipy.signal.dlsim``
     (an unstable realization overflows to inf, which the caller scores as a failed fit)."""
-
     with np.errstate(all="ignore"):
         _, y, _ = dlsim((A, B, C, D, 1.0), np.asarray(U, float).T)
     return np.asarray(y, float).reshape(U.shape[1], C.shape[0]).T
@@ -232,7 +231,6 @@ def _mean_nrmse(out: np.ndarray, Y: np.ndarray, mask: np.ndarray) -> float:
 
 def transfer_function_estimate(record, band_halfwidth: float = 0.35) -> PeerResult:
     """The fundamental mode from the transmissibility (see the module's docstring)."""
-
     t0 = time.perf_counter()
     U, Y = io_arrays(record)
     fit, _ = spans(record)

@@ -25,7 +25,6 @@ from pidyn.systems.sdof import feedthrough_name, influence_name, support_damping
 def hold_integrals(Ac: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """The first-order hold's integrals of exp(A_c s) over a step (scipy's ``cont2discrete``
     'foh' blocks with B = I): P1 = int_0^dt exp(A_c s) ds, P2 its ramp-weighted part."""
-
     n = Ac.shape[0]
     em = np.zeros((3 * n, 3 * n))
     em[:n, :n], em[:n, n : 2 * n], em[n : 2 * n, 2 * n :] = Ac * dt, np.eye(n) * dt, np.eye(n)
@@ -37,7 +36,6 @@ def continuous_modes(realization: tuple, dt: float) -> tuple[list[dict], np.ndar
     """The realization's modes in continuous time, longest period first: each ``{c, k, alpha,
     beta}`` (alpha, beta per input), and D_c. None when a pole is real, the log of A is not
     real, or a mode is not a damped oscillator."""
-
     A, B, C, D = (np.atleast_2d(np.asarray(x, float)) for x in realization)
     if A.shape[0] % 2 or C.shape[0] != 1 or np.any(np.abs(np.linalg.eigvals(A).imag) < 1e-12):
         return None
@@ -64,7 +62,6 @@ def realization_params(system, realization: tuple, dt: float) -> dict[str, float
     """A realization of one output mapped onto ``system``'s parameters (empty when it does not
     map: another order than twice the model's modes, a real pole pair, a negative stiffness).
     A single degree of freedom with one input keeps only c and k (its input terms are fixed)."""
-
     modal = isinstance(system, ModesOnSupports)
     if not modal and not _plain_sdof(system):
         return {}

@@ -211,9 +211,8 @@ def _update(
     y_mean = Y @ wm
     DY = Y - y_mean[:, None]
     Syy = (wc * DY) @ DY.T + R
-    if not (
-        np.all(np.isfinite(Syy)) and np.all(np.isfinite(P))
-    ):  # the filter diverged: no update, no likelihood
+    # the filter diverged: no update, no likelihood
+    if not (np.all(np.isfinite(Syy)) and np.all(np.isfinite(P))):
         return m, P, -np.inf
     Sinv = np.linalg.inv(Syy)
     K = ((wc * D) @ DY.T) @ Sinv

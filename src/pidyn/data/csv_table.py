@@ -34,7 +34,6 @@ def read_table(path: Path, units: dict[str, float] | None) -> pd.DataFrame:
 
 def ground_from_at2(path: Path, df: pd.DataFrame, time_col: str, at2: str | Path) -> None:
     """Add column ``ag`` from a PEER AT2 record, interpolated at the CSV's times."""
-
     if "ag" in df.columns or "u" in df.columns:
         raise DataError(f"{path}: has an excitation column and an AT2 record ({at2}) was given too; use one")
     if time_col not in df.columns:
@@ -122,7 +121,6 @@ def floor_arrays(
 def channel_columns(path: Path, columns) -> dict[str, dict[int, str]]:
     """Response columns by kind and floor: ``x`` alone is floor 1, ``x3`` floor 3. A file may
     not mix the two spellings of a kind, and needs at least one response column."""
-
     out: dict[str, dict[int, str]] = {}
     unknown = [c for c in columns if c not in ("t", "ag", "u") and not re.fullmatch(r"[xva]\d*", c)]
     if unknown:

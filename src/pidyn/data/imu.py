@@ -255,7 +255,6 @@ def start_seconds(start_time: str) -> float | None:
 
 def band(sig: np.ndarray, dt: float, lo: float, hi: float) -> np.ndarray:
     """Zero-phase band-pass (4th-order Butterworth, forward and back)."""
-
     sos = butter(4, [lo, min(hi, 0.45 / dt)], btype="bandpass", fs=1.0 / dt, output="sos")
     return sosfiltfilt(sos, sig, axis=0)
 

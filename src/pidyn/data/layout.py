@@ -62,7 +62,6 @@ def station_deck(
 def _along(inputs: list[int], direction: str, **kwargs: Any) -> Any:
     """Along the deck (longitudinal) a deck rigid in its plane only translates: every deck channel
     reads one motion, a single degree of freedom on the supports (``SDOFSystem`` with inputs)."""
-
     if kwargs.get("support_terms"):
         raise DataError(
             f"system=rigid_deck: support_terms act on the deck's supports across it, not '{direction}'"

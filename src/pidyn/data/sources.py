@@ -217,7 +217,6 @@ class Record:
 
     def segment(self, t0: float | None, t1: float | None) -> Record:
         """The samples with t0 <= t <= t1 (times kept absolute; the truth travels along)."""
-
         lo = -np.inf if t0 is None else t0 - 1e-9
         hi = np.inf if t1 is None else t1 + 1e-9
         keep = (self.t >= lo) & (self.t <= hi)
@@ -418,7 +417,6 @@ def from_csv(
 
 def checked_hold(hold: str, what: str) -> str:
     """``hold`` if the integrator knows it, else a DataError naming ``what``."""
-
     if hold not in HOLDS:
         raise DataError(f"{what} must be one of {', '.join(HOLDS)}, got '{hold}'")
     return hold

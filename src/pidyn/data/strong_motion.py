@@ -81,7 +81,6 @@ def channel_sets(
 
 def _station_of(archive: Archive) -> str | None:
     """``CE<number>`` from the files' ``Station No.`` line (CSMIP's network code is CE)."""
-
     for ch in archive.channels.values():
         for line in ch.header:
             m = re.search(r"station\s+no\.?\s*(\d+)", line, re.IGNORECASE)
@@ -260,7 +259,6 @@ def _velocities(
 ) -> np.ndarray:
     """The supports' velocities as the V2 files give them (integrated and band-passed with the
     accelerations by the processing); integrated here (spectrally, above 0.05 Hz) where a file has none."""
-
     cols = []
     for j, c in enumerate(ins):
         vel = archive.channels[c].vel

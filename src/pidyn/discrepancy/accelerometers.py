@@ -55,7 +55,6 @@ def motion_view(
     """The record as the relative motion of an accelerometer-measured structure (see the module's
     docstring); ``system``: the nominal model with the record's inputs (influence coefficients);
     ``tol``: the supports' output-error fits stop there (``DiagnosisSettings.polish_tol``)."""
-
     if record.a is None:
         raise ValueError(f"record '{record.name}': neither a displacement nor an acceleration channel")
     peak = fundamental(record)
@@ -123,7 +122,6 @@ def _nominal_influence(
     against the other basins of the period (``pidyn.refine.period_scan``): no start need lie in the
     lowest one. With one input nothing is fitted here (the start is ranked by its own cost, and the
     refits after it take the identification's refinement, which scans the period itself)."""
-
     seg = record.segment(*fit)
     values = {s.name: float(s.init) for s in system.param_specs()}
     start = start_from_data(record, system)
@@ -159,7 +157,6 @@ def _envelope_refit(seg: Record, system, values: dict[str, float], tol: float):
     """The supports' fit under the noise model its residuals support (``pidyn.discrepancy.heteroscedastic``):
     where their scale follows the measured response's envelope (over four periods), the fit redone
     from ``values`` with each residual divided by it; else ``values`` as they are. (values, the test)."""
-
     window = 4.0 * float(modal_properties(*linear_matrices(system, values))["period_s"][0])
     w = envelope(seg.a, seg.dt, window)
     trainable = {s.name for s in system.param_specs() if s.trainable}
@@ -182,7 +179,6 @@ def _envelope_refit(seg: Record, system, values: dict[str, float], tol: float):
 def _moved_by_scan(seg: Record, system, fits: dict, options: dict, best: str, tol: float) -> str:
     """The kept fit checked against the other basins of the period; where the scan's start fits
     the fitting part lower, it is added to ``fits`` and ``options`` under a label that says so."""
-
     scan = scan_period(system, seg, fits[best][0])
     if scan is None or scan.values is None:
         return best
@@ -203,7 +199,6 @@ def _scan_words(scan) -> str:
 
 def _influence_fit(seg: Record, system, values: dict[str, float], tol: float):
     """Output error on ``seg`` from ``values``: (the fitted values, the fit)."""
-
     trainable = {s.name for s in system.param_specs() if s.trainable}
     res = fit_output_error(
         seg, system, init={k: v for k, v in values.items() if k in trainable}, max_nfev=100, tol=tol
@@ -214,7 +209,6 @@ def _influence_fit(seg: Record, system, values: dict[str, float], tol: float):
 def _peer_options(seg: Record, system, values: dict[str, float]) -> dict[str, dict[str, float]]:
     """The peer whose realization on ``seg`` simulates it best (its other parameters from
     ``values``), or none without mdof or a realization that maps onto the model."""
-
     peers = {f"{k}'s realization": {**values, **v} for k, v in peer_starts(seg, system).items()}
     if not peers:
         return {}
@@ -225,7 +219,6 @@ def _peer_options(seg: Record, system, values: dict[str, float]) -> dict[str, di
 def acceleration_gain(record: Record, sims: dict[str, dict | None], held: np.ndarray) -> dict:
     """``heldout_nrmse_a`` of each simulated model (``{"nominal": sim, "extended": sim}``): the
     absolute acceleration (relative + ground, as the accelerometer reads it) on ``held``."""
-
     ground = np.asarray(
         (record.meta or {}).get("sensor_ground", record.f), float
     )  # what the sensor adds to x''

@@ -265,7 +265,6 @@ def locate_step(
     ``th.min_step_heldout_gain``) does not persist: a stiffness lower only in the strong motion
     depends on the amplitude (softening), it is no damage. Nothing is named then, the split stays
     where it was, and the screening's rule for a step in time holds here too."""
-
     search = _step_search(
         weak_system(nominal, values, s, f, x_raw, weak, mass_known), s, weak, candidates, values
     )

@@ -173,7 +173,6 @@ def located_start(
     fitted from 10 s ended at 10.6 s with 3.6 times the cost, from 9.5 s at 9.00 s; and a size
     the weak form overstated (a 73 % loss on a Painter Street record) starts the fit seven times
     the nominal model's cost away. Rows without a located interval are returned as they are."""
-
     ci = (row.get("located") or {}).get("t_change_ci95")
     if not ci:
         return row

@@ -36,9 +36,8 @@ def extended_system(
         raise TypeError(
             f"the discrepancy library extends single-degree-of-freedom models, not {type(nominal).__name__}"
         )
-    if (
-        effect == "learned_force"
-    ):  # outside the library: a network f(x, x') (a universal differential equation)
+    # outside the library: a network f(x, x') (a universal differential equation)
+    if effect == "learned_force":
         ctx = dict(context)
         term = LearnedForce(
             ctx.get("x_scale", 1.0),
@@ -132,7 +131,6 @@ def release_held(node: Any) -> dict:
 
 def build_system(node: Any) -> SDOFSystem:
     """The system a node describes."""
-
     return hydra.utils.instantiate(OmegaConf.create(_plain(node)))
 
 
@@ -154,7 +152,6 @@ def node_with_values(node: Any, values: dict[str, float]) -> dict:
 
 def _plain(node: Any) -> dict:
     """A deep plain-dict copy of a node (a DictConfig resolved)."""
-
     out = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else copy.deepcopy(node)
     assert isinstance(out, dict)
     return out

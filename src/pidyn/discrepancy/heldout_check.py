@@ -97,7 +97,6 @@ def heldout_check(
     quiet held-out part it hid a 15 % stiffness loss). ``settle``: the first samples of the
     record, where a simulation from a measured (noisy) initial state still rings, are left out
     of the fitting part's residual."""
-
     e = np.asarray(x_meas, float) - np.asarray(x_sim, float)
     n_fit, n_ho = _excess(x_meas, e, fit, noise_std), _excess(x_meas, e, held, noise_std)
     ratio = None if n_fit is None or n_ho is None else n_ho / max(n_fit, 0.02)

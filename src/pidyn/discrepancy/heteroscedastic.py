@@ -51,7 +51,6 @@ def scale_test(
     r: np.ndarray, w: np.ndarray, window_s: float, floor: float = 0.1, min_gain: float = 10.0
 ) -> ScaleTest:
     """Does the residual ``r`` (N,) follow the envelope ``w`` (N, geometric mean 1)?"""
-
     r = np.asarray(r, float)
     n = len(r)
     gain = n * np.log(np.mean(r**2) / np.mean((r / w) ** 2))

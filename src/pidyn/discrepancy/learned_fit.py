@@ -115,7 +115,6 @@ def _starts(
     displacement smoothed over a tenth of the period, else from the model's simulation; latent
     states from the model's simulation. They are trained with the rest; this is only where
     they start."""
-
     n = system.n_dof
     width = max(5, int(round(0.1 * period / record.dt)) | 1)
     measured = record.x is not None and bool(np.all(np.isfinite(record.x))) and width < len(record.t)
@@ -246,9 +245,8 @@ def _lbfgs_best(loss_fn, params: list[torch.Tensor], keep, max_evaluations: int)
         opt.zero_grad()
         loss = loss_fn()
         evaluations += 1
-        if not torch.isfinite(
-            loss
-        ):  # a step into a blow-up: a large loss, no slope; the line search backs off
+        # a step into a blow-up: a large loss, no slope; the line search backs off
+        if not torch.isfinite(loss):
             return torch.tensor(1e30, dtype=torch.float64)
         loss.backward()
         value = float(loss.detach())

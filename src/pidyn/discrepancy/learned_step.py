@@ -49,7 +49,6 @@ def save_unexplained(
     """The force ``system`` cannot explain on the fitting part (band-limited, the ringing ends
     left out), with x and x' beside it: what a learned force term starts from. ``f``: the
     excitation paired with ``x_raw`` (default the record's)."""
-
     period = 2 * np.pi * np.sqrt(values["m"] / max(values.get(system.stiffness_name, 1.0), 1e-300))
     pw = unexplained_force(system, values, record.t, x_raw, record.f if f is None else f, period)
     dt = float(record.t[1] - record.t[0])
@@ -110,7 +109,6 @@ def learned_predicts(
     extends? A network trained on the fitting part can fit it and still extrapolate wrongly
     (a trilinear spring reached further in the held-out part): kept only if it predicts better.
     The held-out part decides here, as it does for the screening's held-out rules."""
-
     mask = (record.t >= held[0]) & (record.t <= held[1])
     kind = "x" if record.x is not None else "a"  # an accelerometer record is judged on its accelerations
     measured = x_raw if kind == "x" else record.a[:, 0]

@@ -60,7 +60,6 @@ def running_period(case: Case, nom: Nominal) -> dict | None:
 def nominal_modes(case: Case, nom: Nominal) -> list[dict] | None:
     """The nominal model's modes with 95 % intervals: its fitting part refined by multiple shooting
     (from the polished values and the measured or integrated states) for the covariance."""
-
     try:
         seg = case.record.segment(*case.fit)
         res = refine(

@@ -68,7 +68,6 @@ def plot_residual(path: Path, t, r_raw, x, v, fit, cause, fitted, units: dict, p
 
     The residual and x, x' are band-limited alike (``residual.unexplained_force``); one
     natural period at each end, where the spectral derivative rings, is left out."""
-
     plt = _plt()
     dt = float(t[1] - t[0])
     edge = max(1, int(round(period / dt)))
@@ -148,7 +147,6 @@ def plot_running_estimate(
     the ``stiffness`` parameter named, a second panel gives the running natural period
     2 pi sqrt(m / k(t)) (and the damping ratio) beside the motion's envelope (``signal``: t, x),
     so a period that lengthens in the strong motion and recovers in the coda shows as such."""
-
     plt = _plt()
     names = [n for n in running if n != "t" and n in nominal and n != "m"]
     with_period = stiffness is not None and stiffness in running and nominal.get(stiffness, 0) > 0
@@ -187,7 +185,6 @@ def plot_running_estimate(
 
 def _period_panel(a2, running: dict, nominal: dict, fit, held, stiffness: str, signal: tuple | None) -> None:
     """The running natural period (and damping ratio) beside the motion's envelope."""
-
     m = float(nominal.get("m", 1.0))
     k = np.asarray(running[stiffness], float)
     period = np.where(k > 0, 2 * np.pi * np.sqrt(m / np.where(k > 0, k, 1.0)), np.nan)
@@ -219,7 +216,6 @@ def _period_panel(a2, running: dict, nominal: dict, fit, held, stiffness: str, s
 def plot_learned_force(path: Path, x, v, residual, learned, surface: dict, units: dict) -> None:
     """The learned force beside the force the nominal model could not explain: against x and x'
     (the loops a structural engineer reads), and the learned f(x, x') as a surface."""
-
     plt = _plt()
     ux, uf = units.get("x", "m"), units.get("u", "N")
     fig, ax = plt.subplots(1, 3, figsize=(14, 4.2))
@@ -267,7 +263,6 @@ def plot_running_period(
     """Period and damping ratio window by window (output error on the sensors' readings), each with
     its 95 % interval, over the motion's envelope; ``model`` (t, period, zeta): an
     amplitude-dependent model's own, along its simulated response."""
-
     plt = _plt()
     t = np.asarray(running["t"])
     fig, axes = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True)

@@ -290,7 +290,6 @@ def building_fit_test(
 ) -> dict:
     """The fit test (``pidyn.discrepancy.fit_test``) of every measured floor's absolute
     acceleration on ``span``, simulated from rest; the noise read above the model's modes."""
-
     sim = simulate_response(system, values, record)["a"]
     ag = np.asarray(record.f, float)
     mask = (record.t >= span[0]) & (record.t <= span[1])

@@ -53,7 +53,6 @@ def nominal_fit(
     them misleads: a guess far below the structure's frequencies barely responds, and its small
     misfit beat a start at the right frequencies but off in phase (a shake-table building ended
     at held-out NRMSE 0.89 from the config's guess, 0.26 from the data's start)."""
-
     config = {s.name: float(s.init) for s in system.param_specs()}
     # an earlier run's estimate replaces the config's guesses, not the data's start: refined again
     # here (segments from the integrated accelerations), a run's estimate can land elsewhere
@@ -98,7 +97,6 @@ def _refined_best(
     record: Record, system: ShearBuilding, starts: dict, settings: Any, fit: tuple[float, float], config: dict
 ) -> tuple[float, dict, Any] | None:
     """Each start refined on its own; (fitting-part NRMSE, values, result) of the best, or None."""
-
     best = None
     for label, values in starts.items():
         try:
@@ -135,7 +133,6 @@ def close_modes(system: ShearBuilding, a: dict[str, float], b: dict[str, float])
 
 def modal_frequencies(system: ShearBuilding, values: dict[str, float]) -> np.ndarray:
     """The linear building's modal frequencies (Hz), ascending."""
-
     return np.sort(modal_properties(*linear_matrices(system, values))["frequency_hz"])
 
 

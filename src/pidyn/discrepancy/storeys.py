@@ -151,7 +151,6 @@ def building_heldout_test(study: Study, current: dict) -> dict:
     floor's relative acceleration, simulated from rest, with the sensitivities to the building's
     trainable parameters; a floor fails below the test's level shared among the floors
     (Bonferroni)."""
-
     record, system, values = study.record, current["system"], current["values"]
     floors = measured_floors(record)
     names = [s.name for s in system.param_specs() if s.trainable and s.name in values]

@@ -119,7 +119,6 @@ def heldout_gain(case: Case, o: Outcome) -> dict[str, Any]:
 
 def log_verdict(d: dict[str, Any]) -> None:
     """The verdict, where, and the held-out errors beside knowing nothing's, in the log."""
-
     gain, storeys = d["gain"], d.get("storeys") or []
     named = [f"{c} in storey {s}" if s else c for c, s in zip(d["causes"], storeys)] or (
         [d["cause"]] if d.get("cause") else []
@@ -307,7 +306,6 @@ def amplitude_path(case: Case, o: Outcome) -> tuple[np.ndarray, np.ndarray, np.n
     period, zeta): the equivalent-linear structure at the envelope its simulated response
     carries (the free run the gain was measured on), beside the windows' fits. None without
     such a term."""
-
     system, values = o.extension.get("system"), o.extension.get("values")
     term = next((t for t in getattr(system, "terms", []) if isinstance(t, AmplitudeSoftening)), None)
     if term is None:
@@ -340,7 +338,6 @@ def explained_force(
     """What the screening's fit says the residual is: the effect's force plus the change it
     brings to the nominal parameters (which had absorbed part of the effect), on the same
     band-limited signals as the residual."""
-
     p = {**values, **row["nominal_refit"], **row["parameters"]}
     term = EFFECTS[row["effect"]].term(row["parameters"], s.context())
     x, v = pw["x"], pw["v"]

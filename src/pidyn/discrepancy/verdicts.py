@@ -26,7 +26,6 @@ class Verdict(str, Enum):
 
 def _register_yaml() -> None:
     """A verdict in a YAML file is its plain string."""
-
     yaml.SafeDumper.add_representer(Verdict, lambda dumper, v: dumper.represent_str(v.value))
 
 

@@ -200,7 +200,6 @@ def _test_rest(
     free solution's residuals; the drop is divided by it (1 for white noise). Measured: on
     noise-free Bouc-Wen under El Centro x3 an uncorrected drop of 4e3 against 11.3 said "not
     at rest" of a record that starts at rest."""
-
     ns = problem.ns
     if int(problem.bounds[0]) > 0:
         return (
@@ -368,7 +367,6 @@ class _Starts:
 
     def add(self, label: str, values: dict[str, float]) -> str:
         """One more candidate start (found after the first solve); returns its label."""
-
         self.cands[label] = values
         self.thetas[label] = to_theta(self.problem.specs, values)
         return label

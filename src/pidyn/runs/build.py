@@ -38,7 +38,6 @@ log = logging.getLogger(__name__)
 def instantiate(node: DictConfig, **kwargs: Any) -> Any:
     """``hydra.utils.instantiate``, with a user's error (a bad value, a bad file, a missing channel)
     coming out as itself, not wrapped in Hydra's instantiation error, so it is named as such."""
-
     try:
         return hydra.utils.instantiate(node, **kwargs)
     except InstantiationException as exc:
@@ -208,7 +207,6 @@ def data_start(
     cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path
 ) -> tuple[StructuralSystem, Any]:
     """``model.start`` (see ``pidyn.starts.policy.start_policy``); the start goes to data_start.json."""
-
     system, start, used = start_policy(str(cfg.model.get("start", "auto")), system, record, user_settings())
     if start is not None:
         write_json(run_dir / "data_start.json", {**start.to_dict(), "used_by_pidynnet": used})

@@ -48,7 +48,6 @@ def _drift_and_force(system, values: Mapping[str, float], t: np.ndarray, Y: np.n
 def _interface_modes(path: Path) -> dict:
     """The ``modes`` list (periods and damping ratios with intervals) already in ``modal.json``,
     kept beside the building's own tables."""
-
     try:
         return {"modes": json.loads(path.read_text())["modes"]}
     except (OSError, ValueError, KeyError):
@@ -229,7 +228,6 @@ def storey_residuals(
     high-passed alike at a fifth of the fundamental). Its RMS share of F_i, its dominant frequency,
     and the share of it each simple force shape would explain (a stiffness, damping, friction or
     cubic error of that storey): where to look, not a verdict."""
-
     if record.a is None or np.isnan(record.a).any() or record.n_inputs != 1:
         return []
     peak = fundamental(record)

@@ -154,7 +154,6 @@ def _save_hydra_files(folder: Path, cfg: DictConfig) -> None:
     """``.hydra/config.yaml``, ``hydra.yaml`` and ``overrides.yaml``, as Hydra writes them, but only
     once this run holds the folder (``hydra.output_subdir: null``): a refused second run must not
     overwrite the first run's record of itself."""
-
     if not HydraConfig.initialized():
         return
     hydra_cfg = HydraConfig.get()

@@ -134,7 +134,6 @@ def write_outputs(run_dir: Path, cfg: DictConfig, record, df: pd.DataFrame, summ
 
 def _write_markdown(path: Path, cfg: DictConfig, df: pd.DataFrame, summary: dict[str, Any]) -> None:
     """The run's result as a table a reader can check case by case."""
-
     import torch  # lazy: only for the table's versions line
 
     try:

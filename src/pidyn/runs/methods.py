@@ -30,13 +30,11 @@ def default_starts() -> tuple[str, ...]:
     """The refinement's starts when the config names none: the data's, then every estimator that
     ran and gave the model's parameters (``model.refine.starts`` in
     conf/model/refine/multiple_shooting.yaml)."""
-
     return ("data", *STARTS)
 
 
 def check_method_names(cfg: DictConfig) -> None:
     """Misspelled names and settings fail before PIDynNet runs, not minutes later (or never)."""
-
     check_names("baselines.run", list((cfg.get("baselines") or {}).get("run") or []))
     plan = refine_plan(cfg)
     if plan is not None:
@@ -51,7 +49,6 @@ def check_method_names(cfg: DictConfig) -> None:
 def refine_plan(cfg: DictConfig) -> tuple[set[str], list[str], Any] | None:
     """``model.refine`` read and checked: (classical starts allowed, state sources to compare,
     RefineSettings), or None when the stage is off."""
-
     node = cfg.model.get("refine") or "none"
     # model.refine=none / =multiple_shooting on the command line sets the method by name (the
     # settings then are RefineSettings' defaults, which conf/model/refine/*.yaml mirror)
@@ -84,7 +81,6 @@ def run_refinement(
     Starts: PIDynNet's estimate with its networks' states, and the classical estimates named
     in ``model.refine.starts`` that ran on the same record; the stage refines the one that
     simulates the record best and says so when that is not PIDynNet's."""
-
     plan = refine_plan(cfg)
     if plan is None:
         return None
@@ -173,7 +169,6 @@ def run_baselines(
 ) -> list[dict]:
     """The configured classical methods on the same record (``pending``: already started),
     logged and written to baselines.json, and the Cramer-Rao bound to cramer_rao.json."""
-
     bcfg = cfg.get("baselines") or {}
     out = (pending if pending is not None else start_baselines(cfg, system, record)).result()
     truth = record.truth or {}

@@ -49,7 +49,6 @@ def physics_only(
     """prediction.json's ``physics_only`` entry: every measured channel's NRMSE of the networks'
     prediction (``_response``: its accelerations from the model at its motion), its time,
     and the worst window's physics loss; or why it does not apply."""
-
     why = applies(system, record)
     if why is not None:
         return {"applies": False, "why": why}

@@ -62,7 +62,6 @@ class Identified:
         """The run's system and values, and the record (``record``, or the one ``data`` describes,
         read as the run read its own); the system's inputs are the record's where the run took
         them so."""
-
         cfg = self.cfg.copy()
         if data is not None:
             with open_dict(cfg):
@@ -97,7 +96,6 @@ def check_channels(run: Identified, record: Record) -> None:
 
 def _plain(value: Any) -> Any:
     """JSON's view of a value (dict keys as strings, tuples as lists), to compare with metrics.json."""
-
     return json.loads(json.dumps(value))
 
 
@@ -130,7 +128,6 @@ def score(system: StructuralSystem, values: dict[str, float], record: Record) ->
 def trivial(record: Record) -> dict[str, Any]:
     """The prediction that knows nothing, chosen on the predicted record itself (so it is at least
     as good as any such choice made beforehand)."""
-
     record, _ = sensor_view(record, {})  # a deck's own channels (pidyn.data.layout)
     span = (float(record.t[0]), float(record.t[-1]))
     preds = trivial_predictions(record, span)

@@ -155,7 +155,6 @@ def _metrics(
 def _adequacy(run: Run, final: dict[str, float], sim: dict[str, np.ndarray]) -> dict[str, Any]:
     """Whether the identified model describes the record (``pidyn.adequacy``), on the fitting part
     and on a held-out part, with the integrator's stability at the record's step."""
-
     record = run.record
     split = (record.meta or {}).get("split") if run.hold_out else None
     fit = split["fit"] if split else (float(record.t[0]), float(record.t[-1]))
@@ -166,7 +165,6 @@ def _adequacy(run: Run, final: dict[str, float], sim: dict[str, np.ndarray]) -> 
 def _record_adequacy(result: dict[str, Any], metrics: dict) -> None:
     """``adequate`` and ``adequacy`` in metrics.json, the held-out scores beside the prediction that
     knows nothing, and a note when the model does not describe the record."""
-
     metrics["adequate"] = result["adequate"]
     metrics["adequacy"] = result
     if "heldout" in metrics:
@@ -183,7 +181,6 @@ def _record_adequacy(result: dict[str, Any], metrics: dict) -> None:
 
 def write_run_report(run_dir: Path, equation: str, metrics: dict) -> None:
     """``report.md``: the verdict on the model first, then the equation and the parameters."""
-
     ad = metrics["adequacy"]
     names = str(metrics["record"]).split("+")
     on = metrics["record"] if len(names) == 1 else f"{len(names)} records"
@@ -216,7 +213,6 @@ def write_run_report(run_dir: Path, equation: str, metrics: dict) -> None:
 def _building(run: Run, final: dict[str, float], truths: dict, refined: Any, metrics: dict) -> None:
     """A building's modal table, storey equations and loops (``building_report``); its modes go to
     metrics.json."""
-
     modes = write_building_report(
         run.system,
         run.record,
@@ -234,7 +230,6 @@ def _assess(
     run: Run, final: dict[str, float], refined: Any, sim: dict[str, np.ndarray], metrics: dict, adequate: bool
 ) -> None:
     """modal.json and, on a record with a held-out part, how the model predicts it (``pidyn.assessment``)."""
-
     metrics.update(assess(run.system, run.record, final, refined, sim, run.hold_out, run.run_dir, adequate))
     for r, mode in enumerate(metrics.get("modal") or [], start=1):
         if adequate and mode.get("not_a_property"):  # a rejected model is said so once, elsewhere

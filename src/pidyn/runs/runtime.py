@@ -11,7 +11,6 @@ from hydra.types import RunMode
 
 def in_multirun() -> bool:
     """True inside a Hydra multirun job (progress bars of parallel jobs would interleave)."""
-
     try:
         return HydraConfig.get().mode == RunMode.MULTIRUN
     except ValueError:
@@ -20,7 +19,6 @@ def in_multirun() -> bool:
 
 def quiet_framework_warnings() -> None:
     """Silence Lightning notices that do not apply to a one-window-at-a-time loop."""
-
     for msg in (
         ".*LeafSpec.*",
         ".*IterableDataset.*has `__len__`.*",

@@ -30,7 +30,6 @@ ENDED = "sweep_progress.log"  # one line per job that ended
 def sweep_size(overrides: list[str]) -> int | None:
     """How many jobs the basic sweeper makes of ``overrides`` (the product of every sweep's
     choices); None where a sweep cannot be counted in advance (an interval of another sweeper)."""
-
     try:
         parsed = OverridesParser.create().parse_overrides(overrides)
         return math.prod(len(list(o.sweep_string_iterator())) for o in parsed if o.is_sweep_override())

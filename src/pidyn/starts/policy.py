@@ -19,7 +19,6 @@ log = logging.getLogger(__name__)
 def with_start(system, values: dict[str, float], keep: set[str] | frozenset = frozenset()):
     """``system`` with its trainable parameters started at ``values`` (their scales with them),
     except those in ``keep`` (a start the user gave)."""
-
     trainable = {s.name for s in system.param_specs() if s.trainable}
     chosen = {n: {"init": float(v)} for n, v in values.items() if n in trainable and n not in keep}
     if chosen:
@@ -29,7 +28,6 @@ def with_start(system, values: dict[str, float], keep: set[str] | frozenset = fr
 
 def user_started(system, settings: list[str]) -> set[str]:
     """The parameters whose start the user set (``system.params.<name>...``, ``system.guess``)."""
-
     names = [s.name for s in system.param_specs()]
     out: set[str] = set()
     for key in settings:
@@ -51,7 +49,6 @@ def start_from_run(folder: str, system) -> DataStart:
     the same structure whose input does not show its resonance (a sine below it) starts from a
     broadband record's estimate; the record at hand then decides. A pattern (``*``) must match one
     folder. A single mode's run starts a modes model (``from_single_mode``)."""
-
     if any(ch in folder for ch in "*?["):  # a pattern (a sweep names each job's earlier run by its options)
         found = sorted(glob.glob(folder))
         if len(found) != 1:

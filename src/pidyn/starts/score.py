@@ -14,7 +14,6 @@ log = logging.getLogger(__name__)
 def cheapest(record, system, options: dict[str, dict[str, float]]) -> str:
     """The option with the lowest output-error cost on ``record`` (said in the log when there is a
     choice)."""
-
     if len(options) == 1:
         return next(iter(options))
     costs = {k: output_error_cost(record, system, v) for k, v in options.items()}

@@ -161,7 +161,6 @@ class StructuralSystem(ABC):
 
 def merge_specs(defaults: list[ParamSpec], overrides: dict | None) -> list[ParamSpec]:
     """Apply config overrides (``{name: {field: value}}``) to default specs; typos fail."""
-
     overrides = dict(overrides or {})
     by_name = {s.name: s for s in defaults}
     unknown = set(overrides) - set(by_name)

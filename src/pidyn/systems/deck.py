@@ -296,7 +296,6 @@ def _per_support(value: float | Sequence[float], n: int, what: str) -> list[floa
 def _own(entry: Mapping[str, Any], j: int) -> dict:
     """A config entry whose term reads the support's spring and dashpot by name (an amplitude
     law scales them) is pointed at support j's own (``k2``, ``c2``)."""
-
     entry = dict(entry)
     cls = TERMS.get(entry.get("term"))
     if cls is not None:

@@ -97,7 +97,6 @@ def linear_matrices(system, values: Mapping[str, float]) -> tuple[np.ndarray, np
 def stiffness_params(system) -> list[str]:
     """A single degree of freedom's parameters that make up its stiffness about rest (a linear
     spring's k, a Bouc-Wen spring's k since dz/dx = 1 at rest)."""
-
     return [
         t.param for t in getattr(system, "terms", []) if isinstance(t, (LinearStiffness, BoucWenHysteresis))
     ]
@@ -125,7 +124,6 @@ def modes_with_intervals(
     nonlinear maps k -> period and (c, k) -> damping ratio, which a first-order rule is not for
     the wide intervals of a short record. Modes are matched by their order in frequency. Mode
     shapes are scaled to 1 on the top floor; ``mode_shape_ci95`` gives each floor's interval."""
-
     point = modal_properties(*linear_matrices(system, values))
     n = len(point["frequency_hz"])
     ci = {key: [[None, None]] * n for key in ("period_s", "damping_ratio", "frequency_hz")}
@@ -198,7 +196,6 @@ def _drawn_modes(
 
 def first_mode(system, values: Mapping[str, float]) -> tuple[float | None, float | None]:
     """The first mode's frequency (Hz) and damping ratio of the model at ``values``."""
-
     try:
         modes = modal_properties(*linear_matrices(system, values))
     except (KeyError, ValueError):

@@ -183,7 +183,6 @@ class SDOFSystem(StructuralSystem):
     def stiffness_name(self) -> str:
         """The parameter that is this model's stiffness about rest (a linear spring's k or k1, a
         Bouc-Wen spring's k): what a stiffness loss scales and a period is read from."""
-
         names = stiffness_params(self)
         if not names:
             raise ValueError(f"nominal system '{self.name}' has no linear stiffness to extend")
@@ -201,7 +200,6 @@ class SDOFSystem(StructuralSystem):
 
     def support_params(self, p: dict[str, float]) -> dict[str, dict[str, float]]:
         """Each support's own spring and dashpot per unit mass: k_j = r_j k, c_j = g_j + r_j c."""
-
         k = sum(float(p[n]) for n in stiffness_params(self))
         c = sum(float(p[n]) for n in damping_params(self))
         return {

@@ -73,9 +73,8 @@ class SingleDOF(Subject):
         check_record(record)
         if record.excitation != base.excitation:
             base = inputs.make_system(excitation=record.excitation)
-        if needs_view(
-            record
-        ):  # accelerometers: the relative motion the screening needs, from the accelerations
+        # accelerometers: the relative motion the screening needs, from the accelerations
+        if needs_view(record):
             full = inputs.make_system(inputs=record.inputs) if record.n_inputs > 1 else base
             fit = split_spans(record, float(settings.fit_share))[0]
             record = motion_view(record, full, fit, tol=float(settings.polish_tol))
@@ -109,9 +108,8 @@ class SingleDOF(Subject):
         progress.step("the first cause")
         cause, self.confirmation, change_row = _first_cause(case, nom, sc, check, change_row, forced, running)
         self.check, self.change_row = check, change_row
-        if (
-            case.from_accelerometers
-        ):  # a period that moves beyond its windows' intervals refutes one linear model
+        # a period that moves beyond its windows' intervals refutes one linear model
+        if case.from_accelerometers:
             structured = check.failed or bool(running and running.get("variation", {}).get("varies"))
         else:
             structured = sc.verdict == Verdict.UNEXPLAINED or check.failed
