@@ -10,6 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from pidyn import Record
 from pidyn.adequacy import (
     AdequacySettings,
     check_adequacy,
@@ -19,7 +20,6 @@ from pidyn.adequacy import (
     trivial_predictions,
 )
 from pidyn.config import make_system
-from pidyn.data.sources import Record
 from pidyn.simulate import simulate_response
 
 

@@ -136,10 +136,53 @@ def test_settings_dataclasses_mirror_their_config(cls, config, key, task_keys):
 
 
 def test_task_read_settings_default_to_the_config():
-    from pidyn.runs.methods import default_starts
+    from pidyn.runs.methods import default_starts, refine_plan
 
-    refine = OmegaConf.select(compose("train"), "model.refine")
-    assert list(default_starts()) == list(refine.starts)
+    plan = refine_plan(compose("train"))
+    assert plan is not None and plan[0] == set(default_starts())
+
+
+#: (config file, its node holding a schema's overrides, the schema's name in pidyn.schemas)
+SCHEMA_FILES = [
+    ("diagnose.yaml", "diagnosis", "diagnosis"),
+    ("model/pidynnet.yaml", "schedule", "schedule"),
+    ("model/refine/multiple_shooting.yaml", "", "refine"),
+    ("generalize.yaml", "generalization", "generalization"),
+]
+
+
+@pytest.mark.parametrize("path, key, schema", SCHEMA_FILES, ids=[s for *_, s in SCHEMA_FILES])
+def test_config_files_hold_overrides_only(path, key, schema):
+    """Defaults live once, in the settings dataclass: a file's value equal to its default is a
+    second copy that would drift; the file names the schema in its defaults list."""
+    import yaml
+
+    from pidyn.config import CONF_DIR
+    from pidyn.schemas import SCHEMAS
+
+    raw = yaml.safe_load((CONF_DIR / path).read_text())
+    assert any(f"schema/{schema}@" in str(d) for d in raw.get("defaults", [])), (
+        f"{path} names no schema/{schema}"
+    )
+    node = (raw.get(key) if key else {k: v for k, v in raw.items() if k != "defaults"}) or {}
+    cls = SCHEMAS[schema]
+    defaults = OmegaConf.to_container(OmegaConf.structured(cls))
+
+    def copies(n, d, where):
+        for k, v in n.items():
+            if isinstance(v, dict) and isinstance(d.get(k), dict):
+                yield from copies(v, d[k], f"{where}{k}.")
+            elif k in d and _same(v, d[k]) and not (isinstance(v, str) and "${" in v):
+                yield f"{where}{k}"
+
+    # a refinement file's method names the file's choice, not a copied default
+    same = [k for k in copies(node, defaults, "") if k != "method"]
+    assert not same, f"{path}: {same} repeat {cls.__name__}'s defaults"
+
+
+def test_a_setting_of_the_wrong_type_fails_at_composition():
+    with pytest.raises(Exception, match="max_effects"):
+        compose("diagnose", overrides=["diagnosis.max_effects=two"])
 
 
 @pytest.mark.parametrize("method", list(entries()))

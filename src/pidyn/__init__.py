@@ -25,7 +25,7 @@ from typing import Any
 __version__ = "0.1.0"
 
 _PUBLIC = {
-    "Record": "pidyn.data.sources",
+    "Record": "pidyn.api",  # through the API, which resolves system names through the configs
     "identify": "pidyn.api",
     "predict": "pidyn.api",
     "diagnose": "pidyn.api",

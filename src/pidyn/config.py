@@ -22,7 +22,11 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException
 
+from pidyn.named import RESOLVERS
+from pidyn.schemas import register as register_schemas
+
 CONF_DIR = Path(__file__).resolve().parent / "conf"
+register_schemas()  # the settings dataclasses, which the config files' defaults lists name
 
 #: config groups chosen by name (a file of the group), as ``system=bouc_wen`` on the command line
 GROUPS = (
@@ -113,6 +117,9 @@ def make_system(name: str, **values: Any):
     (``make_system("shear_building", n_storeys=5)``, ``make_system("duffing", **{"params.k3.init": 50})``)."""
     cfg = compose("train", groups={"system": name}, values={f"system.{k}": v for k, v in values.items()})
     return hydra.utils.instantiate(cfg.system)
+
+
+RESOLVERS["system"] = make_system  # Record.simulate("duffing") resolves names here
 
 
 def user_settings() -> list[str]:

@@ -21,6 +21,7 @@ from pidyn.data.errors import DataError, needed
 from pidyn.data.windows import spread_by_integration
 from pidyn.excitation.ground_motion import GroundMotion, prepare
 from pidyn.integrate import HOLDS
+from pidyn.named import RESOLVERS
 from pidyn.simulate import Trajectory, add_noise, simulate
 from pidyn.systems.base import StructuralSystem
 
@@ -188,9 +189,12 @@ class Record:
         ``excitation`` (a shipped record's name or an AT2 path), measured with noise of std
         ``noise`` x RMS on each channel (seeded by ``seed``)."""
         if isinstance(system, str):
-            from pidyn.config import make_system  # lazy: names resolve through the configs, at the edge
-
-            system = make_system(system, **system_values)
+            if "system" not in RESOLVERS:
+                raise RuntimeError(
+                    f"Record.simulate('{system}'): a system's name resolves through pidyn's configs; "
+                    "use pidyn.Record (or import pidyn.config first), or pass a system object"
+                )
+            system = RESOLVERS["system"](system, **system_values)
         elif system_values:
             raise ValueError(f"settings {sorted(system_values)} need a system name, not a system object")
         return synthetic(

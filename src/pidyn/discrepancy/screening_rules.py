@@ -14,8 +14,8 @@ class Thresholds:
     """When an effect counts as found (defaults calibrated on clean and 5 %-noise data)."""
 
     min_delta_bic: float = 10.0  # "very strong" evidence on Kass & Raftery's scale
-    min_cv_gain: float = 0.05
-    min_force_share: float = 1e-6
+    min_cv_gain: float = 0.05  # blocked cross-validation's share of the force residual removed
+    min_force_share: float = 1e-6  # of the force's total sum of squares
     min_structure_gain: float = (
         0.3  # a generic f(x, x') removing this share (CV) marks the residual as structured
     )
@@ -38,7 +38,7 @@ class Thresholds:
     #: between passing effects this close in BIC (below "strong", 6, on Kass & Raftery's
     #: scale) the one with the clearly better blocked cross-validation gain is named
     tie_delta_bic: float = 6.0
-    tie_cv_margin: float = 0.1
+    tie_cv_margin: float = 0.1  # ... when one's CV gain is higher by this
 
     def step_persists(self, heldout_gain: float | None) -> bool:
         """A step in time lasts into the rows no fit used (no rows: nothing to refute it)."""

@@ -1,5 +1,6 @@
-"""The diagnosis's settings as typed dataclasses (``conf/diagnose.yaml``'s ``diagnosis`` node
-mirrors them; ``tests/test_settings_source.py`` checks that the two agree)."""
+"""The diagnosis's settings as typed dataclasses: the one source of their defaults. Hydra composes
+them as the schema of ``diagnose.yaml``'s ``diagnosis`` node (``pidyn.schemas``), which holds
+overrides only."""
 
 from __future__ import annotations
 
@@ -71,27 +72,29 @@ class ChangeSettings:
 class DiagnosisSettings:
     """What the diagnosis does and when it names an effect."""
 
-    fit_share: float = 0.65
-    effects: list[str] | None = None
-    force_effect: str | None = None
-    extend: bool = True
+    fit_share: float = 0.65  # fitting share of the record when the data carry no split of their own
+    effects: list[str] | None = None  # a subset of the library to screen (None: all)
+    force_effect: str | None = None  # extend with this effect whatever the screening says
+    extend: bool = True  # extend the model with what the screening names (False: screen only)
+    #: a structured residual no library effect explains: add a learned force f(x, x')
     learn_unexplained: bool = True
-    max_effects: int = 3
+    max_effects: int = 3  # extend, screen again, extend ... at most this many effects
     #: a building: a storey effect is named only when the extended model predicts the held-out
     #: floor accelerations better than the model it extends by this share (NRMSE)
     storey_min_gain: float = 0.01
     #: a building: a named effect's size (its key parameter) must be determined, its standard
     #: deviation at most this share of it (two standard deviations from zero)
     storey_max_rel_std: float = 0.5
+    #: PIDynNet starts from the weak form's estimates, not its own first-window solve
     ls_init: str | None = "none"
-    polish: bool = True
-    polish_seconds: float | None = None
+    polish: bool = True  # output-error least squares after each PIDynNet identification
+    polish_seconds: float | None = None  # length of the fitting part the polish uses (None: all)
     polish_max_nfev: int = 30
     #: every output-error fit of the diagnosis stops when a step lowers its cost by less than this
     #: share: a model choice by BIC over ~1000 independent samples moves by less than 0.01 then,
     #: where a fit of a located change crawled on at 1e-7 a step through its whole budget (66 s)
     polish_tol: float = 1e-6
-    substeps: int = 4
+    substeps: int = 4  # RK4 substeps per sample in simulations
     learned: LearnedSettings = field(default_factory=LearnedSettings)
     confirm: ConfirmSettings = field(default_factory=ConfirmSettings)
     changes: ChangeSettings = field(default_factory=ChangeSettings)

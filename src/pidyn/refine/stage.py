@@ -24,7 +24,8 @@ from pidyn.params import to_theta
 from pidyn.refine.period_profile import profile_period
 from pidyn.refine.period_scan import scan_period
 from pidyn.refine.problem import ShootingProblem
-from pidyn.refine.setup import RefineSettings, build_problem, initial_states, state_scale
+from pidyn.refine.settings import RefineSettings
+from pidyn.refine.setup import build_problem, initial_states, state_scale
 from pidyn.refine.solve import solve, solve_constrained
 from pidyn.refine.uncertainty import (
     bound_notes,

@@ -17,7 +17,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from pidyn.data.sources import synthetic_from_motion
 from pidyn.excitation.ground_motion import load_record, prepare
-from pidyn.models.predict import PredictSettings, pearson, predict_response
+from pidyn.models.predict import pearson, predict_response
+from pidyn.models.predict_settings import PredictSettings
 from pidyn.reporting import pyplot, write_json
 from pidyn.simulate import simulate
 

@@ -28,8 +28,7 @@ log = logging.getLogger(__name__)
 
 def default_starts() -> tuple[str, ...]:
     """The refinement's starts when the config names none: the data's, then every estimator that
-    ran and gave the model's parameters (``model.refine.starts`` in
-    conf/model/refine/multiple_shooting.yaml)."""
+    ran and gave the model's parameters (``model.refine.starts: null``)."""
     return ("data", *STARTS)
 
 
@@ -51,7 +50,7 @@ def refine_plan(cfg: DictConfig) -> tuple[set[str], list[str], Any] | None:
     RefineSettings), or None when the stage is off."""
     node = cfg.model.get("refine") or "none"
     # model.refine=none / =multiple_shooting on the command line sets the method by name (the
-    # settings then are RefineSettings' defaults, which conf/model/refine/*.yaml mirror)
+    # settings then are RefineSettings' defaults, the schema of conf/model/refine/*.yaml)
     rcfg = {"method": node} if isinstance(node, str) else OmegaConf.to_container(node, resolve=True)
     assert isinstance(rcfg, dict)
     method = rcfg.pop("method", "none")
@@ -59,7 +58,8 @@ def refine_plan(cfg: DictConfig) -> tuple[set[str], list[str], Any] | None:
         return None
     if method != "multiple_shooting":
         raise ValueError(f"model.refine: unknown method '{method}'; choose multiple_shooting or none")
-    allowed = set(rcfg.pop("starts", default_starts()))
+    starts = rcfg.pop("starts", None)
+    allowed = set(default_starts() if starts is None else starts)
     compare = list(rcfg.pop("compare_states", None) or [])
     settings = RefineSettings(**rcfg)
     for source in compare:

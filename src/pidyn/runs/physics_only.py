@@ -19,7 +19,8 @@ from omegaconf import DictConfig, OmegaConf
 from pidyn.assessment import heldout_scores
 from pidyn.data.sources import Record
 from pidyn.models.pidynnet import PIDynNet
-from pidyn.models.predict import PredictSettings, predict_response
+from pidyn.models.predict import predict_response
+from pidyn.models.predict_settings import PredictSettings
 from pidyn.reporting import nrmse
 from pidyn.systems.base import StructuralSystem
 
