@@ -134,7 +134,8 @@ def test_a_quiet_fitting_part_does_not_reject_the_true_model():
 def test_a_nominal_model_worse_than_knowing_nothing_is_never_said_to_hold():
     from types import SimpleNamespace
 
-    from pidyn.discrepancy.summary import _verdict, trivial_note
+    from pidyn.discrepancy.result import trivial_note
+    from pidyn.discrepancy.summary import _verdict
     from pidyn.discrepancy.verdicts import Verdict
 
     gain = {"nominal": 1.37, "trivial": 1.0, "trivial_label": "at rest", "nominal_beats_trivial": False}

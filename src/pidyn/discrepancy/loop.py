@@ -9,8 +9,10 @@ structure, the diagnosis runs the same steps:
    (``Subject.next_step``). An accepted step becomes the current model; a refused one ends
    the loop and is reported;
 3. the verdict, the fallbacks (a learned force where the library names nothing that earns its
-   place) and the held-out gain (``Subject.conclude``);
-4. ``diagnosis.json`` (``Subject.summary``), ``report.md`` and the figures (``Subject.write``).
+   place) and the held-out gain (``Subject.conclude``): one typed result for every subject
+   (``pidyn.discrepancy.result.DiagnosisResult``, the place a column);
+4. ``diagnosis.json``, ``report.md`` and the figures, by one writer (``pidyn.discrepancy.writer``):
+   the same head for every subject, then the subject's ``details``, ``sections`` and ``figures``.
 
 A *subject* is a kind of structure with the places a cause can sit at: a single degree of
 freedom (the structure itself), a shear building (its storeys). It says how the record is seen,
@@ -28,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from pidyn.data.sources import Record
+from pidyn.discrepancy.result import DiagnosisResult
 from pidyn.discrepancy.settings import DiagnosisSettings
 
 #: identify(record, config node, run folder, fitting span) -> (metrics, system, values): one
@@ -104,16 +107,20 @@ class Subject(ABC):
         None when there is nothing to try."""
 
     @abstractmethod
-    def conclude(self, current: Any, found: list, steps: list[Step], refused: Step | None) -> Any:
-        """The verdict and what the subject reports (its result)."""
+    def conclude(self, current: Any, found: list, steps: list[Step], refused: Step | None) -> DiagnosisResult:
+        """The verdict, what was found where, the held-out errors; the subject's account as its detail."""
 
     @abstractmethod
-    def summary(self, result: Any) -> dict[str, Any]:
-        """The content of ``diagnosis.json``."""
+    def details(self, result: DiagnosisResult) -> dict[str, Any]:
+        """What ``diagnosis.json`` holds beyond the result's head (the subject's evidence)."""
 
     @abstractmethod
-    def write(self, result: Any, summary: dict[str, Any]) -> None:
-        """``report.md`` and the figures in the run folder."""
+    def sections(self, result: DiagnosisResult, summary: dict[str, Any]) -> list[str]:
+        """The subject's sections of ``report.md``, after the common head."""
+
+    @abstractmethod
+    def figures(self, result: DiagnosisResult, summary: dict[str, Any]) -> list[str]:
+        """The figures drawn into ``figures/`` of the run folder; their file names."""
 
 
 def extend(subject: Subject, current: Any) -> tuple[Any, list, list[Step], Step | None]:
@@ -135,8 +142,8 @@ def extend(subject: Subject, current: Any) -> tuple[Any, list, list[Step], Step 
     return current, found, steps, refused
 
 
-def diagnose(subject: Subject) -> Any:
-    """Steps 1-3 of the loop; the subject's result."""
+def diagnose(subject: Subject) -> DiagnosisResult:
+    """Steps 1-3 of the loop; the result."""
     current = subject.nominal()
     current, found, steps, refused = extend(subject, current)
     return subject.conclude(current, found, steps, refused)

@@ -2,59 +2,24 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from pidyn.discrepancy.effects import get_effect
 from pidyn.discrepancy.heldout_check import HeldoutCheck
-from pidyn.discrepancy.verdicts import Verdict
 
 
 def _num(v) -> str:
     return "-" if v is None else (f"{v:.4g}" if isinstance(v, (int, float)) else str(v))
 
 
-def write_report(path: Path, d: dict, figures: list[str]) -> None:
-    """report.md: the verdict, the steps, the models' held-out errors, the evidence, the ranking."""
-    lines = (
-        _verdict_lines(d)
-        + _accelerometer_lines(d)
+def report_sections(d: dict) -> list[str]:
+    """report.md after the common head: the steps, the equations, the evidence, the ranking."""
+    return (
+        _accelerometer_lines(d)
         + _steps_lines(d)
         + _model_lines(d)
         + _evidence_lines(d)
         + _confirmation_lines(d)
         + _ranking_lines(d)
-        + ["## Figures", ""]
-        + [f"![{f}](figures/{f})" for f in figures]
     )
-    path.write_text("\n".join(lines) + "\n")
-
-
-def _verdict_lines(d: dict) -> list[str]:
-    """The title and the verdict in words."""
-    lines = [f"# Diagnosis of `{d['record']}`", ""]
-    if d["verdict"] == Verdict.NONE:
-        lines += [
-            "**Verdict: none.** No candidate effect explains more of the residual than noise and the "
-            "model's own error would (thresholds below). The nominal model is adequate for these data.",
-            "",
-        ]
-    elif d["verdict"] == Verdict.UNEXPLAINED:
-        lines += [
-            "**Verdict: unexplained.** The nominal model is clearly wrong on these data, but no effect of the "
-            "library (nor a change of stiffness or damping in time) explains what it misses. Look at the "
-            "residual force below before trusting this model.",
-            "",
-        ]
-    else:
-        causes = d.get("causes") or [d["cause"]]
-        lines += [
-            f"**Verdict: discrepancy. Cause{'s' if len(causes) > 1 else ''}: "
-            + ", ".join(f"`{c}`" for c in causes)
-            + "**"
-            + (" (named by the user, not by the screening)" if d.get("forced") else ""),
-            "",
-        ]
-    return lines
 
 
 def _accelerometer_lines(d: dict) -> list[str]:
@@ -166,26 +131,11 @@ def _steps_lines(d: dict) -> list[str]:
 
 
 def _model_lines(d: dict) -> list[str]:
-    """Nominal and extended equations with their held-out errors, and the split."""
-    g = d["gain"]
-    lines = [
-        "| model | equation | held-out NRMSE of x |",
-        "|---|---|---|",
-        f"| nominal | `{d['nominal']}` | {_num(g['nominal'])} |",
-    ]
+    """The nominal and extended equations."""
+    lines = ["| model | equation |", "|---|---|", f"| nominal | `{d['nominal']}` |"]
     if d.get("extended"):
-        lines.append(f"| extended | `{d['extended']}` | {_num(g['extended'])} |")
-    if g.get("trivial") is not None:
-        lines.append(f"| knowing nothing | the structure {g['trivial_label']} | {_num(g['trivial'])} |")
-    if d.get("trivial_note"):
-        lines += ["", f"**{d['trivial_note']}**"]
-    lines += [
-        "",
-        f"Fitting part {d['split']['fit'][0]:.4g}-{d['split']['fit'][1]:.4g} s; held-out part "
-        f"{d['split']['heldout'][0]:.4g}-{d['split']['heldout'][1]:.4g} s (not used for fitting).",
-        "",
-    ]
-    return lines
+        lines.append(f"| extended | `{d['extended']}` |")
+    return lines + [""]
 
 
 def _evidence_lines(d: dict) -> list[str]:

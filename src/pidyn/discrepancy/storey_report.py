@@ -107,7 +107,8 @@ def storey_residual(view: StoreyView, values: dict[str, float], found) -> np.nda
     return view.shear - law
 
 
-def write_building_figures(run_dir: Path, d: BuildingDiagnosis) -> None:
+def write_building_figures(run_dir: Path, d: BuildingDiagnosis) -> list[str]:
+    """Each storey's unexplained force against its drift and drift velocity; the figure's name."""
     plt = pyplot()
 
     n = len(d.views)
@@ -136,19 +137,12 @@ def write_building_figures(run_dir: Path, d: BuildingDiagnosis) -> None:
     (run_dir / "figures").mkdir(parents=True, exist_ok=True)
     fig.savefig(run_dir / "figures" / "storey_residuals.png", dpi=110)
     plt.close(fig)
+    return ["storey_residuals.png"]
 
 
 def report_lines(d: dict) -> list[str]:
-    """``report.md`` of a building diagnosis."""
-    lines = [f"# Diagnosis of '{d['record']}' (building, floors measured: {d['measured_floors']})", ""]
-    lines.append(
-        f"**Verdict: {d['verdict']}**"
-        + (
-            f": {', '.join(f'{c} in storey {s}' for c, s in zip(d['causes'], d['storeys']))}"
-            if d["causes"]
-            else ""
-        )
-    )
+    """``report.md`` of a building after the common head: the storeys, the equations, the steps."""
+    lines = [f"Floors measured: {d['measured_floors']}.", ""]
     if d["unexplained_storey"]:
         lines.append(
             f"Storey {d['unexplained_storey']}'s force is structured, and no library effect earns its place there."
@@ -161,19 +155,8 @@ def report_lines(d: dict) -> list[str]:
     ]
     if d["extended"]:
         lines += ["", "Extended model:", ""] + [f"    {e}" for e in d["extended"]["storey_equations"]]
-    g = d["gain"]
-    lines += [
-        "",
-        "| model | held-out NRMSE of the floor accelerations |",
-        "|---|---|",
-        f"| nominal | {g['nominal']:.4g} |",
-    ]
-    if g["extended"] is not None:
-        lines.append(f"| extended | {g['extended']:.4g} |")
     lines += _fit_test_lines(d.get("fit_test"))
     lines += _storey_table(d)
-    for note in d["notes"]:
-        lines.append(f"\nNote: {note}.")
     learned = d.get("learned")
     if learned:
         lines.append(
@@ -186,11 +169,7 @@ def report_lines(d: dict) -> list[str]:
             f"\nStep: {s['effect']} in storey {s['storey']} (score {score_text(s.get('score'))}): held-out NRMSE "
             f"{s['heldout_before']:.4g} -> {s['heldout_after']:.4g}, {step_outcome(s)}."
         )
-    lines += [
-        "",
-        "Figure: `figures/storey_residuals.png` (each storey's unexplained force against drift and drift velocity).",
-    ]
-    return lines
+    return lines + [""]
 
 
 def _fit_test_lines(test: dict | None) -> list[str]:

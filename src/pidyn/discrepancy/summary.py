@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import logging
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +13,6 @@ from pidyn.discrepancy.case import Case, Outcome
 from pidyn.discrepancy.changes import running_estimate
 from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.learned_step import LEARNED
-from pidyn.discrepancy.report import write_report
 from pidyn.discrepancy.report_figures import (
     plot_learned_force,
     plot_ranking,
@@ -23,6 +21,7 @@ from pidyn.discrepancy.report_figures import (
     plot_running_estimate,
     plot_running_period,
 )
+from pidyn.discrepancy.result import DiagnosisResult, Finding, HeldoutErrors, trivial_note
 from pidyn.discrepancy.screening import weak_system
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.notes import note
@@ -32,41 +31,56 @@ from pidyn.systems.sdof import SDOFSystem
 from pidyn.systems.terms import AmplitudeSoftening, latent_path
 
 
-def summarize(case: Case, o: Outcome) -> dict[str, Any]:
-    """The content of diagnosis.json: verdict, causes, evidence, parameters, held-out gain."""
-    record, nom, ext = case.record, o.nominal, o.extension
+def conclusion(case: Case, o: Outcome) -> DiagnosisResult:
+    """The single degree of freedom's result: the verdict (``unexplained`` when the names did not
+    earn their place, see ``_verdict``), the causes kept, the held-out errors, the coded notes."""
     gain = heldout_gain(case, o)
     learned = LEARNED in o.causes
-    causes = [c for c in o.causes if c != LEARNED]
-    unearned = ext.get("unearned")  # the extension's names did not earn their place: none is kept
-    if unearned:
-        causes = []
-    ext_system, ext_values, ext_metrics = ext["system"], ext["values"], ext["metrics"]
-    effect_params = _effect_parameters(o, nom, ext_system, ext_values)
+    unearned = o.extension.get("unearned")  # the extension's names did not earn their place: none is kept
+    causes = [] if unearned else [c for c in o.causes if c != LEARNED]
     worse = trivial_note(gain)
     verdict = Verdict.UNEXPLAINED if unearned else _verdict(case, o, bool(causes), learned, worse is not None)
+    contested = None if unearned else rivals(o)
+    notes = [n for n in (worse, (unearned or {}).get("note"), (contested or {}).get("note")) if n]
+    return DiagnosisResult(
+        case.record.name,
+        "single degree of freedom",
+        "",
+        verdict,
+        [Finding(c) for c in causes],
+        HeldoutErrors.of(gain),
+        gain,
+        notes,
+        o.forced,
+        o,
+    )
+
+
+def summarize(case: Case, result: DiagnosisResult) -> dict[str, Any]:
+    """diagnosis.json beyond the result's head: the evidence, the parameters, the models."""
+    o: Outcome = result.detail
+    record, nom, ext = case.record, o.nominal, o.extension
+    unearned = ext.get("unearned")
+    causes = [f.effect for f in result.findings]
+    ext_system, ext_values, ext_metrics = ext["system"], ext["values"], ext["metrics"]
+    effect_params = _effect_parameters(o, nom, ext_system, ext_values)
     truth = dict(record.meta.get("hidden_params") or {}) if "hidden_effect" in record.meta else None
     return {
         "nominal": nom.system.describe(nom.values),
-        "verdict": verdict,
         "cause": causes[0] if causes else (None if o.cause == LEARNED or unearned else o.cause),
         "unearned": unearned,
-        "causes": causes,
-        "storeys": [None] * len(causes),  # a building's diagnosis names each cause's storey here
         "t_change": effect_params.get("t_change"),
         "steps": ext["steps"],
-        "learned_force": learned,
+        "learned_force": LEARNED in o.causes,
         "structure": {k: v for k, v in o.screening.structure.items()},
         "heldout_check": o.check.__dict__,
         "change": None if o.change_row is None else o.change_row["change"].to_dict(),
-        "forced": o.forced,
         "ranking": o.screening.ranking,
         "extended": ext_system.describe(ext_values) if ext_system is not None else None,
         "parameters": effect_params,
         "nominal_parameters": nom.values,
         "extended_parameters": ext_values,
-        "gain": gain,
-        "trivial_note": worse,
+        "trivial_note": trivial_note(result.gain),
         "split": {"fit": list(case.fit), "heldout": list(case.held)},
         "record": record.name,
         "noise": (record.meta or {}).get("noise"),
@@ -115,38 +129,6 @@ def heldout_gain(case: Case, o: Outcome) -> dict[str, Any]:
     for key in ("nominal", "extended"):  # beside every held-out score, the prediction that knows nothing
         gain[f"{key}_beats_trivial"] = None if gain.get(key) is None else bool(gain[key] < gain["trivial"])
     return gain
-
-
-def log_verdict(d: dict[str, Any]) -> None:
-    """The verdict, where, and the held-out errors beside knowing nothing's, in the log."""
-    gain, storeys = d["gain"], d.get("storeys") or []
-    named = [f"{c} in storey {s}" if s else c for c, s in zip(d["causes"], storeys)] or (
-        [d["cause"]] if d.get("cause") else []
-    )
-    logging.getLogger("pidyn.tasks.diagnose").info(
-        "verdict: %s%s; held-out NRMSE (%s) nominal %.4g%s; knowing nothing (the structure %s) %.4g",
-        d["verdict"],
-        f" ({', '.join(named)})" if named else "",
-        gain["metric"],
-        gain["nominal"],
-        "" if gain["extended"] is None else f", extended {gain['extended']:.4g}",
-        gain.get("trivial_label", "at rest"),
-        gain.get("trivial") if gain.get("trivial") is not None else float("nan"),
-    )
-    if d.get("trivial_note"):
-        logging.getLogger("pidyn.tasks.diagnose").warning("%s", d["trivial_note"])
-
-
-def trivial_note(gain: dict[str, Any]) -> str | None:
-    """Says so when the nominal model predicts the held-out part no better than knowing nothing."""
-    if gain.get("nominal_beats_trivial") is not False:
-        return None
-    return note(
-        "worse_than_trivial",
-        f"the nominal model predicts the held-out part worse than knowing nothing (NRMSE {gain['nominal']:.4g} "
-        f"against {gain['trivial']:.4g}, the structure {gain['trivial_label']}): it does not hold there, "
-        "whatever the checks on the fitting part say",
-    )
 
 
 def rivals(o: Outcome) -> dict[str, Any] | None:
@@ -198,8 +180,8 @@ def _verdict(case: Case, o: Outcome, named: bool, learned: bool, worse: bool = F
     return Verdict.UNEXPLAINED if learned or structured or worse else Verdict.NONE
 
 
-def write_figures(case: Case, o: Outcome, d: dict) -> None:
-    """The figures and report.md of the run folder."""
+def write_figures(case: Case, o: Outcome, d: dict) -> list[str]:
+    """The figures of the run folder; their file names."""
     record, fit, held, nom = case.record, case.fit, case.held, o.nominal
     period, cause, sc = nom.period, d["cause"], o.screening
     fig = case.run_dir / "figures"
@@ -238,7 +220,7 @@ def write_figures(case: Case, o: Outcome, d: dict) -> None:
             pw,
             units,
         )
-    write_report(case.run_dir / "report.md", d, [p.name for p in sorted(fig.glob("*.png"))])
+    return [p.name for p in sorted(fig.glob("*.png"))]
 
 
 def _running_figures(case: Case, o: Outcome, fig) -> None:

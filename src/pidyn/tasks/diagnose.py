@@ -22,8 +22,7 @@ from pidyn.discrepancy import loop
 from pidyn.discrepancy.loop import Inputs, Subject
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.subjects import subject_for
-from pidyn.discrepancy.summary import log_verdict
-from pidyn.reporting import write_json
+from pidyn.discrepancy.writer import write_diagnosis
 from pidyn.runs.build import build_record, instantiate
 from pidyn.runs.folder import is_complete, run_folder
 from pidyn.runs.methods import refine_plan
@@ -48,11 +47,7 @@ def _diagnose(cfg: DictConfig, record: Record | None) -> dict[str, Any]:
     check_settings(cfg)
     subject = compose_subject(cfg, record)
     result = loop.diagnose(subject)
-    diagnosis = subject.summary(result)
-    diagnosis["wall_seconds"] = time.perf_counter() - t_wall
-    write_json(subject.run_dir / "diagnosis.json", diagnosis)
-    subject.write(result, diagnosis)
-    log_verdict(diagnosis)
+    diagnosis = write_diagnosis(subject, result, time.perf_counter() - t_wall)
     log.info("run folder %s (%.0f s)", subject.run_dir, diagnosis["wall_seconds"])
     return diagnosis
 

@@ -13,6 +13,7 @@ from pidyn.data.checks import check_floors, check_record
 from pidyn.data.sources import Record
 from pidyn.discrepancy.case import split_spans
 from pidyn.discrepancy.loop import Inputs, Step, Subject
+from pidyn.discrepancy.result import DiagnosisResult, Finding, HeldoutErrors, trivial_note
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_choice import Study
 from pidyn.discrepancy.storey_model import BuildingDiagnosis
@@ -104,7 +105,7 @@ class Building(Subject):
 
     def conclude(
         self, current: dict, found: list, steps: list[Step], refused: Step | None
-    ) -> BuildingDiagnosis:
+    ) -> DiagnosisResult:
         study, settings, nominal = self.study, self.settings, self.nominal_report
         self.progress.step("the final screening and the verdict", last=True)
         views, screenings = study.screen(current, found)
@@ -117,13 +118,15 @@ class Building(Subject):
                 study, current, found, (views, screenings), unexplained, self.run_dir
             )
         extended = extended_entry(current, found, bool(learned and learned["kept"]))
-        return BuildingDiagnosis(
+        gain = building_gain(nominal, current, extended is not None)
+        worse = trivial_note(gain)
+        account = BuildingDiagnosis(
             verdict,
             found,
             nominal,
             extended,
             [s.report for s in steps if s.report is not None],
-            building_gain(nominal, current, extended is not None),
+            gain,
             unexplained,
             views,
             screenings,
@@ -134,12 +137,26 @@ class Building(Subject):
             if learned is None
             else {k: v for k, v in learned.items() if k not in ("system", "values", "heldout")},
         )
-
-    def summary(self, result: BuildingDiagnosis) -> dict[str, Any]:
-        return summarize_building(
-            self.record, self.system, result, self.fit, self.held, self.settings.thresholds
+        return DiagnosisResult(
+            self.record.name,
+            "shear building",
+            self.place,
+            verdict,
+            [Finding(f.effect, self.place, f.storey) for f in found],
+            HeldoutErrors.of(gain),
+            gain,
+            notes + ([worse] if worse else []),
+            bool(settings.force_effect),
+            account,
         )
 
-    def write(self, result: BuildingDiagnosis, summary: dict[str, Any]) -> None:
-        (self.run_dir / "report.md").write_text("\n".join(report_lines(summary)) + "\n")
-        write_building_figures(self.run_dir, result)
+    def details(self, result: DiagnosisResult) -> dict[str, Any]:
+        return summarize_building(
+            self.record, self.system, result.detail, self.fit, self.held, self.settings.thresholds
+        )
+
+    def sections(self, result: DiagnosisResult, summary: dict[str, Any]) -> list[str]:
+        return report_lines(summary)
+
+    def figures(self, result: DiagnosisResult, summary: dict[str, Any]) -> list[str]:
+        return write_building_figures(self.run_dir, result.detail)

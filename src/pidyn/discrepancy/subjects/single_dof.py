@@ -15,7 +15,9 @@ from pidyn.discrepancy.learned_step import LEARNED, learned_row
 from pidyn.discrepancy.loop import Inputs, Step, Subject, extend
 from pidyn.discrepancy.nominal import identify_nominal, nominal_modes, running_period, starting_point
 from pidyn.discrepancy.nominal_check import check_heldout
+from pidyn.discrepancy.report import report_sections
 from pidyn.discrepancy.residual import unexplained_force
+from pidyn.discrepancy.result import DiagnosisResult
 from pidyn.discrepancy.screening import EXCLUSIVE
 from pidyn.discrepancy.sdof_steps import (
     _acceleration_sims,
@@ -25,7 +27,7 @@ from pidyn.discrepancy.sdof_steps import (
     heldout_errors,
     next_cause,
 )
-from pidyn.discrepancy.summary import summarize, write_figures
+from pidyn.discrepancy.summary import conclusion, summarize, write_figures
 from pidyn.discrepancy.verdicts import Verdict, unearned_names
 from pidyn.progress import Steps
 from pidyn.systems.sdof import SDOFSystem
@@ -162,7 +164,7 @@ class SingleDOF(Subject):
                     self.pending = nxt
         return Step(True, step, cause, ext["steps"][-1])
 
-    def conclude(self, current: Any, found: list, steps: list[Step], refused: Step | None) -> Outcome:
+    def conclude(self, current: Any, found: list, steps: list[Step], refused: Step | None) -> DiagnosisResult:
         case, nom = self.case, self.nom
         ext = self._names_earn_or_learn()
         causes = ext["causes"] if case.settings.extend else ([] if self.cause is None else [self.cause])
@@ -173,7 +175,7 @@ class SingleDOF(Subject):
             else None
         )
         sims = _acceleration_sims(case, nom, ext) if case.from_accelerometers else {}
-        return Outcome(
+        outcome = Outcome(
             nom,
             self.sc,
             self.check,
@@ -190,6 +192,7 @@ class SingleDOF(Subject):
             nominal_modes(case, nom),
             self.running,
         )
+        return conclusion(case, outcome)
 
     def _names_earn_or_learn(self) -> dict[str, Any]:
         """The library names of an extension must earn their place together (``unearned_names``, on
@@ -210,8 +213,11 @@ class SingleDOF(Subject):
         extend(self, self._start())
         return {**self.ext, "unearned": {**refused, "steps": ext["steps"]}}
 
-    def summary(self, result: Outcome) -> dict[str, Any]:
+    def details(self, result: DiagnosisResult) -> dict[str, Any]:
         return summarize(self.case, result)
 
-    def write(self, result: Outcome, summary: dict[str, Any]) -> None:
-        write_figures(self.case, result, summary)
+    def sections(self, result: DiagnosisResult, summary: dict[str, Any]) -> list[str]:
+        return report_sections(summary)
+
+    def figures(self, result: DiagnosisResult, summary: dict[str, Any]) -> list[str]:
+        return write_figures(self.case, result.detail, summary)
