@@ -89,7 +89,7 @@ def test_a_moving_period_adds_the_amplitude_dependent_structure_to_the_check(mon
     seen = {}
 
     def fake(case, system, values, node, sc, s, k, everything=False, extra=None):
-        seen["extra"] = [r["effect"] for r in extra or []]
+        seen["extra"] = [r.effect for r in extra or []]
         return Confirmation()
 
     monkeypatch.setattr(pipeline, "confirm_undecided", fake)

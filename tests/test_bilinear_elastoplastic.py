@@ -33,7 +33,7 @@ def test_a_yielding_spring_is_named_with_its_stiffness_and_yield_displacement(se
     case = hidden_case(NAME, seed, noise=0.02)
     sc = _screen(case)
     assert sc.verdict == "discrepancy" and sc.cause == NAME, sc.ranking[:3]
-    found = sc.ranking[0]["parameters"]
+    found = sc.ranking[0].parameters
     assert found["kp"] == pytest.approx(case.truth["kp"], rel=EFFECTS[NAME].tolerance)
     assert found["x_y"] == pytest.approx(case.truth["x_y"], rel=0.1)
 

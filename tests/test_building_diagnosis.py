@@ -228,12 +228,13 @@ def test_the_configs_guesses_are_refined_only_when_their_modes_are_far_from_the_
 def test_a_named_effect_needs_a_determined_size():
     """The refinement's interval of the effect's size (its key parameter) decides whether a
     building's extension may be named: two standard deviations from zero (``storey_max_rel_std``)."""
+    from pidyn.discrepancy.evidence import Evidence
     from pidyn.discrepancy.settings import DiagnosisSettings
     from pidyn.discrepancy.storey_extension import size_spread
     from pidyn.discrepancy.storey_model import Found
     from pidyn.discrepancy.storey_steps import refusal_notes
 
-    cand = Found("quadratic_damping", 1, {"c2": 25.0}, {"score": 2.8}, {})
+    cand = Found("quadratic_damping", 1, {"c2": 25.0}, Evidence("quadratic_damping", score=2.8), {})
     loose = {"intervals": {"c2_1": {"value": 1.23, "std": 1.30, "rel_std_pct": 106.0}}}
     tight = {"intervals": {"c2_1": {"value": 1.23, "std": 0.10, "rel_std_pct": 8.1}}}
     limit = DiagnosisSettings().storey_max_rel_std

@@ -104,9 +104,7 @@ def test_information_count_is_calibrated_on_noise():
     stats = []
     for seed in range(40):
         sc = _screen(hidden_case(None, seed, noise=0.03), effects=two_sided)
-        stats += [
-            -sc.n_independent * np.log(1.0 - r["explained"]) for r in sc.ranking if r.get("score") is not None
-        ]
+        stats += [-sc.n_independent * np.log(1.0 - r.explained) for r in sc.ranking if r.score is not None]
     assert len(stats) == 80
     # chi2_1: mean 1, sd of an 80-draw mean 0.16 (1.23 here; 0.67 with the old count)
     assert 0.75 < np.mean(stats) < 1.5, np.mean(stats)
@@ -123,10 +121,10 @@ def test_screening_names_the_hidden_effect(effect, seed):
         assert sc.verdict == "none"
     else:
         top = sc.ranking[0]
-        assert top["cv_gain"] > 0.3
+        assert top.cv_gain > 0.3
         eff = get_effect(effect)
         # the screening is a starting point; a loose check here, the tight one after identification
-        assert top["parameters"][eff.key] == pytest.approx(case.truth[eff.key], rel=0.5)
+        assert top.parameters[eff.key] == pytest.approx(case.truth[eff.key], rel=0.5)
 
 
 def test_silverbox_screening_finds_the_cubic_stiffness():
@@ -154,7 +152,7 @@ def test_silverbox_screening_finds_the_cubic_stiffness():
         mass_known=False,
     )
     assert sc.cause == "cubic_stiffness"
-    assert sc.ranking[0]["parameters"]["k3"] > 0
+    assert sc.ranking[0].parameters["k3"] > 0
     fn = np.sqrt(sc.nominal_params["k"] / sc.nominal_params["m"]) / (2 * np.pi)
     assert 60 < fn < 75
 
@@ -247,9 +245,9 @@ def test_signed_effects_are_found_with_their_sign(effect, key):
         assert case.truth[key] < 0
         sc = _screen(case)
         assert sc.cause == effect, sc.ranking[:2]
-        est = sc.ranking[0]["parameters"][key]
+        est = sc.ranking[0].parameters[key]
         assert est == pytest.approx(case.truth[key], rel=0.3)
-        term = get_effect(effect).term(sc.ranking[0]["parameters"], {})
+        term = get_effect(effect).term(sc.ranking[0].parameters, {})
         spec = term.specs()[0]
         assert spec.transform == "identity" and spec.init < 0
 
@@ -278,8 +276,8 @@ def test_bouc_wen_benchmark_screening_names_the_hysteresis():
         fit_end,
         mass_known=False,
     )
-    assert sc.cause == "hysteresis", [row["effect"] for row in sc.ranking]
-    params = sc.ranking[0]["parameters"]
+    assert sc.cause == "hysteresis", [row.effect for row in sc.ranking]
+    params = sc.ranking[0].parameters
     specs = {sp.name: sp for sp in get_effect("hysteresis").term(params, s.context()).specs()}
     assert specs["beta"].lower < 0 and specs["gamma"].lower < 0
     assert specs["beta"].lower < -1100 < specs["beta"].upper  # the benchmark's own beta fits inside
@@ -512,7 +510,7 @@ def test_screening_names_a_pair_that_a_third_effect_stands_in_for(pair, seed):
     jointly, the hidden pair wins."""
     sc = _screen(hidden_case(pair, seed))
     greedy = sc.ranking[0]
-    assert not (greedy["passes"] and greedy["effect"] in pair.split("+")), "greedy naming alone would do here"
+    assert not (greedy.passes and greedy.effect in pair.split("+")), "greedy naming alone would do here"
     assert sc.verdict == "discrepancy" and sc.cause in pair.split("+"), (
         sc.ranking[:3],
         sc.structure.get("pair"),
@@ -554,7 +552,7 @@ def test_the_true_friction_model_screens_clean(seed):
         effects=rest,
     )
     assert sc.verdict == "none", sc.ranking[:2]
-    change = next(q for q in sc.ranking if q["effect"] == "damping_change")
+    change = next(q for q in sc.ranking if q.effect == "damping_change")
     assert change["score"] is None or change["parameters"]["change"] > -1.0
 
 

@@ -9,6 +9,7 @@ import pytest
 from pidyn.baselines.least_squares import output_error
 from pidyn.discrepancy.confirm import confirm, independent_samples, undecided
 from pidyn.discrepancy.effects import Signals
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.extend import extended_system
 from pidyn.discrepancy.hidden import hidden_case
 from pidyn.discrepancy.screening import pair_lead
@@ -32,14 +33,14 @@ def test_white_noise_counts_every_sample_and_a_coloured_one_fewer():
 def test_only_leaning_unrefused_effects_are_checked():
     th = Thresholds()
     rows = [
-        {"effect": "gap_contact", "score": 25.0},
-        {"effect": "cubic_stiffness", "score": 4.0},
-        {"effect": "stiffness_loss", "score": 6.0, "step_in_time": True},
-        {"effect": "quadratic_stiffness", "score": 3.0, "heldout_miss": True},
-        {"effect": "quadratic_damping", "score": -2.0},
-        {"effect": "hysteresis", "score": None},
+        Evidence("gap_contact", score=25.0),
+        Evidence("cubic_stiffness", score=4.0),
+        Evidence("stiffness_loss", score=6.0, step_in_time=True),
+        Evidence("quadratic_stiffness", score=3.0, heldout_miss=True),
+        Evidence("quadratic_damping", score=-2.0),
+        Evidence("hysteresis"),
     ]
-    assert [r["effect"] for r in undecided(rows, th, 3)] == ["cubic_stiffness"]
+    assert [r.effect for r in undecided(rows, th, 3)] == ["cubic_stiffness"]
 
 
 def _check(effect: str | None, seed: int, noise: float, sign: float | None = None):
@@ -52,13 +53,13 @@ def _check(effect: str | None, seed: int, noise: float, sign: float | None = Non
     fitted = output_error(rec.segment(0.0, case.fit_end), nominal, substeps=4, max_nfev=30).params
     values = {"m": 1.0, **fitted}
     start = -30.0 if (sign or 1.0) < 0 else 30.0
-    row = {"effect": "cubic_stiffness", "score": 4.0, "parameters": {"k3": start}}
+    row = Evidence("cubic_stiffness", score=4.0, parameters={"k3": start})
     out = confirm(
         rec,
         nominal,
         values,
         [row],
-        lambda r: extended_system(nominal, r["effect"], r["parameters"], s.context()),
+        lambda r: extended_system(nominal, r.effect, r.parameters, s.context()),
         (0.0, case.fit_end),
         (case.fit_end, float(rec.t[-1])),
         Thresholds(),
@@ -71,17 +72,17 @@ def test_the_simulated_response_names_a_softening_cubic_the_weak_form_leaves_und
     it) under 3 % noise, against the best linear model."""
     case, out = _check("cubic_stiffness", 11, 0.03, sign=-1.0)
     (tested,) = out.tested
-    assert out.row is not None and out.row["effect"] == "cubic_stiffness", tested
-    assert tested["delta_bic"] < -10 and tested["heldout_gain"] > 0
-    assert tested["parameters"]["k3"] == pytest.approx(case.truth["k3"], rel=0.15)
-    assert out.row["rivals"] == []  # one candidate: nothing to tell it from
+    assert out.row is not None and out.row.effect == "cubic_stiffness", tested
+    assert tested.delta_bic < -10 and tested.heldout_gain > 0
+    assert tested.parameters["k3"] == pytest.approx(case.truth["k3"], rel=0.15)
+    assert out.row.rivals == []  # one candidate: nothing to tell it from
 
 
 def test_the_simulated_response_names_nothing_when_nothing_is_missing():
     _, out = _check(None, 12, 0.03)
     (tested,) = out.tested
-    assert out.row is None and not tested["passes"], tested
-    assert tested["delta_bic"] > -10
+    assert out.row is None and not tested.passes, tested
+    assert tested.delta_bic > -10
 
 
 def test_an_effect_is_judged_against_the_nominal_models_own_refit():
@@ -95,22 +96,22 @@ def test_an_effect_is_judged_against_the_nominal_models_own_refit():
     fitted = output_error(rec.segment(0.0, case.fit_end), nominal, substeps=4, max_nfev=30).params
     off = {"m": 1.0, "c": 1.6 * fitted["c"], "k": 1.06 * fitted["k"]}
     rows = [
-        {"effect": "cubic_stiffness", "score": 4.0, "parameters": {"k3": 30.0}},
-        {"effect": "quadratic_damping", "score": 3.0, "parameters": {"c2": 0.1}},
+        Evidence("cubic_stiffness", score=4.0, parameters={"k3": 30.0}),
+        Evidence("quadratic_damping", score=3.0, parameters={"c2": 0.1}),
     ]
     out = confirm(
         rec,
         nominal,
         off,
         rows,
-        lambda r: extended_system(nominal, r["effect"], r["parameters"], s.context()),
+        lambda r: extended_system(nominal, r.effect, r.parameters, s.context()),
         (0.0, case.fit_end),
         (case.fit_end, float(rec.t[-1])),
         Thresholds(),
         max_nfev=60,
     )
     assert out.nominal["refit"] and out.nominal["rss_fit"] < 0.2 * out.nominal["rss_fit_before"], out.nominal
-    assert out.row is None and not any(t["passes"] for t in out.tested), out.tested
+    assert out.row is None and not any(t.passes for t in out.tested), out.tested
 
 
 def test_a_located_change_time_is_held_in_the_extension():
@@ -126,9 +127,9 @@ def test_a_located_change_time_is_held_in_the_extension():
 def test_a_pair_holding_an_effect_the_held_out_rule_refuses_leads_nowhere():
     th = Thresholds()
     ranking = [
-        {"effect": "quadratic_stiffness", "score": 14.0, "passes": False, "heldout_miss": True},
-        {"effect": "cubic_stiffness", "score": 12.0, "passes": True},
-        {"effect": "gap_contact", "score": 11.0, "passes": True},
+        Evidence("quadratic_stiffness", score=14.0, passes=False, heldout_miss=True),
+        Evidence("cubic_stiffness", score=12.0, passes=True),
+        Evidence("gap_contact", score=11.0, passes=True),
     ]
     pairs = [
         {
@@ -141,10 +142,10 @@ def test_a_pair_holding_an_effect_the_held_out_rule_refuses_leads_nowhere():
     ]
     structure = {"cv_gain": 0.9}
     assert pair_lead(ranking, pairs, structure, th) is None  # the best pair holds the refused spring
-    ranking[0].pop("heldout_miss")
+    ranking[0].heldout_miss = False
     lead = pair_lead(ranking, pairs, structure, th)
     assert lead is not None and lead["lead"] == "quadratic_stiffness"
-    ranking[0]["heldout_small"] = True  # a small held-out share refuses an effect alone, not in a pair
+    ranking[0].heldout_small = True  # a small held-out share refuses an effect alone, not in a pair
     assert pair_lead(ranking, pairs, structure, th) is not None
 
 
@@ -190,19 +191,14 @@ def _located_change(rec, fit_end: float, drop: float, t_d: float) -> tuple[dict,
     located = {"t_change": t_d, "t_change_ci95": [t_d - 1.5, t_d + 1.0], "fraction": -drop}
     change = SimpleNamespace(to_dict=lambda: located)
     row = _change_candidate(
-        {
-            "effect": "stiffness_loss",
-            "score": 40.0,
-            "parameters": {"drop": drop, "t_d": t_d},
-            "change": change,
-        }
+        Evidence("stiffness_loss", score=40.0, parameters={"drop": drop, "t_d": t_d}, change=change)
     )
     out = confirm(
         rec,
         nominal,
         {"m": 1.0, **fitted},
         [row],
-        lambda r: extended_system(nominal, r["effect"], r["parameters"], s.context()),
+        lambda r: extended_system(nominal, r.effect, r.parameters, s.context()),
         (0.0, fit_end),
         (fit_end, float(rec.t[-1])),
         Thresholds(),
@@ -218,21 +214,21 @@ def test_a_located_change_is_one_candidate_of_the_check_with_its_time_free():
     time free, and names it only where the simulated response decides for it."""
     clean = hidden_case(None, 12, noise=0.03)
     row, out = _located_change(clean.record, clean.fit_end, 0.5, 8.0)
-    assert "change" not in row and row["located"]["t_change"] == 8.0  # nothing held
+    assert row.change is None and row.located["t_change"] == 8.0  # nothing held
     (tested,) = out.tested
-    assert out.row is None and not tested["passes"], tested
-    assert tested["located"]["t_change"] == 8.0 and tested["located"]["fraction"] == -0.5
+    assert out.row is None and not tested.passes, tested
+    assert tested.located["t_change"] == 8.0 and tested.located["fraction"] == -0.5
     from pidyn.discrepancy.report import _confirmation_lines
 
     assert any(
         "stiffness_loss (located at 8.00 s)" in line
-        for line in _confirmation_lines({"confirmation": out.tested})
+        for line in _confirmation_lines({"confirmation": [r.to_dict() for r in out.tested]})
     )
     damaged = hidden_case("stiffness_loss", 3, noise=0.03, params={"t_d": 9.0})
     truth = damaged.truth
     _, out = _located_change(damaged.record, damaged.fit_end, 0.7 * truth["drop"], 10.0)
-    assert out.row is not None and out.row["effect"] == "stiffness_loss", out.tested
-    assert out.row["parameters"]["t_d"] == pytest.approx(9.0, abs=0.3)
+    assert out.row is not None and out.row.effect == "stiffness_loss", out.tested
+    assert out.row.parameters["t_d"] == pytest.approx(9.0, abs=0.3)
 
 
 def test_the_first_cause_keeps_a_located_change_only_when_the_check_names_it(monkeypatch):
@@ -255,21 +251,16 @@ def test_the_first_cause_keeps_a_located_change_only_when_the_check_names_it(mon
     nom = SimpleNamespace(system=None, values={}, node={}, s=None)
     sc = SimpleNamespace(cause="stiffness_loss", verdict="discrepancy")
     change = SimpleNamespace(to_dict=lambda: {"t_change": 5.0})
-    row = {
-        "effect": "stiffness_loss",
-        "score": 30.0,
-        "parameters": {"drop": 0.4, "t_d": 5.0},
-        "change": change,
-    }
+    row = Evidence("stiffness_loss", score=30.0, parameters={"drop": 0.4, "t_d": 5.0}, change=change)
     holds, fails = SimpleNamespace(failed=False), SimpleNamespace(failed=True)
-    named = {"effect": "cubic_stiffness"}
+    named = Evidence("cubic_stiffness")
     assert pipeline._first_cause(case, nom, sc, holds, row, None) == (
         "cubic_stiffness",
         Confirmation(row=named),
         None,
     )
-    assert seen["everything"] and [r["effect"] for r in seen["extra"]] == ["stiffness_loss"]
-    named = {"effect": "stiffness_loss"}
+    assert seen["everything"] and [r.effect for r in seen["extra"]] == ["stiffness_loss"]
+    named = Evidence("stiffness_loss")
     cause, _, kept = pipeline._first_cause(case, nom, sc, holds, row, None)
     assert cause == "stiffness_loss" and kept is row
     seen.clear()  # the nominal model failed on the held-out part: the located change stands

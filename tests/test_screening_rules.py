@@ -7,27 +7,28 @@ import numpy as np
 import pytest
 
 from pidyn.discrepancy.effects import EFFECTS, Signals
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.regression import _cv_rss, _folds
 from pidyn.discrepancy.screening_rules import Thresholds, _mark_heldout_miss, _passes, _tie_break, _verdict
 
 
-def _row(effect: str, score: float, cv: float, ho: float | None = 0.5, step: bool = False) -> dict:
-    return {
-        "effect": effect,
-        "score": score,
-        "delta_bic": -score,
-        "cv_gain": cv,
-        "heldout_gain": ho,
-        "force_share": 0.01,
-        "step_in_time": step,
-        "parameters": {"t_d": 5.0},
-    }
+def _row(effect: str, score: float, cv: float, ho: float | None = 0.5, step: bool = False) -> Evidence:
+    return Evidence(
+        effect,
+        score=score,
+        delta_bic=-score,
+        cv_gain=cv,
+        heldout_gain=ho,
+        force_share=0.01,
+        step_in_time=step,
+        parameters={"t_d": 5.0},
+    )
 
 
-def _rank(rows: list[dict], structure: dict, th: Thresholds) -> list[dict]:
+def _rank(rows: list[Evidence], structure: dict, th: Thresholds) -> list[Evidence]:
     for r in rows:
         _mark_heldout_miss(r, structure, th)
-        r["passes"] = _passes(r, th)
+        r.passes = _passes(r, th)
     return rows
 
 
@@ -60,15 +61,15 @@ def test_an_effect_that_predicts_the_held_out_part_worse_is_refused_where_a_gene
     th = Thresholds()
     structured = {"cv_gain": 0.6, "heldout_gain": 0.98}
     rows = _rank([_row("quadratic_stiffness", 13.6, 0.35, ho=-0.09)], structured, th)
-    assert rows[0]["heldout_miss"] and not rows[0]["passes"]
+    assert rows[0].heldout_miss and not rows[0].passes
     assert _verdict(rows, dict(structured), th) == ("unexplained", None)
     # the held-out part without structure (a generic force gains nothing there): no evidence against it
     quiet = {"cv_gain": 0.6, "heldout_gain": 0.1}
     rows = _rank([_row("quadratic_stiffness", 13.6, 0.35, ho=-0.09)], quiet, th)
-    assert rows[0]["passes"] and "heldout_miss" not in rows[0]
+    assert rows[0].passes and not rows[0].heldout_miss
     # a step in time has its own rule (it must persist), not this one
     rows = _rank([_row("stiffness_loss", 30.0, 0.5, ho=-0.05, step=True)], structured, th)
-    assert "heldout_miss" not in rows[0]
+    assert not rows[0].heldout_miss
 
 
 def test_an_effect_that_predicts_almost_none_of_the_held_out_structure_is_not_named():
@@ -77,17 +78,17 @@ def test_an_effect_that_predicts_almost_none_of_the_held_out_structure_is_not_na
     th = Thresholds()
     structured = {"cv_gain": 0.79, "heldout_gain": 0.77}
     rows = _rank([_row("quadratic_stiffness", 16.0, 0.63, ho=0.01)], structured, th)
-    assert rows[0]["heldout_small"] and not rows[0]["passes"] and "heldout_miss" not in rows[0]
+    assert rows[0].heldout_small and not rows[0].passes and not rows[0].heldout_miss
     assert _verdict(rows, dict(structured), th) == ("unexplained", None)
     # a third of what the generic force predicts there (the first of a pair, alone) is named
     rows = _rank([_row("gap_contact", 16.0, 0.63, ho=0.25)], structured, th)
-    assert rows[0]["passes"] and "heldout_small" not in rows[0]
+    assert rows[0].passes and not rows[0].heldout_small
     assert _verdict(rows, dict(structured), th) == ("discrepancy", "gap_contact")
     # no structure in the held-out part: nothing to share
     rows = _rank(
         [_row("quadratic_stiffness", 16.0, 0.63, ho=0.01)], {"cv_gain": 0.79, "heldout_gain": 0.2}, th
     )
-    assert rows[0]["passes"]
+    assert rows[0].passes
 
 
 def test_cross_validation_decides_between_effects_that_bic_does_not():

@@ -4,11 +4,14 @@ alone, named with an imperfect law, must give nothing to search."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from pidyn.data.sources import synthetic
 from pidyn.discrepancy.effects import EFFECTS
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_choice import Study, misfit_rows
 from pidyn.discrepancy.storey_model import (
@@ -54,7 +57,9 @@ def _state(hidden: dict[int, list], named_k3: float):
     study.period, study.corner = WINDOW_SHARE / f1, CORNER_SHARE * f1
     views = storey_views(rec, linear, values, study.corner)
     sig, _ = storey_signals(views[1], values["k2"], study.period, study.fit[1])
-    named = Found("cubic_stiffness", 2, {"k3": named_k3}, {"score": 60.0}, sig.context())
+    named = Found(
+        "cubic_stiffness", 2, {"k3": named_k3}, Evidence("cubic_stiffness", score=60.0), sig.context()
+    )
     system, vals = building_with(linear, values, [named])
     sd = np.nanstd(rec.a - rec.clean.a, axis=0)  # the sensors' noise, as the nominal refinement reads it
     current = {"system": system, "values": vals, "noise": {"a": float(sd[0]), "a3": float(sd[2])}}
@@ -81,7 +86,7 @@ def test_the_other_storeys_effect_of_a_pair_comes_first(sizes):
     study, current, found, views, screenings = _state(_terms(cubic, quad), cubic["k3"])
     rows = misfit_rows(study, current, found, views, screenings, [], GATE)
     assert rows, "the quadratic damper in storey 1 was not searched"
-    assert (rows[0][1]["effect"], rows[0][0]) == ("quadratic_damping", 1), [(r["effect"], i) for i, r in rows]
+    assert (rows[0][1].effect, rows[0][0]) == ("quadratic_damping", 1), [(r.effect, i) for i, r in rows]
     assert all(i != 2 for i, _ in rows)  # the named effect's storey is not searched again
 
 
@@ -125,7 +130,7 @@ def test_the_misfit_search_stops_at_a_candidate_that_removes_nearly_all_of_it(mo
     monkeypatch.setattr(st, "fit_bic", lambda *a: 1000.0)
     monkeypatch.setattr(st, "storey_signals", lambda *a: (type("S", (), {"context": dict})(), None))
     current = {"system": None, "values": {"k1": 1.0}, "noise": {}}
-    rows = [(1, {"effect": e, "parameters": {}, "score": 0.0}) for e in ("B", "A", "C")]
+    rows = [(1, Evidence(e, score=0.0)) for e in ("B", "A", "C")]
     misfit = {"channels": {"a1": {"excess": 1.0}}}
     best = st.confirm_leaning(FakeStudy(), current, [], [None], rows, misfit)
     assert tried == ["B", "A"]  # A removed 99.75 % of the squared excess: C was not refined
@@ -133,7 +138,9 @@ def test_the_misfit_search_stops_at_a_candidate_that_removes_nearly_all_of_it(mo
         best["report"]["effect"] == "A" and best["report"]["misfit_explained"] > settings.confirm.misfit_done
     )
     tried.clear()
-    best = st.confirm_leaning(FakeStudy(), current, [], [None], [(1, dict(rows[0][1], effect="D"))], misfit)
+    best = st.confirm_leaning(
+        FakeStudy(), current, [], [None], [(1, replace(rows[0][1], effect="D"))], misfit
+    )
     assert tried == ["D"] and best is None  # a BIC gain of 1000, but 36 % of the squared excess removed
 
 

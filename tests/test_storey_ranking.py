@@ -4,6 +4,8 @@ twice-integrated drifts scores poorly."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -44,28 +46,28 @@ def test_the_hidden_effect_in_its_storey_ranks_first(effect):
     study.period, study.corner = WINDOW_SHARE / f1, CORNER_SHARE * f1
     current = {"system": linear, "values": values, "noise": {}}
     views, screenings = study.screen(current, [])
-    rows = [(i, r) for i, sc in enumerate(screenings, start=1) for r in sc.ranking if r.get("parameters")]
-    assert len({r["effect"] for _, r in rows}) >= 6  # the whole library is in the race
+    rows = [(i, r) for i, sc in enumerate(screenings, start=1) for r in sc.ranking if r.parameters]
+    assert len({r.effect for _, r in rows}) >= 6  # the whole library is in the race
     ranked = rank_candidates(study, current, [], views, rows)
     top = ranked[0]
-    assert (top.row["effect"], top.storey) == (effect, storey), [
-        (c.row["effect"], c.storey, c.chi2) for c in ranked[:5]
+    assert (top.row.effect, top.storey) == (effect, storey), [
+        (c.row.effect, c.storey, c.chi2) for c in ranked[:5]
     ]
     assert 0.0 < top.share <= 1.0 and top.chi2 > 2.0 * ranked[1].chi2
     if effect == "damping_change":  # the step's time comes from the grid, not the weak form
-        assert top.row["parameters"]["t_d"] == pytest.approx(7.0, abs=1.0)
+        assert top.row.parameters["t_d"] == pytest.approx(7.0, abs=1.0)
     assert np.isfinite([c.chi2 for c in ranked]).all()
     # where the weak form found no physical fit (a wrong sign beside an inflated damper: benchmark
     # case 56), the effect is still scored, at a typical size against the storey's drift
     unfit = [
-        (i, {**r, "parameters": None, "score": None, "note": "no physical fit (wrong sign)"})
-        if (r["effect"], i) == (effect, storey)
+        (i, replace(r, parameters={}, score=None, note="no physical fit (wrong sign)"))
+        if (r.effect, i) == (effect, storey)
         else (i, r)
         for i, r in rows
     ]
     again = rank_candidates(study, current, [], views, unfit)
-    assert (again[0].row["effect"], again[0].storey) == (effect, storey)
-    assert again[0].row["score"] is None and again[0].row["parameters"]
+    assert (again[0].row.effect, again[0].storey) == (effect, storey)
+    assert again[0].row.score is None and again[0].row.parameters
 
 
 @pytest.mark.slow
@@ -99,7 +101,7 @@ def test_a_force_outside_the_library_puts_its_storey_first():
     order = storey_order(study, current, [], views, rows)
     assert sorted(order) == [1, 2, 3, 4] and order[0] == 3, order
     assert len(study.scores) == 1 and memo["rows"] == simulated  # its simulations reused, none added
-    assert {(c.storey, c.row["effect"]) for c in ranked} == {(k[0], k[1]) for k, v in simulated.items() if v}
+    assert {(c.storey, c.row.effect) for c in ranked} == {(k[0], k[1]) for k, v in simulated.items() if v}
 
 
 def test_a_spring_at_rest_is_tried_on_the_storey_spring_its_weak_form_fit_kept():
@@ -107,12 +109,13 @@ def test_a_spring_at_rest_is_tried_on_the_storey_spring_its_weak_form_fit_kept()
     (a share of the storey's own law's); other effects start from the current spring."""
     from types import SimpleNamespace
 
+    from pidyn.discrepancy.evidence import Evidence
     from pidyn.discrepancy.storey_ranking import spring_shares, trial_values
 
     rows = [
-        {"effect": "hysteresis", "nominal_refit": {"c": 0.4, "k": 60.0}},
-        {"effect": "cubic_stiffness", "nominal_refit": {"c": 0.4, "k": 90.0}},
-        {"effect": "hysteresis", "nominal_refit": {}},
+        Evidence("hysteresis", nominal_refit={"c": 0.4, "k": 60.0}),
+        Evidence("cubic_stiffness", nominal_refit={"c": 0.4, "k": 90.0}),
+        Evidence("hysteresis"),
     ]
     spring_shares(SimpleNamespace(nominal_params={"c": 0.5, "k": 120.0}, ranking=rows))
     values = {"k1": 200.0, "k2": 150.0, "c2": 0.5}

@@ -58,8 +58,14 @@ def write_yaml(path: Path, data: dict) -> None:
     write_text_atomic(path, yaml.safe_dump(data, sort_keys=False))
 
 
+def _jsonable(value: Any) -> Any:
+    """A typed result writes itself (``to_dict``); a NumPy scalar is a number."""
+    to_dict = getattr(value, "to_dict", None)
+    return to_dict() if callable(to_dict) else float(value)
+
+
 def write_json(path: Path, data: dict) -> None:
-    write_text_atomic(path, json.dumps(data, indent=2, default=float))
+    write_text_atomic(path, json.dumps(data, indent=2, default=_jsonable))
 
 
 def nrmse(pred: np.ndarray, true: np.ndarray) -> float:

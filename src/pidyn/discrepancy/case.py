@@ -14,6 +14,7 @@ import numpy as np
 from pidyn.data.sources import Record
 from pidyn.discrepancy.confirm import Confirmation
 from pidyn.discrepancy.effects import EFFECTS, LIBRARY, Signals
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.heldout_check import HeldoutCheck
 from pidyn.discrepancy.screening import Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
@@ -242,7 +243,7 @@ class Outcome:
     nominal: Nominal
     screening: Screening
     check: HeldoutCheck
-    change_row: dict | None
+    change_row: Evidence | None
     extension: dict
     causes: list[str]
     cause: str | None

@@ -33,11 +33,12 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from pidyn.data.sources import Record
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.screening_rules import Thresholds
 from pidyn.progress import Steps
 from pidyn.refine.output_error import fit_output_error, output_error_costs
@@ -84,23 +85,23 @@ class Confirmation:
     """What the output-error check tried, the effect it names (or None), and the nominal model's
     own refit that every candidate was judged against."""
 
-    tested: list[dict] = field(default_factory=list)
-    row: dict | None = None
+    tested: list[Evidence] = field(default_factory=list)
+    row: Evidence | None = None
     nominal: dict | None = None
 
 
-def undecided(ranking: list[dict], th: Thresholds, limit: int) -> list[dict]:
+def undecided(ranking: list[Evidence], th: Thresholds, limit: int) -> list[Evidence]:
     """The screening's rows the weak form leans towards without deciding (0 < score <
     min_delta_bic), best first: no step in time, none a screening rule refused."""
     out = [
         r
         for r in ranking
-        if r.get("score") is not None
-        and np.isfinite(r["score"])
-        and 0.0 < r["score"] < th.min_delta_bic
-        and not r.get("step_in_time")
-        and r.get("persists") is not False
-        and not r.get("heldout_miss")
+        if r.score is not None
+        and np.isfinite(r.score)
+        and 0.0 < r.score < th.min_delta_bic
+        and not r.step_in_time
+        and r.persists is not False
+        and not r.heldout_miss
     ]
     return out[:limit]
 
@@ -109,8 +110,8 @@ def confirm(
     record: Record,
     system,
     values: dict[str, float],
-    candidates: list[dict],
-    build: Callable[[dict], object],
+    candidates: list[Evidence],
+    build: Callable[[Evidence], object],
     fit: tuple[float, float],
     held: tuple[float, float],
     th: Thresholds,
@@ -132,7 +133,7 @@ def confirm(
     )
     progress = Steps("output-error check", len(candidates), log)
     for row in candidates:
-        progress.step(row["effect"])
+        progress.step(row.effect)
         t0 = time.perf_counter()
         row = located_start(seg, build, values, row, substeps)
         ext = build(row)
@@ -140,43 +141,45 @@ def confirm(
         try:
             res = _fit(seg, ext, values, substeps, max_nfev, tol)
         except (ValueError, FloatingPointError) as err:  # a start the effect's bounds refuse
-            out.tested.append({"effect": row["effect"], "weak_form_score": row["score"], "error": str(err)})
+            out.tested.append(
+                Evidence(row.effect, source="output_error", weak_form_score=row.score, error=str(err))
+            )
             continue
         tested = _judge(row, ext, specs, values, res, base)
-        tested["seconds"], tested["nfev"] = time.perf_counter() - t0, res.nfev
+        tested.seconds, tested.nfev = time.perf_counter() - t0, res.nfev
         out.tested.append(tested)
         log.info(
             "output-error check of %s (weak-form score %s): dBIC %.1f over %.0f independent samples, "
             "held-out gain %s%s (%d evaluations, %.0f s)",
-            row["effect"],
-            "none" if row["score"] is None else f"{row['score']:.1f}",
-            tested["delta_bic"],
-            tested["independent_samples"],
-            "n/a" if tested["heldout_gain"] is None else f"{tested['heldout_gain']:.2f}",
-            ": named" if tested["passes"] else "",
+            row.effect,
+            "none" if row.score is None else f"{row.score:.1f}",
+            tested.delta_bic,
+            tested.independent_samples,
+            "n/a" if tested.heldout_gain is None else f"{tested.heldout_gain:.2f}",
+            ": named" if tested.passes else "",
             res.nfev,
-            tested["seconds"],
+            tested.seconds,
         )
-    passing = [r for r in out.tested if r.get("passes")]
+    passing = [r for r in out.tested if r.passes]
     if passing:
-        out.row = max(passing, key=lambda r: r["score"])
-        out.row["rivals"] = _rivals(out.row, passing, th)
+        out.row = max(passing, key=lambda r: r.score)
+        out.row.rivals = _rivals(out.row, passing, th)
     return out
 
 
 def located_start(
-    seg: Record, build: Callable[[dict], object], values: dict[str, float], row: dict, substeps: int
-) -> dict:
+    seg: Record, build: Callable[[Evidence], object], values: dict[str, float], row: Evidence, substeps: int
+) -> Evidence:
     """A located change's start for its fit: the time on a grid over its interval and the size at
     the located one, a half or a quarter of it, whichever simulates ``seg`` best. The simulated
     response is not convex in a step's time (each oscillation a valley): a stiffness loss at 9 s
     fitted from 10 s ended at 10.6 s with 3.6 times the cost, from 9.5 s at 9.00 s; and a size
     the weak form overstated (a 73 % loss on a Painter Street record) starts the fit seven times
     the nominal model's cost away. Rows without a located interval are returned as they are."""
-    ci = (row.get("located") or {}).get("t_change_ci95")
+    ci = (row.located or {}).get("t_change_ci95")
     if not ci:
         return row
-    p = row["parameters"]
+    p = row.parameters
     size = "drop" if "drop" in p else "change"
     trials = [
         {**p, "t_d": float(t_d), size: share * float(p[size])}
@@ -184,19 +187,19 @@ def located_start(
         for share in (1.0, 0.5, 0.25)
     ]
     costs = output_error_costs(seg, build(row), [{**values, **t} for t in trials], substeps)
-    return {**row, "parameters": trials[int(np.argmin(costs))]}
+    return replace(row, parameters=trials[int(np.argmin(costs))])
 
 
 #: times tried over a located change's interval (``located_start``)
 LOCATED_GRID = 11
 
 
-def _rivals(best: dict, passing: list[dict], th: Thresholds) -> list[dict]:
+def _rivals(best: Evidence, passing: list[Evidence], th: Thresholds) -> list[Evidence]:
     """The passing effects within ``tie_delta_bic`` of the named one, best first."""
     return [
-        {"effect": r["effect"], "score": r["score"], "heldout_gain": r["heldout_gain"]}
-        for r in sorted(passing, key=lambda r: -r["score"])
-        if r is not best and best["score"] - r["score"] < th.tie_delta_bic
+        Evidence(r.effect, score=r.score, heldout_gain=r.heldout_gain, passes=True, source=r.source)
+        for r in sorted(passing, key=lambda r: -r.score)
+        if r is not best and best.score - r.score < th.tie_delta_bic
     ]
 
 
@@ -258,7 +261,7 @@ class _Nominal:
     th: Thresholds
 
 
-def _judge(row: dict, ext, specs: list, values: dict[str, float], res, base: _Nominal) -> dict:
+def _judge(row: Evidence, ext, specs: list, values: dict[str, float], res, base: _Nominal) -> Evidence:
     """One candidate's output-error fit judged on the simulated channels: its BIC against the
     nominal model on the fitting part and its gain on the held-out part."""
     record, substeps, m_fit, m_ho = base.record, base.substeps, base.m_fit, base.m_ho
@@ -274,22 +277,20 @@ def _judge(row: dict, ext, specs: list, values: dict[str, float], res, base: _No
     effect_params = {n: float(v) for n, v in res.params.items() if n not in trainable0}
     nominal_refit = {n: float(v) for n, v in res.params.items() if n in trainable0}
     passes = bool(delta_bic <= -th.min_delta_bic and (ho is None or ho >= th.min_heldout_gain))
-    tested = {
-        "effect": row["effect"],
-        "weak_form_score": None if row["score"] is None else float(row["score"]),
-        "score": float(-delta_bic),
-        "delta_bic": float(delta_bic),
-        "explained": float(1 - rss1 / rss0) if ok else None,
-        "heldout_gain": ho,
-        "independent_samples": n_eff,
-        "parameters": effect_params,
-        "nominal_refit": nominal_refit,
-        "passes": passes,
-        "source": "output_error",
-    }
-    if "located" in row:  # a change the weak form located in time: where it put it
-        tested["located"] = row["located"]
-    return tested
+    return Evidence(
+        row.effect,
+        weak_form_score=None if row.score is None else float(row.score),
+        score=float(-delta_bic),
+        delta_bic=float(delta_bic),
+        explained=float(1 - rss1 / rss0) if ok else None,
+        heldout_gain=ho,
+        independent_samples=n_eff,
+        parameters=effect_params,
+        nominal_refit=nominal_refit,
+        passes=passes,
+        source="output_error",
+        located=row.located,  # a change the weak form located in time: where it put it
+    )
 
 
 def _nominal_misfit(

@@ -14,6 +14,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from pidyn.discrepancy.effects import get_effect
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.systems.sdof import SDOFSystem
 from pidyn.systems.terms import LearnedForce
 
@@ -82,23 +83,23 @@ def system_node(node: Any, inits: dict[str, float], mass: float, identify_mass: 
     return out
 
 
-def check_fit(values: dict[str, float], row: dict, k: int) -> dict[str, float] | None:
+def check_fit(values: dict[str, float], row: Evidence, k: int) -> dict[str, float] | None:
     """The extended model as the output-error check fitted it: the current model's ``values``
     (at the first step with the check's refit of the nominal parameters) and the effect's
     estimate; None when the check gave no numbers."""
-    effect = {n: float(v) for n, v in (row.get("parameters") or {}).items() if not isinstance(v, str)}
+    effect = {n: float(v) for n, v in row.parameters.items() if not isinstance(v, str)}
     if not effect:
         return None
     return {**values, **_refit(row, k), **effect}
 
 
-def _refit(row: dict, k: int) -> dict[str, float]:
+def _refit(row: Evidence, k: int) -> dict[str, float]:
     """The check's refit of the nominal parameters, which the first step starts from."""
-    return {n: v for n, v in (row.get("nominal_refit") or {}).items() if v > 0} if k == 1 else {}
+    return {n: v for n, v in row.nominal_refit.items() if v > 0} if k == 1 else {}
 
 
 def extension_node(
-    node: dict, values: dict[str, float], cause: str, row: dict, context: dict, k: int, mass_known: bool
+    node: dict, values: dict[str, float], cause: str, row: Evidence, context: dict, k: int, mass_known: bool
 ) -> dict:
     """The node of step ``k``'s model: the current model (its values; at the first step the
     screening's refit of the nominal parameters) extended with ``cause`` started at the
@@ -111,10 +112,10 @@ def extension_node(
         "_target_": EXTENSION,
         "nominal": inner,
         "effect": cause,
-        "effect_params": {n: (v if isinstance(v, str) else float(v)) for n, v in row["parameters"].items()},
+        "effect_params": {n: (v if isinstance(v, str) else float(v)) for n, v in row.parameters.items()},
         "context": context,
     }
-    if row.get("change") is not None:  # located over the record, with an interval: held (see extended_system)
+    if row.change is not None:  # located over the record, with an interval: held (see extended_system)
         out["held"] = ["t_d"]
     return out
 

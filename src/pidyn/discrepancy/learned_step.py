@@ -8,6 +8,7 @@ import numpy as np
 import torch
 
 from pidyn.data.sources import Record
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.learned_fit import fit_learned_force
 from pidyn.discrepancy.residual import unexplained_force
 from pidyn.reporting import nrmse
@@ -22,19 +23,18 @@ log = logging.getLogger(__name__)
 LEARNED = "learned_force"
 
 
-def learned_row(structure: dict | None) -> dict:
+def learned_row(structure: dict | None) -> Evidence:
     """The extension row of a learned force: its evidence is the generic f(x, x')'s."""
     st = structure or {}
-    return {
-        "effect": LEARNED,
-        "parameters": {},
-        "nominal_refit": {},
-        "score": -st.get("delta_bic", 0.0),
-        "delta_bic": st.get("delta_bic"),
-        "explained": st.get("explained"),
-        "cv_gain": st.get("cv_gain"),
-        "heldout_gain": st.get("heldout_gain"),
-    }
+    return Evidence(
+        LEARNED,
+        score=-st.get("delta_bic", 0.0),
+        delta_bic=st.get("delta_bic"),
+        explained=st.get("explained"),
+        cv_gain=st.get("cv_gain"),
+        heldout_gain=st.get("heldout_gain"),
+        source="learned",
+    )
 
 
 def save_unexplained(

@@ -10,6 +10,7 @@ import numpy as np
 from pidyn.discrepancy.case import Case, Nominal
 from pidyn.discrepancy.changes import locate_step
 from pidyn.discrepancy.effects import EFFECTS
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.heldout_check import (
     HELDOUT_BAND,
     SETTLE_PERIODS,
@@ -90,10 +91,10 @@ def check_heldout(
     if change is None:
         return check, None
     log.info("%s", change.sentence())
-    return check, {
-        "effect": change.effect,
-        "parameters": change.effect_parameters(),
-        "nominal_refit": {},
-        "score": -change.delta_bic,
-        "change": change,
-    }
+    return check, Evidence(
+        change.effect,
+        score=-change.delta_bic,
+        parameters=change.effect_parameters(),
+        source="change",
+        change=change,
+    )

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import welch
 
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.reporting import plottable, pyplot
 
 
@@ -113,13 +114,13 @@ def plot_residual(path: Path, t, r_raw, x, v, fit, cause, fitted, units: dict, p
     plt.close(fig)
 
 
-def plot_ranking(path: Path, ranking: list[dict], min_delta_bic: float) -> None:
+def plot_ranking(path: Path, ranking: list[Evidence], min_delta_bic: float) -> None:
     plt = _plt()
-    rows = [r for r in ranking if r.get("score") is not None]
+    rows = [r for r in ranking if r.score is not None]
     fig, ax = plt.subplots(figsize=(7, 0.45 * len(rows) + 1.2))
-    names = [r["effect"] for r in rows][::-1]
-    scores = [r["score"] for r in rows][::-1]
-    colors = ["tab:blue" if r.get("passes") else "0.6" for r in rows][::-1]
+    names = [r.effect for r in rows][::-1]
+    scores = [r.score for r in rows][::-1]
+    colors = ["tab:blue" if r.passes else "0.6" for r in rows][::-1]
     ax.barh(names, scores, color=colors)
     ax.axvline(
         min_delta_bic, color="k", ls=":", lw=0.8, label=f"evidence threshold (-dBIC = {min_delta_bic:g})"

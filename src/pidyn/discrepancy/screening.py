@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pidyn.discrepancy.effects import EFFECTS, LIBRARY, Candidate, Effect, Signals
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.regression import _cv_rss, _folds, fit_candidate, lstsq
 from pidyn.discrepancy.screening_rules import (
     Thresholds,
@@ -67,7 +68,7 @@ class Screening:
     """Outcome of the screening: nominal refit, ranking, verdict."""
 
     nominal_params: dict[str, float]
-    ranking: list[dict]
+    ranking: list[Evidence]
     verdict: Verdict
     cause: str | None
     rss_nominal_fit: float
@@ -156,18 +157,18 @@ def screen(
     projected = {n: [(c, weak.project(c.columns)) for c in e.candidates(s)] for n, e in effects.items()}
     ranking = [_score_effect(eff, projected[n], base, values) for n, eff in effects.items()]
     structure = _structure(s, weak, base)
-    ranking.sort(key=lambda r: -np.inf if r["score"] is None else r["score"], reverse=True)
+    ranking.sort(key=lambda r: -np.inf if r.score is None else r.score, reverse=True)
     for r in ranking:
         _mark_fleeting_step(r, th)
         _mark_heldout_miss(r, structure, th)
-        r["passes"] = bool(r["score"] is not None and _passes(r, th))
+        r.passes = bool(r.score is not None and _passes(r, th))
     pairs = _score_pairs(effects, projected, ranking, base, values)
     structure["pair"] = pair_lead(ranking, pairs, structure, th)
     verdict, cause = _verdict(ranking, structure, th)
     return _screening(base, weak, ranking, structure, verdict, cause)
 
 
-def _screening(base, weak: WeakForm, ranking: list[dict], structure: dict, verdict, cause) -> Screening:
+def _screening(base, weak: WeakForm, ranking: list[Evidence], structure: dict, verdict, cause) -> Screening:
     """The screening's outcome with the nominal regression's residual rows."""
     return Screening(
         nominal_params=dict(zip(base.names, map(float, base.theta0))),
@@ -247,7 +248,7 @@ def _nominal_fit(
 
 def _score_effect(
     eff: Effect, projected: list[tuple[Candidate, np.ndarray]], base: _NominalFit, values: dict[str, float]
-) -> dict:
+) -> Evidence:
     """The effect's best candidate added to the nominal regression: its BIC score, shares of the
     force it explains (in sample, cross-validated, held out) and its parameters."""
     best = None
@@ -262,7 +263,7 @@ def _score_effect(
         if row is not None and (best is None or row["rss_fit"] < best["rss_fit"]):
             best = row
     if best is None:
-        return {"effect": eff.name, "score": None, "note": "no physical fit (wrong sign)"}
+        return Evidence(eff.name, note="no physical fit (wrong sign)")
     rss0, rss0_cv, rss0_ho = base.rss0, base.rss0_cv, base.rss0_ho
     rss_cv = _cv_rss(np.column_stack([base.A0, best.pop("B")]), base.y, base.folds, n_fixed=base.A0.shape[1])
     k = len(best["coef"]) + eff.n_grid
@@ -270,18 +271,18 @@ def _score_effect(
     delta_bic = base.n_eff * np.log(rss / max(rss0, 1e-300)) + k * np.log(base.n_eff)
     nominal_fit = {n: best["theta"][i] for i, n in enumerate(base.names)}
     params = eff.parameters(best["coef"], best["fixed"], {**values, **nominal_fit})
-    return {
-        "effect": eff.name,
-        "step_in_time": eff.step_in_time,
-        "score": float(-delta_bic),
-        "delta_bic": float(delta_bic),
-        "explained": float(1 - rss / max(rss0, 1e-300)),
-        "force_share": float((rss0 - rss) / max(base.ss_total, 1e-300)),
-        "cv_gain": float(1 - rss_cv / max(rss0_cv, 1e-300)),
-        "heldout_gain": None if rss0_ho is None else float(1 - best["rss_ho"] / max(rss0_ho, 1e-300)),
-        "parameters": {k_: float(v) for k_, v in params.items()},
-        "nominal_refit": {k_: float(v) for k_, v in nominal_fit.items()},
-    }
+    return Evidence(
+        eff.name,
+        step_in_time=eff.step_in_time,
+        score=float(-delta_bic),
+        delta_bic=float(delta_bic),
+        explained=float(1 - rss / max(rss0, 1e-300)),
+        force_share=float((rss0 - rss) / max(base.ss_total, 1e-300)),
+        cv_gain=float(1 - rss_cv / max(rss0_cv, 1e-300)),
+        heldout_gain=None if rss0_ho is None else float(1 - best["rss_ho"] / max(rss0_ho, 1e-300)),
+        parameters={k_: float(v) for k_, v in params.items()},
+        nominal_refit={k_: float(v) for k_, v in nominal_fit.items()},
+    )
 
 
 #: a pair's two grids are searched in full up to this many joint candidates, by alternating
@@ -301,12 +302,12 @@ def _admissible(
 def _score_pairs(
     effects: dict[str, Effect],
     projected: dict[str, list[tuple[Candidate, np.ndarray]]],
-    ranking: list[dict],
+    ranking: list[Evidence],
     base: _NominalFit,
     values: dict[str, float],
 ) -> list[dict]:
     """Every pair of effects fitted jointly with the nominal parameters, best first."""
-    fitted = {r["effect"] for r in ranking if r.get("score") is not None}
+    fitted = {r.effect for r in ranking if r.score is not None}
     cols = {n: c for n, c in projected.items() if n in fitted}
 
     def rss(a: str, b: str, i: int, j: int) -> float:
@@ -366,19 +367,19 @@ def _best_pair_point(rss, na: int, nb: int) -> tuple[float, int, int]:
     return rss(i, j), i, j
 
 
-def pair_lead(ranking: list[dict], pairs: list[dict], structure: dict, th: Thresholds) -> dict | None:
+def pair_lead(ranking: list[Evidence], pairs: list[dict], structure: dict, th: Thresholds) -> dict | None:
     """The effect to name first when a pair explains the residual better than greedy
     one-at-a-time naming would (see the module's notes); None leaves the single ranking in charge."""
-    if not pairs or not ranking or ranking[0].get("score") is None:
+    if not pairs or not ranking or ranking[0].score is None:
         return None
-    singles = {r["effect"]: r["score"] if r.get("score") is not None else -np.inf for r in ranking}
+    singles = {r.effect: r.score if r.score is not None else -np.inf for r in ranking}
     # a step that does not last, or an effect that misses the held-out part where a generic force
     # does not, leads nowhere: the rules that refuse it alone refuse it in a pair too
-    refused = {r["effect"] for r in ranking if r.get("persists") is False or r.get("heldout_miss")}
+    refused = {r.effect for r in ranking if r.persists is False or r.heldout_miss}
     pairs = [p for p in pairs if not refused & set(p["effects"])]
     if not pairs:
         return None
-    top, s_top = ranking[0]["effect"], ranking[0]["score"]
+    top, s_top = ranking[0].effect, ranking[0].score
     best = pairs[0]
     a, b = best["effects"]
     if best["delta_bic"] > -th.min_delta_bic or best["cv_gain"] < th.min_cv_gain:
@@ -398,7 +399,7 @@ def pair_lead(ranking: list[dict], pairs: list[dict], structure: dict, th: Thres
             f"{a} and {b} together score {best['score']:.1f}, more than {top} with any partner "
             f"({rival:.1f}) or alone ({s_top:.1f}): {top} stood in for them"
         )
-    elif not ranking[0]["passes"] and best["score"] - s_top >= th.min_delta_bic:
+    elif not ranking[0].passes and best["score"] - s_top >= th.min_delta_bic:
         other = b if a == top else a
         why = f"{top} alone scores {s_top:.1f}, with {other} {best['score']:.1f}: the two are needed together"
     else:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.verdicts import Verdict
 
 
@@ -45,7 +46,7 @@ class Thresholds:
         return heldout_gain is None or heldout_gain >= self.min_step_heldout_gain
 
 
-def _verdict(ranking: list[dict], structure: dict, th: Thresholds) -> tuple[Verdict, str | None]:
+def _verdict(ranking: list[Evidence], structure: dict, th: Thresholds) -> tuple[Verdict, str | None]:
     """``discrepancy`` when the top effect passes and explains a fair share of what a generic
     f(x, x') explains; ``unexplained`` when the residual is structured but no effect does;
     else ``none``. Marks ``structure['structured']`` (and a note when the top effect is refused)."""
@@ -56,11 +57,11 @@ def _verdict(ranking: list[dict], structure: dict, th: Thresholds) -> tuple[Verd
     if pair is not None:  # two effects explain it together: name the pair's lead first
         return Verdict.DISCREPANCY, pair["lead"]
     found = top is not None and _passes(top, th)
-    if found and structured and top["cv_gain"] < th.min_library_share * structure["cv_gain"]:
+    if found and structured and top.cv_gain < th.min_library_share * structure["cv_gain"]:
         # the best library effect explains only a small part of a clearly structured residual:
         # naming it would be naming the wrong thing
         structure["note"] = (
-            f"{top['effect']} passes but explains {top['cv_gain']:.2f} of the residual in "
+            f"{top.effect} passes but explains {top.cv_gain:.2f} of the residual in "
             f"cross-validation against {structure['cv_gain']:.2f} for a generic f(x, x')"
         )
         found = False
@@ -68,28 +69,28 @@ def _verdict(ranking: list[dict], structure: dict, th: Thresholds) -> tuple[Verd
         rival = _tie_break(ranking, th)
         if rival is not None:
             structure["tie_break"] = (
-                f"{rival['effect']} (score {rival['score']:.1f}, cross-validation gain "
-                f"{rival['cv_gain']:.2f}) named before {top['effect']} ({top['score']:.1f}, "
-                f"{top['cv_gain']:.2f}): BIC does not decide between them, "
+                f"{rival.effect} (score {rival.score:.1f}, cross-validation gain "
+                f"{rival.cv_gain:.2f}) named before {top.effect} ({top.score:.1f}, "
+                f"{top.cv_gain:.2f}): BIC does not decide between them, "
                 "cross-validation does"
             )
-            return Verdict.DISCREPANCY, rival["effect"]
-        return Verdict.DISCREPANCY, top["effect"]
+            return Verdict.DISCREPANCY, rival.effect
+        return Verdict.DISCREPANCY, top.effect
     return (Verdict.UNEXPLAINED if structured else Verdict.NONE), None
 
 
-def _mark_fleeting_step(r: dict, th: Thresholds) -> None:
+def _mark_fleeting_step(r: Evidence, th: Thresholds) -> None:
     """Mark a step in time that does not last (``persists: False``, with a note): a stiffness
     lower only in the strong motion is one that depends on the amplitude (softening), not damage."""
-    if r.get("step_in_time") and not th.step_persists(r.get("heldout_gain")):
-        r["persists"] = False
-        r["note"] = (
-            f"a step at t = {r['parameters'].get('t_d', float('nan')):.2f} s that does not persist: "
-            f"held-out gain {r['heldout_gain']:.2f}"
+    if r.step_in_time and not th.step_persists(r.heldout_gain):
+        r.persists = False
+        r.note = (
+            f"a step at t = {r.parameters.get('t_d', float('nan')):.2f} s that does not persist: "
+            f"held-out gain {r.heldout_gain:.2f}"
         )
 
 
-def _mark_heldout_miss(r: dict, structure: dict, th: Thresholds) -> None:
+def _mark_heldout_miss(r: Evidence, structure: dict, th: Thresholds) -> None:
     """Mark an effect (not a step in time: ``_mark_fleeting_step`` rules those) that predicts the
     held-out part worse than the nominal model does, where a generic f(x, x') predicts it
     clearly better: the effect fits the fitting part's force by a shape the structure does not
@@ -97,50 +98,45 @@ def _mark_heldout_miss(r: dict, structure: dict, th: Thresholds) -> None:
     ``heldout_small`` when it predicts less than ``min_heldout_share`` of what the generic force
     predicts there: a quadratic spring fitted to a symmetric trilinear one gains 0.01 where the
     generic force gains 0.77."""
-    ho, generic = r.get("heldout_gain"), structure.get("heldout_gain")
-    if r.get("step_in_time") or r.get("score") is None or ho is None or generic is None:
+    ho, generic = r.heldout_gain, structure.get("heldout_gain")
+    if r.step_in_time or r.score is None or ho is None or generic is None:
         return
     if generic < th.min_structure_gain:
         return
     if ho < th.min_heldout_gain:
-        r["heldout_miss"] = True
-        r["note"] = (
+        r.heldout_miss = True
+        r.note = (
             f"held-out gain {ho:.2f} against {generic:.2f} for a generic f(x, x'): "
             "it does not predict the rows no fit used"
         )
     elif ho < th.min_heldout_share * generic:
-        r["heldout_small"] = True
-        r["note"] = (
+        r.heldout_small = True
+        r.note = (
             f"held-out gain {ho:.2f} against {generic:.2f} for a generic f(x, x'): "
             "it explains almost none of the structure in the rows no fit used"
         )
 
 
-def _tie_break(ranking: list[dict], th: Thresholds) -> dict | None:
+def _tie_break(ranking: list[Evidence], th: Thresholds) -> Evidence | None:
     """The passing effect to name instead of the top one, when BIC does not decide between them
     (within ``tie_delta_bic``) and blocked cross-validation clearly does; None: the top one."""
-    passing = [r for r in ranking if r.get("passes")]
+    passing = [r for r in ranking if r.passes]
     if len(passing) < 2 or passing[0] is not ranking[0]:
         return None
     top = passing[0]
     rivals = [
         r
         for r in passing[1:]
-        if top["score"] - r["score"] < th.tie_delta_bic and r["cv_gain"] - top["cv_gain"] >= th.tie_cv_margin
+        if top.score - r.score < th.tie_delta_bic and r.cv_gain - top.cv_gain >= th.tie_cv_margin
     ]
-    return max(rivals, key=lambda r: r["cv_gain"]) if rivals else None
+    return max(rivals, key=lambda r: r.cv_gain) if rivals else None
 
 
-def _passes(r: dict, th: Thresholds) -> bool:
-    if (
-        r.get("score") is None
-        or r.get("persists") is False
-        or r.get("heldout_miss")
-        or r.get("heldout_small")
-    ):
+def _passes(r: Evidence, th: Thresholds) -> bool:
+    if r.score is None or r.persists is False or r.heldout_miss or r.heldout_small:
         return False
     return (
-        r["delta_bic"] <= -th.min_delta_bic
-        and r["force_share"] >= th.min_force_share
-        and r["cv_gain"] >= th.min_cv_gain
+        r.delta_bic <= -th.min_delta_bic
+        and r.force_share >= th.min_force_share
+        and r.cv_gain >= th.min_cv_gain
     )

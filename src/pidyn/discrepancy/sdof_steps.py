@@ -25,6 +25,7 @@ it in, so this package never imports the task layer.
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -33,6 +34,7 @@ from pidyn.discrepancy.accelerometers import acceleration_gain
 from pidyn.discrepancy.case import Case, Nominal
 from pidyn.discrepancy.confirm import Confirmation, confirm, undecided
 from pidyn.discrepancy.effects import EFFECTS, Signals
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.extend import (  # noqa: F401
     EXTENSION,
     build_system,
@@ -83,13 +85,13 @@ STEP_EVIDENCE = (
 
 
 def _first_cause(
-    case: Case, nom: Nominal, sc, check, change_row: dict | None, forced, running: dict | None = None
-) -> tuple[str | None, Any, dict | None]:
+    case: Case, nom: Nominal, sc, check, change_row: Evidence | None, forced, running: dict | None = None
+) -> tuple[str | None, Any, Evidence | None]:
     """The cause to extend with first (a located change, a forced effect, the screening's
     choice), the output-error confirmation where the simulated response decides, and the
     located change that survives it. A period that moves through the record (``running``) adds
     the amplitude-dependent structure to the candidates."""
-    cause = change_row["effect"] if change_row is not None else (forced or sc.cause)
+    cause = change_row.effect if change_row is not None else (forced or sc.cause)
     confirmation = None
     if case.from_accelerometers and not forced and (change_row is None or not check.failed):
         # integrated accelerations are a poor measurement of the motion: the weak form proposes, output
@@ -102,47 +104,41 @@ def _first_cause(
         confirmation = confirm_undecided(
             case, nom.system, nom.values, nom.node, sc, nom.s, 1, everything=True, extra=extra
         )
-        cause = None if confirmation.row is None else confirmation.row["effect"]
-        if change_row is not None and cause != change_row["effect"]:
+        cause = None if confirmation.row is None else confirmation.row.effect
+        if change_row is not None and cause != change_row.effect:
             log.info("the output error does not confirm the change the weak form located: none is named")
             change_row = None
     elif cause is None and not forced and sc.verdict == Verdict.NONE:
         # an effect the weak form leans towards without deciding: the simulated response decides
         confirmation = confirm_undecided(case, nom.system, nom.values, nom.node, sc, nom.s, 1)
         if confirmation.row is not None:
-            cause = confirmation.row["effect"]
+            cause = confirmation.row.effect
     return cause, confirmation, change_row
 
 
-def _change_candidate(change_row: dict) -> dict:
+def _change_candidate(change_row: Evidence) -> Evidence:
     """A located change as one candidate of the output-error check: started where the weak form
-    put it, its time free (no ``change`` key, so nothing is held), its location kept for the record."""
-    return {
-        "effect": change_row["effect"],
-        "score": change_row["score"],
-        "parameters": dict(change_row["parameters"]),
-        "nominal_refit": {},
-        "located": change_row["change"].to_dict(),
-    }
+    put it, its time free (no ``change``, so nothing is held), its location kept for the record."""
+    return Evidence(
+        change_row.effect,
+        score=change_row.score,
+        parameters=dict(change_row.parameters),
+        located=change_row.change.to_dict(),
+    )
 
 
 #: the amplitude-dependent structure, tried where the period moves (``Effect.tried_where_period_moves``)
 AMPLITUDE = next(n for n, e in EFFECTS.items() if e.tried_where_period_moves)
 
 
-def _amplitude_candidate() -> dict:
+def _amplitude_candidate() -> Evidence:
     """The amplitude-dependent structure as a candidate of the output-error check, started at a
     small softening and a time constant of a second (on the 1992 Petrolia records the fits from
     0.5 and 2 s ended together; the weak form does not score it: ``score`` None)."""
-    return {
-        "effect": AMPLITUDE,
-        "score": None,
-        "parameters": {"soft": 0.1, "gain": 0.1, "tau": 1.0},
-        "nominal_refit": {},
-    }
+    return Evidence(AMPLITUDE, parameters={"soft": 0.1, "gain": 0.1, "tau": 1.0})
 
 
-def _cause_row(cause: str | None, sc, change_row: dict | None, confirmation) -> dict | None:
+def _cause_row(cause: str | None, sc, change_row: Evidence | None, confirmation) -> Evidence | None:
     """The evidence row the extension starts from: the learned force's, the located change's,
     the confirmation's or the screening's."""
     if cause is None:
@@ -153,9 +149,7 @@ def _cause_row(cause: str | None, sc, change_row: dict | None, confirmation) -> 
         return change_row
     if confirmation and confirmation.row:
         return confirmation.row
-    return next(
-        r for r in sc.ranking if r["effect"] == cause
-    )  # a forced effect is screened (``case.prepare``)
+    return next(r for r in sc.ranking if r.effect == cause)  # a forced effect is screened (``case.prepare``)
 
 
 def _acceleration_sims(case: Case, nom: Nominal, ext: dict) -> dict:
@@ -180,13 +174,13 @@ def heldout_errors(case: Case, nom: Nominal, ext: dict[str, Any]) -> dict[str, f
 
 
 def extension_step(
-    case: Case, nom: Nominal, node: dict, values: dict[str, float], cause: str, row: dict, out: dict[str, Any]
+    case: Case, nom: Nominal, node: dict, values: dict, cause: str, row: Evidence, out: dict[str, Any]
 ) -> tuple[dict, dict[str, float], SDOFSystem] | None:
     """Step k: the current model extended with ``cause``, identified, polished (and a learned
     force trained on the response); recorded in ``out``. None when a learned force is refused."""
     st, record, s = case.settings, case.record, nom.s
-    if row.get("score") is not None and not np.isfinite(row["score"]):
-        raise ValueError(f"effect '{cause}' has no physical fit to this record ({row.get('note')})")
+    if row.score is not None and not np.isfinite(row.score):
+        raise ValueError(f"effect '{cause}' has no physical fit to this record ({row.note})")
     k = len(out["causes"]) + 1
     if cause == LEARNED:  # start the network at the force the current model cannot explain
         path = save_unexplained(
@@ -198,7 +192,7 @@ def extension_step(
             case.fit,
             f=case.weak_f,
         )
-        row = {**row, "parameters": {"init_from": str(path)}}
+        row = replace(row, parameters={"init_from": str(path)})
     ext_node = extension_node(node, values, cause, row, s.context(), k, case.mass_known)
     folder = case.run_dir / ("extended" if k == 1 else f"extended_{k}")
     metrics, system, ext_values = case.identify(ext_node, folder, case.fit)
@@ -239,7 +233,7 @@ def extension_step(
     return ext_node, ext_values, system
 
 
-def _step_record(k: int, cause: str, folder, equation: str, row: dict, errors) -> dict:
+def _step_record(k: int, cause: str, folder, equation: str, row: Evidence, errors) -> dict:
     """What ``diagnosis.json`` keeps of extension step ``k``."""
     return {
         "step": k,
@@ -247,7 +241,7 @@ def _step_record(k: int, cause: str, folder, equation: str, row: dict, errors) -
         "folder": folder.name,
         "equation": equation,
         "evidence": {
-            **{key: row.get(key) for key in ROW_EVIDENCE},
+            **{key: getattr(row, key) for key in ROW_EVIDENCE},
             **({"heldout_nrmse": errors} if cause == LEARNED else {}),
         },
     }
@@ -262,7 +256,7 @@ def next_cause(
     out: dict[str, Any],
     s: Signals,
     weak: WeakForm,
-) -> tuple[str | None, dict | None]:
+) -> tuple[str | None, Evidence | None]:
     """Screen the model just extended against the effects not yet in it; what the weak form
     leaves undecided goes to the output-error check, and a structured remainder no library
     effect explains to the learned force. The evidence lands on the last step of ``out``."""
@@ -280,24 +274,26 @@ def next_cause(
         case.thresholds,
     )
     step = out["steps"][-1]
-    step["next_ranking"] = [{k_: r.get(k_) for k_ in STEP_EVIDENCE if k_ in r} for r in sc.ranking]
+    step["next_ranking"] = [
+        {k_: v for k_, v in r.to_dict().items() if k_ in STEP_EVIDENCE} for r in sc.ranking
+    ]
     step["next_structure"] = dict(sc.structure)
     step["next_verdict"] = sc.verdict
     log.info(
         "screening the extended model: %s",
-        ", ".join(f"{r['effect']} {r['score']:.1f}" for r in sc.ranking[:4] if r.get("score") is not None),
+        ", ".join(f"{r.effect} {r.score:.1f}" for r in sc.ranking[:4] if r.score is not None),
     )
     if case.from_accelerometers:  # output error on the accelerations decides (see ``run``)
         confirmation = confirm_undecided(case, system, values, node, sc, s, k + 1, everything=True)
-        step["next_confirmation"] = confirmation.tested
-        return (None, None) if confirmation.row is None else (confirmation.row["effect"], confirmation.row)
+        step["next_confirmation"] = [r.to_dict() for r in confirmation.tested]
+        return (None, None) if confirmation.row is None else (confirmation.row.effect, confirmation.row)
     if sc.cause is not None:
-        return sc.cause, next(r for r in sc.ranking if r["effect"] == sc.cause)
+        return sc.cause, next(r for r in sc.ranking if r.effect == sc.cause)
     if sc.verdict == Verdict.NONE:  # the simulated response decides what the weak form leans to
         confirmation = confirm_undecided(case, system, values, node, sc, s, k + 1)
-        step["next_confirmation"] = confirmation.tested
+        step["next_confirmation"] = [r.to_dict() for r in confirmation.tested]
         if confirmation.row is not None:
-            return confirmation.row["effect"], confirmation.row
+            return confirmation.row.effect, confirmation.row
     if sc.verdict == Verdict.UNEXPLAINED and LEARNED not in out["causes"] and case.settings.learn_unexplained:
         return LEARNED, learned_row(
             sc.structure
@@ -314,7 +310,7 @@ def confirm_undecided(
     s: Signals,
     k: int,
     everything: bool = False,
-    extra: list[dict] | None = None,
+    extra: list[Evidence] | None = None,
 ) -> Confirmation:
     """The output-error check of the effects screening ``sc`` leaves undecided
     (``pidyn.discrepancy.confirm``); ``diagnosis.confirm.max_candidates`` = 0 turns it off.
@@ -323,9 +319,7 @@ def confirm_undecided(
     st = case.settings
     if everything:
         candidates = [
-            r
-            for r in sc.ranking
-            if r.get("score") is not None and np.isfinite(r["score"]) and not r.get("step_in_time")
+            r for r in sc.ranking if r.score is not None and np.isfinite(r.score) and not r.step_in_time
         ]
     else:
         candidates = undecided(sc.ranking, case.thresholds, int(st.confirm.max_candidates))
@@ -335,8 +329,8 @@ def confirm_undecided(
     node = release_held(node)  # as in the polish: a located change time is refined with the rest
     ctx = s.context()
 
-    def build(row: dict) -> Any:
-        return build_system(extension_node(node, values, row["effect"], row, ctx, k, case.mass_known))
+    def build(row: Evidence) -> Any:
+        return build_system(extension_node(node, values, row.effect, row, ctx, k, case.mass_known))
 
     # deciding, not confirming (an accelerometer record): each fit run to its end
     nfev = fit_budget(case) if everything else int(st.polish_max_nfev)

@@ -11,6 +11,7 @@ import numpy as np
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.fit_test import fit_test
 from pidyn.discrepancy.screening import Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
@@ -75,15 +76,15 @@ def screen_storeys(
     return out
 
 
-def best_row(screenings: list[Screening]) -> tuple[int, dict] | None:
+def best_row(screenings: list[Screening]) -> tuple[int, Evidence] | None:
     """The (storey, row) of the strongest named cause over every storey: each storey's screening
     decides whether it names one (its evidence, pair and tie rules), the scores between storeys."""
     best = None
     for i, sc in enumerate(screenings, start=1):
         if sc.verdict != Verdict.DISCREPANCY or sc.cause is None:
             continue
-        row = next(r for r in sc.ranking if r["effect"] == sc.cause)
-        if best is None or (row["score"] or 0.0) > (best[1]["score"] or 0.0):
+        row = next(r for r in sc.ranking if r.effect == sc.cause)
+        if best is None or (row.score or 0.0) > (best[1].score or 0.0):
             best = (i, row)
     return best
 
@@ -101,7 +102,7 @@ def better(a: dict, b: dict, settings: DiagnosisSettings) -> bool:
     return gap > 0
 
 
-def leaning_rows(screenings: list[Screening], settings: DiagnosisSettings) -> list[tuple[int, dict]]:
+def leaning_rows(screenings: list[Screening], settings: DiagnosisSettings) -> list[tuple[int, Evidence]]:
     """(storey, row) of the effects the weak form leans to without deciding (0 < score <
     ``min_delta_bic``, no rule against them), strongest first, at most ``confirm.max_candidates``."""
     th = settings.thresholds
@@ -109,12 +110,12 @@ def leaning_rows(screenings: list[Screening], settings: DiagnosisSettings) -> li
         (i, r)
         for i, sc in enumerate(screenings, start=1)
         for r in sc.ranking
-        if r.get("score") is not None
-        and 0.0 < r["score"] < th.min_delta_bic
-        and r.get("persists", True)
-        and not r.get("heldout_miss")
+        if r.score is not None
+        and 0.0 < r.score < th.min_delta_bic
+        and r.persists is not False
+        and not r.heldout_miss
     ]
-    rows.sort(key=lambda ir: -ir[1]["score"])
+    rows.sort(key=lambda ir: -ir[1].score)
     return rows[: int(settings.confirm.max_candidates)]
 
 
@@ -146,7 +147,7 @@ def misfit_rows(
         log.info(
             "score test: the best candidate (%s in storey %d) removes %.0f%% of the squared residual, below "
             "%.0f%%: no effect searched beside the named ones",
-            ranked[0].row["effect"],
+            ranked[0].row.effect,
             ranked[0].storey,
             100 * ranked[0].share,
             100 * min_share,
@@ -155,7 +156,7 @@ def misfit_rows(
     for c in ranked[:6]:
         log.info(
             "score test: %s in storey %d removes %.0f (%.0f%% of the squared residual), linearised",
-            c.row["effect"],
+            c.row.effect,
             c.storey,
             c.chi2,
             100 * c.share,
@@ -173,7 +174,7 @@ def confirm_leaning(
     current: dict,
     found: list[Found],
     views: list[StoreyView],
-    rows: list[tuple[int, dict]],
+    rows: list[tuple[int, Evidence]],
     misfit: dict | None = None,
 ) -> dict | None:
     """The output-error check of ``rows`` (storey, weak-form row): each effect's extension refined
@@ -190,7 +191,7 @@ def confirm_leaning(
     best = None
     for storey, row in rows:
         sig, _ = storey_signals(views[storey - 1], current["values"][f"k{storey}"], study.period, fit[1])
-        cand = Found(row["effect"], storey, dict(row["parameters"]), row, sig.context())
+        cand = Found(row.effect, storey, dict(row.parameters), row, sig.context())
         trial = study.extend(current, found, cand)
         gain = base - trial["report"]["fit_bic"]
         trial["report"].update(source="output_error", delta_bic_fit=gain)
@@ -203,7 +204,7 @@ def confirm_leaning(
             "output-error check of %s in storey %d (weak-form score %s): BIC gain %.1f on the fitting part%s",
             cand.effect,
             storey,
-            score_text(row.get("score")),
+            score_text(row.score),
             gain,
             "" if misfit is None else f", {trial['report']['misfit_explained']:.0%} of the misfit explained",
         )
@@ -218,16 +219,16 @@ def confirm_leaning(
     return best
 
 
-def close_rivals(screening: Screening, row: dict, settings: DiagnosisSettings) -> list[dict]:
+def close_rivals(screening: Screening, row: Evidence, settings: DiagnosisSettings) -> list[Evidence]:
     """The named row and every other passing effect of its storey less than ``min_delta_bic``
     below it in the weak form: the weak form does not decide between them (a stop and a cubic
     spring on a building scored 53 and 60), the output error on the fitting part does."""
     margin = float(settings.thresholds.min_delta_bic)
     out = [row]
     for r in screening.ranking:
-        if r is row or not r.get("passes") or r.get("step_in_time") != row.get("step_in_time"):
+        if r is row or not r.passes or r.step_in_time != row.step_in_time:
             continue
-        if (r["score"] or -np.inf) >= (row["score"] or 0.0) - margin:
+        if (r.score or -np.inf) >= (row.score or 0.0) - margin:
             out.append(r)
     return out
 

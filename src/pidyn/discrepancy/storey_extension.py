@@ -47,7 +47,7 @@ def try_extension(
         "storey %d: %s (score %.1f), extending and refining",
         cand.storey,
         cand.effect,
-        cand.row["score"] or 0.0,
+        cand.row.score or 0.0,
     )
     res = refine(
         ext, record, {"screening": start}, refine_settings, t_start=fit[0], t_end=fit[1], prefer="screening"
@@ -101,8 +101,8 @@ def _step_report(
     report = {
         "effect": cand.effect,
         "storey": cand.storey,
-        "score": cand.row.get("score"),
-        "cv_gain": cand.row.get("cv_gain"),
+        "score": cand.row.score,
+        "cv_gain": cand.row.cv_gain,
         "screening_parameters": cand.params,
         "parameters": {names[b]: v for b, v in params.items()},
         "intervals": {full: res.intervals.get(full) for full in names.values() if full in res.intervals},

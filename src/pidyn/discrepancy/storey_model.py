@@ -10,6 +10,7 @@ import numpy as np
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS, Signals
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.screening import Screening
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.params import positive
@@ -62,7 +63,7 @@ class Found:
     effect: str
     storey: int
     params: dict[str, float]
-    row: dict
+    row: Evidence  # the evidence it was tried on
     ctx: dict
 
 

@@ -17,12 +17,13 @@ the effect, without fitting it. The candidates are tried by output error in this
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.storey_model import Found, building_with, storey_signals
 from pidyn.simulate import input_hold, simulate_batch
 
@@ -30,7 +31,7 @@ from pidyn.simulate import input_hold, simulate_batch
 @dataclass
 class Ranked:
     storey: int
-    row: dict  # the weak form's row, its parameters at the best grid point
+    row: Evidence  # the weak form's row, its parameters at the best grid point
     chi2: float  # the misfit (noise units) one linearised step removes
     share: float  # ... as a share of the current model's squared residual there
     direction: np.ndarray  # its change of the floor accelerations, the profiled parameters' part removed
@@ -88,35 +89,37 @@ def spring_shares(screening) -> None:
     every loop shape)."""
     own = float(screening.nominal_params.get("k", 0.0))
     for row in screening.ranking:
-        refit = float((row.get("nominal_refit") or {}).get("k", 0.0))
-        if getattr(EFFECTS.get(row["effect"]), "spring_at_rest", False) and own > 0 and refit > 0:
-            row["spring_share"] = float(np.clip(refit / own, 0.05, 1.0))
+        refit = float(row.nominal_refit.get("k", 0.0))
+        if getattr(EFFECTS.get(row.effect), "spring_at_rest", False) and own > 0 and refit > 0:
+            row.spring_share = float(np.clip(refit / own, 0.05, 1.0))
 
 
-def trial_values(values: dict[str, float], storey: int, row: dict) -> dict[str, float]:
+def trial_values(values: dict[str, float], storey: int, row: Evidence) -> dict[str, float]:
     """The current model's values with the storey's spring taken down to the row's
     ``spring_share`` (``spring_shares``): where a trial of the row's effect starts."""
-    share = row.get("spring_share")
+    share = row.spring_share
     if not share:
         return values
     return {**values, f"k{storey}": float(values[f"k{storey}"]) * float(share)}
 
 
-def _trials(row: dict, span: tuple[float, float], drift_peak: float, k: float) -> list[dict]:
+def _trials(row: Evidence, span: tuple[float, float], drift_peak: float, k: float) -> list[dict]:
     """The starts of a row's trial, as its effect asks (``Effect.storey_trials``: a step in time
     at every time of a grid, a stop at every gap of its grid)."""
-    return EFFECTS[row["effect"]].storey_trials(dict(row["parameters"]), span, drift_peak, k)
+    return EFFECTS[row.effect].storey_trials(dict(row.parameters), span, drift_peak, k)
 
 
 def rank_candidates(
-    study, current: dict, found: list, views: list, rows: list[tuple[int, dict]]
+    study, current: dict, found: list, views: list, rows: list[tuple[int, Evidence]]
 ) -> list[Ranked]:
     """``rows`` (storey, weak-form row) scored and sorted, best first (the module's docstring)."""
     ranked, _ = _scored(study, current, found, views, rows)
     return ranked
 
 
-def storey_order(study, current: dict, found: list, views: list, rows: list[tuple[int, dict]]) -> list[int]:
+def storey_order(
+    study, current: dict, found: list, views: list, rows: list[tuple[int, Evidence]]
+) -> list[int]:
     """The storeys, the one whose candidates together remove most of the fitting part's misfit
     first: the projection of the residual on the span of all its candidates' directions (a
     force outside the library is in no single one of them, but its storey's springs and
@@ -132,7 +135,7 @@ def storey_order(study, current: dict, found: list, views: list, rows: list[tupl
 
 
 def _scored(
-    study, current: dict, found: list, views: list, rows: list[tuple[int, dict]]
+    study, current: dict, found: list, views: list, rows: list[tuple[int, Evidence]]
 ) -> tuple[list[Ranked], np.ndarray]:
     """The candidates scored (best first) and the current model's residual, its parameters profiled out."""
     record, fit = study.record, study.fit
@@ -151,19 +154,19 @@ def _scored(
     total = max(float(r @ r), 1e-300)
     out = []
     for storey, row in rows:
-        key = (storey, row["effect"], repr(sorted((row.get("parameters") or {}).items())))
+        key = (storey, row.effect, repr(sorted(row.parameters.items())))
         if key in memo["rows"]:
             if memo["rows"][key] is not None:
                 out.append(memo["rows"][key])
             continue
         sig, _ = storey_signals(views[storey - 1], current["values"][f"k{storey}"], study.period, fit[1])
-        if not row.get("parameters"):  # the weak form found no physical fit: a typical size is tried
-            row = {**row, "parameters": EFFECTS[row["effect"]].sample(np.random.default_rng(0), sig)}
+        if not row.parameters:  # the weak form found no physical fit: a typical size is tried
+            row = replace(row, parameters=EFFECTS[row.effect].sample(np.random.default_rng(0), sig))
         view = views[storey - 1]
         trials = _trials(row, fit, float(np.max(np.abs(view.drift))), float(current["values"][f"k{storey}"]))
         start = trial_values(current["values"], storey, row)
         systems = [
-            building_with(study.system, start, [*found, Found(row["effect"], storey, p, row, sig.context())])
+            building_with(study.system, start, [*found, Found(row.effect, storey, p, row, sig.context())])
             for p in trials
         ]
         sims = _simulate(systems[0][0], [s[1] for s in systems], record, floors, mask) / scale
@@ -193,7 +196,7 @@ def _memo(study, current: dict, found: list) -> dict:
     return store.setdefault(model, {})
 
 
-def _one(storey: int, row: dict, params: dict, d: np.ndarray, q: np.ndarray, r: np.ndarray, total: float):
+def _one(storey: int, row: Evidence, params: dict, d: np.ndarray, q: np.ndarray, r: np.ndarray, total: float):
     """One candidate's linearised score from its change ``d`` of the floor accelerations."""
     if not np.all(np.isfinite(d)):
         return None
@@ -202,8 +205,8 @@ def _one(storey: int, row: dict, params: dict, d: np.ndarray, q: np.ndarray, r: 
     if dd <= 0:
         return None
     step = float(r @ pd_) / dd
-    chi2 = step * float(r @ pd_) if (step > 0 or _signed(row["effect"])) else 0.0
-    return Ranked(storey, {**row, "parameters": params, "linear_step": step}, chi2, chi2 / total, pd_)
+    chi2 = step * float(r @ pd_) if (step > 0 or _signed(row.effect)) else 0.0
+    return Ranked(storey, replace(row, parameters=params), chi2, chi2 / total, pd_)
 
 
 def _signed(effect: str) -> bool:

@@ -86,7 +86,7 @@ def _ranking_row(storey: int, sc) -> dict:
         "verdict": sc.verdict,
         "cause": sc.cause,
         "own_law": sc.nominal_params,
-        "rows": sc.ranking,
+        "rows": [r.to_dict() for r in sc.ranking],
     }
 
 

@@ -7,6 +7,7 @@ import logging
 
 import numpy as np
 
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.screening import Screening
 from pidyn.discrepancy.storey_choice import (
     Study,
@@ -105,7 +106,11 @@ def _gain(step: dict) -> float:
 
 
 def named_step(
-    study: Study, current: dict, found: list[Found], views: list[StoreyView], rivals: list[tuple[int, dict]]
+    study: Study,
+    current: dict,
+    found: list[Found],
+    views: list[StoreyView],
+    rivals: list[tuple[int, Evidence]],
 ) -> dict:
     """The weak form's named cause and its close rivals in the same storey, each extended and
     refined; the fitting part's output error chooses (``better``)."""
@@ -113,7 +118,7 @@ def named_step(
     sig, _ = storey_signals(views[storey - 1], current["values"][f"k{storey}"], study.period, study.fit[1])
     step = None
     for _, rival in rivals:
-        cand = Found(rival["effect"], storey, dict(rival["parameters"]), rival, sig.context())
+        cand = Found(rival.effect, storey, dict(rival.parameters), rival, sig.context())
         trial = study.extend(current, found, cand)
         if step is not None:
             log.info(

@@ -12,6 +12,7 @@ from pidyn.discrepancy.accelerometers import acceleration_gain
 from pidyn.discrepancy.case import Case, Outcome
 from pidyn.discrepancy.changes import running_estimate
 from pidyn.discrepancy.effects import EFFECTS, Signals
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.learned_step import LEARNED
 from pidyn.discrepancy.report_figures import (
     plot_learned_force,
@@ -74,8 +75,8 @@ def summarize(case: Case, result: DiagnosisResult) -> dict[str, Any]:
         "learned_force": LEARNED in o.causes,
         "structure": {k: v for k, v in o.screening.structure.items()},
         "heldout_check": o.check.__dict__,
-        "change": None if o.change_row is None else o.change_row["change"].to_dict(),
-        "ranking": o.screening.ranking,
+        "change": None if o.change_row is None else o.change_row.change.to_dict(),
+        "ranking": [r.to_dict() for r in o.screening.ranking],
         "extended": ext_system.describe(ext_values) if ext_system is not None else None,
         "parameters": effect_params,
         "nominal_parameters": nom.values,
@@ -100,7 +101,7 @@ def summarize(case: Case, result: DiagnosisResult) -> dict[str, Any]:
         else [{k: v for k, v in m.items() if not k.startswith("mode_shape")} for m in o.modal],
         "running": None if o.running is None else running_summary(o.running, case),
         "accelerometers": (record.meta or {}).get("accelerometers"),
-        "confirmation": None if o.confirmation is None else o.confirmation.tested,
+        "confirmation": None if o.confirmation is None else [r.to_dict() for r in o.confirmation.tested],
         "confirmation_nominal": None if o.confirmation is None else o.confirmation.nominal,
         "rivals": None if unearned else rivals(o),
         "learned_force_refused": ext.get("refused"),
@@ -135,16 +136,16 @@ def rivals(o: Outcome) -> dict[str, Any] | None:
     """The effects the output-error check cannot tell from the one it named (within
     ``tie_delta_bic``): the record does not decide between them. None when it does."""
     row = None if o.confirmation is None else o.confirmation.row
-    if not row or not row.get("rivals"):
+    if not row or not row.rivals:
         return None
-    named = row["effect"]
-    others = ", ".join(f"{r['effect']} ({r['score']:.1f})" for r in row["rivals"])
+    named = row.effect
+    others = ", ".join(f"{r.effect} ({r.score:.1f})" for r in row.rivals)
     return {
         "named": named,
-        "rivals": row["rivals"],
+        "rivals": [r.to_dict() for r in row.rivals],
         "note": note(
             "not_decided",
-            f"{named} is named by the output-error check (score {row['score']:.1f}), but {others} "
+            f"{named} is named by the output-error check (score {row.score:.1f}), but {others} "
             "simulate the record as well: the record does not decide between them",
         ),
     }
@@ -157,7 +158,7 @@ def _effect_parameters(o: Outcome, nom, ext_system, ext_values) -> dict[str, Any
         nominal_names = {sp.name for sp in nom.system.param_specs()}
         effect_params = {k: v for k, v in ext_values.items() if k not in nominal_names}
     if o.change_row is not None:
-        ch = o.change_row["change"]
+        ch = o.change_row.change
         effect_params["t_change"] = effect_params.get("t_d", ch.t_change)
         effect_params["t_change_ci95"] = list(ch.ci95)
     return effect_params
@@ -238,7 +239,7 @@ def _running_figures(case: Case, o: Outcome, fig) -> None:
         nom.values,
         fit,
         held,
-        None if o.change_row is None else o.change_row["change"],
+        None if o.change_row is None else o.change_row.change,
         stiffness=case.stiff,
         signal=(record.t, case.x_raw),
     )
@@ -300,28 +301,28 @@ def amplitude_path(case: Case, o: Outcome) -> tuple[np.ndarray, np.ndarray, np.n
         return case.record.t, 2 * np.pi * np.sqrt(m / k), c / (2 * np.sqrt(k * m))
 
 
-def _evidence_row(o: Outcome, cause: str | None) -> dict | None:
+def _evidence_row(o: Outcome, cause: str | None) -> Evidence | None:
     """The fit that named ``cause``: the located change, the screening's row, or the output-error
     check's (an effect the weak form does not screen, the amplitude-dependent structure)."""
     if cause is None:
         return None
     if o.change_row:
         return o.change_row
-    row = next((r for r in o.screening.ranking if r["effect"] == cause), None)
+    row = next((r for r in o.screening.ranking if r.effect == cause), None)
     checked = getattr(o.confirmation, "row", None)
-    if row is None and checked and checked.get("effect") == cause:
+    if row is None and checked and checked.effect == cause:
         return checked
     return row
 
 
 def explained_force(
-    nominal: SDOFSystem, values: dict[str, float], row: dict, s: Signals, pw: dict[str, np.ndarray]
+    nominal: SDOFSystem, values: dict[str, float], row: Evidence, s: Signals, pw: dict[str, np.ndarray]
 ) -> np.ndarray:
     """What the screening's fit says the residual is: the effect's force plus the change it
     brings to the nominal parameters (which had absorbed part of the effect), on the same
     band-limited signals as the residual."""
-    p = {**values, **row["nominal_refit"], **row["parameters"]}
-    term = EFFECTS[row["effect"]].term(row["parameters"], s.context())
+    p = {**values, **row.nominal_refit, **row.parameters}
+    term = EFFECTS[row.effect].term(row.parameters, s.context())
     x, v = pw["x"], pw["v"]
     z = latent_path(term, s.t, x, None, p) if term.n_latent else None
     change = nominal.restoring_force(s.t, x, v, None, values) - nominal.restoring_force(s.t, x, v, None, p)

@@ -11,6 +11,7 @@ from typing import Any
 from pidyn.data.checks import check_record
 from pidyn.discrepancy.accelerometers import motion_view, needs_view
 from pidyn.discrepancy.case import Case, Outcome, prepare, split_spans
+from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.learned_step import LEARNED, learned_row
 from pidyn.discrepancy.loop import Inputs, Step, Subject, extend
 from pidyn.discrepancy.nominal import identify_nominal, nominal_modes, running_period, starting_point
@@ -101,7 +102,7 @@ class SingleDOF(Subject):
             nom.system, nom.values, case.record.t, case.x_raw, case.weak_f, nom.period
         )
         forced = case.settings.force_effect
-        log.info("screening: %s", ", ".join(f"{r['effect']} {r['score']:.1f}" for r in sc.ranking[:4]))
+        log.info("screening: %s", ", ".join(f"{r.effect} {r.score:.1f}" for r in sc.ranking[:4]))
         # does the nominal model hold on the held-out part? if not, when did the structure change?
         progress.step("held-out check and running period")
         self.x_nom = case.free_run(nom.system, nom.values, float(nom.s.v[0]))
@@ -125,11 +126,11 @@ class SingleDOF(Subject):
     def _start(self) -> tuple[dict, dict[str, float], SDOFSystem]:
         return self.nom.node, self.nom.values, self.nom.system
 
-    def _begin(self, cause: str | None, row: dict | None, forced: bool) -> None:
+    def _begin(self, cause: str | None, row: Evidence | None, forced: bool) -> None:
         """Extensions from the nominal model with ``cause`` first (its evidence ``row``); ``forced``:
         this run extends with the forced effect alone."""
         self.ext = _no_extension()
-        self.pending: tuple[str | None, dict | None] = (cause, row)
+        self.pending: tuple[str | None, Evidence | None] = (cause, row)
         self.limit = 1 if forced else int(self.case.settings.max_effects)
         self.forced_run = forced
 
