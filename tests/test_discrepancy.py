@@ -553,7 +553,7 @@ def test_the_true_friction_model_screens_clean(seed):
     )
     assert sc.verdict == "none", sc.ranking[:2]
     change = next(q for q in sc.ranking if q.effect == "damping_change")
-    assert change["score"] is None or change["parameters"]["change"] > -1.0
+    assert change.score is None or change.parameters["change"] > -1.0
 
 
 def test_ridge_fit_survives_a_column_silent_in_the_fitting_rows():
