@@ -135,3 +135,24 @@ def test_notes_carry_codes_that_survive_a_file():
     assert codes(back) == {"not_at_rest"} and code_of(back[1]) is None
     with pytest.raises(ValueError, match="note code"):
         note("Not At Rest", "x")
+
+
+def test_every_note_code_the_package_makes_is_in_the_one_table():
+    """A code is made in one place and explained in one: ``pidyn.notes.CODES``. Every literal code
+    passed to ``note`` in the package is there, and every code there is made somewhere."""
+    import ast
+    from pathlib import Path
+
+    import pidyn
+    from pidyn.notes import CODES
+
+    used = set()
+    for f in Path(pidyn.__file__).parent.rglob("*.py"):
+        for n in ast.walk(ast.parse(f.read_text())):
+            name = getattr(getattr(n, "func", None), "id", getattr(getattr(n, "func", None), "attr", None))
+            if isinstance(n, ast.Call) and name == "note" and n.args and isinstance(n.args[0], ast.Constant):
+                used.add(n.args[0].value)
+    assert used == set(CODES), (sorted(used - set(CODES)), sorted(set(CODES) - used))
+    assert all(text and text[0].islower() for text in CODES.values())
+    with pytest.raises(ValueError, match="not in pidyn.notes.CODES"):
+        note("not_a_code_anyone_made", "x")
