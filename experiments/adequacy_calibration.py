@@ -33,8 +33,7 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 
-from calibration_grid import calibration_args, finished, run_grid  # noqa: E402
-
+from pidyn.bench.grid import calibration_args, finished, run_grid  # noqa: E402
 from pidyn.excitation.ground_motion import SHIPPED  # noqa: E402
 
 SYSTEMS = ("linear", "duffing", "bouc_wen")
@@ -164,7 +163,7 @@ def write_table(df: pd.DataFrame, path: Path, seconds: float, ran: int) -> None:
 
 
 def main() -> None:
-    args = calibration_args(__doc__, SHIPPED)
+    args = calibration_args(__doc__, SHIPPED, ROOT / "experiments" / "results")
     logging.basicConfig(level=logging.ERROR)
     csv = args.results / "adequacy_calibration.csv"
     done, have = finished(csv, ["record", "system", "noise"], args.fresh)

@@ -168,13 +168,13 @@ def storey_cost(n: int, iters: int = 100) -> dict:
 
 def storey_scaling() -> list[dict]:
     out = []
-    for n in STOREYS:
-        code = (
-            f"import sys, json; sys.path.insert(0, {str(ROOT / 'experiments')!r}); import torch; "
-            f"torch.set_num_threads(1); import bench; print(json.dumps(bench.storey_cost({n})))"
-        )
+    for n in STOREYS:  # each in a process of its own: the peak memory is that size's
         res = subprocess.run(
-            [sys.executable, "-c", code], check=True, capture_output=True, text=True, cwd=ROOT
+            [sys.executable, __file__, "--storey-cost", str(n)],
+            check=True,
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
         )
         out.append(json.loads(res.stdout.strip().splitlines()[-1]))
         print(out[-1], flush=True)
@@ -406,7 +406,14 @@ def main() -> None:
         action="store_true",
         help="only the simulation section, written into the last bench.json (its other rows kept)",
     )
+    ap.add_argument(
+        "--storey-cost", type=int, default=None, help=argparse.SUPPRESS
+    )  # one size, in its own process
     a = ap.parse_args()
+    if a.storey_cost is not None:
+        torch.set_num_threads(1)
+        print(json.dumps(storey_cost(a.storey_cost)))
+        return
     if a.render:
         write_markdown(json.loads((OUT / "bench.json").read_text()))
         return

@@ -32,6 +32,7 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 
+from pidyn.bench.draws import draw_building, draw_sensors  # noqa: E402
 from pidyn.discrepancy.effects import EFFECTS, LIBRARY, Signals  # noqa: E402
 from pidyn.discrepancy.hidden import EQUIVALENT, OUTSIDE, RECORDS, _outside_term  # noqa: E402
 from pidyn.runs.provenance import code_commit  # noqa: E402  (the checkout's commit, "+dirty" for changed code)
@@ -42,24 +43,6 @@ DURATION, FIT_SHARE = 20.0, 0.65
 KINDS = ["none", *SINGLE, "pair", "trilinear_spring"]
 #: effects a pair draws from (a change in time has its own kind)
 PAIRABLE = [e for e in SINGLE if not EFFECTS[e].step_in_time]
-
-
-def draw_building(rng: np.random.Generator) -> tuple[int, list[float], list[float], list[float]]:
-    """Storeys, masses, stiffnesses and dashpots of a seeded building (the module's docstring)."""
-    n = int(rng.integers(3, 6))
-    masses = [round(float(m), 3) for m in rng.uniform(0.8, 1.2, n)]
-    k0 = float(rng.uniform(150.0, 250.0))
-    stiff = [round(k0 * (1 - 0.5 * j / max(n - 1, 1)), 2) for j in range(n)]
-    damp = [round(0.02 * 2 * np.sqrt(k * m), 4) for k, m in zip(stiff, masses)]
-    return n, masses, stiff, damp
-
-
-def draw_sensors(rng: np.random.Generator, n: int) -> list[int]:
-    """Every floor, or, one building in three, every floor but one between the first and the top."""
-    sensors = list(range(1, n + 1))
-    if rng.random() < 1 / 3:
-        sensors.remove(int(rng.integers(2, n)))
-    return sensors
 
 
 def draw_case(i: int, duration: float = DURATION) -> dict:

@@ -30,9 +30,8 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 
-from calibration_grid import calibration_args, finished, run_grid  # noqa: E402
-from discrepancy_bench_building import draw_building, draw_sensors  # noqa: E402
-
+from pidyn.bench.draws import draw_building, draw_sensors  # noqa: E402
+from pidyn.bench.grid import calibration_args, finished, run_grid  # noqa: E402
 from pidyn.discrepancy.settings import FitTestSettings  # noqa: E402
 from pidyn.excitation.ground_motion import SHIPPED  # noqa: E402
 
@@ -123,7 +122,7 @@ def write_table(df: pd.DataFrame, path: Path, seconds: float, ran: int) -> None:
 
 
 def main() -> None:
-    args = calibration_args(__doc__, SHIPPED)
+    args = calibration_args(__doc__, SHIPPED, ROOT / "experiments" / "results")
     logging.basicConfig(level=logging.WARNING)
     csv = args.results / "fit_test_calibration.csv"
     done, have = finished(csv, ["record", "noise", "fit_share"], args.fresh)

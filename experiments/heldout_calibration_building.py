@@ -31,8 +31,7 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 
-from calibration_grid import calibration_args, finished, run_grid  # noqa: E402
-
+from pidyn.bench.grid import calibration_args, finished, run_grid  # noqa: E402
 from pidyn.excitation.ground_motion import SHIPPED  # noqa: E402
 
 #: (noise, fitting share, duration in s)
@@ -150,7 +149,7 @@ def write_table(df: pd.DataFrame, path: Path, seconds: float, ran: int) -> None:
 
 
 def main() -> None:
-    args = calibration_args(__doc__, SHIPPED)
+    args = calibration_args(__doc__, SHIPPED, ROOT / "experiments" / "results")
     logging.basicConfig(level=logging.WARNING)
     csv = args.results / "heldout_calibration_building.csv"
     done, have = finished(csv, ["record", "noise", "fit_share", "duration"], args.fresh)

@@ -26,11 +26,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-from launch import run_logged
 from real_final import final_lines
 from real_modes import two_modes_lines
 
 from pidyn.assessment import reported_damping
+from pidyn.bench.launch import run_logged
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"

@@ -19,9 +19,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from launch import run_logged
 
 from pidyn.assessment import reported_damping
+from pidyn.bench.launch import run_logged
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"

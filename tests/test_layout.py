@@ -178,3 +178,10 @@ def test_an_import_inside_a_function_says_why():
                     if not any("#" in ln for ln in near):
                         bare.append(f"{f.relative_to(SRC)}:{sub.lineno}")
     assert not bare, bare
+
+
+def test_the_studies_share_through_the_package_not_by_path():
+    """``experiments/`` imports what its studies share from ``pidyn.bench``: none edits sys.path."""
+    root = SRC.parents[1]
+    edits = [f.name for f in (root / "experiments").glob("*.py") if "sys.path" in f.read_text()]
+    assert not edits, edits

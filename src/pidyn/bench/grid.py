@@ -11,15 +11,14 @@ from pathlib import Path
 
 import pandas as pd
 
-ROOT = Path(__file__).resolve().parents[1]
 
-
-def calibration_args(doc: str | None, records: Iterable[str]) -> argparse.Namespace:
-    """``--records``, ``--jobs``, ``--results`` and ``--fresh`` (run every record again)."""
+def calibration_args(doc: str | None, records: Iterable[str], results: Path) -> argparse.Namespace:
+    """``--records``, ``--jobs``, ``--results`` (default ``results``) and ``--fresh`` (run every
+    record again)."""
     ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--records", nargs="*", default=sorted(records))
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--results", type=Path, default=ROOT / "experiments" / "results")
+    ap.add_argument("--results", type=Path, default=results)
     ap.add_argument("--fresh", action="store_true", help="run every record again (a changed test)")
     return ap.parse_args()
 

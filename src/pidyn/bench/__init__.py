@@ -1,0 +1,3 @@
+"""What the studies under ``experiments/`` share: their command line and process pool
+(``grid``), a logged subprocess (``launch``) and the seeded buildings they draw (``draws``).
+Nothing in the package imports it; the studies import it from here, not by path."""
