@@ -187,6 +187,7 @@ def test_the_extension_draws_its_own_period_through_the_record(tmp_path):
     the windows' periods."""
     from types import SimpleNamespace
 
+    from pidyn.discrepancy.case import Extension
     from pidyn.discrepancy.report_figures import plot_running_period
     from pidyn.discrepancy.summary import amplitude_path
 
@@ -197,7 +198,7 @@ def test_the_extension_draws_its_own_period_through_the_record(tmp_path):
     n = len(rec.t)
     case = SimpleNamespace(record=rec, x_raw=np.zeros(n), settings=SimpleNamespace(substeps=4))
     o = SimpleNamespace(  # the free run from rest the diagnosis measured its gain on
-        extension={"system": system, "values": values},
+        extension=Extension(system=system, values=values),
         nominal=SimpleNamespace(s=SimpleNamespace(v=np.zeros(n))),
         sims={"extended": simulate_response(system, values, rec, 4, np.zeros(system.n_state))},
     )

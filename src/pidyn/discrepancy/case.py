@@ -8,6 +8,7 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -237,6 +238,23 @@ class Nominal:
 
 
 @dataclass
+class Extension:
+    """A single degree of freedom's extensions so far: the last extended model (its system, values
+    and identification's metrics), the causes added and each step's record; the polish's note, a
+    refused learned force, the learned force's training, and names that did not earn their place."""
+
+    system: Any = None
+    values: dict[str, float] | None = None
+    metrics: dict | None = None
+    causes: list[str] = field(default_factory=list)
+    steps: list[dict] = field(default_factory=list)
+    note: str | None = None
+    refused: dict | None = None
+    learned_fit: dict | None = None
+    unearned: dict | None = None
+
+
+@dataclass
 class Outcome:
     """Everything the summary and the figures are made of."""
 
@@ -244,7 +262,7 @@ class Outcome:
     screening: Screening
     check: HeldoutCheck
     change_row: Evidence | None
-    extension: dict
+    extension: Extension
     causes: list[str]
     cause: str | None
     forced: bool

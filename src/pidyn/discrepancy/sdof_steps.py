@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from pidyn.discrepancy.accelerometers import acceleration_gain
-from pidyn.discrepancy.case import Case, Nominal
+from pidyn.discrepancy.case import Case, Extension, Nominal
 from pidyn.discrepancy.confirm import Confirmation, confirm, undecided
 from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.evidence import Evidence
@@ -152,17 +152,17 @@ def _cause_row(cause: str | None, sc, change_row: Evidence | None, confirmation)
     return next(r for r in sc.ranking if r.effect == cause)  # a forced effect is screened (``case.prepare``)
 
 
-def _acceleration_sims(case: Case, nom: Nominal, ext: dict) -> dict:
+def _acceleration_sims(case: Case, nom: Nominal, ext: Extension) -> dict:
     """The nominal and extended models' responses: the gain is measured on the accelerations, as
     the sensors read them."""
     v0 = float(nom.s.v[0])
     return {
         "nominal": case.free_response(nom.system, nom.values, v0),
-        "extended": None if ext["system"] is None else case.free_response(ext["system"], ext["values"], v0),
+        "extended": None if ext.system is None else case.free_response(ext.system, ext.values, v0),
     }
 
 
-def heldout_errors(case: Case, nom: Nominal, ext: dict[str, Any]) -> dict[str, float | None]:
+def heldout_errors(case: Case, nom: Nominal, ext: Extension) -> dict[str, float | None]:
     """The nominal and extended models' held-out NRMSE as ``diagnosis.json``'s ``gain`` gives it:
     of the displacement, or of the accelerations as the sensors read them."""
     held = case.mask(case.held)
@@ -174,14 +174,14 @@ def heldout_errors(case: Case, nom: Nominal, ext: dict[str, Any]) -> dict[str, f
 
 
 def extension_step(
-    case: Case, nom: Nominal, node: dict, values: dict, cause: str, row: Evidence, out: dict[str, Any]
+    case: Case, nom: Nominal, node: dict, values: dict, cause: str, row: Evidence, out: Extension
 ) -> tuple[dict, dict[str, float], SDOFSystem] | None:
     """Step k: the current model extended with ``cause``, identified, polished (and a learned
     force trained on the response); recorded in ``out``. None when a learned force is refused."""
     st, record, s = case.settings, case.record, nom.s
     if row.score is not None and not np.isfinite(row.score):
         raise ValueError(f"effect '{cause}' has no physical fit to this record ({row.note})")
-    k = len(out["causes"]) + 1
+    k = len(out.causes) + 1
     if cause == LEARNED:  # start the network at the force the current model cannot explain
         path = save_unexplained(
             case.run_dir / f"unexplained_{k}.npz",
@@ -203,16 +203,14 @@ def extension_step(
         # moved the cost by 3e-4)
         budget = int(st.polish_max_nfev) if trained else None
         check = None if cause == LEARNED else check_fit(values, row, k)  # the fit that named the effect
-        ext_values, out["note"] = polish(
-            case, build_system(release_held(ext_node)), ext_values, budget, check
-        )
+        ext_values, out.note = polish(case, build_system(release_held(ext_node)), ext_values, budget, check)
     if trained:
-        ext_values, out["learned_fit"] = train_learned_force(
+        ext_values, out.learned_fit = train_learned_force(
             record, system, ext_values, s, case.fit, st.learned, folder
         )
     errors = None
     if cause == LEARNED:
-        out["refused"], errors = refuse_learned(
+        out.refused, errors = refuse_learned(
             record,
             build_system(node),
             values,
@@ -224,11 +222,11 @@ def extension_step(
             int(st.substeps),
             folder,
         )
-        if out["refused"] is not None:  # a network that fits the fitting part but predicts worse
+        if out.refused is not None:  # a network that fits the fitting part but predicts worse
             return None
-    out["causes"].append(cause)
-    out["steps"].append(_step_record(k, cause, folder, system.describe(ext_values), row, errors))
-    out.update(system=system, values=ext_values, metrics=metrics)
+    out.causes.append(cause)
+    out.steps.append(_step_record(k, cause, folder, system.describe(ext_values), row, errors))
+    out.system, out.values, out.metrics = system, ext_values, metrics
     log.info("step %d: extended with %s: %s", k, cause, system.describe(ext_values))
     return ext_node, ext_values, system
 
@@ -253,14 +251,14 @@ def next_cause(
     values: dict[str, float],
     node: dict,
     remaining: dict,
-    out: dict[str, Any],
+    out: Extension,
     s: Signals,
     weak: WeakForm,
 ) -> tuple[str | None, Evidence | None]:
     """Screen the model just extended against the effects not yet in it; what the weak form
     leaves undecided goes to the output-error check, and a structured remainder no library
     effect explains to the learned force. The evidence lands on the last step of ``out``."""
-    k = len(out["causes"])
+    k = len(out.causes)
     sc = screen(
         system,
         values,
@@ -273,7 +271,7 @@ def next_cause(
         remaining,
         case.thresholds,
     )
-    step = out["steps"][-1]
+    step = out.steps[-1]
     step["next_ranking"] = [
         {k_: v for k_, v in r.to_dict().items() if k_ in STEP_EVIDENCE} for r in sc.ranking
     ]
@@ -294,7 +292,7 @@ def next_cause(
         step["next_confirmation"] = [r.to_dict() for r in confirmation.tested]
         if confirmation.row is not None:
             return confirmation.row.effect, confirmation.row
-    if sc.verdict == Verdict.UNEXPLAINED and LEARNED not in out["causes"] and case.settings.learn_unexplained:
+    if sc.verdict == Verdict.UNEXPLAINED and LEARNED not in out.causes and case.settings.learn_unexplained:
         return LEARNED, learned_row(
             sc.structure
         )  # what remains is structured but no library effect: learn it

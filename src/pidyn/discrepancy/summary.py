@@ -37,7 +37,7 @@ def conclusion(case: Case, o: Outcome) -> DiagnosisResult:
     earn their place, see ``_verdict``), the causes kept, the held-out errors, the coded notes."""
     gain = heldout_gain(case, o)
     learned = LEARNED in o.causes
-    unearned = o.extension.get("unearned")  # the extension's names did not earn their place: none is kept
+    unearned = o.extension.unearned  # the extension's names did not earn their place: none is kept
     causes = [] if unearned else [c for c in o.causes if c != LEARNED]
     worse = trivial_note(gain)
     verdict = Verdict.UNEXPLAINED if unearned else _verdict(case, o, bool(causes), learned, worse is not None)
@@ -61,9 +61,9 @@ def summarize(case: Case, result: DiagnosisResult) -> dict[str, Any]:
     """diagnosis.json beyond the result's head: the evidence, the parameters, the models."""
     o: Outcome = result.detail
     record, nom, ext = case.record, o.nominal, o.extension
-    unearned = ext.get("unearned")
+    unearned = ext.unearned
     causes = [f.effect for f in result.findings]
-    ext_system, ext_values, ext_metrics = ext["system"], ext["values"], ext["metrics"]
+    ext_system, ext_values, ext_metrics = ext.system, ext.values, ext.metrics
     effect_params = _effect_parameters(o, nom, ext_system, ext_values)
     truth = dict(record.meta.get("hidden_params") or {}) if "hidden_effect" in record.meta else None
     return {
@@ -71,7 +71,7 @@ def summarize(case: Case, result: DiagnosisResult) -> dict[str, Any]:
         "cause": causes[0] if causes else (None if o.cause == LEARNED or unearned else o.cause),
         "unearned": unearned,
         "t_change": effect_params.get("t_change"),
-        "steps": ext["steps"],
+        "steps": ext.steps,
         "learned_force": LEARNED in o.causes,
         "structure": {k: v for k, v in o.screening.structure.items()},
         "heldout_check": o.check.__dict__,
@@ -87,8 +87,8 @@ def summarize(case: Case, result: DiagnosisResult) -> dict[str, Any]:
         "noise": (record.meta or {}).get("noise"),
         "natural_period": nom.period,
         "thresholds": dataclasses.asdict(case.thresholds),
-        "polish": {"nominal": nom.polish_note, "extended": ext["note"]},
-        "learned_fit": ext.get("learned_fit"),
+        "polish": {"nominal": nom.polish_note, "extended": ext.note},
+        "learned_fit": ext.learned_fit,
         "pidynnet": {
             "nominal_errors_pct": nom.metrics.get("error_pct"),
             "extended_errors_pct": None if ext_metrics is None else ext_metrics.get("error_pct"),
@@ -104,7 +104,7 @@ def summarize(case: Case, result: DiagnosisResult) -> dict[str, Any]:
         "confirmation": None if o.confirmation is None else [r.to_dict() for r in o.confirmation.tested],
         "confirmation_nominal": None if o.confirmation is None else o.confirmation.nominal,
         "rivals": None if unearned else rivals(o),
-        "learned_force_refused": ext.get("refused"),
+        "learned_force_refused": ext.refused,
     }
 
 
@@ -210,14 +210,14 @@ def write_figures(case: Case, o: Outcome, d: dict) -> list[str]:
     plot_ranking(fig / "ranking.png", sc.ranking, case.thresholds.min_delta_bic)
     _running_figures(case, o, fig)
     ext = o.extension
-    if d["learned_force"] and ext["system"] is not None and ext["system"].n_latent == 0:
+    if d["learned_force"] and ext.system is not None and ext.system.n_latent == 0:
         plot_learned(
             fig / "learned_force.png",
             record.t,
             nom.system,
             nom.values,
-            ext["system"],
-            ext["values"],
+            ext.system,
+            ext.values,
             pw,
             units,
         )
@@ -289,7 +289,7 @@ def amplitude_path(case: Case, o: Outcome) -> tuple[np.ndarray, np.ndarray, np.n
     period, zeta): the equivalent-linear structure at the envelope its simulated response
     carries (the free run the gain was measured on), beside the windows' fits. None without
     such a term."""
-    system, values = o.extension.get("system"), o.extension.get("values")
+    system, values = o.extension.system, o.extension.values
     term = next((t for t in getattr(system, "terms", []) if isinstance(t, AmplitudeSoftening)), None)
     if term is None:
         return None

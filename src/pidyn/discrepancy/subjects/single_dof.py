@@ -5,12 +5,13 @@ seen through the relative motion integrated from them (``accelerometers.motion_v
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from pidyn.data.checks import check_record
 from pidyn.discrepancy.accelerometers import motion_view, needs_view
-from pidyn.discrepancy.case import Case, Outcome, prepare, split_spans
+from pidyn.discrepancy.case import Case, Extension, Outcome, prepare, split_spans
 from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.learned_step import LEARNED, learned_row
 from pidyn.discrepancy.loop import Inputs, Step, Subject, extend
@@ -34,20 +35,6 @@ from pidyn.progress import Steps
 from pidyn.systems.sdof import SDOFSystem
 
 log = logging.getLogger(__name__)
-
-
-def _no_extension() -> dict[str, Any]:
-    """The extension's record before any step: what ``diagnosis.json`` reads of it."""
-    return {
-        "system": None,
-        "values": None,
-        "metrics": None,
-        "causes": [],
-        "steps": [],
-        "note": None,
-        "refused": None,
-        "learned_fit": None,
-    }
 
 
 class SingleDOF(Subject):
@@ -129,7 +116,7 @@ class SingleDOF(Subject):
     def _begin(self, cause: str | None, row: Evidence | None, forced: bool) -> None:
         """Extensions from the nominal model with ``cause`` first (its evidence ``row``); ``forced``:
         this run extends with the forced effect alone."""
-        self.ext = _no_extension()
+        self.ext = Extension()
         self.pending: tuple[str | None, Evidence | None] = (cause, row)
         self.limit = 1 if forced else int(self.case.settings.max_effects)
         self.forced_run = forced
@@ -150,31 +137,27 @@ class SingleDOF(Subject):
         assert cause is not None and row is not None
         step = extension_step(case, self.nom, node, values, cause, row, ext)
         if step is None:  # a learned force that predicts the held-out part worse: not kept
-            return Step(False, current, cause, ext["refused"])
+            return Step(False, current, cause, ext.refused)
         node, values, system = step
-        if len(ext["causes"]) >= self.limit:
+        if len(ext.causes) >= self.limit:
             if not self.forced_run:
                 log.info("stopping at diagnosis.max_effects=%d effects", self.limit)
         elif cause != LEARNED:  # the learned force takes whatever is left: nothing to screen after it
-            present = set(ext["causes"]) | {t.name for t in system.terms}
+            present = set(ext.causes) | {t.name for t in system.terms}
             blocked = set().union(*[g for g in EXCLUSIVE if g & present])
             remaining = {n: e for n, e in case.effects.items() if n not in present | blocked}
             if remaining:
                 nxt = next_cause(case, system, values, node, remaining, ext, self.nom.s, self.nom.weak)
-                if not (nxt[0] == LEARNED and LEARNED in ext["causes"]):
+                if not (nxt[0] == LEARNED and LEARNED in ext.causes):
                     self.pending = nxt
-        return Step(True, step, cause, ext["steps"][-1])
+        return Step(True, step, cause, ext.steps[-1])
 
     def conclude(self, current: Any, found: list, steps: list[Step], refused: Step | None) -> DiagnosisResult:
         case, nom = self.case, self.nom
         ext = self._names_earn_or_learn()
-        causes = ext["causes"] if case.settings.extend else ([] if self.cause is None else [self.cause])
+        causes = ext.causes if case.settings.extend else ([] if self.cause is None else [self.cause])
         self.progress.step("simulations and modes")
-        x_ext = (
-            case.free_run(ext["system"], ext["values"], float(nom.s.v[0]))
-            if ext["system"] is not None
-            else None
-        )
+        x_ext = case.free_run(ext.system, ext.values, float(nom.s.v[0])) if ext.system is not None else None
         sims = _acceleration_sims(case, nom, ext) if case.from_accelerometers else {}
         outcome = Outcome(
             nom,
@@ -195,24 +178,24 @@ class SingleDOF(Subject):
         )
         return conclusion(case, outcome)
 
-    def _names_earn_or_learn(self) -> dict[str, Any]:
+    def _names_earn_or_learn(self) -> Extension:
         """The library names of an extension must earn their place together (``unearned_names``, on
         the held-out errors the diagnosis reports): the members of a pair may help only together (a
         gap alone once predicted 1.82 -> 2.17, gap and friction 0.99). When they do not, the extension
         is not kept (``unearned``, with its steps) and a learned force is tried from the nominal model
         in their place; a forced effect's model is kept, its name still refused."""
         case, ext = self.case, self.ext
-        names = [c for c in ext["causes"] if c != LEARNED]
-        if not names or ext["system"] is None:
+        names = [c for c in ext.causes if c != LEARNED]
+        if not names or ext.system is None:
             return ext
         refused = unearned_names(names, heldout_errors(case, self.nom, ext), case.thresholds)
         if refused is None or self.forced:
-            return {**ext, "unearned": refused}
+            return replace(ext, unearned=refused)
         log.info("%s", refused["note"])
-        learned = case.settings.learn_unexplained and LEARNED not in ext["causes"]
+        learned = case.settings.learn_unexplained and LEARNED not in ext.causes
         self._begin(LEARNED if learned else None, learned_row(self.sc.structure) if learned else None, False)
         extend(self, self._start())
-        return {**self.ext, "unearned": {**refused, "steps": ext["steps"]}}
+        return replace(self.ext, unearned={**refused, "steps": ext.steps})
 
     def details(self, result: DiagnosisResult) -> dict[str, Any]:
         return summarize(self.case, result)
