@@ -17,6 +17,7 @@ from pidyn.discrepancy.storey_choice import Study, misfit_rows
 from pidyn.discrepancy.storey_model import (
     CORNER_SHARE,
     WINDOW_SHARE,
+    BuildingState,
     Found,
     building_with,
     storey_signals,
@@ -62,7 +63,7 @@ def _state(hidden: dict[int, list], named_k3: float):
     )
     system, vals = building_with(linear, values, [named])
     sd = np.nanstd(rec.a - rec.clean.a, axis=0)  # the sensors' noise, as the nominal refinement reads it
-    current = {"system": system, "values": vals, "noise": {"a": float(sd[0]), "a3": float(sd[2])}}
+    current = BuildingState(system, vals, {}, noise={"a": float(sd[0]), "a3": float(sd[2])})
     views, screenings = study.screen(current, [named])
     return study, current, [named], views, screenings
 
@@ -129,7 +130,7 @@ def test_the_misfit_search_stops_at_a_candidate_that_removes_nearly_all_of_it(mo
 
     monkeypatch.setattr(st, "fit_bic", lambda *a: 1000.0)
     monkeypatch.setattr(st, "storey_signals", lambda *a: (type("S", (), {"context": dict})(), None))
-    current = {"system": None, "values": {"k1": 1.0}, "noise": {}}
+    current = BuildingState(None, {"k1": 1.0}, {}, noise={})
     rows = [(1, Evidence(e, score=0.0)) for e in ("B", "A", "C")]
     misfit = {"channels": {"a1": {"excess": 1.0}}}
     best = st.confirm_leaning(FakeStudy(), current, [], [None], rows, misfit)
@@ -154,7 +155,9 @@ def test_a_first_name_that_leaves_most_of_the_misfit_is_challenged(monkeypatch):
     def test_of(excess: float, failed: bool = True) -> dict:
         return {"failed": failed, "channels": {"a1": {"excess": excess}}}
 
-    before, after = {"model": "before"}, {"model": "after"}
+    # the two models told apart by a mark in their held-out record (the fit test is faked)
+    before = BuildingState(None, {}, {"model": "before"}, noise={})
+    after = BuildingState(None, {}, {"model": "after"}, noise={})
     study = Study(None, None, DiagnosisSettings(), None, (0.0, 13.0), (13.0, 20.0))  # type: ignore[arg-type]
     monkeypatch.setattr(st, "fit_bic", lambda *a: 1000.0)
 
@@ -164,12 +167,12 @@ def test_a_first_name_that_leaves_most_of_the_misfit_is_challenged(monkeypatch):
 
     for excess_after, weak in ((0.9, True), (0.6, False)):  # 19 % and 64 % of the excess removed
         tests = {"before": test_of(1.0), "after": test_of(excess_after)}
-        study.fit_check = lambda current: tests[current["model"]]  # type: ignore[method-assign]
+        study.fit_check = lambda current: tests[current.heldout["model"]]  # type: ignore[method-assign]
         s = step()
-        assert st.weak_first_name(study, {**before, "system": None, "values": {}, "noise": {}}, s) is weak
+        assert st.weak_first_name(study, before, s) is weak
         assert s["report"]["delta_bic_fit"] == pytest.approx(300.0)
         assert s["report"]["misfit_explained"] == pytest.approx(1 - excess_after**2)
     study.fit_check = lambda current: test_of(1.0, failed=False)  # type: ignore[method-assign]
     s = step()
-    assert not st.weak_first_name(study, {**before, "system": None, "values": {}, "noise": {}}, s)
+    assert not st.weak_first_name(study, before, s)
     assert "delta_bic_fit" not in s["report"]  # nothing to compete with: no search, no gain computed

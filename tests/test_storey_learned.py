@@ -9,6 +9,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from pidyn.discrepancy.storey_model import BuildingState
+
 
 @pytest.mark.slow
 def test_a_learned_force_goes_to_the_storey_the_linear_model_misses(tmp_path):
@@ -38,11 +40,7 @@ def test_a_learned_force_goes_to_the_storey_the_linear_model_misses(tmp_path):
         held=(10.0, 15.0),
         settings=SimpleNamespace(learned=LearnedSettings(max_evaluations=16)),
     )
-    current = {
-        "system": linear,
-        "values": values,
-        "heldout": heldout_nrmse(record, linear, values, study.held),
-    }
+    current = BuildingState(linear, values, heldout_nrmse(record, linear, values, study.held))
     out = learned_storey_force(
         study, current, None, tmp_path, 1.0 / fundamental_hz(linear, values), heldout_nrmse
     )

@@ -12,7 +12,7 @@ import pytest
 from pidyn.data.sources import synthetic
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_choice import Study
-from pidyn.discrepancy.storey_model import CORNER_SHARE, WINDOW_SHARE
+from pidyn.discrepancy.storey_model import CORNER_SHARE, WINDOW_SHARE, BuildingState
 from pidyn.discrepancy.storey_nominal import fundamental_hz
 from pidyn.discrepancy.storey_ranking import rank_candidates
 from pidyn.systems.shear_building import ShearBuilding
@@ -44,7 +44,7 @@ def test_the_hidden_effect_in_its_storey_ranks_first(effect):
     study = Study(rec, linear, DiagnosisSettings(), None, (0.0, 13.0), (13.0, 20.0))
     f1 = fundamental_hz(linear, values)
     study.period, study.corner = WINDOW_SHARE / f1, CORNER_SHARE * f1
-    current = {"system": linear, "values": values, "noise": {}}
+    current = BuildingState(linear, values, {}, noise={})
     views, screenings = study.screen(current, [])
     rows = [(i, r) for i, sc in enumerate(screenings, start=1) for r in sc.ranking if r.parameters]
     assert len({r.effect for _, r in rows}) >= 6  # the whole library is in the race
@@ -92,7 +92,7 @@ def test_a_force_outside_the_library_puts_its_storey_first():
     study = Study(rec, linear, DiagnosisSettings(), None, (0.0, 13.0), (13.0, 20.0))
     f1 = fundamental_hz(linear, values)
     study.period, study.corner = WINDOW_SHARE / f1, CORNER_SHARE * f1
-    current = {"system": linear, "values": values, "noise": {}}
+    current = BuildingState(linear, values, {}, noise={})
     views, screenings = study.screen(current, [])
     rows = [(i, r) for i, sc in enumerate(screenings, start=1) for r in sc.ranking]
     ranked = rank_candidates(study, current, [], views, rows)  # the search before it, on the same model

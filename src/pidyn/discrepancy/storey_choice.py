@@ -17,6 +17,7 @@ from pidyn.discrepancy.screening import Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_extension import fit_bic, try_extension
 from pidyn.discrepancy.storey_model import (
+    BuildingState,
     Found,
     StoreyView,
     score_text,
@@ -121,7 +122,7 @@ def leaning_rows(screenings: list[Screening], settings: DiagnosisSettings) -> li
 
 def misfit_rows(
     study: Study,
-    current: dict,
+    current: BuildingState,
     found: list[Found],
     views: list[StoreyView],
     screenings: list[Screening],
@@ -171,7 +172,7 @@ def excess2(test: dict) -> float:
 
 def confirm_leaning(
     study: Study,
-    current: dict,
+    current: BuildingState,
     found: list[Found],
     views: list[StoreyView],
     rows: list[tuple[int, Evidence]],
@@ -187,10 +188,10 @@ def confirm_leaning(
     hysteretic top storey drew a quadratic damper in storey 1 that removed a tenth). The
     strongest such effect is returned, or None."""
     record, fit, settings = study.record, study.fit, study.settings
-    base = fit_bic(record, current["system"], current["values"], fit, current["noise"])
+    base = fit_bic(record, current.system, current.values, fit, current.noise)
     best = None
     for storey, row in rows:
-        sig, _ = storey_signals(views[storey - 1], current["values"][f"k{storey}"], study.period, fit[1])
+        sig, _ = storey_signals(views[storey - 1], current.values[f"k{storey}"], study.period, fit[1])
         cand = Found(row.effect, storey, dict(row.parameters), row, sig.context())
         trial = study.extend(current, found, cand)
         gain = base - trial["report"]["fit_bic"]
@@ -259,20 +260,18 @@ class Study:
     #: the same model
     fits: dict = field(default_factory=dict)
 
-    def screen(self, current: dict, found: list[Found]) -> tuple[list[StoreyView], list[Screening]]:
-        views = storey_views(self.record, current["system"], current["values"], self.corner)
-        return views, screen_storeys(views, current["values"], found, self.period, self.fit[1], self.settings)
+    def screen(self, current: BuildingState, found: list[Found]) -> tuple[list[StoreyView], list[Screening]]:
+        views = storey_views(self.record, current.system, current.values, self.corner)
+        return views, screen_storeys(views, current.values, found, self.period, self.fit[1], self.settings)
 
-    def fit_check(self, current: dict) -> dict:
-        system = current["system"]
-        model = (tuple(t.name for t in system.terms), repr(sorted(current["values"].items())))
+    def fit_check(self, current: BuildingState) -> dict:
+        system = current.system
+        model = (tuple(t.name for t in system.terms), repr(sorted(current.values.items())))
         if model not in self.fits:
-            self.fits[model] = building_fit_test(
-                self.record, system, current["values"], self.fit, self.settings
-            )
+            self.fits[model] = building_fit_test(self.record, system, current.values, self.fit, self.settings)
         return self.fits[model]
 
-    def extend(self, current: dict, found: list[Found], cand: Found) -> dict:
+    def extend(self, current: BuildingState, found: list[Found], cand: Found) -> dict:
         return try_extension(
             self.record,
             self.system,

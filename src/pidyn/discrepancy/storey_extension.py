@@ -12,7 +12,7 @@ import numpy as np
 from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.settings import DiagnosisSettings
-from pidyn.discrepancy.storey_model import Found, building_with
+from pidyn.discrepancy.storey_model import BuildingState, Found, building_with
 from pidyn.discrepancy.storey_nominal import heldout_nrmse
 from pidyn.discrepancy.storey_ranking import floor_noise, measured_floors, trial_values
 from pidyn.refine.stage import refine
@@ -26,7 +26,7 @@ log = logging.getLogger(__name__)
 def try_extension(
     record: Record,
     nominal_system: ShearBuilding,
-    current: dict,
+    current: BuildingState,
     found: list[Found],
     cand: Found,
     fit: tuple[float, float],
@@ -41,7 +41,7 @@ def try_extension(
     # width read from filtered drifts is biased, and the friction's size follows its width)
     cand = replace(cand, ctx={**cand.ctx, "free_width": True})
     ext, start = building_with(
-        nominal_system, trial_values(current["values"], cand.storey, cand.row), [*found, cand]
+        nominal_system, trial_values(current.values, cand.storey, cand.row), [*found, cand]
     )
     log.info(
         "storey %d: %s (score %.1f), extending and refining",
@@ -54,8 +54,8 @@ def try_extension(
     )
     values = {**start, **res.params}
     ho = heldout_nrmse(record, ext, values, held)
-    before = current["heldout"]["mean"]
-    bic = fit_bic(record, ext, values, fit, current["noise"])
+    before = current.heldout["mean"]
+    bic = fit_bic(record, ext, values, fit, current.noise)
     accepted = bool(np.isfinite(ho["mean"]) and ho["mean"] < before * (1.0 - float(settings.storey_min_gain)))
     params, report = _step_report(cand, values, res, bic, before, ho["mean"], accepted)
     if accepted and (spread := size_spread(cand, report)) > float(settings.storey_max_rel_std):
@@ -76,7 +76,7 @@ def try_extension(
         "accepted": accepted,
         "report": report,
         "found": done,
-        "current": {"system": ext, "values": values, "heldout": ho, "result": res, "noise": current["noise"]},
+        "current": BuildingState(ext, values, ho, res, current.noise),
     }
 
 

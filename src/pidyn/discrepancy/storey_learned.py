@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 from pidyn.discrepancy.learned_fit import fit_learned_force
+from pidyn.discrepancy.storey_model import BuildingState
 from pidyn.simulate import simulate_response
 from pidyn.systems.shear_building import ShearBuilding
 from pidyn.systems.terms import LearnedForce
@@ -103,7 +104,7 @@ def _train_best(study, system, values, storeys: list[int], drifts, velocities, p
 
 def learned_storey_force(
     study: Any,
-    current: dict,
+    current: BuildingState,
     storeys: list[int] | None,
     folder: Path | None,
     period: float,
@@ -115,7 +116,7 @@ def learned_storey_force(
     ``heldout(record, system, values, span)`` scores it as the diagnosis scores every model.
     Its held-out gain, and whether it is kept; None when no storey's network can be trained
     (a fitting part shorter than one segment)."""
-    record, system, values = study.record, current["system"], current["values"]
+    record, system, values = study.record, current.system, current.values
     sim = simulate_response(system, values, record)
     drifts, velocities = system._drifts(sim["x"], sim["v"])  # per storey, as the equations take them
     ordered = bool(storeys)
@@ -125,7 +126,7 @@ def learned_storey_force(
         return None
     chosen, ext, res, seconds, tried = picked
     held = heldout(record, ext, res.values, study.held)
-    before = current["heldout"]["mean"]
+    before = current.heldout["mean"]
     kept = bool(np.isfinite(held["mean"]) and held["mean"] < before)
     out = {
         "storey": chosen,

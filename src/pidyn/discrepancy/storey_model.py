@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -65,6 +66,18 @@ class Found:
     params: dict[str, float]
     row: Evidence  # the evidence it was tried on
     ctx: dict
+
+
+@dataclass
+class BuildingState:
+    """The building model the loop holds: its system and values, its held-out errors (mean and per
+    floor), the refinement's result and the noise it estimated per channel."""
+
+    system: Any
+    values: dict[str, float]
+    heldout: dict
+    result: Any = None
+    noise: dict | None = None
 
 
 @dataclass

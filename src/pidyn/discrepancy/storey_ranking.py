@@ -24,7 +24,7 @@ import numpy as np
 from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.evidence import Evidence
-from pidyn.discrepancy.storey_model import Found, building_with, storey_signals
+from pidyn.discrepancy.storey_model import BuildingState, Found, building_with, storey_signals
 from pidyn.simulate import input_hold, simulate_batch
 
 
@@ -110,7 +110,7 @@ def _trials(row: Evidence, span: tuple[float, float], drift_peak: float, k: floa
 
 
 def rank_candidates(
-    study, current: dict, found: list, views: list, rows: list[tuple[int, Evidence]]
+    study, current: BuildingState, found: list, views: list, rows: list[tuple[int, Evidence]]
 ) -> list[Ranked]:
     """``rows`` (storey, weak-form row) scored and sorted, best first (the module's docstring)."""
     ranked, _ = _scored(study, current, found, views, rows)
@@ -118,7 +118,7 @@ def rank_candidates(
 
 
 def storey_order(
-    study, current: dict, found: list, views: list, rows: list[tuple[int, Evidence]]
+    study, current: BuildingState, found: list, views: list, rows: list[tuple[int, Evidence]]
 ) -> list[int]:
     """The storeys, the one whose candidates together remove most of the fitting part's misfit
     first: the projection of the residual on the span of all its candidates' directions (a
@@ -135,19 +135,19 @@ def storey_order(
 
 
 def _scored(
-    study, current: dict, found: list, views: list, rows: list[tuple[int, Evidence]]
+    study, current: BuildingState, found: list, views: list, rows: list[tuple[int, Evidence]]
 ) -> tuple[list[Ranked], np.ndarray]:
     """The candidates scored (best first) and the current model's residual, its parameters profiled out."""
     record, fit = study.record, study.fit
     mask = (record.t >= fit[0]) & (record.t <= fit[1])
     floors = measured_floors(record)
-    scale = np.tile(floor_noise(record, current["noise"], mask), int(mask.sum()))
+    scale = np.tile(floor_noise(record, current.noise, mask), int(mask.sum()))
     memo = _memo(study, current, found)
     if "r" not in memo:
         meas = record.a[mask][:, floors].reshape(-1) / scale
-        base_sys, base_vals = building_with(study.system, current["values"], found)
-        resid = meas - _simulate(current["system"], [current["values"]], record, floors, mask)[0] / scale
-        q = _profiled(current["system"], current["values"], record, floors, mask, scale)
+        base_sys, base_vals = building_with(study.system, current.values, found)
+        resid = meas - _simulate(current.system, [current.values], record, floors, mask)[0] / scale
+        q = _profiled(current.system, current.values, record, floors, mask, scale)
         memo.update(q=q, r=resid - q @ (q.T @ resid), rows={})
         memo["base"] = _simulate(base_sys, [base_vals], record, floors, mask)[0] / scale
     q, r, base = memo["q"], memo["r"], memo["base"]
@@ -159,12 +159,12 @@ def _scored(
             if memo["rows"][key] is not None:
                 out.append(memo["rows"][key])
             continue
-        sig, _ = storey_signals(views[storey - 1], current["values"][f"k{storey}"], study.period, fit[1])
+        sig, _ = storey_signals(views[storey - 1], current.values[f"k{storey}"], study.period, fit[1])
         if not row.parameters:  # the weak form found no physical fit: a typical size is tried
             row = replace(row, parameters=EFFECTS[row.effect].sample(np.random.default_rng(0), sig))
         view = views[storey - 1]
-        trials = _trials(row, fit, float(np.max(np.abs(view.drift))), float(current["values"][f"k{storey}"]))
-        start = trial_values(current["values"], storey, row)
+        trials = _trials(row, fit, float(np.max(np.abs(view.drift))), float(current.values[f"k{storey}"]))
+        start = trial_values(current.values, storey, row)
         systems = [
             building_with(study.system, start, [*found, Found(row.effect, storey, p, row, sig.context())])
             for p in trials
@@ -182,16 +182,16 @@ def _scored(
     return out, r
 
 
-def _memo(study, current: dict, found: list) -> dict:
+def _memo(study, current: BuildingState, found: list) -> dict:
     """The score test's store for one model (its system, parameter values and named effects)."""
     store = getattr(study, "scores", None)
     if store is None:
         return {}
     model = (
-        current["system"].name,
-        repr(sorted(current["values"].items())),
+        current.system.name,
+        repr(sorted(current.values.items())),
         tuple((f.effect, f.storey) for f in found),
-        repr(sorted(current["noise"].items())),
+        repr(sorted(current.noise.items())),
     )
     return store.setdefault(model, {})
 

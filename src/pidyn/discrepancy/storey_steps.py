@@ -20,14 +20,18 @@ from pidyn.discrepancy.storey_choice import (
     misfit_rows,
 )
 from pidyn.discrepancy.storey_extension import fit_bic
-from pidyn.discrepancy.storey_model import Found, StoreyView, score_text, storey_signals
+from pidyn.discrepancy.storey_model import BuildingState, Found, StoreyView, score_text, storey_signals
 from pidyn.notes import note
 
 log = logging.getLogger(__name__)
 
 
 def next_step(
-    study: Study, current: dict, found: list[Found], views: list[StoreyView], screenings: list[Screening]
+    study: Study,
+    current: BuildingState,
+    found: list[Found],
+    views: list[StoreyView],
+    screenings: list[Screening],
 ) -> dict | None:
     """The next extension: the strongest named cause (and its close rivals, the fitting part's
     output error choosing), or, where the weak form names nothing, a leaning effect the output
@@ -76,7 +80,7 @@ def next_step(
     return other
 
 
-def weak_first_name(study: Study, current: dict, step: dict) -> bool:
+def weak_first_name(study: Study, current: BuildingState, step: dict) -> bool:
     """Whether the weak form's first name leaves most of the model's misfit: the building
     fails the fit test before it, and the name removes less than ``confirm.misfit_share`` of
     the fitting part's excess over the noise. Then the score test's candidates, every storey's,
@@ -87,7 +91,7 @@ def weak_first_name(study: Study, current: dict, step: dict) -> bool:
     if not misfit["failed"]:
         return False
     explained = 1.0 - excess2(study.fit_check(step["current"])) / max(excess2(misfit), 1e-300)
-    base = fit_bic(study.record, current["system"], current["values"], study.fit, current["noise"])
+    base = fit_bic(study.record, current.system, current.values, study.fit, current.noise)
     step["report"].update(delta_bic_fit=base - step["report"]["fit_bic"], misfit_explained=explained)
     weak = explained < float(study.settings.confirm.misfit_share)
     if weak:
@@ -107,7 +111,7 @@ def _gain(step: dict) -> float:
 
 def named_step(
     study: Study,
-    current: dict,
+    current: BuildingState,
     found: list[Found],
     views: list[StoreyView],
     rivals: list[tuple[int, Evidence]],
@@ -115,7 +119,7 @@ def named_step(
     """The weak form's named cause and its close rivals in the same storey, each extended and
     refined; the fitting part's output error chooses (``better``)."""
     storey = rivals[0][0]
-    sig, _ = storey_signals(views[storey - 1], current["values"][f"k{storey}"], study.period, study.fit[1])
+    sig, _ = storey_signals(views[storey - 1], current.values[f"k{storey}"], study.period, study.fit[1])
     step = None
     for _, rival in rivals:
         cand = Found(rival.effect, storey, dict(rival.parameters), rival, sig.context())
@@ -137,16 +141,16 @@ def named_step(
     return step
 
 
-def building_gain(nominal: dict, current: dict, extended: bool) -> dict:
+def building_gain(nominal: dict, current: BuildingState, extended: bool) -> dict:
     """``gain`` of ``diagnosis.json``: the held-out NRMSE of the floor accelerations."""
     trivial = nominal["heldout"].get("trivial")
     out = {
         "metric": "heldout_nrmse_a",
         "nominal": nominal["heldout"]["mean"],
-        "extended": current["heldout"]["mean"] if extended else None,
+        "extended": current.heldout["mean"] if extended else None,
         "per_floor": {
             "nominal": nominal["heldout"]["per_floor"],
-            "extended": current["heldout"]["per_floor"] if extended else None,
+            "extended": current.heldout["per_floor"] if extended else None,
             "trivial": nominal["heldout"].get("trivial_per_floor"),
         },
         "trivial": trivial,

@@ -46,6 +46,7 @@ from pidyn.discrepancy.storey_learned import learned_storey_force
 from pidyn.discrepancy.storey_model import (
     CORNER_SHARE,
     WINDOW_SHARE,
+    BuildingState,
     Found,
     StoreyView,
 )
@@ -63,7 +64,7 @@ log = logging.getLogger(__name__)
 
 def learned_step(
     study: Study,
-    current: dict,
+    current: BuildingState,
     found: list[Found],
     screened: tuple[list[StoreyView], list[Screening]],
     storey: int | None,
@@ -71,9 +72,9 @@ def learned_step(
 ) -> tuple[dict, dict | None]:
     """The current model with a learned storey force when it is kept (``storey_learned``), and the
     report. Its storey: the structured one, else the ``learned.storeys`` the score test puts first."""
-    period = 1.0 / fundamental_hz(current["system"], current["values"])
+    period = 1.0 / fundamental_hz(current.system, current.values)
     storeys = [storey] if storey else None
-    if storey is None and current["system"].n_dof > int(study.settings.learned.storeys):
+    if storey is None and current.system.n_dof > int(study.settings.learned.storeys):
         views, screenings = screened
         rows = [(i, r) for i, sc in enumerate(screenings, start=1) for r in sc.ranking]
         order = storey_order(study, current, found, views, rows)
@@ -81,25 +82,25 @@ def learned_step(
         storeys = order[: int(study.settings.learned.storeys)] or None
     learned = learned_storey_force(study, current, storeys, run_dir, period, heldout_nrmse)
     if learned is not None and learned["kept"]:  # its storey: learned["storey"]
-        current = {**current, "system": learned["system"], "values": learned["values"]}
-        current["heldout"] = learned["heldout"]
+        current = replace(current, system=learned["system"], values=learned["values"])
+        current.heldout = learned["heldout"]
     return current, learned
 
 
-def extended_entry(current: dict, found: list[Found], learned_kept: bool) -> dict | None:
+def extended_entry(current: BuildingState, found: list[Found], learned_kept: bool) -> dict | None:
     """The extended model's entry: the named effects', or a kept learned force's."""
     if not found and not learned_kept:
         return None
     return {
-        "system": current["system"].name,
-        "params": current["values"],
-        "intervals": current["result"].intervals if found else {},
-        "storey_equations": current["system"].storey_equations(current["values"]),
+        "system": current.system.name,
+        "params": current.values,
+        "intervals": current.result.intervals if found else {},
+        "storey_equations": current.system.storey_equations(current.values),
     }
 
 
 def building_verdict(
-    study: Study, current: dict, found: list[Found], screenings: list[Screening]
+    study: Study, current: BuildingState, found: list[Found], screenings: list[Screening]
 ) -> tuple[Verdict, int | None, list[str], dict | None]:
     """``discrepancy`` with a named effect; ``unexplained`` when a storey's force is structured
     and nothing earned its place, or when the nominal building fails the held-out test (with the
@@ -146,12 +147,12 @@ def building_verdict(
     return verdict, unexplained, notes, check
 
 
-def building_heldout_test(study: Study, current: dict) -> dict:
+def building_heldout_test(study: Study, current: BuildingState) -> dict:
     """The calibrated held-out test (``pidyn.discrepancy.heldout_check.heldout_check``) on every measured
     floor's relative acceleration, simulated from rest, with the sensitivities to the building's
     trainable parameters; a floor fails below the test's level shared among the floors
     (Bonferroni)."""
-    record, system, values = study.record, current["system"], current["values"]
+    record, system, values = study.record, current.system, current.values
     floors = measured_floors(record)
     names = [s.name for s in system.param_specs() if s.trainable and s.name in values]
 
@@ -210,11 +211,5 @@ def nominal_state(study: Study, start: dict | None) -> tuple[dict, dict]:
     f1 = fundamental_hz(system, values)
     study.period = WINDOW_SHARE / f1
     study.corner = max(CORNER_SHARE * f1, 2.0 / float(record.t[-1] - record.t[0]))
-    current = {
-        "system": system,
-        "values": values,
-        "heldout": nominal["heldout"],
-        "result": res,
-        "noise": res.noise_std,
-    }
+    current = BuildingState(system, values, nominal["heldout"], res, res.noise_std)
     return nominal, current

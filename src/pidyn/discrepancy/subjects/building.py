@@ -16,7 +16,7 @@ from pidyn.discrepancy.loop import Inputs, Step, Subject
 from pidyn.discrepancy.result import DiagnosisResult, Finding, HeldoutErrors, trivial_note
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_choice import Study
-from pidyn.discrepancy.storey_model import BuildingDiagnosis
+from pidyn.discrepancy.storey_model import BuildingDiagnosis, BuildingState
 from pidyn.discrepancy.storey_report import report_lines, summarize_building, write_building_figures
 from pidyn.discrepancy.storey_steps import building_gain, next_step, refusal_notes
 from pidyn.discrepancy.storeys import building_verdict, extended_entry, learned_step, nominal_state
@@ -95,7 +95,7 @@ class Building(Subject):
     def more(self, found: list) -> bool:
         return len(found) < int(self.settings.max_effects) and bool(self.settings.extend)
 
-    def next_step(self, current: dict, found: list) -> Step | None:
+    def next_step(self, current: BuildingState, found: list) -> Step | None:
         self.progress.step(f"screening the storeys for effect {len(found) + 1}")
         views, screenings = self.study.screen(current, found)
         step = next_step(self.study, current, found, views, screenings)
@@ -104,7 +104,7 @@ class Building(Subject):
         return Step(bool(step["accepted"]), step.get("current"), step.get("found"), step["report"])
 
     def conclude(
-        self, current: dict, found: list, steps: list[Step], refused: Step | None
+        self, current: BuildingState, found: list, steps: list[Step], refused: Step | None
     ) -> DiagnosisResult:
         study, settings, nominal = self.study, self.settings, self.nominal_report
         self.progress.step("the final screening and the verdict", last=True)
@@ -130,7 +130,7 @@ class Building(Subject):
             unexplained,
             views,
             screenings,
-            current["values"],
+            current.values,
             study.corner,
             notes,
             None
