@@ -21,7 +21,7 @@ log = logging.getLogger("pidyn.tasks.diagnose")
 #: the verdict in words, whatever the structure
 VERDICT_WORDS = {
     Verdict.NONE: "No candidate effect explains more of the residual than noise and the model's own error "
-    "would (thresholds below). The nominal model is adequate for these data.",
+    "would. The nominal model is adequate for these data.",
     Verdict.UNEXPLAINED: "The nominal model is clearly wrong on these data, but no effect of the library (nor "
     "a change of stiffness or damping in time) explains what it misses. Look at the residual force "
     "before trusting this model.",
