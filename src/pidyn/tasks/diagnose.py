@@ -7,10 +7,10 @@ The nominal and extended identifications are ordinary PIDynNet runs in ``nominal
 
 from __future__ import annotations
 
-import copy
 import json
 import logging
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -62,7 +62,7 @@ def compose_subject(cfg: DictConfig, record: Record | None = None) -> Subject:
     assert isinstance(node, dict)
 
     def identify(rec: Record, system_node: dict, folder: Path, fit: tuple[float, float]):
-        metrics, obj = train_identify(_sub_cfg(cfg, system_node, folder, fit), rec)
+        metrics, obj = train_identify(SubRun(system_node, folder, fit).config(cfg), rec)
         return metrics, obj["system"], obj["module"].net.params.as_floats()
 
     def refine_settings():
@@ -84,21 +84,35 @@ def compose_subject(cfg: DictConfig, record: Record | None = None) -> Subject:
     return subject.compose(system, inputs)
 
 
-def _sub_cfg(cfg: DictConfig, system_node: dict, out_dir: Path, fit: tuple[float, float]) -> DictConfig:
-    """The config of one identification inside the diagnosis (saved in its folder)."""
-    c = copy.deepcopy(cfg)
-    with open_dict(c):
-        c.system = system_node
-        c.paths.output_dir = str(out_dir)
-        c.data.windows.t_start = fit[0]
-        c.data.windows.t_end = fit[1]
-        c.baselines = {"run": [], "cramer_rao": False}
-        c.model.refine = {
-            "method": "none"
-        }  # the diagnosis polishes with output error itself (diagnosis.polish)
-        c.model.start = "config"  # the diagnosis gives its own start (weak form, then each step's estimate)
+@dataclass
+class SubRun:
+    """One identification inside the diagnosis, as the loop asks for it: the model (a system
+    node), its run folder and fitting span. The rest is how the diagnosis identifies: PIDynNet
+    alone (the diagnosis polishes by output error itself, ``diagnosis.polish``), no baselines (the
+    screening is their peer), started where the diagnosis puts it (the weak form, then each step's
+    estimate: ``model.start=config``) and with the diagnosis's least-squares start."""
+
+    system: dict
+    folder: Path
+    fit: tuple[float, float]
+
+    def config(self, cfg: DictConfig) -> DictConfig:
+        """The sub-run's config: the diagnosis's, with this run's model, folder and span (saved in
+        the folder as ``config.yaml``)."""
+        own: dict[str, Any] = {
+            "paths": {"output_dir": str(self.folder)},
+            "baselines": {"run": [], "cramer_rao": False},
+            "model": {"refine": {"method": "none"}, "start": "config"},
+        }
         if cfg.diagnosis.get("ls_init") is not None:
-            c.model.schedule.ls_init = cfg.diagnosis.ls_init
-    out_dir.mkdir(parents=True, exist_ok=True)
-    OmegaConf.save(c, out_dir / "config.yaml", resolve=False)
-    return c
+            own["model"]["schedule"] = {"ls_init": cfg.diagnosis.ls_init}
+        c = OmegaConf.merge(cfg, own)
+        assert isinstance(c, DictConfig)
+        with open_dict(c):
+            c.system = self.system  # a model replaces the config's whole, it is not merged into it
+            # the span is set on the windows the data's node points to (a CSV's is an interpolation,
+            # which a merge would replace by the span alone)
+            c.data.windows.t_start, c.data.windows.t_end = self.fit
+        self.folder.mkdir(parents=True, exist_ok=True)
+        OmegaConf.save(c, self.folder / "config.yaml", resolve=False)
+        return c
