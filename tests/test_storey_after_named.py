@@ -12,6 +12,7 @@ import pytest
 from pidyn.data.sources import synthetic
 from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.evidence import Evidence
+from pidyn.discrepancy.loop import Step
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_choice import Study, misfit_rows
 from pidyn.discrepancy.storey_model import (
@@ -123,7 +124,7 @@ def test_the_misfit_search_stops_at_a_candidate_that_removes_nearly_all_of_it(mo
         def extend(self, current, found, cand):
             tried.append(cand.effect)
             report = {"fit_bic": bic[cand.effect], "effect": cand.effect}
-            return {"accepted": True, "report": report, "current": {"excess": left[cand.effect]}}
+            return Step(True, {"excess": left[cand.effect]}, None, report)
 
         def fit_check(self, current):
             return {"channels": {"a1": {"excess": current["excess"]}}}
@@ -135,9 +136,7 @@ def test_the_misfit_search_stops_at_a_candidate_that_removes_nearly_all_of_it(mo
     misfit = {"channels": {"a1": {"excess": 1.0}}}
     best = st.confirm_leaning(FakeStudy(), current, [], [None], rows, misfit)
     assert tried == ["B", "A"]  # A removed 99.75 % of the squared excess: C was not refined
-    assert (
-        best["report"]["effect"] == "A" and best["report"]["misfit_explained"] > settings.confirm.misfit_done
-    )
+    assert best.report["effect"] == "A" and best.report["misfit_explained"] > settings.confirm.misfit_done
     tried.clear()
     best = st.confirm_leaning(
         FakeStudy(), current, [], [None], [(1, replace(rows[0][1], effect="D"))], misfit
@@ -161,18 +160,18 @@ def test_a_first_name_that_leaves_most_of_the_misfit_is_challenged(monkeypatch):
     study = Study(None, None, DiagnosisSettings(), None, (0.0, 13.0), (13.0, 20.0))  # type: ignore[arg-type]
     monkeypatch.setattr(st, "fit_bic", lambda *a: 1000.0)
 
-    def step() -> dict:
+    def step() -> Step:
         report = {"effect": "cubic_stiffness", "storey": 3, "fit_bic": 700.0}
-        return {"accepted": True, "report": report, "current": after}
+        return Step(True, after, None, report)
 
     for excess_after, weak in ((0.9, True), (0.6, False)):  # 19 % and 64 % of the excess removed
         tests = {"before": test_of(1.0), "after": test_of(excess_after)}
         study.fit_check = lambda current: tests[current.heldout["model"]]  # type: ignore[method-assign]
         s = step()
         assert st.weak_first_name(study, before, s) is weak
-        assert s["report"]["delta_bic_fit"] == pytest.approx(300.0)
-        assert s["report"]["misfit_explained"] == pytest.approx(1 - excess_after**2)
+        assert s.report["delta_bic_fit"] == pytest.approx(300.0)
+        assert s.report["misfit_explained"] == pytest.approx(1 - excess_after**2)
     study.fit_check = lambda current: test_of(1.0, failed=False)  # type: ignore[method-assign]
     s = step()
     assert not st.weak_first_name(study, before, s)
-    assert "delta_bic_fit" not in s["report"]  # nothing to compete with: no search, no gain computed
+    assert "delta_bic_fit" not in s.report  # nothing to compete with: no search, no gain computed

@@ -13,6 +13,7 @@ from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.fit_test import fit_test
+from pidyn.discrepancy.loop import Step
 from pidyn.discrepancy.screening import Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_extension import fit_bic, try_extension
@@ -177,7 +178,7 @@ def confirm_leaning(
     views: list[StoreyView],
     rows: list[tuple[int, Evidence]],
     misfit: dict | None = None,
-) -> dict | None:
+) -> Step | None:
     """The output-error check of ``rows`` (storey, weak-form row): each effect's extension refined
     on the fitting part and named when its free simulation beats the current model's by
     ``min_delta_bic`` (BIC, in the nominal fit's noise units) and it predicts the held-out floor
@@ -194,12 +195,12 @@ def confirm_leaning(
         sig, _ = storey_signals(views[storey - 1], current.values[f"k{storey}"], study.period, fit[1])
         cand = Found(row.effect, storey, dict(row.parameters), row, sig.context())
         trial = study.extend(current, found, cand)
-        gain = base - trial["report"]["fit_bic"]
-        trial["report"].update(source="output_error", delta_bic_fit=gain)
-        ok = gain >= float(settings.thresholds.min_delta_bic) and trial["accepted"]
+        gain = base - trial.report["fit_bic"]
+        trial.report.update(source="output_error", delta_bic_fit=gain)
+        ok = gain >= float(settings.thresholds.min_delta_bic) and trial.accepted
         if misfit is not None:
-            explained = 1.0 - excess2(study.fit_check(trial["current"])) / max(excess2(misfit), 1e-300)
-            trial["report"].update(source="fit_test", misfit_explained=explained)
+            explained = 1.0 - excess2(study.fit_check(trial.current)) / max(excess2(misfit), 1e-300)
+            trial.report.update(source="fit_test", misfit_explained=explained)
             ok = ok and explained >= float(settings.confirm.misfit_share)
         log.info(
             "output-error check of %s in storey %d (weak-form score %s): BIC gain %.1f on the fitting part%s",
@@ -207,14 +208,14 @@ def confirm_leaning(
             storey,
             score_text(row.score),
             gain,
-            "" if misfit is None else f", {trial['report']['misfit_explained']:.0%} of the misfit explained",
+            "" if misfit is None else f", {trial.report['misfit_explained']:.0%} of the misfit explained",
         )
-        if ok and (best is None or gain > best["report"]["delta_bic_fit"]):
+        if ok and (best is None or gain > best.report["delta_bic_fit"]):
             best = trial
         if (
             ok
             and misfit is not None
-            and trial["report"]["misfit_explained"] >= float(settings.confirm.misfit_done)
+            and trial.report["misfit_explained"] >= float(settings.confirm.misfit_done)
         ):
             break  # the rows come best first (the score test): what is left is too little for another
     return best
@@ -271,7 +272,7 @@ class Study:
             self.fits[model] = building_fit_test(self.record, system, current.values, self.fit, self.settings)
         return self.fits[model]
 
-    def extend(self, current: BuildingState, found: list[Found], cand: Found) -> dict:
+    def extend(self, current: BuildingState, found: list[Found], cand: Found) -> Step:
         return try_extension(
             self.record,
             self.system,

@@ -11,6 +11,7 @@ import numpy as np
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS
+from pidyn.discrepancy.loop import Step
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_model import BuildingState, Found, building_with
 from pidyn.discrepancy.storey_nominal import heldout_nrmse
@@ -33,7 +34,7 @@ def try_extension(
     held: tuple[float, float],
     settings: DiagnosisSettings,
     refine_settings: Any,
-) -> dict:
+) -> Step:
     """The building with ``cand`` added, refined on the fitting part; accepted when it predicts
     the held-out floor accelerations better than the current model by ``storey_min_gain``."""
 
@@ -72,12 +73,7 @@ def try_extension(
         step_outcome(report),
     )
     done = Found(cand.effect, cand.storey, params, cand.row, cand.ctx)
-    return {
-        "accepted": accepted,
-        "report": report,
-        "found": done,
-        "current": BuildingState(ext, values, ho, res, current.noise),
-    }
+    return Step(accepted, BuildingState(ext, values, ho, res, current.noise), done, report)
 
 
 def size_spread(cand: Found, report: dict) -> float:

@@ -8,6 +8,7 @@ import logging
 import numpy as np
 
 from pidyn.discrepancy.evidence import Evidence
+from pidyn.discrepancy.loop import Step
 from pidyn.discrepancy.screening import Screening
 from pidyn.discrepancy.storey_choice import (
     Study,
@@ -32,7 +33,7 @@ def next_step(
     found: list[Found],
     views: list[StoreyView],
     screenings: list[Screening],
-) -> dict | None:
+) -> Step | None:
     """The next extension: the strongest named cause (and its close rivals, the fitting part's
     output error choosing), or, where the weak form names nothing, a leaning effect the output
     error confirms; then, with the weak form's name refused (or none given), for a building that
@@ -48,10 +49,10 @@ def next_step(
         tried = [(pick[0], r) for r in close_rivals(screenings[pick[0] - 1], pick[1], study.settings)]
         step = named_step(study, current, found, views, tried)
     after = float(study.settings.confirm.after_named_share)
-    if step is not None and step["accepted"] and pick is not None and not found:
+    if step is not None and step.accepted and pick is not None and not found:
         if not weak_first_name(study, current, step):
             return step
-    elif (step is not None and step["accepted"] and (pick is not None or found)) or (found and after <= 0):
+    elif (step is not None and step.accepted and (pick is not None or found)) or (found and after <= 0):
         return step
     # a leaning effect the output error confirmed competes with the fit test's candidates (a
     # friction in storey 3 at 4.9 % noise: a damping change there, weak-form score 0.1, gained 16
@@ -75,12 +76,12 @@ def next_step(
     # finds strong is tried (a quadratic damper in storey 1 beside a named cubic spring in storey 2)
     rows = misfit_rows(study, current, found, views, screenings, tried, after if found else 0.0)
     other = confirm_leaning(study, current, found, views, rows, misfit)
-    if other is None or (step is not None and step["accepted"] and _gain(step) >= _gain(other)):
+    if other is None or (step is not None and step.accepted and _gain(step) >= _gain(other)):
         return step
     return other
 
 
-def weak_first_name(study: Study, current: BuildingState, step: dict) -> bool:
+def weak_first_name(study: Study, current: BuildingState, step: Step) -> bool:
     """Whether the weak form's first name leaves most of the model's misfit: the building
     fails the fit test before it, and the name removes less than ``confirm.misfit_share`` of
     the fitting part's excess over the noise. Then the score test's candidates, every storey's,
@@ -90,23 +91,23 @@ def weak_first_name(study: Study, current: BuildingState, step: dict) -> bool:
     misfit = study.fit_check(current)
     if not misfit["failed"]:
         return False
-    explained = 1.0 - excess2(study.fit_check(step["current"])) / max(excess2(misfit), 1e-300)
+    explained = 1.0 - excess2(study.fit_check(step.current)) / max(excess2(misfit), 1e-300)
     base = fit_bic(study.record, current.system, current.values, study.fit, current.noise)
-    step["report"].update(delta_bic_fit=base - step["report"]["fit_bic"], misfit_explained=explained)
+    step.report.update(delta_bic_fit=base - step.report["fit_bic"], misfit_explained=explained)
     weak = explained < float(study.settings.confirm.misfit_share)
     if weak:
         log.info(
             "storey %d %s removes %.0f%% of the fitting part's excess over the noise: the score test's "
             "candidates compete with it",
-            step["report"]["storey"],
-            step["report"]["effect"],
+            step.report["storey"],
+            step.report["effect"],
             100 * explained,
         )
     return weak
 
 
-def _gain(step: dict) -> float:
-    return float(step["report"].get("delta_bic_fit") or -np.inf)
+def _gain(step: Step) -> float:
+    return float(step.report.get("delta_bic_fit") or -np.inf)
 
 
 def named_step(
@@ -115,7 +116,7 @@ def named_step(
     found: list[Found],
     views: list[StoreyView],
     rivals: list[tuple[int, Evidence]],
-) -> dict:
+) -> Step:
     """The weak form's named cause and its close rivals in the same storey, each extended and
     refined; the fitting part's output error chooses (``better``)."""
     storey = rivals[0][0]
@@ -129,14 +130,14 @@ def named_step(
                 "storey %d: %s (fitting-part BIC %.1f) against %s (%.1f)",
                 storey,
                 cand.effect,
-                trial["report"]["fit_bic"],
-                step["report"]["effect"],
-                step["report"]["fit_bic"],
+                trial.report["fit_bic"],
+                step.report["effect"],
+                step.report["fit_bic"],
             )
             keys = ("effect", "fit_bic", "n_params", "heldout_after")
-            trial["report"]["rival"] = {k: step["report"][k] for k in keys}
-            step["report"]["rival"] = {k: trial["report"][k] for k in keys}
-        if step is None or better(trial["report"], step["report"], study.settings):
+            trial.report["rival"] = {k: step.report[k] for k in keys}
+            step.report["rival"] = {k: trial.report[k] for k in keys}
+        if step is None or better(trial.report, step.report, study.settings):
             step = trial
     return step
 

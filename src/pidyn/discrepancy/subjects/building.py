@@ -98,10 +98,7 @@ class Building(Subject):
     def next_step(self, current: BuildingState, found: list) -> Step | None:
         self.progress.step(f"screening the storeys for effect {len(found) + 1}")
         views, screenings = self.study.screen(current, found)
-        step = next_step(self.study, current, found, views, screenings)
-        if step is None:
-            return None
-        return Step(bool(step["accepted"]), step.get("current"), step.get("found"), step["report"])
+        return next_step(self.study, current, found, views, screenings)
 
     def conclude(
         self, current: BuildingState, found: list, steps: list[Step], refused: Step | None
