@@ -109,3 +109,16 @@ def test_a_model_worse_than_knowing_nothing_is_said_in_the_head(tmp_path):
         "**Note:** the nominal model predicts the held-out part worse" in (tmp_path / "report.md").read_text()
     )
     assert trivial_note(_gain(0.5, None, 1.0)) is None
+
+
+def test_every_subjects_result_says_when_its_nominal_model_is_worse_than_knowing_nothing():
+    """The result adds the note itself, once, whichever subject made it."""
+    gain = _gain(1.3, 1.1, 1.0)
+    result = DiagnosisResult("rec", "thing", "storey", Verdict.NONE, [], HeldoutErrors.of(gain), gain)
+    assert codes(result.notes) == {"worse_than_trivial"} and result.worse_than_trivial == result.notes[0]
+    again = DiagnosisResult(
+        "rec", "thing", "", Verdict.NONE, [], HeldoutErrors.of(gain), gain, list(result.notes)
+    )
+    assert again.notes == result.notes
+    fine = _gain(0.4, None, 1.0)
+    assert DiagnosisResult("rec", "thing", "", Verdict.NONE, [], HeldoutErrors.of(fine), fine).notes == []

@@ -37,10 +37,10 @@ class GeneralizationNode(PredictSettings):
     solved, and which responses are predicted."""
 
     duration: float = 20.0  # length of each predicted response (s)
-    own_scales: list[float] = field(
-        default_factory=lambda: [0.5, 1.0, 1.5, 2.0]
-    )  # of the identification record
-    own_stretches: list[float] = field(default_factory=lambda: [0.8, 1.0, 1.25])  # its time stretched
+    #: the identification record scaled and its time stretched
+    own_scales: list[float] = field(default_factory=lambda: [0.5, 1.0, 1.5, 2.0])
+    own_stretches: list[float] = field(default_factory=lambda: [0.8, 1.0, 1.25])
+    #: the other shipped records, each at these multiples of the identification record's PGA
     other_records: list[str] = field(
         default_factory=lambda: [
             "kobe",
@@ -58,12 +58,9 @@ class GeneralizationNode(PredictSettings):
             "chichi",
         ]
     )
-    other_scales: list[float] = field(
-        default_factory=lambda: [0.5, 1.0]
-    )  # multiples of the identification PGA
-    match_pga: bool = (
-        True  # scale other records to the identification record's PGA (over the predicted segment)
-    )
+    other_scales: list[float] = field(default_factory=lambda: [0.5, 1.0])
+    #: scale other records to the identification record's PGA (over the predicted segment)
+    match_pga: bool = True
     align: bool = True  # start other records `lead` s before their strong motion (5 % Arias intensity)
     lead: float = 2.0
     max_cases: int | None = None

@@ -70,6 +70,17 @@ class DiagnosisResult:
     forced: bool = False  # the cause was named by the user (diagnosis.force_effect), not the screening
     detail: Any = None
 
+    def __post_init__(self) -> None:
+        # whatever the subject: a nominal model that predicts worse than knowing nothing is said so
+        worse = trivial_note(self.gain)
+        if worse is not None and worse not in self.notes:
+            self.notes = [worse, *self.notes]
+
+    @property
+    def worse_than_trivial(self) -> str | None:
+        """The note that the nominal model predicts worse than knowing nothing, or None."""
+        return next((n for n in self.notes if code_of(n) == "worse_than_trivial"), None)
+
     def head(self) -> dict[str, Any]:
         """The part of ``diagnosis.json`` every subject writes the same way."""
         return {

@@ -42,7 +42,8 @@ def conclusion(case: Case, o: Outcome) -> DiagnosisResult:
     worse = trivial_note(gain)
     verdict = Verdict.UNEXPLAINED if unearned else _verdict(case, o, bool(causes), learned, worse is not None)
     contested = None if unearned else rivals(o)
-    notes = [n for n in (worse, (unearned or {}).get("note"), (contested or {}).get("note")) if n]
+    # (the result adds the note that it predicts worse than knowing nothing, as for every subject)
+    notes = [n for n in ((unearned or {}).get("note"), (contested or {}).get("note")) if n]
     return DiagnosisResult(
         case.record.name,
         "single degree of freedom",
@@ -81,7 +82,7 @@ def summarize(case: Case, result: DiagnosisResult) -> dict[str, Any]:
         "parameters": effect_params,
         "nominal_parameters": nom.values,
         "extended_parameters": ext_values,
-        "trivial_note": trivial_note(result.gain),
+        "trivial_note": result.worse_than_trivial,
         "split": {"fit": list(case.fit), "heldout": list(case.held)},
         "record": record.name,
         "noise": (record.meta or {}).get("noise"),

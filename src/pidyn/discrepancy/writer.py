@@ -13,7 +13,6 @@ from typing import Any
 from pidyn.discrepancy.loop import Subject
 from pidyn.discrepancy.result import DiagnosisResult
 from pidyn.discrepancy.verdicts import Verdict
-from pidyn.notes import code_of
 from pidyn.reporting import write_json
 
 log = logging.getLogger("pidyn.tasks.diagnose")
@@ -92,6 +91,5 @@ def log_verdict(result: DiagnosisResult) -> None:
         h.trivial_label,
         h.trivial if h.trivial is not None else float("nan"),
     )
-    for n in result.notes:
-        if code_of(n) == "worse_than_trivial":
-            log.warning("%s", n)
+    if result.worse_than_trivial:
+        log.warning("%s", result.worse_than_trivial)

@@ -13,7 +13,7 @@ from pidyn.data.checks import check_floors, check_record
 from pidyn.data.sources import Record
 from pidyn.discrepancy.case import split_spans
 from pidyn.discrepancy.loop import Inputs, Step, Subject
-from pidyn.discrepancy.result import DiagnosisResult, Finding, HeldoutErrors, trivial_note
+from pidyn.discrepancy.result import DiagnosisResult, Finding, HeldoutErrors
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.storey_choice import Study
 from pidyn.discrepancy.storey_model import BuildingDiagnosis, BuildingState
@@ -116,7 +116,6 @@ class Building(Subject):
             )
         extended = extended_entry(current, found, bool(learned and learned["kept"]))
         gain = building_gain(nominal, current, extended is not None)
-        worse = trivial_note(gain)
         account = BuildingDiagnosis(
             verdict,
             found,
@@ -142,7 +141,7 @@ class Building(Subject):
             [Finding(f.effect, self.place, f.storey) for f in found],
             HeldoutErrors.of(gain),
             gain,
-            notes + ([worse] if worse else []),
+            notes,
             bool(settings.force_effect),
             account,
         )
