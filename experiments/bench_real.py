@@ -101,11 +101,11 @@ def _oe_heldout(run_dir: Path, oe: dict | None) -> float | None:
     from pidyn.simulate import simulate_response
 
     system, record, values = Identified.load(run_dir).for_record()
-    split = (record.meta or {}).get("split")
+    split = record.meta.split
     if not split:
         return None
     sim = simulate_response(system, {**values, **oe["params"]}, record)
-    return heldout_scores(sim, record, split["heldout"])["mean_nrmse_a"]
+    return heldout_scores(sim, record, split.heldout)["mean_nrmse_a"]
 
 
 def read_rows(path: Path) -> list[dict]:

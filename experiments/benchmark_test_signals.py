@@ -157,7 +157,7 @@ def bouc_wen(run: Path) -> tuple[list[dict], list[str]]:
         rec = load_bouc_wen_validation(name)
         y = rec.x[:, 0]
         for label, system, values in mods:
-            sim = simulate(system, values, rec.f, FS, repeat, hold=rec.meta["input_hold"])
+            sim = simulate(system, values, rec.f, FS, repeat, hold=rec.meta.input_hold)
             err = sim - y
             rows.append(
                 {

@@ -62,9 +62,9 @@ def events(records: Path, station: str, direction: str) -> tuple[list[dict], lis
             {
                 "event": _event(path),
                 "path": str(path),
-                "inputs": list(meta["input_channels"]),
-                "outputs": list(meta["output_channels"]),
-                "pga_g": float(meta["pga"]) / 9.80665,
+                "inputs": list(meta.input_channels),
+                "outputs": list(meta.output_channels),
+                "pga_g": float(meta.pga) / 9.80665,
             }
         )
     sets = [json.dumps([r["inputs"], r["outputs"]]) for r in rows if "inputs" in r]

@@ -28,9 +28,9 @@ RESULTS = ROOT / "experiments" / "results" / "real"
 
 def middle_and_ends(deck, rec) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
     """The channel between the ends and the two end channels (ordered first end, last end)."""
-    chans = list(rec.meta["sensor_channels"])
+    chans = list(rec.meta.sensor_channels)
     pos = [deck.sensors[f"ch{c}"] for c in chans]
-    raw = np.asarray(rec.meta["sensor_a"])
+    raw = np.asarray(rec.meta.sensor_a)
     first, last = int(np.argmin(pos)), int(np.argmax(pos))
     mid = next(i for i in range(len(chans)) if i not in (first, last))
     return raw[:, mid], raw[:, first], raw[:, last], f"ch{chans[mid]}"
@@ -61,7 +61,7 @@ def rows(records: Path, station: str, swap: float) -> list[dict]:
         out.append(
             {
                 "event": path.name.split("_ce")[0],
-                "pga_g": float(rec.meta["pga"]) / 9.80665,
+                "pga_g": float(rec.meta.pga) / 9.80665,
                 "channel": name,
                 "layout": residual_share(mid, a, b, xi),
                 "swapped": residual_share(mid, a, b, swap / deck.length),

@@ -58,7 +58,7 @@ def one(args: tuple[int, str, float, float]) -> dict:
     gm = prepare(record, scale=3.0 / float(np.max(np.abs(gm.acc))), duration=20.0, dt=0.02)
     true = ShearBuilding(n, masses, damp, stiff)
     rec = synthetic_from_motion(true, gm, noise=noise, data_seed=9000 + i, channels=("a",), sensors=sensors)
-    rec.meta = {k: v for k, v in rec.meta.items() if k not in ("noise", "noise_levels")}  # as from a file
+    rec.meta = rec.meta.with_(noise=None, noise_levels=None)  # as from a file
     cfg = compose("diagnose", groups={"system": "shear_building"}, values={"system.n_storeys": n})
     settings = DiagnosisSettings.from_mapping({"fit_share": share})
     refine_settings = replace(refine_plan(cfg)[2], states="integrated")

@@ -644,7 +644,7 @@ def _held_out_own_fit(cfg: dict, metrics: dict) -> tuple[dict, dict, float]:
         **{s.name: s.init for s in system.param_specs()},
         **{k: float(v) for k, v in metrics["params"].items()},
     }
-    held = rec.segment(rec.meta["split"]["fit"][1], float(rec.t[-1]))
+    held = rec.segment(rec.meta.split.fit[1], float(rec.t[-1]))
     own = {**ident, **fit_output_error(held, system, init=ident, max_nfev=100).params}
     own_nrmse = nrmse(simulate_response(system, own, held)["a"][:, 0], held.a[:, 0])
     return ident, own, own_nrmse

@@ -217,7 +217,7 @@ def predict_runs(model: str, ident_run: Path, others: list[str]) -> list[dict]:
                 "identified_on": MODELS[model][1],
                 "predicted_run": label,
                 "duration_s": float(rec.t[-1]),
-                "pga_m_s2": rec.meta["pga"],
+                "pga_m_s2": rec.meta.pga,
                 **{f"pidyn_a{j + 1}": ours[j] for j in range(n)},
                 **{f"srim_a{j + 1}": theirs[j] for j in range(n)},
                 "pidyn_mean": float(np.mean(ours)),

@@ -79,7 +79,7 @@ def _fit_mse(system, values: dict, rec) -> float:
     """Mean-square free-simulation error (V^2) over the fitting part, from rest."""
     from pidyn.simulate import simulate_response
 
-    fit = rec.segment(*rec.meta["split"]["fit"])
+    fit = rec.segment(*rec.meta.split.fit)
     err = simulate_response(system, values, fit)["x"][:, 0] - fit.x[:, 0]
     return float(np.mean(err[SKIP:] ** 2))
 
@@ -90,13 +90,13 @@ def refine_model(added: list[str], start: dict, hold: str = "bandlimited") -> di
     from pidyn.refine.stage import RefineSettings, refine
 
     rec = load_silverbox()
-    rec.meta["input_hold"] = hold
+    rec.meta.input_hold = hold
     system = _terms(start, added, _scales(rec))
     init = {s.name: s.init for s in system.param_specs()}
     init.update({k: v for k, v in start.items() if k in init})
     t0 = time.perf_counter()
     settings = RefineSettings(segment_length=1.0, states="simulated", initial_state="rest")
-    lo, hi = rec.meta["split"]["fit"]
+    lo, hi = rec.meta.split.fit
     res = refine(system, rec, {"start": init}, settings, t_start=lo, t_end=hi, prefer="start")
     return {
         "added": added,
@@ -105,7 +105,7 @@ def refine_model(added: list[str], start: dict, hold: str = "bandlimited") -> di
         "intervals": {k: v["ci95"] for k, v in res.intervals.items()},
         "equation": system.describe(res.params),
         "fit_mse": _fit_mse(system, res.params, rec),
-        "n_fit": int(len(rec.segment(*rec.meta["split"]["fit"]).t) - SKIP),
+        "n_fit": int(len(rec.segment(*rec.meta.split.fit).t) - SKIP),
         "converged": bool(res.converged),
         "seconds": time.perf_counter() - t0,
     }
@@ -197,7 +197,7 @@ def arrow_lines(model: dict) -> list[str]:
     from pidyn.data.measured.silverbox import FS, load_silverbox
 
     rec = load_silverbox()
-    fit_peak = float(np.max(np.abs(rec.segment(*rec.meta["split"]["fit"]).x[:, 0])))
+    fit_peak = float(np.max(np.abs(rec.segment(*rec.meta.split.fit).x[:, 0])))
     u, y = silverbox_arrays()
     lo, hi = SILVERBOX_SIGNALS["arrow (full)"]
     system = _terms(model["params"], model["added"], _scales(rec))

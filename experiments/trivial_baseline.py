@@ -30,9 +30,9 @@ def trivial_heldout(path: Path, station: str, direction: str) -> tuple[float, st
     from pidyn.reporting import nrmse
 
     rec = csmip_record(path, station=station, direction=direction, on_missing="drop", max_outputs=1)
-    split = rec.meta["split"]
-    label, pred = trivial_predictions(rec, split["fit"])["a"]
-    m = (rec.t >= split["heldout"][0] - 1e-9) & (rec.t <= split["heldout"][1] + 1e-9)
+    split = rec.meta.split
+    label, pred = trivial_predictions(rec, split.fit)["a"]
+    m = (rec.t >= split.heldout[0] - 1e-9) & (rec.t <= split.heldout[1] + 1e-9)
     meas = rec.a[:, 0] + ground_acceleration(rec)
     return nrmse(pred[m], meas[m]), label
 

@@ -134,7 +134,7 @@ def test_silverbox_screening_finds_the_cubic_stiffness():
     from pidyn.signals import dominant_period
 
     r = load_silverbox()
-    fit_end = r.meta["split"]["fit"][1]
+    fit_end = r.meta.split.fit[1]
     m = r.t <= fit_end
     period = dominant_period(r.t[m], r.x[m])
     assert 65 < 1 / period < 75  # the resonance near 69 Hz
@@ -260,7 +260,7 @@ def test_bouc_wen_benchmark_screening_names_the_hysteresis():
     from pidyn.signals import dominant_period
 
     r = load_bouc_wen_benchmark()
-    fit_end = r.meta["split"]["fit"][1]
+    fit_end = r.meta.split.fit[1]
     m = r.t <= fit_end
     period = dominant_period(r.t[m], r.x[m])
     xs, vs = smooth_signals(r.t, r.x[:, 0], None, period)
@@ -294,8 +294,8 @@ def test_the_bouc_wen_benchmark_data_match_its_equations():
     from pidyn.integrate import rk4, stage_excitation
 
     train = load_bouc_wen_benchmark()
-    assert len(train.t) == 5 * P and abs(train.meta["dt"] - 1 / FS) < 1e-15
-    assert train.meta["split"]["fit"][1] < train.meta["split"]["heldout"][0]
+    assert len(train.t) == 5 * P and abs(train.meta.dt - 1 / FS) < 1e-15
+    assert train.meta.split.fit[1] < train.meta.split.heldout[0]
     rec = load_bouc_wen_validation("val_multisine")
     system = extended_system(
         LinearSDOF(mass=2.0, excitation="force", identify_mass=True),
@@ -308,7 +308,7 @@ def test_the_bouc_wen_benchmark_data_match_its_equations():
     f = np.tile(rec.f, 3)
     y = rec.x[:, 0]
     nrms = {}
-    for hold in ("linear", rec.meta["input_hold"]):
+    for hold in ("linear", rec.meta.input_hold):
         stages = stage_excitation(f, 4, hold)
         Y, _ = rk4(system, truth, np.arange(len(f)) / FS, f, np.zeros((1, system.n_state)), 4, stages=stages)
         nrms[hold] = np.sqrt(np.mean((Y[-P:, 0, 0] - y) ** 2)) / np.std(y)

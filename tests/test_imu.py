@@ -47,10 +47,10 @@ def test_shipped_models_read_with_their_runs_and_floors():
     assert run_labels(MODELS / "Stiff 1 story")[0] == "El Centro Trial 1"
     rec = xsens_record(STIFF3, "Northridge", fit_share=0.65)
     assert rec.a.shape[1] == 3 and rec.dt == pytest.approx(1 / 120, rel=1e-3)
-    assert rec.meta["floors"] == ["Ground Floor", "1st Floor", "2nd Floor", "3rd Floor (Top floor)"]
-    assert rec.meta["alignment"]["coarse"] == "clock" and np.isfinite(rec.a).all()
-    assert 5.0 < rec.meta["pga"] < 12.0  # m/s^2, gravity off
-    assert rec.meta["split"]["fit"][1] == pytest.approx(0.65 * rec.t[-1])
+    assert rec.meta.floors == ["Ground Floor", "1st Floor", "2nd Floor", "3rd Floor (Top floor)"]
+    assert rec.meta.alignment.coarse == "clock" and np.isfinite(rec.a).all()
+    assert 5.0 < rec.meta.pga < 12.0  # m/s^2, gravity off
+    assert rec.meta.split.fit[1] == pytest.approx(0.65 * rec.t[-1])
 
 
 def test_named_errors_for_a_missing_floor_a_broken_file_and_an_unknown_run(tmp_path):

@@ -77,7 +77,7 @@ def test_silverbox_is_read_band_limited_and_fits_better_so():
     start = {"m": 5.2e-6, "c": 2.2e-4, "k1": 0.95, "k3": 3.7}
     out = {}
     for hold in ("linear", "bandlimited"):
-        fit.meta["input_hold"] = both.meta["input_hold"] = hold
+        fit.meta.input_hold = both.meta.input_hold = hold
         values = {**start, **fit_output_error(fit, system, init=start, max_nfev=40).params}
         sim = simulate_response(system, values, both)["x"][:, 0]
         err = (sim - both.x[:, 0])[both.t > 2.0]  # the two seconds after the fitted ones
@@ -96,7 +96,7 @@ def test_a_strong_motion_record_carries_its_hold_and_a_wrong_one_is_named():
         Path(__file__).resolve().parents[1] / "data" / "painter_street" / "records" / "riodell82_ce89324p.zip"
     )
     rec = csmip_record(path, on_missing="drop", input_hold="bandlimited")
-    assert rec.meta["input_hold"] == "bandlimited" and rec.f.shape[1] == 4  # two supports, acc and vel
+    assert rec.meta.input_hold == "bandlimited" and rec.f.shape[1] == 4  # two supports, acc and vel
     assert stage_excitation(rec.f, 4, input_hold(rec)).shape == (len(rec.t) - 1, 9, 4)
     with pytest.raises(DataError, match="data.input_hold must be one of linear, bandlimited, got 'zoh'"):
         csmip_record(path, on_missing="drop", input_hold="zoh")

@@ -199,4 +199,4 @@ def test_a_strong_motion_record_reads_one_sensor_for_two_modes():
     path = Path(__file__).resolve().parents[1] / "data/painter_street/records/nc73667866_ce89324p.zip"
     rec = csmip_record(path, station="CE89324", system=ModesOnSupports(n_modes=2))
     assert rec.a.shape[1] == 2 and np.isfinite(rec.a[:, 0]).all() and np.isnan(rec.a[:, 1]).all()
-    assert rec.meta["output_channels"] == [7]
+    assert rec.meta.output_channels == [7]

@@ -14,6 +14,7 @@ import pytest
 from pidyn import Record
 from pidyn.config import make_system
 from pidyn.data.errors import DataError
+from pidyn.data.meta import RecordMeta
 from pidyn.data.multi import concatenate, pieces
 from pidyn.data.windows import make_windows
 from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
@@ -35,8 +36,8 @@ def test_concatenated_record_keeps_its_pieces_and_truth():
     both = concatenate([r1, r2])
     assert len(both.t) == len(r1.t) + len(r2.t)
     assert np.allclose(np.diff(both.t), r1.dt)
-    assert [p["name"] for p in pieces(both)] == [r1.name, r2.name]
-    assert pieces(both)[1]["i0"] == len(r1.t)
+    assert [p.name for p in pieces(both)] == [r1.name, r2.name]
+    assert pieces(both)[1].i0 == len(r1.t)
     assert both.truth == r1.truth
     assert both.clean is not None and len(both.clean.x) == len(both.t)
 
@@ -69,7 +70,7 @@ def test_shooting_segments_end_where_a_record_begins_and_no_defect_joins_records
     system = make_system("duffing")
     r1, r2 = _records()
     both = concatenate([r1, r2])
-    start = pieces(both)[1]["i0"]
+    start = pieces(both)[1].i0
     bounds = segment_bounds(both.t, 1.0, breaks=[start])
     assert start in bounds
     prob = ShootingProblem(
@@ -88,7 +89,7 @@ def test_shooting_segments_end_where_a_record_begins_and_no_defect_joins_records
 def test_windows_take_turns_between_records_and_never_span_two():
     r1, r2 = _records()
     both = concatenate([r1, r2])
-    spans = [(both.t[p["i0"]], both.t[p["i1"] - 1]) for p in pieces(both)]
+    spans = [(both.t[p.i0], both.t[p.i1 - 1]) for p in pieces(both)]
     wins = make_windows(both.t, both.f, both.x, both.v, None, 2.0, 50, pieces=spans)
     assert [w.piece for w in wins[:4]] == [0, 1, 0, 1]
     for w in wins:
@@ -101,10 +102,10 @@ def test_predict_refuses_a_record_of_other_channels():
 
     run = Identified(Path("RUN"), None, {"record_meta": {"station": "CE89324", "output_channels": [7]}})
     rec = Record(name="other", t=np.arange(100) * 0.02, f=np.sin(np.arange(100)), a=np.cos(np.arange(100)))
-    rec.meta = {"station": "CE89324", "output_channels": [9]}
+    rec.meta = RecordMeta(station="CE89324", output_channels=[9])
     with pytest.raises(ValueError, match="output_channels"):
         check_channels(run, rec)
-    rec.meta["output_channels"] = [7]
+    rec.meta.output_channels = [7]
     check_channels(run, rec)
 
 
@@ -181,9 +182,9 @@ def test_the_api_reads_what_the_command_line_reads():
         station="CE89324",
         max_outputs=1,
     )
-    assert rec.inputs == ["ch3", "ch17", "ch20"] and rec.meta["output_channels"] == [7]
+    assert rec.inputs == ["ch3", "ch17", "ch20"] and rec.meta.output_channels == [7]
     imu = Record.from_xsens(ROOT / "data" / "mini_shake_table" / "Stiff 3 story", run="Sine 1.5")
-    assert imu.a.shape[1] == 3 and imu.meta["run"] == "Sine 1.5"
+    assert imu.a.shape[1] == 3 and imu.meta.run == "Sine 1.5"
 
 
 def test_one_amplitude_dependent_model_from_a_weak_and_a_strong_earthquake():

@@ -80,19 +80,19 @@ def test_reader_names_the_file_and_the_problem(tmp_path):
 
 def test_a_record_cuts_aligns_and_resamples_what_it_reads():
     rec = csmip_record(RIODELL82, station="CE89324", on_missing="drop")
-    assert {"channel_missing", "cut_to_shortest"} <= codes(rec.meta["notes"]), rec.meta["notes"]
-    assert len(rec.t) == 1065 or "1065 samples" in " ".join(rec.meta["notes"])
-    assert rec.meta["input_channels"] == [17, 20] and rec.n_inputs == 2 and rec.f.shape[1] == 4
-    assert rec.a.shape[1] == 3 and rec.meta["acceleration"] == "absolute"  # no model given: every output kept
+    assert {"channel_missing", "cut_to_shortest"} <= codes(rec.meta.notes), rec.meta.notes
+    assert len(rec.t) == 1065 or "1065 samples" in " ".join(rec.meta.notes)
+    assert rec.meta.input_channels == [17, 20] and rec.n_inputs == 2 and rec.f.shape[1] == 4
+    assert rec.a.shape[1] == 3 and rec.meta.acceleration == "absolute"  # no model given: every output kept
     # a digital record at 0.01 s: resampled to 0.02 s, its pre-event part measured, split for the held-out check
     rec = csmip_record(RECORDS / "nc73667866_ce89324p.zip", station="CE89324", max_outputs=1)
     assert rec.dt == pytest.approx(0.02) and rec.a.shape[1] == 1 and rec.inputs == ["ch3", "ch17", "ch20"]
-    assert 0 < rec.meta["pre_event_rms"]["share_of_peak"] < 0.02
-    fit, held = rec.meta["split"]["fit"], rec.meta["split"]["heldout"]
+    assert 0 < rec.meta.pre_event_rms["share_of_peak"] < 0.02
+    fit, held = rec.meta.split.fit, rec.meta.split.heldout
     assert fit[1] == pytest.approx(0.65 * rec.t[-1]) and held[1] == pytest.approx(rec.t[-1])
     # the velocities beside the accelerations are the files' own (integrated by the processing)
     v2 = read_archive(RECORDS / "nc73667866_ce89324p.zip").channels[3]
-    i0 = int(round(rec.meta["t_offset"] / v2.dt))
+    i0 = int(round(rec.meta.t_offset / v2.dt))
     assert np.max(np.abs(rec.f[:, 3] - v2.vel[i0 : i0 + 2 * len(rec.t) : 2][: len(rec.t)])) < 0.05 * np.max(
         np.abs(v2.vel)
     )
@@ -355,7 +355,7 @@ def test_an_accelerometer_diagnosis_starts_from_the_accelerations_when_the_weak_
     view = motion_view(rec, LinearSDOF(inputs=["a", "b"]), fit, tol=settings.polish_tol)
     base = LinearSDOF(c=0.5, k=15.0)
     case = diagnosis_case.prepare(view, base, {}, settings, 1.0, tmp_path, identify=None)
-    fitted = view.meta["accelerometers"]["nominal"]
+    fitted = view.meta.accelerometers.nominal
     assert fitted["k"] == pytest.approx(p["k"], rel=0.02)
     bad = {"m": 1.0, "c": -3.0, "k": 0.12 * p["k"]}
     values, period = nominal._accelerometer_start(case, bad, 1.0)

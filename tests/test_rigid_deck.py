@@ -67,13 +67,13 @@ def test_a_record_read_through_the_layout_keeps_its_channels_for_scoring():
 
     path = ROOT / "data" / "painter_street" / "records" / "nc73821046_ce89324p.zip"
     rec = csmip_record(path, station="CE89324", system=station_deck("CE89324", "transverse"))
-    assert rec.a.shape[1] == 2 and rec.meta["sensor_channels"] == [7, 9, 4]
-    H = np.asarray(rec.meta["observation"])
-    raw = rec.meta["sensor_a"]
+    assert rec.a.shape[1] == 2 and rec.meta.sensor_channels == [7, 9, 4]
+    H = np.asarray(rec.meta.observation)
+    raw = rec.meta.sensor_a
     # least squares: what is left of the channels is orthogonal to what a rigid deck can move
     assert np.allclose(H.T @ (raw - rec.a @ H.T).T, 0.0, atol=1e-8)
     view, sim = sensor_view(rec, {"a": rec.a})
-    assert np.array_equal(view.a, raw) and view.meta["output_channels"] == [7, 9, 4]
+    assert np.array_equal(view.a, raw) and view.meta.output_channels == [7, 9, 4]
     assert np.allclose(sim["a"], rec.a @ H.T)
 
 

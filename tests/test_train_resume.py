@@ -136,6 +136,6 @@ def test_baselines_take_the_noise_a_data_source_drew(tmp_path):
     system = hydra.utils.instantiate(cfg.system)
     record = build_record(cfg, system)
     level = record_noise(cfg, record)
-    assert 0.0 <= level <= 0.05 and level == record.meta["noise"]
+    assert 0.0 <= level <= 0.05 and level == record.meta.noise
     rows = start_baselines(cfg, system, record).result()
     assert rows[0]["method"] == "equation_error" and rows[0]["params"]

@@ -145,7 +145,7 @@ def rk4_stability(system, values: dict[str, float], dt: float, substeps: int = 4
 def declared_noise(record) -> dict[str, float] | None:
     """The noise the record declares per channel kind, as a fraction of each channel's RMS (a
     simulated record's), or None for a measurement."""
-    levels = (record.meta or {}).get("noise_levels")
+    levels = record.meta.noise_levels
     if record.clean is None or not levels:
         return None
     return {str(k): float(v) for k, v in levels.items()}

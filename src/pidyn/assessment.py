@@ -63,29 +63,29 @@ def assess(
         extra = None if adequate else {"adequate": False, "warning": NOT_ADEQUATE}
         write_modal(run_dir, modes, extra)
         out["modal"] = [{k: v for k, v in m.items() if not k.startswith("mode_shape")} for m in modes]
-    meta = record.meta or {}
-    if "station" in meta:
-        out["record_meta"] = {k: meta.get(k) for k in RECORD_META}
-    elif "alignment" in meta:  # an IMU set
-        out["record_meta"] = {k: meta.get(k) for k in IMU_META}
+    meta = record.meta
+    if meta.station is not None:
+        out["record_meta"] = meta.to_dict(RECORD_META)
+    elif meta.alignment is not None:  # an IMU set
+        out["record_meta"] = meta.to_dict(IMU_META)
     # what the record measures: a prediction of another record must measure the same
     out.setdefault("record_meta", {}).update({"sensors": record.sensors(), "inputs": record.inputs})
-    if meta.get("pieces"):  # several records of the structure (pidyn.data.multi)
+    if meta.pieces:  # several records of the structure (pidyn.data.multi)
         out.setdefault("record_meta", {})["records"] = [
             {
-                "name": q["name"],
-                "t0": float(record.t[q["i0"]]),
-                "t1": float(record.t[q["i1"] - 1]),
-                **q["meta"],
+                "name": q.name,
+                "t0": float(record.t[q.i0]),
+                "t1": float(record.t[q.i1 - 1]),
+                **(q.origin.to_dict() if q.origin else {}),
             }
-            for q in meta["pieces"]
+            for q in meta.pieces
         ]
-    split = meta.get("split") if hold_out else None
+    split = meta.split if hold_out else None
     if split:
-        out["heldout"] = heldout_scores(sim, record, split["heldout"], split["fit"])
+        out["heldout"] = heldout_scores(sim, record, split.heldout, split.fit)
         logging.getLogger(__name__).info(
             "held-out part %.4g-%.4g s: NRMSE %s",
-            *split["heldout"],
+            *split.heldout,
             ", ".join(f"{k} {v:.3g}" for k, v in out["heldout"]["nrmse"].items()),
         )
     return out

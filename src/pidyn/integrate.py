@@ -35,14 +35,14 @@ HOLDS = ("linear", "bandlimited")
 
 
 def input_hold(record: Any) -> str:
-    """How a record's excitation is read between samples: ``meta["input_hold"]``, else linear."""
-    return str(record.meta.get("input_hold", "linear"))
+    """How a record's excitation is read between samples: ``meta.input_hold``, else linear."""
+    return str(record.meta.input_hold or "linear")
 
 
 def piece_starts(record: Any) -> list[int]:
-    """Sample indices where another record of a record made of several begins (``meta["pieces"]``,
+    """Sample indices where another record of a record made of several begins (``meta.pieces``,
     see ``pidyn.data.multi``): a free run restarts from rest there."""
-    return [int(piece["i0"]) for piece in (record.meta or {}).get("pieces") or [] if int(piece["i0"]) > 0]
+    return [piece.i0 for piece in record.meta.pieces or [] if piece.i0 > 0]
 
 
 def stage_excitation(f: np.ndarray, substeps: int, hold: str = "linear") -> np.ndarray | None:

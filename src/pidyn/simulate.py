@@ -178,7 +178,7 @@ def simulate_response(
     one ground; absolute for several inputs) by the fixed-step batched RK4 (bounded cost: a
     model that blows up gives NaNs rather than an adaptive integrator crawling) from
     ``state0`` (the full state, default rest), the excitation read between samples as the
-    record says (``meta["input_hold"]``, default linear)."""
+    record says (``meta.input_hold``, default linear)."""
     n = system.n_dof
     Y, R = simulate_states(
         system, values, record.t, record.f, state0, substeps, input_hold(record), piece_starts(record)

@@ -90,11 +90,11 @@ def io_arrays(record) -> tuple[np.ndarray, np.ndarray]:
 
 def spans(record) -> tuple[np.ndarray, np.ndarray | None]:
     """Masks of the fitting part and of the held-out part (None: the record has no split)."""
-    sp = (record.meta or {}).get("split")
+    sp = record.meta.split
     if not sp:
         return np.ones(len(record.t), bool), None
     t = record.t
-    return (t >= sp["fit"][0] - 1e-9) & (t <= sp["fit"][1] + 1e-9), t > sp["fit"][1] + 1e-9
+    return (t >= sp.fit[0] - 1e-9) & (t <= sp.fit[1] + 1e-9), t > sp.fit[1] + 1e-9
 
 
 def _require_mdof():

@@ -71,7 +71,7 @@ def unscented_kalman_filter(
     specs, fixed, theta0 = starting_point(system, init)
     nd, ns, npar = system.n_dof, system.n_state, len(specs)
     chans = record_channels(record, nd)
-    levels = dict((record.meta or {}).get("noise_levels") or {})
+    levels = dict(record.meta.noise_levels or {})
     R = np.diag(
         [max(levels.get(c.kind, noise_level), r_floor) ** 2 * _sensor_rms(record, c) ** 2 for c in chans]
     )

@@ -24,7 +24,7 @@ G = 9.80665
 
 
 def _where(record: Record) -> str:
-    return str((record.meta or {}).get("path") or f"record '{record.name}'")
+    return str(record.meta.path or f"record '{record.name}'")
 
 
 def check_record(record: Record, system_n_dof: int | None = None) -> list[str]:

@@ -105,7 +105,7 @@ class SubperiodDataModule(L.LightningDataModule):
 
 def _piece_spans(record: Record) -> list[tuple[float, float]] | None:
     """The time spans of the records a record is made of (``pidyn.data.multi``); None for one."""
-    parts = (record.meta or {}).get("pieces")
+    parts = record.meta.pieces
     if not parts:
         return None
-    return [(float(record.t[p["i0"]]), float(record.t[p["i1"] - 1])) for p in parts]
+    return [(float(record.t[p.i0]), float(record.t[p.i1 - 1])) for p in parts]

@@ -36,6 +36,7 @@ import numpy as np
 import pandas as pd
 from scipy.signal import butter, sosfiltfilt
 
+from pidyn.data.meta import RecordMeta, Split
 from pidyn.data.sources import READERS, DataError, Record, checked_hold
 from pidyn.data.strong_motion import _resample, shaking_span
 from pidyn.notes import note
@@ -398,20 +399,20 @@ def checked_run(
     return files
 
 
-def _meta(path, run: str, files, imus, report, align: str, notes: list[str], pre_rms) -> dict:
+def _meta(path, run: str, files, imus, report, align: str, notes: list[str], pre_rms) -> RecordMeta:
     """What a run's record says of where it came from and how its sensors were placed."""
-    return {
-        "path": str(path),
-        "run": run,
-        "floors": [f.parent.name for _, f in files],
-        "files": [f.name for _, f in files],
-        "alignment": report.__dict__,
-        "align": align,
-        "units": {"a": "m/s^2", "ag": "m/s^2"},
-        "pre_event_rms": pre_rms,
-        "notes": notes,
-        "devices": [m.device for m in imus],
-    }
+    return RecordMeta(
+        path=str(path),
+        run=run,
+        floors=[f.parent.name for _, f in files],
+        files=[f.name for _, f in files],
+        alignment=report,
+        align=align,
+        units={"a": "m/s^2", "ag": "m/s^2"},
+        pre_event_rms=pre_rms,
+        notes=notes,
+        devices=[m.device for m in imus],
+    )
 
 
 def xsens_record(
@@ -435,7 +436,7 @@ def xsens_record(
     low-band lag against the table reported) or ``lag`` (each floor moved by that lag); sensors
     without a shared clock are placed by StartTime and moved by their lag whatever ``align`` says.
     ``dt``: resample (s). ``span``/``pre``/``post``: the shaking, as for strong-motion records.
-    ``fit_share``: the first share of the span is for fitting, the rest held out (``meta['split']``).
+    ``fit_share``: the first share of the span is for fitting, the rest held out (``meta.split``).
     ``input_hold``: how models read the table's motion between samples (``pidyn.integrate``)."""
     files = checked_run(
         path, run, n_storeys if n_storeys is not None else getattr(system, "n_dof", None), align, fit_share
@@ -452,16 +453,13 @@ def xsens_record(
     data = data[i0:i1]
     t = np.arange(len(data)) * step
     ag = data[:, 0]
-    meta = {
-        **_meta(path, run, files, imus, report, align, notes, pre_rms),
-        "dt": step,
-        "span": [i0 * step, (i1 - 1) * step],
-        "pga": float(np.max(np.abs(ag))),
-        "input_hold": checked_hold(input_hold, "data.input_hold"),
-    }
-    if fit_share is not None:
-        cut = float(t[-1]) * fit_share
-        meta["split"] = {"fit": [0.0, cut], "heldout": [cut, float(t[-1])]}
+    meta = _meta(path, run, files, imus, report, align, notes, pre_rms).with_(
+        dt=step,
+        span=[i0 * step, (i1 - 1) * step],
+        pga=float(np.max(np.abs(ag))),
+        input_hold=checked_hold(input_hold, "data.input_hold"),
+        split=None if fit_share is None else Split.at(float(t[-1]) * fit_share, float(t[-1])),
+    )
     return Record(
         name=f"{Path(path).name}:{run}",
         t=t,

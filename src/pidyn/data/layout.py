@@ -107,16 +107,16 @@ def end_motions(a: np.ndarray, H: np.ndarray) -> np.ndarray:
 
 def sensor_view(record, sim: dict[str, np.ndarray]) -> tuple[Any, dict[str, np.ndarray]]:
     """The record and a simulation of it channel by channel where the record was read through a
-    deck layout (``meta['observation']``); unchanged otherwise."""
-    meta = record.meta or {}
-    H, raw = meta.get("observation"), meta.get("sensor_a")
+    deck layout (``meta.observation``); unchanged otherwise."""
+    meta = record.meta
+    H, raw = meta.observation, meta.sensor_a
     if H is None or raw is None:
         return record, sim
     H, raw = np.asarray(H, float), np.asarray(raw, float)
     if len(raw) != len(record.t):
         raise DataError(f"record '{record.name}': its deck channels and its samples differ in length")
-    channels = list(meta.get("sensor_channels") or [])
-    view = replace(record, a=raw, x=None, v=None, meta={**meta, "output_channels": channels})
+    channels = list(meta.sensor_channels or [])
+    view = replace(record, a=raw, x=None, v=None, meta=meta.with_(output_channels=channels))
     out = {k: v for k, v in sim.items() if k not in ("x", "v", "a")}
     if "a" in sim:
         out["a"] = np.asarray(sim["a"], float) @ H.T

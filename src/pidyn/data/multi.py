@@ -2,7 +2,7 @@
 
 A structure identified from several earthquakes shares its parameters across them; each record
 keeps its own initial state. Laid end to end, the records go through every stage of a run as one
-record, and ``meta["pieces"]`` says where each begins. Whatever simulates over a junction starts
+record, and ``meta.pieces`` says where each begins. Whatever simulates over a junction starts
 the next record from rest (``pidyn.integrate.piece_starts``), the shooting segments and PIDynNet's windows end
 there, and a continuity defect never joins two records.
 
@@ -18,6 +18,7 @@ from dataclasses import replace
 import numpy as np
 
 from pidyn.data.errors import DataError
+from pidyn.data.meta import Piece, RecordMeta, Split
 from pidyn.simulate import Trajectory
 
 #: metadata that must agree between the records of one structure (the channel map and its units)
@@ -33,10 +34,9 @@ SAME = (
 )
 
 
-def pieces(record) -> list[dict]:
-    """The records a record is made of: ``{"name", "i0", "i1"}`` (samples i0 <= i < i1); one
-    piece for a plain record."""
-    return list((record.meta or {}).get("pieces") or [{"name": record.name, "i0": 0, "i1": len(record.t)}])
+def pieces(record) -> list[Piece]:
+    """The records a record is made of (samples i0 <= i < i1); one piece for a plain record."""
+    return list(record.meta.pieces or [Piece(record.name, 0, len(record.t))])
 
 
 def concatenate(records: Sequence, name: str | None = None):
@@ -55,27 +55,24 @@ def concatenate(records: Sequence, name: str | None = None):
     for r in records:
         local = r.t - r.t[0]
         t_parts.append(local + offset)
-        out_pieces.append(
-            {"name": r.name, "i0": n, "i1": n + len(r.t), "t_offset": offset, "meta": _piece_meta(r.meta)}
-        )
+        out_pieces.append(Piece(r.name, n, n + len(r.t), offset, _origin(r.meta)))
         n += len(r.t)
         offset = float(t_parts[-1][-1]) + dt
     t = np.concatenate(t_parts)
     cat = lambda k: None if getattr(first, k) is None else np.concatenate([getattr(r, k) for r in records])  # noqa: E731
-    meta = {
-        k: v for k, v in (first.meta or {}).items() if k not in ("split", "pieces", "notes", "path", "span")
-    }
-    meta["pieces"] = out_pieces
-    if "sensor_a" in meta:  # a deck's channels, kept beside its end motions (pidyn.data.layout)
-        meta["sensor_a"] = np.concatenate([np.asarray(r.meta["sensor_a"]) for r in records])
-    meta["paths"] = [(r.meta or {}).get("path", r.name) for r in records]
-    meta["notes"] = [f"{r.name}: {text}" for r in records for text in (r.meta or {}).get("notes") or []]
-    if "pga" in meta:
-        meta["pga"] = max(float((r.meta or {}).get("pga", 0.0)) for r in records)
-    split = (records[-1].meta or {}).get("split")
-    if split and all((r.meta or {}).get("split") for r in records):
-        cut = out_pieces[-1]["t_offset"] + float(split["fit"][1]) - float(records[-1].t[0])
-        meta["split"] = {"fit": [float(t[0]), cut], "heldout": [cut, float(t[-1])]}
+    meta = first.meta.with_(
+        pieces=out_pieces,
+        # a deck's channels, kept beside its end motions (pidyn.data.layout)
+        sensor_a=None
+        if first.meta.sensor_a is None
+        else np.concatenate([np.asarray(r.meta.sensor_a) for r in records]),
+        paths=[r.meta.path or r.name for r in records],
+        notes=[f"{r.name}: {text}" for r in records for text in r.meta.notes],
+        pga=None if first.meta.pga is None else max(float(r.meta.pga or 0.0) for r in records),
+        split=_joined_split(records, out_pieces[-1], t),
+        path=None,
+        span=None,
+    )
     clean = None
     if all(r.clean is not None for r in records):
         c = [r.clean for r in records]
@@ -101,10 +98,20 @@ def concatenate(records: Sequence, name: str | None = None):
     )
 
 
-def _piece_meta(meta: dict | None) -> dict:
+def _joined_split(records: list, last: Piece, t: np.ndarray) -> Split | None:
+    """The fitting part of records laid end to end: all but the last one's held-out share."""
+    split = records[-1].meta.split
+    if not (split and all(r.meta.split for r in records)):
+        return None
+    cut = last.t_offset + split.fit[1] - float(records[-1].t[0])
+    return Split.at(cut, float(t[-1]), float(t[0]))
+
+
+def _origin(meta: RecordMeta) -> RecordMeta:
     """What a piece keeps of its own record's metadata (where it came from, its shaking)."""
-    keep = ("path", "t_offset", "span", "pga", "run", "event")
-    return {k: v for k, v in (meta or {}).items() if k in keep}
+    return RecordMeta(
+        path=meta.path, t_offset=meta.t_offset, span=meta.span, pga=meta.pga, run=meta.run, event=meta.event
+    )
 
 
 def _check_alike(first, other, dt: float) -> None:
@@ -118,10 +125,7 @@ def _check_alike(first, other, dt: float) -> None:
         problems.append(f"inputs {other.inputs or other.n_inputs} against {first.inputs or first.n_inputs}")
     if other.sensors() != first.sensors():
         problems.append(f"channels {other.sensors()} against {first.sensors()}")
-    for key in SAME:
-        a, b = (first.meta or {}).get(key), (other.meta or {}).get(key)
-        if a != b:
-            problems.append(f"{key} {b!r} against {a!r}")
+    problems += first.meta.same_as(other.meta, SAME)
     if (first.truth or None) != (other.truth or None):
         problems.append("another true structure")
     if problems:

@@ -18,6 +18,7 @@ from pidyn.data.csv_table import (
     uniform_time,
 )
 from pidyn.data.errors import DataError, needed
+from pidyn.data.meta import RecordMeta
 from pidyn.data.windows import spread_by_integration
 from pidyn.excitation.ground_motion import GroundMotion, prepare
 from pidyn.integrate import HOLDS
@@ -53,10 +54,11 @@ class Record:
     excitation: str = "ground"
     truth: dict[str, float] | None = None
     clean: Trajectory | None = None
-    meta: dict = field(default_factory=dict)
+    meta: RecordMeta = field(default_factory=RecordMeta)
 
     def __post_init__(self) -> None:
         """Response channels are (N, n_dof); a 1-D series is one degree of freedom."""
+        self.meta = RecordMeta.of(self.meta, f"record '{self.name}'")
         self.t = np.asarray(self.t, dtype=float)
         self.f = np.asarray(self.f, dtype=float)
         for name in CHANNEL_KINDS:
@@ -74,7 +76,7 @@ class Record:
             raise DataError(f"record '{self.name}': excitation of shape {self.f.shape}; one column per input")
         if self.f.ndim == 2 and self.f.shape[1] == 1:
             self.f = self.f[:, 0]
-        names = (self.meta or {}).get("inputs")
+        names = self.meta.inputs
         if self.f.ndim == 2 and (
             self.f.shape[1] % 2 or (names is not None and 2 * len(names) != self.f.shape[1])
         ):
@@ -107,8 +109,8 @@ class Record:
 
     @property
     def inputs(self) -> list[str]:
-        """The names of several inputs (``meta["inputs"]``); empty for one."""
-        return list((self.meta or {}).get("inputs") or []) if self.n_inputs > 1 else []
+        """The names of several inputs (``meta.inputs``); empty for one."""
+        return list(self.meta.inputs or []) if self.n_inputs > 1 else []
 
     @property
     def n_dof(self) -> int:
@@ -235,7 +237,7 @@ class Record:
             v=cut(self.v),
             a=cut(self.a),
             clean=None,
-            meta={**self.meta, "segment": [t0, t1]},
+            meta=self.meta.with_(segment=[t0, t1]),
         )
 
 
@@ -298,17 +300,15 @@ def synthetic_from_motion(
         excitation=system.excitation,
         truth=dict(truth),
         clean=clean,
-        meta={
-            "record": gm.name,
-            "pga": gm.pga,
-            "dt": gm.dt,
-            "noise": max(levels.values()),
-            "noise_levels": levels,
-            "data_seed": data_seed,
-            "sensors": floors,
-            "channels": list(channels),
-            **({"inputs": list(system.inputs)} if several else {}),
-        },
+        meta=RecordMeta(
+            record=gm.name,
+            pga=gm.pga,
+            dt=gm.dt,
+            noise=max(levels.values()),
+            noise_levels=levels,
+            data_seed=data_seed,
+            inputs=list(system.inputs) if several else None,
+        ),
     )
 
 
@@ -409,13 +409,12 @@ def from_csv(
         v=arrays.get("v"),
         a=arrays.get("a"),
         excitation="ground" if col == "ag" else "force",
-        meta={
-            "path": str(path),
-            "dt": float(np.mean(np.diff(t))),
-            "acceleration": acceleration,
-            "sensors": {k: sorted(c) for k, c in layout.items()},
-            "input_hold": input_hold,
-        },
+        meta=RecordMeta(
+            path=str(path),
+            dt=float(np.mean(np.diff(t))),
+            acceleration=acceleration,
+            input_hold=input_hold,
+        ),
     )
 
 

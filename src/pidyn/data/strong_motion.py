@@ -15,7 +15,7 @@ choose any others. What is done to the data, each step said in the record's ``me
   polyphase filtering; a record already that coarse is kept as it is;
 * **the span** around the shaking: from ``pre`` seconds before 0.5 % of the inputs' Arias
   intensity to ``post`` seconds after 99.5 %; the pre-event part's RMS (the sensors' noise) is
-  kept in ``meta['pre_event_rms']``; ``span=[t0, t1]`` (s, file time) overrides it;
+  kept in ``meta.pre_event_rms``; ``span=[t0, t1]`` (s, file time) overrides it;
 * **units**: SI (the V2 files' cm/s^2 times 0.01).
 
 With several inputs the record keeps absolute accelerations (there is no single ground to
@@ -36,6 +36,7 @@ from scipy.signal import resample_poly
 
 from pidyn.data.csmip import Archive, CsmipFormatError, MissingChannelError, read_archive
 from pidyn.data.layout import end_motions, observation
+from pidyn.data.meta import RecordMeta, Split
 from pidyn.data.sources import READERS, DataError, Record, checked_hold
 from pidyn.data.stations import STATIONS_FILE, station_number, stations
 from pidyn.notes import note
@@ -109,7 +110,7 @@ def csmip_record(
 
     ``max_outputs``: keep the first this many outputs (default: the model's degrees of freedom
     when ``system`` is given, which the train task passes). ``fit_share``: the first share is
-    fitted, the rest held out (``meta['split']``). ``input_hold``: how models read the inputs
+    fitted, the rest held out (``meta.split``). ``input_hold``: how models read the inputs
     between samples (``pidyn.integrate``)."""
     if not 0.1 <= fit_share <= 0.95:
         raise DataError(f"data.fit_share must lie in [0.1, 0.95], got {fit_share}")
@@ -129,23 +130,23 @@ def csmip_record(
     for text in notes:
         log.info("%s: %s", archive.path.name, text)
     cut = float(t[-1]) * fit_share
-    meta = {
-        "path": str(path),
-        "station": station,
-        "direction": direction,
-        **_channel_meta(archive, ins, outs, several),
-        "dt": step,
-        "t_offset": i0 * step,
-        "span": [i0 * step, (i1 - 1) * step],
-        "pre_event_rms": pre_rms,
-        "notes": notes,
-        "acceleration": "absolute" if several else "relative",
-        "units": {"a": "m/s^2", "ag": "m/s^2"},
-        "pga": float(np.max(np.abs(acc_in[i0:i1]))),
-        "input_hold": checked_hold(input_hold, "data.input_hold"),
-        "split": {"fit": [0.0, cut], "heldout": [cut, float(t[-1])]},
-        **deck,
-    }
+    meta = RecordMeta(
+        path=str(path),
+        station=station,
+        direction=direction,
+        # a deck read where each channel stands scores its channels, not its end motions
+        **{**_channel_meta(archive, ins, outs, several), **deck},
+        dt=step,
+        t_offset=i0 * step,
+        span=[i0 * step, (i1 - 1) * step],
+        pre_event_rms=pre_rms,
+        notes=notes,
+        acceleration="absolute" if several else "relative",
+        units={"a": "m/s^2", "ag": "m/s^2"},
+        pga=float(np.max(np.abs(acc_in[i0:i1]))),
+        input_hold=checked_hold(input_hold, "data.input_hold"),
+        split=Split.at(cut, float(t[-1])),
+    )
     name = Path(path).name.split(".")[0]
     return Record(name=name, t=t, f=f, a=a, excitation="ground", meta=meta)
 
@@ -168,7 +169,12 @@ def _read_through(system, outs: list[int], a: np.ndarray) -> tuple[np.ndarray, d
     H = observation(system, outs) if system is not None else None
     if H is None:
         return _unmeasured_columns(a, system), {}
-    meta = {"sensor_channels": outs, "observation": H.tolist(), "sensor_a": a, "output_channels": []}
+    meta = {
+        "sensor_channels": outs,
+        "observation": H.tolist(),
+        "sensor_a": a,
+        "output_channels": [],
+    }  # RecordMeta's fields
     return end_motions(a, H), meta
 
 

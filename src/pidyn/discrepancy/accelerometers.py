@@ -14,11 +14,11 @@ implies:
 
 The diagnosis then runs on that record: one effective input, the relative acceleration as its
 only measured channel (identification, output error and every held-out judgement use it, as the
-sensors read it), and the integrated motion in ``meta['motion']`` for the weak-form screening,
+sensors read it), and the integrated motion in ``meta.motion`` for the weak-form screening,
 which needs x and x'. On a stiff structure the relative motion is a small difference of two large
 accelerations and its integral is a poor measurement: the screening then only proposes, and an
 output-error fit of each candidate to the accelerations decides (``sdof_steps``). The combination
-and the filter are kept in the record's ``meta['accelerometers']``.
+and the filter are kept in the record's ``meta.accelerometers``.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from pidyn.data.meta import AccelerometerView, Motion
 from pidyn.data.sources import Record
 from pidyn.discrepancy.heteroscedastic import envelope, scale_test
 from pidyn.refine.output_error import fit_output_error, output_error_problem
@@ -46,7 +47,7 @@ log = logging.getLogger(__name__)
 
 def needs_view(record: Record) -> bool:
     """A record without a displacement sensor on its one degree of freedom (and not a view already)."""
-    return "motion" not in (record.meta or {}) and (record.x is None or bool(np.isnan(record.x[:, 0]).all()))
+    return record.meta.motion is None and (record.x is None or bool(np.isnan(record.x[:, 0]).all()))
 
 
 def motion_view(
@@ -77,22 +78,20 @@ def motion_view(
     g = integrate(drive, record.dt, 0, corner)  # the weak form's excitation, filtered as x and v are
     influence = {k: v for k, v in values.items() if k.startswith(("r_", "g_", "e_"))}
     nominal = {k: float(v) for k, v in values.items() if k not in influence}
-    meta = {
-        **(record.meta or {}),
-        "inputs": [],
-        "sensor_ground": ground,
-        "motion": {"x": x, "v": v, "f": g},
-        "accelerometers": {
-            "influence": influence,
-            "nominal": nominal,
-            "highpass_hz": corner,
-            "resonance_hz": fn,
-            "note": note,
-            "weights": weights,
-            "inputs": list(record.inputs),
-            "derived": "x, v integrated from a",
-        },
-    }
+    meta = record.meta.with_(
+        inputs=[],
+        sensor_ground=ground,
+        motion=Motion(x, v, g),
+        accelerometers=AccelerometerView(
+            influence=influence,
+            nominal=nominal,
+            highpass_hz=corner,
+            resonance_hz=fn,
+            note=note,
+            weights=weights,
+            inputs=list(record.inputs),
+        ),
+    )
     if influence:
         log.info(
             "accelerometer record: the supports combined by %s (%s); relative motion high-passed at %.3g Hz",
@@ -219,9 +218,8 @@ def _peer_options(seg: Record, system, values: dict[str, float]) -> dict[str, di
 def acceleration_gain(record: Record, sims: dict[str, dict | None], held: np.ndarray) -> dict:
     """``heldout_nrmse_a`` of each simulated model (``{"nominal": sim, "extended": sim}``): the
     absolute acceleration (relative + ground, as the accelerometer reads it) on ``held``."""
-    ground = np.asarray(
-        (record.meta or {}).get("sensor_ground", record.f), float
-    )  # what the sensor adds to x''
+    seen = record.meta.sensor_ground
+    ground = np.asarray(record.f if seen is None else seen, float)  # what the sensor adds to x''
     measured = record.a[:, 0] + ground
     out: dict = {"metric": "heldout_nrmse_a"}
     for key, sim in sims.items():

@@ -40,9 +40,9 @@ def check_diagnosable(system) -> None:
 
 def split_spans(record: Record, fit_share: float) -> tuple[tuple[float, float], tuple[float, float]]:
     """Fitting and held-out time spans: the record's own split if it has one, else a share."""
-    sp = (record.meta or {}).get("split")
+    sp = record.meta.split
     if sp:
-        return (float(sp["fit"][0]), float(sp["fit"][1])), (float(sp["heldout"][0]), float(sp["heldout"][1]))
+        return sp.fit, sp.heldout
     if not 0.1 <= fit_share <= 0.95:
         raise ValueError(f"diagnosis.fit_share must lie in [0.1, 0.95], got {fit_share}")
     t0, t1 = float(record.t[0]), float(record.t[-1])
@@ -79,21 +79,21 @@ class Case:
         """The displacement: measured, or integrated from accelerometers (``accelerometers.motion_view``)."""
         if self.record.x is not None:
             return self.record.x[:, 0]
-        return np.asarray(self.record.meta["motion"]["x"], float)
+        return self.record.meta.motion.x
 
     @property
     def weak_f(self) -> np.ndarray:
         """The excitation the weak form pairs with ``x_raw``: high-passed alike on an accelerometer record
         (identification and output error take the record's own, unfiltered)."""
-        motion = (self.record.meta or {}).get("motion")
-        return self.record.f if motion is None else np.asarray(motion["f"], float)
+        motion = self.record.meta.motion
+        return self.record.f if motion is None else motion.f
 
     @property
     def v_raw(self) -> np.ndarray | None:
         if self.record.v is not None:
             return self.record.v[:, 0]
-        motion = (self.record.meta or {}).get("motion")
-        return None if motion is None else np.asarray(motion["v"], float)
+        motion = self.record.meta.motion
+        return None if motion is None else motion.v
 
     @property
     def stiff(self) -> str:
@@ -156,13 +156,14 @@ class Case:
         """The measurement noise of ``measured``: of an accelerometer, what the record says of it (the
         simulated noise level, or the sensor's RMS before the shaking), since a smoother's residual
         reads an acceleration's broadband content as noise; else the smoother's estimate."""
-        meta = self.record.meta or {}
+        meta = self.record.meta
         if self.from_accelerometers:
-            level = (meta.get("noise_levels") or {}).get("a")
+            level = (meta.noise_levels or {}).get("a")
             if level is not None:
-                absolute = measured + np.asarray(meta.get("sensor_ground", self.record.f), float)
+                ground = self.record.f if meta.sensor_ground is None else meta.sensor_ground
+                absolute = measured + np.asarray(ground, float)
                 return float(level) * float(np.sqrt(np.mean(absolute**2)))
-            pre = (meta.get("pre_event_rms") or {}).get("outputs")
+            pre = (meta.pre_event_rms or {}).get("outputs")
             if pre:
                 return float(pre[0])
         return measurement_noise(self.record.t, measured, period)
@@ -170,7 +171,7 @@ class Case:
     @property
     def from_accelerometers(self) -> bool:
         """The record's motion was integrated from accelerations (``accelerometers.motion_view``)."""
-        return "accelerometers" in (self.record.meta or {})
+        return self.record.meta.accelerometers is not None
 
 
 def prepare(

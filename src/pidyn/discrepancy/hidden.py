@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pidyn.data.meta import Split
 from pidyn.data.sources import Record, synthetic_from_motion
 from pidyn.discrepancy.effects import EFFECTS, LIBRARY, Signals, get_effect
 from pidyn.excitation.ground_motion import prepare
@@ -205,7 +206,7 @@ def hidden_case(
         system, gm, noise=level, data_seed=seed, channels=tuple(channels), params=truth
     )
     rec.name = f"{motion}+{effect or 'none'}"
-    rec.meta.update({"hidden_effect": effect, "hidden_params": hidden, "seed": seed})
+    rec.meta = rec.meta.with_(hidden_effect=effect, hidden_params=hidden, seed=seed)
     return HiddenCase(rec, effect, hidden, truth_nom, level, motion, fit_end)
 
 
@@ -238,5 +239,5 @@ def hidden_record(
         params=None if params is None else dict(params),
         channels=tuple(channels),
     )
-    case.record.meta["split"] = {"fit": [0.0, fit_end], "heldout": [fit_end, float(case.record.t[-1])]}
+    case.record.meta.split = Split.at(fit_end, float(case.record.t[-1]))
     return case.record

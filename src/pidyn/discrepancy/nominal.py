@@ -101,7 +101,8 @@ def _accelerometer_start(
     accelerations better. The weak form reads an integrated motion, a poor measurement on a stiff
     structure: on a longitudinal Painter Street record it put the period at 0.96 s (negative
     damping) where the accelerations say 0.3 s."""
-    fitted = ((case.record.meta or {}).get("accelerometers") or {}).get("nominal")
+    view = case.record.meta.accelerometers
+    fitted = view.nominal if view is not None else None
     if not fitted:
         return values0, period
     names = {s.name for s in case.base.param_specs()}

@@ -58,7 +58,7 @@ def summarize_building(
         "record": record.name,
         "measured_floors": d.views[0].measured_floors if d.views else [],
         "highpass_hz": d.corner_hz,
-        "noise": (record.meta or {}).get("noise"),
+        "noise": record.meta.noise,
         "thresholds": dataclasses.asdict(thresholds),
         "notes": d.notes,
     }

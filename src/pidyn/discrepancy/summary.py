@@ -66,7 +66,8 @@ def summarize(case: Case, result: DiagnosisResult) -> dict[str, Any]:
     causes = [f.effect for f in result.findings]
     ext_system, ext_values, ext_metrics = ext.system, ext.values, ext.metrics
     effect_params = _effect_parameters(o, nom, ext_system, ext_values)
-    truth = dict(record.meta.get("hidden_params") or {}) if "hidden_effect" in record.meta else None
+    hidden = record.meta.hidden_params  # {} for a hidden case that hides nothing
+    truth = None if hidden is None else dict(hidden)
     return {
         "nominal": nom.system.describe(nom.values),
         "cause": causes[0] if causes else (None if o.cause == LEARNED or unearned else o.cause),
@@ -85,7 +86,7 @@ def summarize(case: Case, result: DiagnosisResult) -> dict[str, Any]:
         "trivial_note": result.worse_than_trivial,
         "split": {"fit": list(case.fit), "heldout": list(case.held)},
         "record": record.name,
-        "noise": (record.meta or {}).get("noise"),
+        "noise": record.meta.noise,
         "natural_period": nom.period,
         "thresholds": dataclasses.asdict(case.thresholds),
         "polish": {"nominal": nom.polish_note, "extended": ext.note},
@@ -94,14 +95,14 @@ def summarize(case: Case, result: DiagnosisResult) -> dict[str, Any]:
             "nominal_errors_pct": nom.metrics.get("error_pct"),
             "extended_errors_pct": None if ext_metrics is None else ext_metrics.get("error_pct"),
         },
-        "hidden": None
-        if truth is None
-        else {"effect": record.meta.get("hidden_effect"), "parameters": truth},
+        "hidden": None if truth is None else {"effect": record.meta.hidden_effect, "parameters": truth},
         "modal": None
         if o.modal is None
         else [{k: v for k, v in m.items() if not k.startswith("mode_shape")} for m in o.modal],
         "running": None if o.running is None else running_summary(o.running, case),
-        "accelerometers": (record.meta or {}).get("accelerometers"),
+        "accelerometers": None
+        if record.meta.accelerometers is None
+        else record.meta.accelerometers.to_dict(),
         "confirmation": None if o.confirmation is None else [r.to_dict() for r in o.confirmation.tested],
         "confirmation_nominal": None if o.confirmation is None else o.confirmation.nominal,
         "rivals": None if unearned else rivals(o),
@@ -188,7 +189,7 @@ def write_figures(case: Case, o: Outcome, d: dict) -> list[str]:
     period, cause, sc = nom.period, d["cause"], o.screening
     fig = case.run_dir / "figures"
     fig.mkdir(exist_ok=True)
-    units = (record.meta or {}).get("units", {})
+    units = record.meta.units or {}
     plot_response(
         fig / "simulation_vs_measured.png",
         record.t,
@@ -245,7 +246,8 @@ def _running_figures(case: Case, o: Outcome, fig) -> None:
         signal=(record.t, case.x_raw),
     )
     if o.running is not None:
-        meas = record.a[:, 0] + np.asarray(record.meta.get("sensor_ground", 0.0))
+        ground = record.meta.sensor_ground
+        meas = record.a[:, 0] + (0.0 if ground is None else np.asarray(ground))
         plot_running_period(
             fig / "running_period.png",
             o.running,

@@ -94,9 +94,7 @@ def _law(record: Any, system: Any, values: dict[str, float], sim: dict, centres:
 
 def _unit(record: Any) -> str:
     kind, _ = record.reference()
-    return (record.meta or {}).get("units", {}).get(kind) or {"a": "m/s^2", "x": "m", "v": "m/s"}.get(
-        kind, ""
-    )
+    return (record.meta.units or {}).get(kind) or {"a": "m/s^2", "x": "m", "v": "m/s"}.get(kind, "")
 
 
 def _draw(path: Path, record: Any, rows: dict[str, np.ndarray], law: np.ndarray | None) -> None:

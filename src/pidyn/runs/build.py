@@ -190,16 +190,16 @@ def _trainer_factory(cfg: DictConfig, logger: Any) -> Any:
 
 
 def _hold_out(cfg: DictConfig, record: Record) -> bool:
-    """``data.hold_out``: identify on the record's own fitting part (``meta['split']``) only, and
+    """``data.hold_out``: identify on the record's own fitting part (``meta.split``) only, and
     report the held-out part (the windows and the refinement end where the fitting part does)."""
     if not cfg.data.get("hold_out", False):
         return False
-    split = (record.meta or {}).get("split")
+    split = record.meta.split
     if not split:
         raise ValueError(f"data.hold_out is set but record '{record.name}' has no fitting / held-out split")
     with open_dict(cfg):
-        cfg.data.windows.t_end = float(split["fit"][1])
-    log.info("identifying on %.4g-%.4g s; %.4g-%.4g s held out", *split["fit"], *split["heldout"])
+        cfg.data.windows.t_end = float(split.fit[1])
+    log.info("identifying on %.4g-%.4g s; %.4g-%.4g s held out", *split.fit, *split.heldout)
     return True
 
 

@@ -124,9 +124,9 @@ def _report_lines(
             "before the blow-up.",
         ]
     if not record.truth:  # a measured building: what the model leaves of each storey's force
-        split = (record.meta or {}).get("split")
+        split = record.meta.split
         modes["storey_residuals"] = storey_residuals(
-            system, identified, record, split["heldout"] if split else None
+            system, identified, record, split.heldout if split else None
         )
         lines += residual_lines(modes["storey_residuals"], bool(split))
     if not getattr(system, "mass_known", True):

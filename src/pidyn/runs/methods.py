@@ -151,7 +151,7 @@ def start_baselines(
     """The run's baselines, started now (in a worker with ``baselines.parallel``, outside a
     multirun whose jobs already use the cores); ``hold_out``: they see the fitting part only."""
     bcfg = cfg.get("baselines") or {}
-    fit = (record.meta or {}).get("split", {}).get("fit") if hold_out else None
+    fit = record.meta.split.fit if hold_out and record.meta.split else None
     plain = OmegaConf.to_container(bcfg, resolve=True) if bcfg else {}
     parallel = bool(bcfg.get("parallel", False)) and not in_multirun()
     return BaselineJob(
@@ -186,7 +186,7 @@ def run_baselines(
     if bcfg.get("cramer_rao"):
         # the bound at the truth when it is known, else at the identified model
         ref = {**{s.name: s.init for s in system.param_specs()}, **identified, **(truth or {})}
-        levels = (record.meta or {}).get("noise_levels") or record_noise(cfg, record)
+        levels = record.meta.noise_levels or record_noise(cfg, record)
         crb = B.cramer_rao(system, ref, record.t, record.f, levels, channels=record.sensors())
         write_json(run_dir / "cramer_rao.json", crb)
     if out:

@@ -45,7 +45,8 @@ def sim_nrmse_x(sim: dict[str, np.ndarray], record: Record) -> float | None:
 def record_noise(cfg: DictConfig, record: Record) -> float:
     """The measurement-noise level of the record: what its data source drew or was given
     (``noise=null`` lets a source draw it), else the config's, else 0."""
-    return float((record.meta or {}).get("noise", cfg.get("noise")) or 0.0)
+    noise = record.meta.noise
+    return float((cfg.get("noise") if noise is None else noise) or 0.0)
 
 
 def relative_errors(values: dict[str, float], truths: dict[str, float | None]) -> dict[str, float]:

@@ -81,7 +81,8 @@ class Identified:
 def check_channels(run: Identified, record: Record) -> None:
     """The new record measures the structure as the run's record did: the same station, direction,
     input and output channels (a model of supports ch3, ch17, ch20 cannot read another set)."""
-    own, new = run.record_meta, {**(record.meta or {}), "sensors": record.sensors(), "inputs": record.inputs}
+    own = run.record_meta
+    new = {**record.meta.to_dict(CHANNEL_KEYS), "sensors": record.sensors(), "inputs": record.inputs}
     wrong = [
         f"{key} {new.get(key)!r} (the run: {own.get(key)!r})"
         for key in (*CHANNEL_KEYS, "sensors", "inputs")
@@ -102,7 +103,7 @@ def _plain(value: Any) -> Any:
 def channel_names(record: Record, keys: list[str]) -> dict[str, str]:
     """Score keys (``a1``: the first output) -> the record's own channel names (``a7``: the station's
     channel 7; a building's floors keep their numbers)."""
-    outs = (record.meta or {}).get("output_channels")
+    outs = record.meta.output_channels
     out = {}
     for key in keys:
         kind, num = key[0], key[1:]
@@ -164,8 +165,7 @@ def predict_record(
     ours = score(system, values, record)
     linear = _linear(linear_run, data, system, record, ours)
     knows_nothing = trivial(record)
-    meta = record.meta or {}
-    offset = float(meta.get("t_offset", 0.0))
+    offset = float(record.meta.t_offset or 0.0)
     out = {
         "mean_nrmse_a": ours["mean_nrmse_a"],
         "nrmse": ours["nrmse"],
@@ -180,7 +180,7 @@ def predict_record(
         "identified_on": run.metrics.get("record"),
         "record": record.name,
         "seen_by_run": record.name in str(run.metrics.get("record") or "").split("+"),
-        "pga": meta.get("pga"),
+        "pga": record.meta.pga,
         "simulated": "from rest, the record's own input motions, fixed-step RK4",
     }
     return out, ours["sim"]
@@ -215,7 +215,7 @@ def figure(path: Path, record: Record, sim: dict[str, np.ndarray], run: Identifi
     fig, axes = plt.subplots(
         len(panels), 1, figsize=(10, 2.2 * len(panels) + 0.6), sharex=True, squeeze=False
     )
-    t = record.t + float((record.meta or {}).get("t_offset", 0.0))
+    t = record.t + float(record.meta.t_offset or 0.0)
     for ax, (kind, fl) in zip(axes[:, 0], panels):
         meas = measured_convention({kind: getattr(record, kind)}, record, kind)[:, fl - 1]
         pred = measured_convention(sim, record, kind)[:, fl - 1]

@@ -156,10 +156,10 @@ def _adequacy(run: Run, final: dict[str, float], sim: dict[str, np.ndarray]) -> 
     """Whether the identified model describes the record (``pidyn.adequacy``), on the fitting part
     and on a held-out part, with the integrator's stability at the record's step."""
     record = run.record
-    split = (record.meta or {}).get("split") if run.hold_out else None
-    fit = split["fit"] if split else (float(record.t[0]), float(record.t[-1]))
+    split = record.meta.split if run.hold_out else None
+    fit = split.fit if split else (float(record.t[0]), float(record.t[-1]))
     stability = rk4_stability(run.system, final, record.dt)
-    return check_adequacy(sim, record, fit, split["heldout"] if split else None, stability=stability)
+    return check_adequacy(sim, record, fit, split.heldout if split else None, stability=stability)
 
 
 def _record_adequacy(result: dict[str, Any], metrics: dict) -> None:

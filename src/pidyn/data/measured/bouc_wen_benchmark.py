@@ -16,6 +16,7 @@ from importlib import resources
 import numpy as np
 import pandas as pd
 
+from pidyn.data.meta import RecordMeta, Split
 from pidyn.data.sources import DataError, Record
 
 FS = 750.0
@@ -46,7 +47,7 @@ def _read(name: str) -> tuple[np.ndarray, np.ndarray]:
     return u, y
 
 
-def _record(name: str, u: np.ndarray, y: np.ndarray, meta: dict) -> Record:
+def _record(name: str, u: np.ndarray, y: np.ndarray, split: Split | None) -> Record:
     t = np.arange(len(u)) / FS
     return Record(
         name=name,
@@ -54,23 +55,23 @@ def _record(name: str, u: np.ndarray, y: np.ndarray, meta: dict) -> Record:
         f=u,
         x=y,
         excitation="force",
-        meta={
-            "dt": 1 / FS,
-            "fs": FS,
-            "units": {"x": "m", "u": "N"},
-            "source": SOURCE,
+        meta=RecordMeta(
+            dt=1 / FS,
+            fs=FS,
+            units={"x": "m", "u": "N"},
+            source=SOURCE,
             # the benchmark's own equations simulated from its sampled input follow its output
             # 7x closer on val_multisine with the input read band-limited between samples than
             # linearly (9.8e-7 m against 7.3e-6 m): its data come from a band-limited input
-            "input_hold": "bandlimited",
-            **meta,
-        },
+            input_hold="bandlimited",
+            split=split,
+        ),
     )
 
 
 def load_bouc_wen_benchmark(fit_periods: int = 3, periods: int = 5) -> Record:
     """The training multisine from rest: ``periods`` periods (1-5), of which the first
-    ``fit_periods`` are fitted and the rest held out (``meta["split"]``)."""
+    ``fit_periods`` are fitted and the rest held out (``meta.split``)."""
     if not 1 <= fit_periods < periods <= 5:
         raise DataError(
             f"bouc_wen_benchmark: need 1 <= fit_periods < periods <= 5, got {fit_periods}, {periods}"
@@ -82,7 +83,7 @@ def load_bouc_wen_benchmark(fit_periods: int = 3, periods: int = 5) -> Record:
         "bouc_wen_benchmark",
         u[:n],
         y[:n],
-        {"split": {"fit": [0.0, fit_end], "heldout": [fit_periods * PERIOD / FS, (n - 1) / FS]}},
+        Split((0.0, fit_end), (fit_periods * PERIOD / FS, (n - 1) / FS)),
     )
 
 
@@ -91,4 +92,4 @@ def load_bouc_wen_validation(name: str) -> Record:
     if name == "train":
         raise DataError("bouc_wen_benchmark: 'train' is not a test signal; use load_bouc_wen_benchmark()")
     u, y = _read(name)
-    return _record(f"bouc_wen_benchmark_{name}", u, y, {})
+    return _record(f"bouc_wen_benchmark_{name}", u, y, None)

@@ -16,6 +16,7 @@ from importlib import resources
 import numpy as np
 from scipy.io import loadmat
 
+from pidyn.data.meta import RecordMeta, Split
 from pidyn.data.sources import DataError, Record
 
 FS = 1e7 / 2**14
@@ -29,7 +30,7 @@ def load_silverbox(
 ) -> Record:
     """The estimation and test parts as one record (time 0 at the first estimation sample).
 
-    ``meta["split"]`` holds the fitting and held-out time spans; the offsets of V1 and V2
+    ``meta.split`` holds the fitting and held-out time spans; the offsets of V1 and V2
     (measurement offsets, as the official README notes) are removed using the estimation part.
     """
     ref = resources.files("pidyn.data.measured").joinpath("silverbox/SNLS80mV.mat")
@@ -55,14 +56,14 @@ def load_silverbox(
         f=u[lo:hi],
         x=y[lo:hi],
         excitation="force",
-        meta={
-            "dt": 1 / FS,
-            "fs": FS,
-            "units": {"x": "V", "u": "V"},
+        meta=RecordMeta(
+            dt=1 / FS,
+            fs=FS,
+            units={"x": "V", "u": "V"},
             # the input was low-pass filtered before sampling, at 9 samples a period of the
             # resonance: read between samples band-limited, not linear (see pidyn.integrate)
-            "input_hold": "bandlimited",
-            "split": {"fit": [0.0, fit_end], "heldout": [(test[0] - lo) / FS, (test[1] - 1 - lo) / FS]},
-            "source": "Silverbox SNLS80mV (Wigren & Schoukens 2013)",
-        },
+            input_hold="bandlimited",
+            split=Split((0.0, fit_end), ((test[0] - lo) / FS, (test[1] - 1 - lo) / FS)),
+            source="Silverbox SNLS80mV (Wigren & Schoukens 2013)",
+        ),
     )
