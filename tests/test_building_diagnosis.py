@@ -230,18 +230,41 @@ def test_a_named_effect_needs_a_determined_size():
     building's extension may be named: two standard deviations from zero (``storey_max_rel_std``)."""
     from pidyn.discrepancy.evidence import Evidence
     from pidyn.discrepancy.settings import DiagnosisSettings
+    from pidyn.discrepancy.step_reports import StoreyStep
     from pidyn.discrepancy.storey_extension import size_spread
     from pidyn.discrepancy.storey_model import Found
     from pidyn.discrepancy.storey_steps import refusal_notes
 
     cand = Found("quadratic_damping", 1, {"c2": 25.0}, Evidence("quadratic_damping", score=2.8), {})
-    loose = {"intervals": {"c2_1": {"value": 1.23, "std": 1.30, "rel_std_pct": 106.0}}}
-    tight = {"intervals": {"c2_1": {"value": 1.23, "std": 0.10, "rel_std_pct": 8.1}}}
+
+    def step(intervals: dict, **kw) -> StoreyStep:
+        return StoreyStep(
+            "quadratic_damping",
+            1,
+            2.8,
+            None,
+            {},
+            {},
+            intervals,
+            "weak_form",
+            0.0,
+            1,
+            0.135,
+            0.104,
+            False,
+            **kw,
+        )
+
+    loose = step({"c2_1": {"value": 1.23, "std": 1.30, "rel_std_pct": 106.0}})
+    tight = step({"c2_1": {"value": 1.23, "std": 0.10, "rel_std_pct": 8.1}})
     limit = DiagnosisSettings().storey_max_rel_std
     assert size_spread(cand, loose) == pytest.approx(1.06) and size_spread(cand, loose) > limit
     assert size_spread(cand, tight) < limit
-    assert size_spread(cand, {"intervals": {}}) == 0.0  # no interval: nothing to refuse on
-    refused = {"effect": "quadratic_damping", "storey": 1, "heldout_before": 0.135, "heldout_after": 0.104}
-    text = refusal_notes({**refused, "size_rel_std": 1.06})[0]
+    assert size_spread(cand, step({})) == 0.0  # no interval: nothing to refuse on
+    text = refusal_notes(step({}, size_rel_std=1.06))[0]
     assert "not determined" in text and "106 %" in text
-    assert "did not predict" in refusal_notes(refused)[0]
+    assert "did not predict" in refusal_notes(step({}))[0]
+    # its form in diagnosis.json reads back the same, and says why it was refused
+    undetermined = step({}, size_rel_std=1.06)
+    assert StoreyStep.of(undetermined.to_dict()) == undetermined
+    assert undetermined.outcome().startswith("refused: its size is not determined")

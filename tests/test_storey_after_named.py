@@ -14,6 +14,7 @@ from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.loop import Step
 from pidyn.discrepancy.settings import DiagnosisSettings
+from pidyn.discrepancy.step_reports import StoreyStep
 from pidyn.discrepancy.storey_choice import Study, misfit_rows
 from pidyn.discrepancy.storey_model import (
     CORNER_SHARE,
@@ -83,6 +84,11 @@ def _terms(cubic: dict, quad: dict | None) -> dict[int, list]:
 
 
 @pytest.mark.slow
+def _report(effect: str, fit_bic: float, storey: int = 1) -> StoreyStep:
+    """A step's account with what the choice between extensions reads (the rest left empty)."""
+    return StoreyStep(effect, storey, None, None, {}, {}, {}, "weak_form", fit_bic, 1, 1.0, 1.0, True)
+
+
 def test_the_other_storeys_effect_of_a_pair_comes_first(sizes):
     cubic, quad = sizes
     study, current, found, views, screenings = _state(_terms(cubic, quad), cubic["k3"])
@@ -123,7 +129,7 @@ def test_the_misfit_search_stops_at_a_candidate_that_removes_nearly_all_of_it(mo
 
         def extend(self, current, found, cand):
             tried.append(cand.effect)
-            report = {"fit_bic": bic[cand.effect], "effect": cand.effect}
+            report = _report(cand.effect, bic[cand.effect])
             return Step(True, {"excess": left[cand.effect]}, None, report)
 
         def fit_check(self, current):
@@ -136,7 +142,7 @@ def test_the_misfit_search_stops_at_a_candidate_that_removes_nearly_all_of_it(mo
     misfit = {"channels": {"a1": {"excess": 1.0}}}
     best = st.confirm_leaning(FakeStudy(), current, [], [None], rows, misfit)
     assert tried == ["B", "A"]  # A removed 99.75 % of the squared excess: C was not refined
-    assert best.report["effect"] == "A" and best.report["misfit_explained"] > settings.confirm.misfit_done
+    assert best.report.effect == "A" and best.report.misfit_explained > settings.confirm.misfit_done
     tried.clear()
     best = st.confirm_leaning(
         FakeStudy(), current, [], [None], [(1, replace(rows[0][1], effect="D"))], misfit
@@ -161,17 +167,16 @@ def test_a_first_name_that_leaves_most_of_the_misfit_is_challenged(monkeypatch):
     monkeypatch.setattr(st, "fit_bic", lambda *a: 1000.0)
 
     def step() -> Step:
-        report = {"effect": "cubic_stiffness", "storey": 3, "fit_bic": 700.0}
-        return Step(True, after, None, report)
+        return Step(True, after, None, _report("cubic_stiffness", 700.0, storey=3))
 
     for excess_after, weak in ((0.9, True), (0.6, False)):  # 19 % and 64 % of the excess removed
         tests = {"before": test_of(1.0), "after": test_of(excess_after)}
         study.fit_check = lambda current: tests[current.heldout["model"]]  # type: ignore[method-assign]
         s = step()
         assert st.weak_first_name(study, before, s) is weak
-        assert s.report["delta_bic_fit"] == pytest.approx(300.0)
-        assert s.report["misfit_explained"] == pytest.approx(1 - excess_after**2)
+        assert s.report.delta_bic_fit == pytest.approx(300.0)
+        assert s.report.misfit_explained == pytest.approx(1 - excess_after**2)
     study.fit_check = lambda current: test_of(1.0, failed=False)  # type: ignore[method-assign]
     s = step()
     assert not st.weak_first_name(study, before, s)
-    assert "delta_bic_fit" not in s.report  # nothing to compete with: no search, no gain computed
+    assert s.report.delta_bic_fit is None  # nothing to compete with: no search, no gain computed

@@ -19,6 +19,7 @@ from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.heldout_check import HeldoutCheck
 from pidyn.discrepancy.screening import Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
+from pidyn.discrepancy.step_reports import ExtensionStep, LearnedRefusal
 from pidyn.simulate import simulate_response
 from pidyn.systems.sdof import SDOFSystem
 from pidyn.weak_form import WeakForm, measurement_noise, smooth_signals, velocity_noise
@@ -248,9 +249,9 @@ class Extension:
     values: dict[str, float] | None = None
     metrics: dict | None = None
     causes: list[str] = field(default_factory=list)
-    steps: list[dict] = field(default_factory=list)
+    steps: list[ExtensionStep] = field(default_factory=list)
     note: str | None = None
-    refused: dict | None = None
+    refused: LearnedRefusal | None = None
     learned_fit: dict | None = None
     unearned: dict | None = None
 

@@ -11,6 +11,7 @@ from pidyn.data.sources import Record
 from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.learned_fit import fit_learned_force
 from pidyn.discrepancy.residual import unexplained_force
+from pidyn.discrepancy.step_reports import LearnedRefusal
 from pidyn.reporting import nrmse
 from pidyn.simulate import simulate_response
 from pidyn.systems.terms import LearnedForce
@@ -132,7 +133,7 @@ def refuse_learned(
     held: tuple[float, float],
     substeps: int,
     folder,
-) -> tuple[dict | None, dict[str, float]]:
+) -> tuple[LearnedRefusal | None, dict[str, float]]:
     """Why the learned force of the run in ``folder`` is not kept (None: it is), and both
     held-out errors."""
     kept, errors = learned_predicts(
@@ -145,4 +146,4 @@ def refuse_learned(
         f"it extends ({errors['without']:.3g}): not kept"
     )
     log.info("%s: %s", folder.name, note)
-    return {"effect": LEARNED, "folder": folder.name, "heldout_nrmse": errors, "note": note}, errors
+    return LearnedRefusal(LEARNED, folder.name, errors, note), errors

@@ -67,7 +67,7 @@ class Step:
     accepted: bool
     current: Any
     found: Any
-    report: dict | None
+    report: Any  # the subject's typed account of the step (pidyn.discrepancy.step_reports); None: none
 
 
 class Subject(ABC):

@@ -55,33 +55,13 @@ from pidyn.discrepancy.nominal import (
     polish,
 )
 from pidyn.discrepancy.screening import Screening, screen
+from pidyn.discrepancy.step_reports import ExtensionStep
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.reporting import nrmse
 from pidyn.systems.sdof import SDOFSystem
 from pidyn.weak_form import WeakForm
 
 log = logging.getLogger(__name__)
-
-
-#: what each step keeps of the row that named its effect
-ROW_EVIDENCE = ("score", "delta_bic", "explained", "cv_gain", "heldout_gain", "force_share", "source")
-#: what each step keeps of the next screening's rows: the evidence behind the next name
-STEP_EVIDENCE = (
-    "effect",
-    "score",
-    "delta_bic",
-    "explained",
-    "cv_gain",
-    "heldout_gain",
-    "force_share",
-    "passes",
-    "persists",
-    "heldout_miss",
-    "heldout_small",
-    "note",
-    "parameters",
-    "source",
-)
 
 
 def _first_cause(
@@ -225,24 +205,14 @@ def extension_step(
         if out.refused is not None:  # a network that fits the fitting part but predicts worse
             return None
     out.causes.append(cause)
-    out.steps.append(_step_record(k, cause, folder, system.describe(ext_values), row, errors))
+    equation = system.describe(ext_values)
+    # the step keeps the evidence as it stands now (copies: a later check may annotate the rows)
+    out.steps.append(
+        ExtensionStep(k, cause, folder.name, equation, replace(row), errors if cause == LEARNED else None)
+    )
     out.system, out.values, out.metrics = system, ext_values, metrics
     log.info("step %d: extended with %s: %s", k, cause, system.describe(ext_values))
     return ext_node, ext_values, system
-
-
-def _step_record(k: int, cause: str, folder, equation: str, row: Evidence, errors) -> dict:
-    """What ``diagnosis.json`` keeps of extension step ``k``."""
-    return {
-        "step": k,
-        "effect": cause,
-        "folder": folder.name,
-        "equation": equation,
-        "evidence": {
-            **{key: getattr(row, key) for key in ROW_EVIDENCE},
-            **({"heldout_nrmse": errors} if cause == LEARNED else {}),
-        },
-    }
 
 
 def next_cause(
@@ -272,24 +242,21 @@ def next_cause(
         case.thresholds,
     )
     step = out.steps[-1]
-    step["next_ranking"] = [
-        {k_: v for k_, v in r.to_dict().items() if k_ in STEP_EVIDENCE} for r in sc.ranking
-    ]
-    step["next_structure"] = dict(sc.structure)
-    step["next_verdict"] = sc.verdict
+    step.next_ranking = [replace(r) for r in sc.ranking]
+    step.next_structure, step.next_verdict = dict(sc.structure), sc.verdict
     log.info(
         "screening the extended model: %s",
         ", ".join(f"{r.effect} {r.score:.1f}" for r in sc.ranking[:4] if r.score is not None),
     )
     if case.from_accelerometers:  # output error on the accelerations decides (see ``run``)
         confirmation = confirm_undecided(case, system, values, node, sc, s, k + 1, everything=True)
-        step["next_confirmation"] = [r.to_dict() for r in confirmation.tested]
+        step.next_confirmation = [replace(r) for r in confirmation.tested]
         return (None, None) if confirmation.row is None else (confirmation.row.effect, confirmation.row)
     if sc.cause is not None:
         return sc.cause, next(r for r in sc.ranking if r.effect == sc.cause)
     if sc.verdict == Verdict.NONE:  # the simulated response decides what the weak form leans to
         confirmation = confirm_undecided(case, system, values, node, sc, s, k + 1)
-        step["next_confirmation"] = [r.to_dict() for r in confirmation.tested]
+        step.next_confirmation = [replace(r) for r in confirmation.tested]
         if confirmation.row is not None:
             return confirmation.row.effect, confirmation.row
     if sc.verdict == Verdict.UNEXPLAINED and LEARNED not in out.causes and case.settings.learn_unexplained:

@@ -16,6 +16,7 @@ from pidyn.discrepancy.fit_test import fit_test
 from pidyn.discrepancy.loop import Step
 from pidyn.discrepancy.screening import Screening, screen
 from pidyn.discrepancy.settings import DiagnosisSettings
+from pidyn.discrepancy.step_reports import StoreyStep
 from pidyn.discrepancy.storey_extension import fit_bic, try_extension
 from pidyn.discrepancy.storey_model import (
     BuildingState,
@@ -91,16 +92,16 @@ def best_row(screenings: list[Screening]) -> tuple[int, Evidence] | None:
     return best
 
 
-def better(a: dict, b: dict, settings: DiagnosisSettings) -> bool:
+def better(a: StoreyStep, b: StoreyStep, settings: DiagnosisSettings) -> bool:
     """Whether extension ``a`` beats ``b`` on the fitting part: a lower BIC by at least
     ``tie_delta_bic`` ("strong"), or, closer than that, fewer parameters (then the lower BIC).
     A stop fitted to a cubic spring in storey 3 came within 2.1 BIC units of the spring (and
     predicted the held-out part a little worse): two parameters where one does."""
-    gap = b["fit_bic"] - a["fit_bic"]
+    gap = b.fit_bic - a.fit_bic
     if abs(gap) >= float(settings.thresholds.tie_delta_bic):
         return gap > 0
-    if a["n_params"] != b["n_params"]:
-        return a["n_params"] < b["n_params"]
+    if a.n_params != b.n_params:
+        return a.n_params < b.n_params
     return gap > 0
 
 
@@ -195,12 +196,12 @@ def confirm_leaning(
         sig, _ = storey_signals(views[storey - 1], current.values[f"k{storey}"], study.period, fit[1])
         cand = Found(row.effect, storey, dict(row.parameters), row, sig.context())
         trial = study.extend(current, found, cand)
-        gain = base - trial.report["fit_bic"]
-        trial.report.update(source="output_error", delta_bic_fit=gain)
+        gain = base - trial.report.fit_bic
+        trial.report.source, trial.report.delta_bic_fit = "output_error", gain
         ok = gain >= float(settings.thresholds.min_delta_bic) and trial.accepted
         if misfit is not None:
             explained = 1.0 - excess2(study.fit_check(trial.current)) / max(excess2(misfit), 1e-300)
-            trial.report.update(source="fit_test", misfit_explained=explained)
+            trial.report.source, trial.report.misfit_explained = "fit_test", explained
             ok = ok and explained >= float(settings.confirm.misfit_share)
         log.info(
             "output-error check of %s in storey %d (weak-form score %s): BIC gain %.1f on the fitting part%s",
@@ -208,15 +209,11 @@ def confirm_leaning(
             storey,
             score_text(row.score),
             gain,
-            "" if misfit is None else f", {trial.report['misfit_explained']:.0%} of the misfit explained",
+            "" if misfit is None else f", {trial.report.misfit_explained:.0%} of the misfit explained",
         )
-        if ok and (best is None or gain > best.report["delta_bic_fit"]):
+        if ok and (best is None or gain > best.report.delta_bic_fit):
             best = trial
-        if (
-            ok
-            and misfit is not None
-            and trial.report["misfit_explained"] >= float(settings.confirm.misfit_done)
-        ):
+        if ok and misfit is not None and trial.report.misfit_explained >= float(settings.confirm.misfit_done):
             break  # the rows come best first (the score test): what is left is too little for another
     return best
 

@@ -13,6 +13,7 @@ from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.loop import Step
 from pidyn.discrepancy.settings import DiagnosisSettings
+from pidyn.discrepancy.step_reports import StoreyStep
 from pidyn.discrepancy.storey_model import BuildingState, Found, building_with
 from pidyn.discrepancy.storey_nominal import heldout_nrmse
 from pidyn.discrepancy.storey_ranking import floor_noise, measured_floors, trial_values
@@ -62,31 +63,31 @@ def try_extension(
     if accepted and (spread := size_spread(cand, report)) > float(settings.storey_max_rel_std):
         # a size the data do not fix: a quadratic damper in storey 1 (c2 1.23, 95 % 0.15-9.8) stood
         # in for the storey's collapsed linear damper beside a friction named in storey 2
-        accepted = False
-        report.update(accepted=False, size_rel_std=spread)
+        accepted = report.accepted = False
+        report.size_rel_std = spread
     log.info(
         "storey %d %s: held-out NRMSE %.4g -> %.4g (%s)",
         cand.storey,
         cand.effect,
         before,
         ho["mean"],
-        step_outcome(report),
+        report.outcome(),
     )
     done = Found(cand.effect, cand.storey, params, cand.row, cand.ctx)
     return Step(accepted, BuildingState(ext, values, ho, res, current.noise), done, report)
 
 
-def size_spread(cand: Found, report: dict) -> float:
+def size_spread(cand: Found, report: StoreyStep) -> float:
     """The standard deviation of the effect's size (its key parameter) as a share of it, from the
     refinement's interval; 0 where it has none."""
-    iv = report["intervals"].get(storey_param(EFFECTS[cand.effect].key, cand.storey)) or {}
+    iv = report.intervals.get(storey_param(EFFECTS[cand.effect].key, cand.storey)) or {}
     rel = iv.get("rel_std_pct")
     return float(rel) / 100.0 if rel is not None and np.isfinite(rel) else 0.0
 
 
 def _step_report(
     cand: Found, values: dict, res: Any, bic: float, before: float, after: float, accepted: bool
-) -> tuple[dict[str, float], dict]:
+) -> tuple[dict[str, float], StoreyStep]:
     """The effect's own parameters (its names without the storey) and what ``diagnosis.json``
     keeps of the step."""
     names = {
@@ -94,21 +95,21 @@ def _step_report(
         for s in EFFECTS[cand.effect].term(cand.params, cand.ctx).specs()
     }
     params = {base: float(values[full]) for base, full in names.items() if full in values}
-    report = {
-        "effect": cand.effect,
-        "storey": cand.storey,
-        "score": cand.row.score,
-        "cv_gain": cand.row.cv_gain,
-        "screening_parameters": cand.params,
-        "parameters": {names[b]: v for b, v in params.items()},
-        "intervals": {full: res.intervals.get(full) for full in names.values() if full in res.intervals},
-        "source": "weak_form",
-        "fit_bic": bic,
-        "n_params": len(names),
-        "heldout_before": before,
-        "heldout_after": after,
-        "accepted": accepted,
-    }
+    report = StoreyStep(
+        effect=cand.effect,
+        storey=cand.storey,
+        score=cand.row.score,
+        cv_gain=cand.row.cv_gain,
+        screening_parameters=cand.params,
+        parameters={names[b]: v for b, v in params.items()},
+        intervals={full: res.intervals.get(full) for full in names.values() if full in res.intervals},
+        source="weak_form",
+        fit_bic=bic,
+        n_params=len(names),
+        heldout_before=before,
+        heldout_after=after,
+        accepted=accepted,
+    )
     return params, report
 
 
@@ -124,12 +125,3 @@ def fit_bic(
     chi2, n = float(np.sum(r**2)), int(mask.sum()) * len(floors)
     k = sum(1 for s in system.param_specs() if s.trainable)
     return chi2 + k * float(np.log(max(n, 1))) if np.isfinite(chi2) else float("inf")
-
-
-def step_outcome(step: dict) -> str:
-    """A step's end for people (the log and the report): named, or which rule refused it."""
-    if step["accepted"]:
-        return "named"
-    if step.get("size_rel_std") is not None:
-        return f"refused: its size is not determined (std {100 * step['size_rel_std']:.0f} % of it)"
-    return "refused: no held-out gain"

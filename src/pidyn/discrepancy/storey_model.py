@@ -13,6 +13,7 @@ from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.screening import Screening
+from pidyn.discrepancy.step_reports import StoreyStep
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.params import positive
 from pidyn.signals import integrate
@@ -86,7 +87,7 @@ class BuildingDiagnosis:
     found: list[Found]
     nominal: dict
     extended: dict | None
-    steps: list[dict]
+    steps: list[StoreyStep]
     gain: dict
     unexplained_storey: int | None
     views: list[StoreyView]

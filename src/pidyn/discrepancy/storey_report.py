@@ -12,7 +12,7 @@ import numpy as np
 
 from pidyn.data.sources import Record
 from pidyn.discrepancy.screening_rules import Thresholds
-from pidyn.discrepancy.storey_extension import step_outcome
+from pidyn.discrepancy.step_reports import StoreyStep
 from pidyn.discrepancy.storey_model import BuildingDiagnosis, StoreyView, score_text, storey_system
 from pidyn.reporting import pyplot
 from pidyn.systems.shear_building import ShearBuilding
@@ -35,7 +35,7 @@ def summarize_building(
         "storeys": [f.storey for f in d.found],
         "t_change": t_change,
         "unexplained_storey": d.unexplained_storey,
-        "steps": d.steps,
+        "steps": [s.to_dict() for s in d.steps],
         "heldout_check": {
             "metric": "nrmse_a",
             "fit": d.nominal["fit"],
@@ -64,17 +64,17 @@ def summarize_building(
     }
 
 
-def _accepted_parameters(steps: list[dict]) -> tuple[dict, float | None, list[float] | None]:
+def _accepted_parameters(steps: list[StoreyStep]) -> tuple[dict, float | None, list[float] | None]:
     """The accepted steps' effect parameters and a located change's time with its interval."""
     params: dict = {}
     t_change, t_ci = None, None
     for step in steps:
-        if not step["accepted"]:
+        if not step.accepted:
             continue
-        params.update(step["parameters"])
-        for name, iv in step["intervals"].items():
+        params.update(step.parameters)
+        for name, iv in step.intervals.items():
             if name.startswith("t_d") and iv is not None:
-                t_change, t_ci = float(step["parameters"][name]), [float(v) for v in iv["ci95"]]
+                t_change, t_ci = float(step.parameters[name]), [float(v) for v in iv["ci95"]]
     if t_change is not None:
         params["t_change"], params["t_change_ci95"] = t_change, t_ci
     return params, t_change, t_ci
@@ -167,7 +167,7 @@ def report_lines(d: dict) -> list[str]:
     for s in d["steps"]:
         lines.append(
             f"\nStep: {s['effect']} in storey {s['storey']} (score {score_text(s.get('score'))}): held-out NRMSE "
-            f"{s['heldout_before']:.4g} -> {s['heldout_after']:.4g}, {step_outcome(s)}."
+            f"{s['heldout_before']:.4g} -> {s['heldout_after']:.4g}, {StoreyStep.of(s).outcome()}."
         )
     return lines + [""]
 

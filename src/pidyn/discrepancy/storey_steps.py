@@ -10,6 +10,7 @@ import numpy as np
 from pidyn.discrepancy.evidence import Evidence
 from pidyn.discrepancy.loop import Step
 from pidyn.discrepancy.screening import Screening
+from pidyn.discrepancy.step_reports import StoreyStep
 from pidyn.discrepancy.storey_choice import (
     Study,
     best_row,
@@ -93,21 +94,21 @@ def weak_first_name(study: Study, current: BuildingState, step: Step) -> bool:
         return False
     explained = 1.0 - excess2(study.fit_check(step.current)) / max(excess2(misfit), 1e-300)
     base = fit_bic(study.record, current.system, current.values, study.fit, current.noise)
-    step.report.update(delta_bic_fit=base - step.report["fit_bic"], misfit_explained=explained)
+    step.report.delta_bic_fit, step.report.misfit_explained = base - step.report.fit_bic, explained
     weak = explained < float(study.settings.confirm.misfit_share)
     if weak:
         log.info(
             "storey %d %s removes %.0f%% of the fitting part's excess over the noise: the score test's "
             "candidates compete with it",
-            step.report["storey"],
-            step.report["effect"],
+            step.report.storey,
+            step.report.effect,
             100 * explained,
         )
     return weak
 
 
 def _gain(step: Step) -> float:
-    return float(step.report.get("delta_bic_fit") or -np.inf)
+    return float(step.report.delta_bic_fit or -np.inf)
 
 
 def named_step(
@@ -130,13 +131,11 @@ def named_step(
                 "storey %d: %s (fitting-part BIC %.1f) against %s (%.1f)",
                 storey,
                 cand.effect,
-                trial.report["fit_bic"],
-                step.report["effect"],
-                step.report["fit_bic"],
+                trial.report.fit_bic,
+                step.report.effect,
+                step.report.fit_bic,
             )
-            keys = ("effect", "fit_bic", "n_params", "heldout_after")
-            trial.report["rival"] = {k: step.report[k] for k in keys}
-            step.report["rival"] = {k: trial.report[k] for k in keys}
+            trial.report.rival, step.report.rival = step.report.versus(), trial.report.versus()
         if step is None or better(trial.report, step.report, study.settings):
             step = trial
     return step
@@ -164,23 +163,23 @@ def building_gain(nominal: dict, current: BuildingState, extended: bool) -> dict
     return out
 
 
-def refusal_notes(refused: dict | None) -> list[str]:
+def refusal_notes(refused: StoreyStep | None) -> list[str]:
     if refused is None:
         return []
-    if refused.get("size_rel_std") is not None:
+    if refused.size_rel_std is not None:
         return [
             note(
                 "refused_undetermined",
-                f"{refused['effect']} in storey {refused['storey']} predicted the held-out floor accelerations "
-                f"better ({refused['heldout_before']:.4g} -> {refused['heldout_after']:.4g}) but its size is not "
-                f"determined (std {100 * refused['size_rel_std']:.0f} % of it): not named",
+                f"{refused.effect} in storey {refused.storey} predicted the held-out floor accelerations "
+                f"better ({refused.heldout_before:.4g} -> {refused.heldout_after:.4g}) but its size is not "
+                f"determined (std {100 * refused.size_rel_std:.0f} % of it): not named",
             )
         ]
     return [
         note(
             "refused_no_heldout_gain",
-            f"{refused['effect']} in storey {refused['storey']} passed the screening (score {score_text(refused.get('score'))}) "
-            f"but did not predict the held-out floor accelerations better ({refused['heldout_before']:.4g} -> "
-            f"{refused['heldout_after']:.4g}): not named",
+            f"{refused.effect} in storey {refused.storey} passed the screening (score {score_text(refused.score)}) "
+            f"but did not predict the held-out floor accelerations better ({refused.heldout_before:.4g} -> "
+            f"{refused.heldout_after:.4g}): not named",
         )
     ]

@@ -71,9 +71,9 @@ def summarize(case: Case, result: DiagnosisResult) -> dict[str, Any]:
     return {
         "nominal": nom.system.describe(nom.values),
         "cause": causes[0] if causes else (None if o.cause == LEARNED or unearned else o.cause),
-        "unearned": unearned,
+        "unearned": None if unearned is None else _with_steps(unearned),
         "t_change": effect_params.get("t_change"),
-        "steps": ext.steps,
+        "steps": [s.to_dict() for s in ext.steps],
         "learned_force": LEARNED in o.causes,
         "structure": {k: v for k, v in o.screening.structure.items()},
         "heldout_check": o.check.__dict__,
@@ -106,7 +106,7 @@ def summarize(case: Case, result: DiagnosisResult) -> dict[str, Any]:
         "confirmation": None if o.confirmation is None else [r.to_dict() for r in o.confirmation.tested],
         "confirmation_nominal": None if o.confirmation is None else o.confirmation.nominal,
         "rivals": None if unearned else rivals(o),
-        "learned_force_refused": ext.refused,
+        "learned_force_refused": None if ext.refused is None else ext.refused.to_dict(),
     }
 
 
@@ -181,6 +181,14 @@ def _verdict(case: Case, o: Outcome, named: bool, learned: bool, worse: bool = F
     if named or (o.cause is not None and o.cause != LEARNED):
         return Verdict.DISCREPANCY
     return Verdict.UNEXPLAINED if learned or structured or worse else Verdict.NONE
+
+
+def _with_steps(unearned: dict) -> dict:
+    """An unearned extension's account with its steps in their JSON form."""
+    return {
+        **unearned,
+        **({"steps": [s.to_dict() for s in unearned["steps"]]} if "steps" in unearned else {}),
+    }
 
 
 def write_figures(case: Case, o: Outcome, d: dict) -> list[str]:
