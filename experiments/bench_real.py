@@ -30,6 +30,8 @@ from pathlib import Path
 import numpy as np
 from real import RECORDS, TUNING, events
 
+from pidyn.bench.tables import cell
+
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "experiments" / "results"
 RUNS = ROOT / "outputs" / "bench_real"
@@ -125,7 +127,7 @@ def write_rows(path: Path, rows: list[dict]) -> None:
 
 
 def _f(v, fmt: str = ".3f") -> str:
-    return "" if v is None or v == "" else format(float(v), fmt)
+    return cell(v, fmt, missing="")
 
 
 def markdown(rows: list[dict]) -> list[str]:

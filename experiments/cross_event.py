@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pidyn.bench.tables import median
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"
 #: the models compared; the first is the reference linear model of the layout
@@ -243,7 +245,7 @@ def table(rows: list[dict], own: dict, systems: list[str]) -> list[dict]:
         for s in systems:
             line[f"{s}_nrmse_a"] = (res.get(s) or {}).get("mean_nrmse_a")
             scores = (res.get(s) or {}).get("nrmse") or {}
-            line[f"{s}_nrmse_ref"] = _median([scores.get(c) for c in ref]) if ref else None
+            line[f"{s}_nrmse_ref"] = median([scores.get(c) for c in ref]) if ref else None
         line["srim_nrmse_a"] = r.get("srim_nrmse_a")
         first = next((v for v in res.values() if v), {})
         line["trivial_nrmse_a"] = first.get("trivial_mean_nrmse_a")
@@ -266,10 +268,10 @@ def summary_lines(lines: list[dict], all_systems: list[str], others: dict[str, l
         rows = [r for r in lines if r["direction"] == direction]
         out += [f"### {direction}", ""]
         systems = [s for s in all_systems if any(r[f"{s}_nrmse_a"] is not None for r in rows)]
-        meds = {s: _median([r[f"{s}_nrmse_a"] for r in rows]) for s in systems}
-        own = _median([r["per_event_heldout_nrmse_a"] for r in rows])
-        triv = _median([r["trivial_nrmse_a"] for r in rows])
-        peer = _median([r.get("srim_nrmse_a") for r in rows])
+        meds = {s: median([r[f"{s}_nrmse_a"] for r in rows]) for s in systems}
+        own = median([r["per_event_heldout_nrmse_a"] for r in rows])
+        triv = median([r["trivial_nrmse_a"] for r in rows])
+        peer = median([r.get("srim_nrmse_a") for r in rows])
         out.append(
             f"- median NRMSE over {len(rows)} events, each predicted by models that never saw it: "
             + ", ".join(f"{s} {_f(m)}" for s, m in meds.items())
@@ -279,7 +281,7 @@ def summary_lines(lines: list[dict], all_systems: list[str], others: dict[str, l
         for s in _other_channels(rows, systems):
             out.append(
                 f"- {s} on the reference model's channels ({systems[0]}'s): median "
-                f"{_f(_median([r[f'{s}_nrmse_ref'] for r in rows]))}"
+                f"{_f(median([r[f'{s}_nrmse_ref'] for r in rows]))}"
             )
         strong = [r for r in rows if r["pga_g"] >= STRONG_G]
         if len(systems) > 1 and strong:
@@ -318,11 +320,6 @@ def _other_channels(rows: list[dict], systems: list[str]) -> list[str]:
 
 def _lt(a, b) -> bool:
     return a is not None and b is not None and float(a) < float(b)
-
-
-def _median(values) -> float | None:
-    v = [float(x) for x in values if x is not None]
-    return float(np.median(v)) if v else None
 
 
 def markdown(lines: list[dict], systems: list[str], others: dict, args, seconds: float, n_runs: int) -> str:

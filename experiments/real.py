@@ -31,6 +31,7 @@ from real_modes import two_modes_lines
 
 from pidyn.assessment import reported_damping
 from pidyn.bench.launch import run_logged
+from pidyn.bench.tables import cell, load_json, sweep_runs
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"
@@ -129,25 +130,10 @@ DIAGNOSED = (
 )
 
 
-def _runs(folder: Path) -> list[tuple[dict, Path]]:
-    """(config, run folder) of every job of a multirun."""
-    out = []
-    for cfg_path in sorted(folder.glob("*/.hydra/config.yaml")):
-        import yaml
-
-        cfg = yaml.safe_load(cfg_path.read_text())
-        out.append((cfg, cfg_path.parent.parent))
-    return out
-
-
-def _load(path: Path) -> dict | None:
-    return json.loads(path.read_text()) if path.exists() else None
-
-
 def identification_rows(folder: Path) -> list[dict]:
     cat = catalogue()
     rows = []
-    for cfg, run in _runs(folder):
+    for cfg, run in sweep_runs(folder):
         event, direction = cfg["data"]["event"], cfg["data"]["direction"]
         row = {
             "event": event,
@@ -158,7 +144,7 @@ def identification_rows(folder: Path) -> list[dict]:
             "magnitude": cat.get(event, {}).get("magnitude"),
             "pga_catalogue_g": float(cat.get(event, {}).get("pga_str_g") or "nan"),
         }
-        failed, metrics = _load(run / "failed.json"), _load(run / "metrics.json")
+        failed, metrics = load_json(run / "failed.json"), load_json(run / "metrics.json")
         if failed or not metrics or not (run / "complete.json").is_file():  # finished runs only
             row["status"] = "failed: " + (failed["message"] if failed else "no results (interrupted?)")
             rows.append(row)
@@ -190,7 +176,7 @@ def identification_rows(folder: Path) -> list[dict]:
                 "equation": None,
             }
         )
-        base = _load(run / "baselines.json") or {"baselines": []}
+        base = load_json(run / "baselines.json") or {"baselines": []}
         for b in base["baselines"]:
             modes = b.get("modes") or []
             key = b["method"]
@@ -254,10 +240,6 @@ def judge(row: dict) -> dict:
     return out
 
 
-def _f(v, fmt=".3f") -> str:
-    return "-" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, fmt)
-
-
 def identification_table(rows: list[dict], direction: str) -> list[str]:
     lines = [
         f"### {direction.capitalize()}",
@@ -274,15 +256,15 @@ def identification_table(rows: list[dict], direction: str) -> list[str]:
         ci, zc = r["period_ci95"], r["damping_ci95"]
         j = judge(r)
         inside = "" if "inside_peers" not in j else (" (in)" if j["inside_peers"] else " (**out**)")
-        inside += "" if j.get("weak_event", True) else f" (event {_f(r['event_pga_g'])} g)"
+        inside += "" if j.get("weak_event", True) else f" (event {cell(r['event_pga_g'])} g)"
         beats = "" if "beats_srim" not in j else ("" if j["beats_srim"] else " **(SRIM better)**")
         lines.append(
-            f"| {r['event']}{tag} | {r['date']} | {_f(r['pga_g'])} | {r['inputs']} -> {r['outputs']} | "
-            f"{_f(r['period_s'])} [{_f(ci[0])}, {_f(ci[1])}]{inside} | {_profile_cell(r, j)} | "
-            f"{_f(100 * r['damping'], '.1f')} "
-            f"[{_f(100 * zc[0], '.1f')}, {_f(100 * zc[1], '.1f')}] | {_f(r.get('transfer_function_period_s'))} | "
-            f"{_f(r.get('srim_period_s'))} | {_f(r.get('okid_era_period_s'))} | {_f(r['heldout_nrmse_a'])} / "
-            f"{_f(r.get('srim_heldout_nrmse_a'))} / {_f(r.get('okid_era_heldout_nrmse_a'))}{beats} | {_f(r['wall_s'], '.0f')} |"
+            f"| {r['event']}{tag} | {r['date']} | {cell(r['pga_g'])} | {r['inputs']} -> {r['outputs']} | "
+            f"{cell(r['period_s'])} [{cell(ci[0])}, {cell(ci[1])}]{inside} | {_profile_cell(r, j)} | "
+            f"{cell(100 * r['damping'], '.1f')} "
+            f"[{cell(100 * zc[0], '.1f')}, {cell(100 * zc[1], '.1f')}] | {cell(r.get('transfer_function_period_s'))} | "
+            f"{cell(r.get('srim_period_s'))} | {cell(r.get('okid_era_period_s'))} | {cell(r['heldout_nrmse_a'])} / "
+            f"{cell(r.get('srim_heldout_nrmse_a'))} / {cell(r.get('okid_era_heldout_nrmse_a'))}{beats} | {cell(r['wall_s'], '.0f')} |"
         )
     return lines + [""]
 
@@ -292,7 +274,7 @@ def _profile_cell(row: dict, j: dict) -> str:
     prof = row.get("period_profile_ci95")
     if not prof:
         return "-"
-    lo, hi = ("..." if v is None else _f(v) for v in prof)
+    lo, hi = ("..." if v is None else cell(v) for v in prof)
     mark = "" if "profile_inside_peers" not in j else (" (in)" if j["profile_inside_peers"] else " (**out**)")
     return f"[{lo}, {hi}]{mark}"
 
@@ -346,8 +328,8 @@ def reduced_choice_lines(rows: list[dict], one: list[dict]) -> list[str]:
     ]
     for f, o in sorted(pairs, key=lambda p: p[0]["pga_g"]):
         lines.append(
-            f"| {f['event']} | {_f(f['pga_g'])} | {_f(f['heldout_nrmse_a'])} / {_f(o['heldout_nrmse_a'])} | "
-            f"{_f(f['period_s'])} / {_f(o['period_s'])} |"
+            f"| {f['event']} | {cell(f['pga_g'])} | {cell(f['heldout_nrmse_a'])} / {cell(o['heldout_nrmse_a'])} | "
+            f"{cell(f['period_s'])} / {cell(o['period_s'])} |"
         )
     gain = [
         o["heldout_nrmse_a"] - f["heldout_nrmse_a"]
@@ -426,11 +408,11 @@ def period_figure(rows: list[dict], path: Path) -> None:
 def diagnosis_rows(folder: Path) -> list[dict]:
     rows = []
     cat = catalogue()
-    for cfg, run in _runs(folder):
+    for cfg, run in sweep_runs(folder):
         event = cfg["data"]["event"]
-        d = _load(run / "diagnosis.json")
+        d = load_json(run / "diagnosis.json")
         direction = cfg["data"].get("direction", "transverse")
-        failed = _load(run / "failed.json")
+        failed = load_json(run / "failed.json")
         row = {
             "event": event,
             "direction": direction,
@@ -482,7 +464,7 @@ def diagnosis_table(rows: list[dict], pga: dict[str, float]) -> list[str]:
     for r in sorted(rows, key=lambda r: -(pga.get(r["event"]) or 0)):
         tag = " *(t)*" if r["role"] == "tuning" else ""
         if r["status"] != "ok":
-            lines.append(f"| {r['event']}{tag} | {_f(pga.get(r['event']))} | {r['status']} | | | | |")
+            lines.append(f"| {r['event']}{tag} | {cell(pga.get(r['event']))} | {r['status']} | | | | |")
             continue
         verdict = r["verdict"] + (f" ({', '.join(r['causes'])})" if r["causes"] else "")
         verdict += f", not told from {', '.join(r['rivals'])}" if r.get("rivals") else ""
@@ -500,9 +482,9 @@ def diagnosis_table(rows: list[dict], pga: dict[str, float]) -> list[str]:
         g = r["gain"]
         best = r["best_candidate_heldout"]
         lines.append(
-            f"| {r['event']}{tag} | {_f(pga.get(r['event']))} | {verdict} | {moves} | {_f(g.get('nominal'))} -> "
-            f"{_f(g.get('extended'))} | {'-' if not best else f'{best[0]} ({best[1]:+.2f})'} | "
-            f"{_f(r['wall_s'], '.0f')} |"
+            f"| {r['event']}{tag} | {cell(pga.get(r['event']))} | {verdict} | {moves} | {cell(g.get('nominal'))} -> "
+            f"{cell(g.get('extended'))} | {'-' if not best else f'{best[0]} ({best[1]:+.2f})'} | "
+            f"{cell(r['wall_s'], '.0f')} |"
         )
     return lines + [""]
 
@@ -606,20 +588,20 @@ def srim_better_lines(rows: list[dict], folder: Path) -> list[str]:
         "|---|---|---|---|---|---|",
     ]
     by_key = {(r["event"], r["direction"]): r for r in rows}
-    for cfg, run in _runs(folder):
+    for cfg, run in sweep_runs(folder):
         d = cfg["data"]
         key = (d["event"], d["direction"])
         if key not in worse:
             continue
-        ident, own, own_nrmse = _held_out_own_fit(cfg, _load(run / "metrics.json") or {})
+        ident, own, own_nrmse = _held_out_own_fit(cfg, load_json(run / "metrics.json") or {})
         r = by_key[key]
 
         def tz(p: dict) -> str:
             return f"{2 * np.pi / np.sqrt(p['k']):.3f} s, {100 * p['c'] / (2 * np.sqrt(p['k'])):.1f} %"
 
         out.append(
-            f"| {d['event']} | {d['direction']} | {tz(ident)} | {tz(own)} | {_f(r['heldout_nrmse_a'])} / "
-            f"{_f(r.get('srim_heldout_nrmse_a'))} / {_f(own_nrmse)} | {r.get('srim_order')} |"
+            f"| {d['event']} | {d['direction']} | {tz(ident)} | {tz(own)} | {cell(r['heldout_nrmse_a'])} / "
+            f"{cell(r.get('srim_heldout_nrmse_a'))} / {cell(own_nrmse)} | {r.get('srim_order')} |"
         )
     return out + [""]
 

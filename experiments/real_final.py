@@ -10,9 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-
-def _f(v, fmt=".3f") -> str:
-    return "-" if v is None else format(v, fmt)
+from pidyn.bench.tables import cell
 
 
 def final_error(diag: dict) -> float | None:
@@ -80,9 +78,9 @@ def final_lines(ident: list[dict], diag: list[dict], tag: Callable[[dict], str])
     for r in sorted(rows, key=lambda r: (r["direction"], r.get("pga_g") or 0)):
         beats = _at_most(r["final"], r["srim"])
         lines.append(
-            f"| {r['event']}{tag(r)} | {r['direction']} | {_f(r['pga_g'])} | {r['verdict']} | "
-            f"{_f(r['identified'])} / {_f(r['nominal'])} / {_f(r['final'])} / {_f(r['srim'])} | "
-            f"{'-' if beats is None else ('yes' if beats else '**no**')} | {_f(r['wall_s'], '.0f')} |"
+            f"| {r['event']}{tag(r)} | {r['direction']} | {cell(r['pga_g'])} | {r['verdict']} | "
+            f"{cell(r['identified'])} / {cell(r['nominal'])} / {cell(r['final'])} / {cell(r['srim'])} | "
+            f"{'-' if beats is None else ('yes' if beats else '**no**')} | {cell(r['wall_s'], '.0f')} |"
         )
     lines.append("")
     for direction in ("transverse", "longitudinal"):

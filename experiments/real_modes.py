@@ -4,23 +4,15 @@ whether the second mode is kept is decided on the fitting part alone (``pidyn.mo
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
+from pidyn.bench.tables import cell, load_json
 from pidyn.model_choice import nested_test
-
-
-def _f(v, fmt=".3f") -> str:
-    return "-" if v is None else format(v, fmt)
-
-
-def _load(path: Path) -> dict | None:
-    return json.loads(path.read_text()) if path.exists() else None
 
 
 def _refined(run: Path) -> dict:
     """The refinement's parameter names and its residuals' lag-1 correlation."""
-    ref = _load(run / "refinement.json") or {}
+    ref = load_json(run / "refinement.json") or {}
     rest = ref.get("rest_test") or {}
     return {"names": ref.get("names") or [], "lag1": rest.get("residual_lag1_correlation")}
 
@@ -28,7 +20,7 @@ def _refined(run: Path) -> dict:
 def choice(one: dict, two: dict) -> dict | None:
     """The test of two modes against one for an event (both rows ok), from their run folders."""
     a, b = _refined(one["run"]), _refined(two["run"])
-    metrics = _load(two["run"] / "metrics.json") or {}
+    metrics = load_json(two["run"] / "metrics.json") or {}
     held, dt = metrics.get("heldout") or {}, (metrics.get("record_meta") or {}).get("dt")
     span = held.get("fit_span")
     extra = len(b["names"]) - len(a["names"])
@@ -39,7 +31,7 @@ def choice(one: dict, two: dict) -> dict | None:
 
 
 def second_mode(run: Path) -> dict:
-    modes = (_load(run / "metrics.json") or {}).get("modal") or []
+    modes = (load_json(run / "metrics.json") or {}).get("modal") or []
     return modes[1] if len(modes) > 1 else {}
 
 
@@ -76,12 +68,12 @@ def two_modes_lines(rows: list[dict], two: list[dict], judge) -> list[str]:
         tag = " *(t)*" if one["role"] == "tuning" else ""
         srim = one.get("srim_heldout_nrmse_a")
         lines.append(
-            f"| {one['event']}{tag} | {one['direction']} | {_f(one.get('pga_g'))} | {_f(one['fit_nrmse_a'])} / "
-            f"{_f(two_row['fit_nrmse_a'])} | {_f(one['heldout_nrmse_a'])} / {_f(two_row['heldout_nrmse_a'])} / "
-            f"{_f(srim)} | {_f(two_row['period_s'])}, {_f(100 * (two_row['damping'] or 0), '.1f')}; "
-            f"{_f(m2.get('period_s'))}, {_f(100 * m2['damping_ratio'] if m2 else None, '.1f')} | "
+            f"| {one['event']}{tag} | {one['direction']} | {cell(one.get('pga_g'))} | {cell(one['fit_nrmse_a'])} / "
+            f"{cell(two_row['fit_nrmse_a'])} | {cell(one['heldout_nrmse_a'])} / {cell(two_row['heldout_nrmse_a'])} / "
+            f"{cell(srim)} | {cell(two_row['period_s'])}, {cell(100 * (two_row['damping'] or 0), '.1f')}; "
+            f"{cell(m2.get('period_s'))}, {cell(100 * m2['damping_ratio'] if m2 else None, '.1f')} | "
             + (f"{test['statistic']:.1f} / {test['threshold']:.1f}" if test else "-")
-            + f" | {'2 modes' if kept else '1 mode'} | {_f(two_row.get('wall_s'), '.0f')} |"
+            + f" | {'2 modes' if kept else '1 mode'} | {cell(two_row.get('wall_s'), '.0f')} |"
         )
         chosen = two_row if kept else one
         if srim is not None and chosen["heldout_nrmse_a"] is not None:

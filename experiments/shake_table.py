@@ -22,6 +22,7 @@ import numpy as np
 
 from pidyn.assessment import reported_damping
 from pidyn.bench.launch import run_logged
+from pidyn.bench.tables import cell, interval
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"
@@ -271,11 +272,11 @@ def run_rows(folder: Path, model: str) -> list[dict]:
 
 
 def _fmt(v, fmt=".3f") -> str:
-    return "n/a" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, fmt)
+    return cell(v, fmt, missing="n/a")
 
 
 def _ci(ci, fmt=".3f") -> str:
-    return "n/a" if not ci or ci[0] is None else f"[{format(ci[0], fmt)}, {format(ci[1], fmt)}]"
+    return interval(ci, fmt, missing="n/a")
 
 
 def alignment_rows(base: Path) -> list[dict]:

@@ -13,17 +13,13 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import sys
 from pathlib import Path
 
 import yaml
 
 from pidyn.assessment import reported_damping
-
-
-def _load(path: Path) -> dict | None:
-    return json.loads(path.read_text()) if path.is_file() else None
+from pidyn.bench.tables import cell, interval, load_json
 
 
 def rows(sweep: Path) -> list[dict]:
@@ -36,7 +32,7 @@ def rows(sweep: Path) -> list[dict]:
             "event": cfg["data"].get("event") or Path(str(cfg["data"]["path"])).stem,
             "direction": cfg["data"].get("direction"),
         }
-        metrics, failed = _load(run / "metrics.json"), _load(run / "failed.json")
+        metrics, failed = load_json(run / "metrics.json"), load_json(run / "failed.json")
         if failed or metrics is None or not (run / "complete.json").is_file():
             row["status"] = "failed: " + (failed or {}).get("message", "did not finish")
             out.append(row)
@@ -65,14 +61,6 @@ def rows(sweep: Path) -> list[dict]:
     return out
 
 
-def _num(v, fmt: str = ".3g") -> str:
-    return "-" if v is None else format(float(v), fmt)
-
-
-def _ci(v, fmt: str = ".3g") -> str:
-    return "-" if not v or any(x is None for x in v) else f"[{format(v[0], fmt)}, {format(v[1], fmt)}]"
-
-
 def markdown(table: list[dict], title: str, command: str) -> str:
     ok = [r for r in table if r["status"] == "adequate"]
     done = [r for r in table if not r["status"].startswith("failed")]
@@ -99,12 +87,12 @@ def markdown(table: list[dict], title: str, command: str) -> str:
             continue
         shown = r["status"] == "adequate"
         lines.append(
-            f"| {r['event']} | {r['direction']} | {r['status']} | {_num(r['fit_nrmse'])} | "
-            f"{_num(r['heldout_nrmse'])}{'' if r['beats_trivial'] is not False else ' (worse)'} | "
-            f"{_num(r['trivial_nrmse'])} | "
+            f"| {r['event']} | {r['direction']} | {r['status']} | {cell(r['fit_nrmse'], '.3g')} | "
+            f"{cell(r['heldout_nrmse'], '.3g')}{'' if r['beats_trivial'] is not False else ' (worse)'} | "
+            f"{cell(r['trivial_nrmse'], '.3g')} | "
             + (
-                f"{_num(r['period_s'], '.4g')} | {_ci(r['period_ci95'], '.4g')} | {_ci(r['period_profile_ci95'], '.4g')} | "
-                f"{_num(r['damping'], '.3f')} | {_ci(r['damping_ci95'], '.3f')} |"
+                f"{cell(r['period_s'], '.4g')} | {interval(r['period_ci95'], '.4g')} | {interval(r['period_profile_ci95'], '.4g')} | "
+                f"{cell(r['damping'], '.3f')} | {interval(r['damping_ci95'], '.3f')} |"
                 if shown
                 else "- | - | - | - | - |"
             )
