@@ -76,8 +76,8 @@ def _first_cause(
     if case.from_accelerometers and not forced and (change_row is None or not check.failed):
         # integrated accelerations are a poor measurement of the motion: the weak form proposes, output
         # error on the accelerations decides among every effect it could fit, a change it located in time
-        # included while the nominal model holds on the held-out part (a 73 % stiffness loss that the
-        # weak form found on a Painter Street record fitted to 3 % and predicted no better)
+        # included while the nominal model holds on the held-out part (a change the weak form reads
+        # into integration drift fits the accelerations no better)
         extra = [] if change_row is None else [_change_candidate(change_row)]
         if running and running.get("variation", {}).get("varies") and not case.settings.effects:
             extra.append(_amplitude_candidate())  # (a user's list of effects screens it where it names it)
@@ -179,8 +179,7 @@ def extension_step(
     trained = cause == LEARNED and st.learned.output_error
     if st.polish:  # a held change time is refined here, from where the search put it; a learned force's
         # model only briefly: its training on the simulated response (the physical parameters with the
-        # weights) follows and the held-out part decides (on a Painter Street record 100 evaluations, 110 s,
-        # moved the cost by 3e-4)
+        # weights) follows and the held-out part decides, so a long polish before it buys nothing
         budget = int(st.polish_max_nfev) if trained else None
         check = None if cause == LEARNED else check_fit(values, row, k)  # the fit that named the effect
         ext_values, out.note = polish(case, build_system(release_held(ext_node)), ext_values, budget, check)

@@ -61,8 +61,8 @@ def try_extension(
     accepted = bool(np.isfinite(ho["mean"]) and ho["mean"] < before * (1.0 - float(settings.storey_min_gain)))
     params, report = _step_report(cand, values, res, bic, before, ho["mean"], accepted)
     if accepted and (spread := size_spread(cand, report)) > float(settings.storey_max_rel_std):
-        # a size the data do not fix: a quadratic damper in storey 1 (c2 1.23, 95 % 0.15-9.8) stood
-        # in for the storey's collapsed linear damper beside a friction named in storey 2
+        # a size the data do not fix: such an effect stands in for another part of the model (a
+        # collapsed linear damper) rather than for something the structure does
         accepted = report.accepted = False
         report.size_rel_std = spread
     log.info(

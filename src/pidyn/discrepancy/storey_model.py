@@ -168,8 +168,8 @@ def building_with(
     typical = float(np.median([start[c] for c in dampers if start[c] >= COLLAPSED * largest] or [0.0]))
     for c in dampers:
         # a damper the nominal fit ran to zero cannot come back in log space (its gradient is
-        # proportional to it): a friction in storey 3 left c2 at 1e-12, and the extension then
-        # drew a damper into storey 2 to put it back
+        # proportional to it), and the extension would then draw a damper into another storey to
+        # put the dissipation back
         if start[c] < COLLAPSED * typical:
             start[c] = RESTART * typical
     for f in found:

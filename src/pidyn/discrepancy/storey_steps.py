@@ -55,14 +55,13 @@ def next_step(
             return step
     elif (step is not None and step.accepted and (pick is not None or found)) or (found and after <= 0):
         return step
-    # a leaning effect the output error confirmed competes with the fit test's candidates (a
-    # friction in storey 3 at 4.9 % noise: a damping change there, weak-form score 0.1, gained 16
-    # BIC units and held-out NRMSE 0.448 -> 0.396, and would have been named)
+    # a leaning effect the output error confirmed competes with the fit test's candidates: a weak
+    # score with a real BIC gain can stand in for another effect of the same storey
     misfit = study.fit_check(current)
     if not misfit["failed"]:
         return step
-    # the model misses something the weak form does not see, or names wrongly (a quadratic damper
-    # in storey 3 refused where a friction in storey 1 with floor 2 unmeasured was hidden)
+    # the model misses something the weak form does not see, or names wrongly (an unmeasured floor
+    # hides the drifts it reads)
     worst = misfit["channels"][misfit["worst"]]
     log.info(
         "the current model fails the fit test (%s: NRMSE %.3g against noise %.3g): trying the effects the "
@@ -72,9 +71,8 @@ def next_step(
         worst["noise"] or 0.0,
     )
     # after a named effect, the remaining misfit is mostly that effect's own law imperfectly
-    # fitted (a friction in storey 3 left floor 2 at 0.089 against noise 0.028, and none of six
-    # effects tried removed a tenth of it): only another storey's effect that the score test
-    # finds strong is tried (a quadratic damper in storey 1 beside a named cubic spring in storey 2)
+    # fitted, which no other library effect removes: only another storey's effect that the score
+    # test finds strong is tried
     rows = misfit_rows(study, current, found, views, screenings, tried, after if found else 0.0)
     other = confirm_leaning(study, current, found, views, rows, misfit)
     if other is None or (step is not None and step.accepted and _gain(step) >= _gain(other)):
