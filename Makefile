@@ -13,8 +13,10 @@ TORCH_INDEX ?=
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q "torch==2.13.0" $(TORCH_INDEX)
-	$(PY) -m pip install -q -e ".[dev]"
+	# --no-compile: Python compiles what is imported on first use; compiling every file of torch
+	# and the dependencies up front took a third of a fresh install
+	$(PY) -m pip install -q --no-compile "torch==2.13.0" $(TORCH_INDEX)
+	$(PY) -m pip install -q --no-compile -e ".[dev]"
 	touch $(STAMP)
 
 install: $(STAMP)
