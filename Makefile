@@ -10,13 +10,15 @@ TORCH_INDEX ?=
 
 .PHONY: install train test test-all docs test-fast lint format bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench discrepancy-bench-building heldout-calibration heldout-calibration-building adequacy-calibration fit-test-calibration basin hayward robustness efficiency benchmarks real
 
+# installed without compiling, then compiled on every core at once: pip compiles one file at a
+# time, and where PYTHONDONTWRITEBYTECODE is set nothing compiled later is kept (a file that does
+# not compile is left as pip would leave it)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	# --no-compile: Python compiles what is imported on first use; compiling every file of torch
-	# and the dependencies up front took a third of a fresh install
 	$(PY) -m pip install -q --no-compile "torch==2.13.0" $(TORCH_INDEX)
 	$(PY) -m pip install -q --no-compile -e ".[dev]"
+	$(PY) -m compileall -q -j 0 $$($(PY) -c "import sysconfig; print(sysconfig.get_paths()['purelib'])") > /dev/null || true
 	touch $(STAMP)
 
 install: $(STAMP)
