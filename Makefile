@@ -41,11 +41,15 @@ docs: $(STAMP)
 	$(VENV)/bin/mkdocs build --strict -q
 
 # one BLAS/OpenMP thread per test worker: the workers already fill the cores
+# one thread a worker (pytest-xdist runs one worker a core), and compiled modules kept between the
+# many Python processes a run starts, even where the environment asks for none
+TEST_ENV := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 PYTHONDONTWRITEBYTECODE=
+
 test: $(STAMP) lint docs
-	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n auto --dist worksteal --durations=15 -m "not second_proof" $(ARGS)
+	$(TEST_ENV) $(PY) -m pytest -q -p no:cacheprovider -n auto --dist worksteal --durations=15 -m "not second_proof" $(ARGS)
 
 test-all: $(STAMP) lint docs  # the second end-to-end cases too (about 7 min more on 2 cores)
-	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 $(PY) -m pytest -q -p no:cacheprovider -n auto --dist worksteal --durations=15 $(ARGS)
+	$(TEST_ENV) $(PY) -m pytest -q -p no:cacheprovider -n auto --dist worksteal --durations=15 $(ARGS)
 
 test-fast: $(STAMP)
 	$(PY) -m pytest -q -m "not slow" $(ARGS)
