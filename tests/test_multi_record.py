@@ -202,3 +202,37 @@ def test_one_amplitude_dependent_model_from_a_weak_and_a_strong_earthquake():
     res = refine(system, concatenate([weak, strong]), {"guess": guess}, RefineSettings(states="simulated"))
     for name in ("c", "k", "soft", "gain", "tau"):
         assert res.params[name] == pytest.approx(truth[name], rel=1e-4), name
+
+
+def test_the_amplitude_models_scale_is_read_from_its_records_and_kept_for_prediction(tmp_path):
+    """``system.w0=null system.a_ref=null``: the structure's circular frequency is the records'
+    resonance and its amplitude scale the strongest record's relative response; the run keeps
+    both, and a prediction of another record uses them, not the new record's."""
+    from pidyn.config import compose
+    from pidyn.runs.build import system_and_record
+    from pidyn.runs.prediction import Identified
+    from pidyn.starts.data import structure_scale
+
+    system = make_system("amplitude", soft=0.3, gain=1.5, tau=1.0)
+    kw = dict(duration=12.0, dt=0.02, channels=("a",))
+    weak = Record.simulate(system, "el_centro", scale=0.1, **kw)
+    strong = Record.simulate(system, "kobe", scale=0.5, **kw)
+    both = concatenate([weak, strong])
+    scale = structure_scale(both)
+    assert scale["w0"] == pytest.approx(np.sqrt(600.0), rel=0.2)  # k = 600 per unit mass, softened
+    x = simulate_response(system, system.true_values(), strong)["x"][:, 0]
+    assert scale["a_ref"] == pytest.approx(np.max(np.abs(x)), rel=0.6)  # a displacement of the strong one
+    cfg = compose("train", groups={"system": "amplitude"}, values={"system.w0": None, "system.a_ref": None})
+    built, _ = system_and_record(cfg, both)
+    term = next(t for t in built.terms if t.name == "amplitude_softening")
+    assert (term.w0, term.a_ref) == (pytest.approx(scale["w0"]), pytest.approx(scale["a_ref"]))
+    assert cfg.system.w0 == pytest.approx(scale["w0"])  # the run's config says what it used
+    # a finished run read back: the new record's own scale is not the model's
+    run = Identified(
+        tmp_path,
+        compose("train", groups={"system": "amplitude"}, values={"system.w0": None, "system.a_ref": None}),
+        {"scale": scale, "params": system.true_values()},
+    )
+    rebuilt, _, _ = run.for_record(record=weak)
+    again = next(t for t in rebuilt.terms if t.name == "amplitude_softening")
+    assert again.a_ref == pytest.approx(scale["a_ref"]) != pytest.approx(structure_scale(weak)["a_ref"])

@@ -180,6 +180,17 @@ def fundamental(record) -> tuple[float, float] | None:
     return fn, float(np.clip(zeta, 0.005, 0.5))
 
 
+def response_pair(record) -> tuple[str, np.ndarray]:
+    """The top measured floor's response relative to the ground, and its kind (x, v or a): an
+    accelerometer's absolute reading less the (mean) input acceleration."""
+    u, y = _input_output(record)
+    sensors = record.sensors()
+    if "a" in sensors and record.excitation == "ground" and u is not None and y is not None:
+        return "a", y - u
+    kind = next(k for k in ("x", "v", "a") if k in sensors)
+    return kind, getattr(record, kind)[:, max(sensors[kind]) - 1]
+
+
 def _input_output(record) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The excitation (several inputs: their mean) and the top measured floor's response: its
     absolute acceleration where an accelerometer gives it (a transmissibility), else the

@@ -23,13 +23,14 @@ RATIO_HIGH, RATIO_LOW = 8.0, 1.0 / 50.0
 G = 9.80665
 
 
-def _where(record: Record) -> str:
+def record_where(record: Record) -> str:
+    """The record as an error names it: its file, else its name."""
     return str(record.meta.path or f"record '{record.name}'")
 
 
 def check_record(record: Record, system_n_dof: int | None = None) -> list[str]:
     """Refuse a record no identification can use; returns the warnings it logged."""
-    where = _where(record)
+    where = record_where(record)
     f = np.asarray(record.f, float)
     excitation = f if f.ndim == 1 else f[:, : record.n_inputs]
     if not np.all(np.isfinite(excitation)):
@@ -118,6 +119,6 @@ def check_floors(record: Record, system_name: str, n_dof: int, n_outputs: int | 
     if top > limit:
         cols = ", ".join(f"{k}{top}" for k, v in floors.items() if top in v)
         raise DataError(
-            f"{_where(record)}: channel(s) {cols} of floor {top}, but system '{system_name}' has {limit} "
+            f"{record_where(record)}: channel(s) {cols} of floor {top}, but system '{system_name}' has {limit} "
             f"floor(s); set system.n_storeys={top} or drop the columns above floor {limit}"
         )

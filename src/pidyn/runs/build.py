@@ -29,6 +29,7 @@ from pidyn.models.schedule import Schedule
 from pidyn.reporting import write_json
 from pidyn.runs.methods import check_method_names
 from pidyn.runs.runtime import in_multirun, quiet_framework_warnings
+from pidyn.starts.data import DATA_SCALES, structure_scale
 from pidyn.starts.policy import start_policy
 from pidyn.systems.base import StructuralSystem
 
@@ -137,9 +138,18 @@ def build_run(cfg: DictConfig, record: Record | None) -> Run:
 
 def system_and_record(cfg: DictConfig, record: Record | None) -> tuple[StructuralSystem, Record]:
     """The system and the record, checked against each other: the excitation, the inputs (a system
-    with ``inputs: null`` takes the record's), the truth in the system's own units."""
-    system: StructuralSystem = instantiate(cfg.system)
+    with ``inputs: null`` takes the record's), the structure's scale where the config leaves it to
+    the records (``starts.data.DATA_SCALES``), the truth in the system's own units."""
+    unset = [k for k in DATA_SCALES if k in cfg.system and cfg.system[k] is None]
+    # the record is read through the system's layout, which its scale does not change
+    system: StructuralSystem = instantiate(cfg.system, **dict.fromkeys(unset, 1.0))
     record = build_record(cfg, system) if record is None else record
+    if unset:
+        scale = structure_scale(record)
+        with open_dict(cfg):  # the run's own config, its record and every report say the values used
+            for k in unset:
+                cfg.system[k] = scale[k]
+        system = instantiate(cfg.system)
     if record.excitation != system.excitation:
         raise ValueError(
             f"data '{record.name}' is {record.excitation}-excited but system '{system.name}' expects "

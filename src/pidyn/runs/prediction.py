@@ -63,9 +63,11 @@ class Identified:
         read as the run read its own); the system's inputs are the record's where the run took
         them so."""
         cfg = self.cfg.copy()
-        if data is not None:
-            with open_dict(cfg):
+        with open_dict(cfg):
+            if data is not None:
                 cfg.data = data
+            # the scale the run read from its own records, not from the record predicted
+            cfg.system.update(self.metrics.get("scale") or {})
         system, record = system_and_record(cfg, record)
         values = {**fixed_values(system), **{k: float(v) for k, v in self.metrics["params"].items()}}
         missing = sorted(s.name for s in system.param_specs() if s.name not in values)

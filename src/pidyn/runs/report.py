@@ -36,6 +36,7 @@ from pidyn.runs.stabilization_figure import stabilization_figure
 from pidyn.runs.supports import support_lines, support_table
 from pidyn.runs.transfer_figure import transfer_figure
 from pidyn.simulate import simulate_response
+from pidyn.starts.data import DATA_SCALES
 from pidyn.systems.base import StructuralSystem
 
 log = logging.getLogger(__name__)
@@ -126,6 +127,8 @@ def _metrics(
     errors, pidyn_errors = relative_errors(values, truths), relative_errors(pidyn_values, truths)
     return {
         "system": run.system.name,
+        # the structure's scale the run used, read from its records where the config left it null
+        "scale": {k: float(cfg.system[k]) for k in DATA_SCALES if cfg.system.get(k) is not None},
         "record": run.record.name,
         "noise": record_noise(cfg, run.record),
         "seed": int(cfg.seed),

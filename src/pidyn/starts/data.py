@@ -28,7 +28,9 @@ import numpy as np
 from scipy.signal import cont2discrete, dlsim
 
 from pidyn.baselines.integrated import corner_of, fit_integrated, integrated_applies
-from pidyn.signals import fundamental
+from pidyn.data.checks import record_where
+from pidyn.data.errors import DataError
+from pidyn.signals import fundamental, response_pair
 from pidyn.systems.modal import first_mode, scaled_to
 
 log = logging.getLogger(__name__)
@@ -65,6 +67,36 @@ class DataStart:
             "seconds": self.seconds,
             "rejected": self.rejected,
         }
+
+
+#: a system's settings that are the structure's scale, not identified: null in its config reads
+#: them from the records (``structure_scale``)
+DATA_SCALES = ("w0", "a_ref")
+
+
+def structure_scale(record) -> dict[str, float]:
+    """The structure's own scale from its records: ``w0``, the circular frequency of the
+    fundamental resonance (rad/s), and ``a_ref``, a typical response amplitude of the strongest
+    shaking (m): the largest relative response of the top measured floor as a displacement
+    amplitude at w0 (an acceleration over w0^2, a velocity over w0). Over several records laid
+    end to end, the strongest one sets it."""
+    peak = fundamental(record)
+    if peak is None:
+        raise DataError(
+            f"{record_where(record)}: no resonance to read the structure's scale from; "
+            f"set {' and '.join(f'system.{k}' for k in DATA_SCALES)}"
+        )
+    w0 = 2.0 * np.pi * float(peak[0])
+    kind, relative = response_pair(record)
+    power = {"x": 0, "v": 1, "a": 2}[kind]
+    a_ref = float(np.max(np.abs(relative))) / w0**power
+    log.info(
+        "the structure's scale from the record: w0 = %.4g rad/s (%.3g s), a_ref = %.3g",
+        w0,
+        2 * np.pi / w0,
+        a_ref,
+    )
+    return {"w0": w0, "a_ref": a_ref}
 
 
 def start_from_data(record, system) -> DataStart | None:
