@@ -105,8 +105,8 @@ def one(args: tuple[int, str, float, float, float]) -> dict:
         "level": test["level"],
         "failed_floors": " ".join(test["failed_floors"]),
         "heldout_over_fit_rms": quiet,
-        "fit_nrmse": heldout_nrmse(rec, nominal, values, fit)["mean"],
-        "heldout_nrmse": heldout_nrmse(rec, nominal, values, held)["mean"],
+        "fit_nrmse": heldout_nrmse(rec, nominal, values, fit).mean,
+        "heldout_nrmse": heldout_nrmse(rec, nominal, values, held).mean,
         "seconds": time.perf_counter() - t0,
     }
 

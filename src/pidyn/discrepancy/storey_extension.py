@@ -56,10 +56,10 @@ def try_extension(
     )
     values = {**start, **res.params}
     ho = heldout_nrmse(record, ext, values, held)
-    before = current.heldout["mean"]
+    before = current.heldout.mean
     bic = fit_bic(record, ext, values, fit, current.noise)
-    accepted = bool(np.isfinite(ho["mean"]) and ho["mean"] < before * (1.0 - float(settings.storey_min_gain)))
-    params, report = _step_report(cand, values, res, bic, before, ho["mean"], accepted)
+    accepted = bool(np.isfinite(ho.mean) and ho.mean < before * (1.0 - float(settings.storey_min_gain)))
+    params, report = _step_report(cand, values, res, bic, before, ho.mean, accepted)
     if accepted and (spread := size_spread(cand, report)) > float(settings.storey_max_rel_std):
         # a size the data do not fix: such an effect stands in for another part of the model (a
         # collapsed linear damper) rather than for something the structure does
@@ -70,7 +70,7 @@ def try_extension(
         cand.storey,
         cand.effect,
         before,
-        ho["mean"],
+        ho.mean,
         report.outcome(),
     )
     done = Found(cand.effect, cand.storey, params, cand.row, cand.ctx)

@@ -126,15 +126,15 @@ def learned_storey_force(
         return None
     chosen, ext, res, seconds, tried = picked
     held = heldout(record, ext, res.values, study.held)
-    before = current.heldout["mean"]
-    kept = bool(np.isfinite(held["mean"]) and held["mean"] < before)
+    before = current.heldout.mean
+    kept = bool(np.isfinite(held.mean) and held.mean < before)
     out = {
         "storey": chosen,
         "storeys_tried": [i for _, i, *_ in tried],
         "fit_loss_ratio": {str(i): r for r, i, *_ in tried},  # after the brief training of each
         "heldout_before": before,
-        "heldout_after": held["mean"],
-        "heldout_per_floor": held["per_floor"],
+        "heldout_after": held.mean,
+        "heldout_per_floor": held.per_floor,
         "kept": kept,
         "note": res.note,
         "seconds": seconds,
@@ -149,7 +149,7 @@ def learned_storey_force(
         chosen,
         out["storeys_tried"],
         before,
-        held["mean"],
+        held.mean,
         "kept" if kept else "not kept: it does not predict the held-out part better",
     )
     return out

@@ -69,6 +69,20 @@ class Found:
     ctx: dict
 
 
+@dataclass(frozen=True)
+class FloorErrors:
+    """A model's NRMSE of every measured floor's absolute acceleration on a span, their mean, and
+    the same of the floors moving with the ground (knowing nothing)."""
+
+    per_floor: dict[str, float]
+    mean: float
+    trivial_per_floor: dict[str, float]
+    trivial: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
 @dataclass
 class BuildingState:
     """The building model the loop holds: its system and values, its held-out errors (mean and per
@@ -76,17 +90,41 @@ class BuildingState:
 
     system: Any
     values: dict[str, float]
-    heldout: dict
+    heldout: FloorErrors
     result: Any = None
     noise: dict | None = None
+
+
+@dataclass
+class NominalBuilding:
+    """The nominal building: its refined values and intervals, its errors on the held-out and the
+    fitting parts, the fit test of its fitting part and, once judged, the held-out test."""
+
+    params: dict[str, float]
+    intervals: dict[str, Any]
+    heldout: FloorErrors
+    fit: FloorErrors
+    fit_test: dict[str, Any]
+    heldout_test: dict[str, Any] | None = None
+
+
+@dataclass(frozen=True)
+class ExtendedBuilding:
+    """The model the diagnosis ends with: the named effects' (with their intervals) or a kept
+    learned force's."""
+
+    system: str
+    params: dict[str, float]
+    intervals: dict[str, Any]
+    storey_equations: Any
 
 
 @dataclass
 class BuildingDiagnosis:
     verdict: Verdict
     found: list[Found]
-    nominal: dict
-    extended: dict | None
+    nominal: NominalBuilding
+    extended: ExtendedBuilding | None
     steps: list[StoreyStep]
     gain: dict
     unexplained_storey: int | None

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from pidyn.data.sources import Record
+from pidyn.discrepancy.storey_model import FloorErrors
 from pidyn.refine.stage import refine
 from pidyn.reporting import nrmse
 from pidyn.simulate import simulate_response
@@ -21,7 +22,7 @@ log = logging.getLogger(__name__)
 
 def heldout_nrmse(
     record: Record, system: ShearBuilding, values: dict[str, float], span: tuple[float, float]
-) -> dict:
+) -> FloorErrors:
     """NRMSE of the absolute acceleration of every measured floor on ``span``, and their mean."""
     sim = simulate_response(system, values, record)["a"]
     ag = np.asarray(record.f, float)
@@ -34,12 +35,9 @@ def heldout_nrmse(
         pred = sim[mask, j] + ag[mask]
         per[f"a{j + 1}"] = nrmse(pred, meas[mask] + ag[mask]) if np.all(np.isfinite(pred)) else float("inf")
         trivial[f"a{j + 1}"] = nrmse(ag[mask], meas[mask] + ag[mask])  # the floor moving with the ground
-    return {
-        "per_floor": per,
-        "mean": float(np.mean(list(per.values()))),
-        "trivial_per_floor": trivial,
-        "trivial": float(np.mean(list(trivial.values()))),
-    }
+    return FloorErrors(
+        per, float(np.mean(list(per.values()))), trivial, float(np.mean(list(trivial.values())))
+    )
 
 
 def nominal_fit(
@@ -107,7 +105,7 @@ def _refined_best(
             log.warning("the nominal refinement from the %s start failed (%s)", label, exc)
             continue
         est = {**config, **res.params}
-        score = heldout_nrmse(record, system, est, fit)["mean"]
+        score = heldout_nrmse(record, system, est, fit).mean
         log.info("nominal model from the %s start: NRMSE %.4g on the fitting part", label, score)
         if best is None or score < best[0]:
             best = (score, est, res)

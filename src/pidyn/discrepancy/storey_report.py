@@ -26,9 +26,9 @@ def summarize_building(
     params, t_change, t_ci = _accepted_parameters(d.steps)
     ext = None
     if d.extended:
-        ext = {"system": d.extended["system"], "storey_equations": d.extended["storey_equations"]}
+        ext = {"system": d.extended.system, "storey_equations": d.extended.storey_equations}
     return {
-        "nominal": {"system": system.name, "storey_equations": system.storey_equations(d.nominal["params"])},
+        "nominal": {"system": system.name, "storey_equations": system.storey_equations(d.nominal.params)},
         "verdict": d.verdict,
         "cause": causes[0] if causes else None,
         "causes": causes,
@@ -38,20 +38,20 @@ def summarize_building(
         "steps": [s.to_dict() for s in d.steps],
         "heldout_check": {
             "metric": "nrmse_a",
-            "fit": d.nominal["fit"],
-            "heldout": d.nominal["heldout"],
-            "test": d.nominal.get("heldout_test"),
+            "fit": d.nominal.fit.to_dict(),
+            "heldout": d.nominal.heldout.to_dict(),
+            "test": d.nominal.heldout_test,
         },
-        "fit_test": d.nominal.get("fit_test"),
+        "fit_test": d.nominal.fit_test,
         "change": None if t_change is None else {"t_change": t_change, "ci95": t_ci},
         "structure": [dict(sc.structure) for sc in d.screenings],
         "ranking": [_ranking_row(i, sc) for i, sc in enumerate(d.screenings, start=1)],
         "extended": ext,
         "parameters": params,
-        "nominal_parameters": d.nominal["params"],
-        "nominal_intervals": d.nominal["intervals"],
-        "extended_parameters": d.extended["params"] if d.extended else None,
-        "extended_intervals": d.extended["intervals"] if d.extended else None,
+        "nominal_parameters": d.nominal.params,
+        "nominal_intervals": d.nominal.intervals,
+        "extended_parameters": d.extended.params if d.extended else None,
+        "extended_intervals": d.extended.intervals if d.extended else None,
         "gain": d.gain,
         "learned": d.learned,
         "split": {"fit": list(fit), "heldout": list(held)},
@@ -117,7 +117,7 @@ def write_building_figures(run_dir: Path, d: BuildingDiagnosis) -> list[str]:
     edge = 0.05 * (t[-1] - t[0]) if len(t) else 0.0
     inner = (t >= t[0] + edge) & (t <= t[-1] - edge) if len(t) else slice(None)  # the filter's ends left out
     for row, view in zip(axes, d.views):
-        nominal = storey_residual(view, d.nominal["params"], [])
+        nominal = storey_residual(view, d.nominal.params, [])
         final = storey_residual(view, d.values, d.found) if d.found else None
         named = [f.effect for f in d.found if f.storey == view.storey]
         signals = (

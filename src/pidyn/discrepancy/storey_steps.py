@@ -22,7 +22,14 @@ from pidyn.discrepancy.storey_choice import (
     misfit_rows,
 )
 from pidyn.discrepancy.storey_extension import fit_bic
-from pidyn.discrepancy.storey_model import BuildingState, Found, StoreyView, score_text, storey_signals
+from pidyn.discrepancy.storey_model import (
+    BuildingState,
+    Found,
+    NominalBuilding,
+    StoreyView,
+    score_text,
+    storey_signals,
+)
 from pidyn.notes import note
 
 log = logging.getLogger(__name__)
@@ -139,17 +146,17 @@ def named_step(
     return step
 
 
-def building_gain(nominal: dict, current: BuildingState, extended: bool) -> dict:
+def building_gain(nominal: NominalBuilding, current: BuildingState, extended: bool) -> dict:
     """``gain`` of ``diagnosis.json``: the held-out NRMSE of the floor accelerations."""
-    trivial = nominal["heldout"].get("trivial")
+    trivial = nominal.heldout.trivial
     out = {
         "metric": "heldout_nrmse_a",
-        "nominal": nominal["heldout"]["mean"],
-        "extended": current.heldout["mean"] if extended else None,
+        "nominal": nominal.heldout.mean,
+        "extended": current.heldout.mean if extended else None,
         "per_floor": {
-            "nominal": nominal["heldout"]["per_floor"],
-            "extended": current.heldout["per_floor"] if extended else None,
-            "trivial": nominal["heldout"].get("trivial_per_floor"),
+            "nominal": nominal.heldout.per_floor,
+            "extended": current.heldout.per_floor if extended else None,
+            "trivial": nominal.heldout.trivial_per_floor,
         },
         "trivial": trivial,
         "trivial_label": "moving with the ground",

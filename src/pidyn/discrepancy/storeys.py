@@ -47,7 +47,9 @@ from pidyn.discrepancy.storey_model import (
     CORNER_SHARE,
     WINDOW_SHARE,
     BuildingState,
+    ExtendedBuilding,
     Found,
+    NominalBuilding,
     StoreyView,
 )
 from pidyn.discrepancy.storey_nominal import fundamental_hz, heldout_nrmse, nominal_fit
@@ -87,16 +89,16 @@ def learned_step(
     return current, learned
 
 
-def extended_entry(current: BuildingState, found: list[Found], learned_kept: bool) -> dict | None:
+def extended_entry(current: BuildingState, found: list[Found], learned_kept: bool) -> ExtendedBuilding | None:
     """The extended model's entry: the named effects', or a kept learned force's."""
     if not found and not learned_kept:
         return None
-    return {
-        "system": current.system.name,
-        "params": current.values,
-        "intervals": current.result.intervals if found else {},
-        "storey_equations": current.system.storey_equations(current.values),
-    }
+    return ExtendedBuilding(
+        current.system.name,
+        current.values,
+        current.result.intervals if found else {},
+        current.system.storey_equations(current.values),
+    )
 
 
 def building_verdict(
@@ -192,18 +194,18 @@ def building_heldout_test(study: Study, current: BuildingState) -> dict:
     }
 
 
-def nominal_state(study: Study, start: dict | None) -> tuple[dict, dict]:
+def nominal_state(study: Study, start: dict | None) -> tuple[NominalBuilding, BuildingState]:
     """The nominal model (refined, its held-out and fitting-part errors) and the time scales it
     sets (``study.period``, ``study.corner``); the loop's first current model."""
     record, system = study.record, study.system
     values, res = nominal_fit(record, system, study.fit, study.refine_settings, start)
-    nominal = {
-        "params": values,
-        "intervals": res.intervals,
-        "heldout": heldout_nrmse(record, system, values, study.held),
-        "fit": heldout_nrmse(record, system, values, study.fit),
-        "fit_test": building_fit_test(record, system, values, study.fit, study.settings),
-    }
+    nominal = NominalBuilding(
+        values,
+        res.intervals,
+        heldout_nrmse(record, system, values, study.held),
+        heldout_nrmse(record, system, values, study.fit),
+        building_fit_test(record, system, values, study.fit, study.settings),
+    )
     if study.refine_settings.initial_state == "auto" and res.rest_test.get("at_rest"):
         # the nominal building accepted rest: every extension starts from rest too, instead of
         # testing it again (a refinement more each: 27 of 175 s of a two-effect diagnosis)
@@ -211,5 +213,5 @@ def nominal_state(study: Study, start: dict | None) -> tuple[dict, dict]:
     f1 = fundamental_hz(system, values)
     study.period = WINDOW_SHARE / f1
     study.corner = max(CORNER_SHARE * f1, 2.0 / float(record.t[-1] - record.t[0]))
-    current = BuildingState(system, values, nominal["heldout"], res, res.noise_std)
+    current = BuildingState(system, values, nominal.heldout, res, res.noise_std)
     return nominal, current

@@ -107,7 +107,7 @@ class Building(Subject):
         self.progress.step("the final screening and the verdict", last=True)
         views, screenings = study.screen(current, found)
         verdict, unexplained, notes, test = building_verdict(study, current, found, screenings)
-        nominal["heldout_test"] = test
+        nominal.heldout_test = test
         notes = refusal_notes(None if refused is None else refused.report) + notes
         learned = None
         if verdict == Verdict.UNEXPLAINED and settings.learn_unexplained:
