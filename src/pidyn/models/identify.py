@@ -213,11 +213,13 @@ class SubperiodIdentifier:
         return self.results
 
     def _todo(self) -> list[Window]:
-        """The windows to run: the informative ones (unless told otherwise), at most max_windows."""
+        """The windows to run: the informative ones (unless told otherwise), at most max_windows
+        (and windows_per_record for each record of the run)."""
         sch = self.schedule
         todo = [w for w in self.dm.windows if (w.informative or not sch.skip_uninformative)]
-        if sch.max_windows is not None:
-            todo = todo[: sch.max_windows]
+        limit = sch.window_limit(len({w.piece for w in self.dm.windows}))
+        if limit is not None:
+            todo = todo[:limit]
         if not todo:
             raise ValueError("no informative window: lower data.min_peak_fraction or check the record")
         return todo

@@ -17,6 +17,10 @@ class Schedule:
     skip_uninformative: bool = True  # skip windows below data.min_peak_fraction of the peak response
     fusion: str = "information"  # information | last (paper: carry the last window's values)
     max_windows: int | None = None
+    # at most this many windows per record of the run as well (several records: their number
+    # times it), so that one record's budget can be small while several records' windows still
+    # come from every record
+    windows_per_record: int | None = None
     transfer_lnn: bool = True  # LNN <- RPN after pretraining (paper's transfer-learning init)
     latent_init: bool = (
         False  # with ls_init: start latent shape parameters (beta, gamma, n) by variable projection
@@ -31,8 +35,16 @@ class Schedule:
         for name in ("pretrain_iters", "pretrain_iters_window", "max_iters"):
             if int(getattr(self, name)) < 0:
                 raise ValueError(f"model.schedule.{name} must be >= 0, got {getattr(self, name)}")
-        if self.max_windows is not None and int(self.max_windows) < 1:
-            raise ValueError(f"model.schedule.max_windows must be >= 1 or null, got {self.max_windows}")
+        for name in ("max_windows", "windows_per_record"):
+            value = getattr(self, name)
+            if value is not None and int(value) < 1:
+                raise ValueError(f"model.schedule.{name} must be >= 1 or null, got {value}")
+
+    def window_limit(self, n_records: int) -> int | None:
+        """How many windows a run of ``n_records`` records may train (None: every one)."""
+        per = None if self.windows_per_record is None else int(self.windows_per_record) * max(n_records, 1)
+        limits = [int(v) for v in (self.max_windows, per) if v is not None]
+        return min(limits) if limits else None
 
 
 @dataclass

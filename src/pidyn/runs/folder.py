@@ -43,6 +43,7 @@ VOLATILE = (
     "num_threads",
     "trainer.enable_progress_bar",
     "model.schedule.max_windows",
+    "model.schedule.windows_per_record",
     "logger",
 )
 

@@ -1,0 +1,45 @@
+"""PIDynNet's window budget: a total, and a share per record, so that one record's budget can be
+small while a run from several records still takes windows from each."""
+
+from __future__ import annotations
+
+import pytest
+
+from pidyn.config import compose
+from pidyn.models.schedule import Schedule
+
+
+def test_the_window_limit_is_the_smaller_of_the_total_and_the_records_share():
+    assert Schedule().window_limit(3) is None
+    assert Schedule(max_windows=8).window_limit(17) == 8
+    assert Schedule(max_windows=8, windows_per_record=2).window_limit(1) == 2
+    assert Schedule(max_windows=8, windows_per_record=2).window_limit(3) == 6
+    assert Schedule(max_windows=8, windows_per_record=2).window_limit(17) == 8
+    assert Schedule(windows_per_record=1).window_limit(0) == 1
+    with pytest.raises(ValueError, match="windows_per_record must be >= 1"):
+        Schedule(windows_per_record=0)
+
+
+def test_a_strong_motion_records_budget_is_two_windows_and_its_diagnosis_keeps_its_own():
+    train = compose("train", groups={"data": "csmip"}).model.schedule
+    assert (train.max_windows, train.windows_per_record) == (8, 2)
+    diagnose = compose("diagnose", groups={"data": "csmip"}).model.schedule
+    assert (diagnose.max_windows, diagnose.windows_per_record) == (8, None)
+
+
+def test_the_identifier_trains_the_informative_windows_within_the_limit():
+    from types import SimpleNamespace
+
+    from pidyn.models.identify import SubperiodIdentifier
+
+    windows = [SimpleNamespace(index=i, piece=i % 3, informative=i != 1) for i in range(12)]
+    run = SimpleNamespace(
+        schedule=Schedule(max_windows=8, windows_per_record=2), dm=SimpleNamespace(windows=windows)
+    )
+    todo = SubperiodIdentifier._todo(run)  # three records: six windows, the uninformative one skipped
+    assert [w.index for w in todo] == [0, 2, 3, 4, 5, 6]
+    one = SimpleNamespace(
+        schedule=Schedule(max_windows=8, windows_per_record=2),
+        dm=SimpleNamespace(windows=windows[:1] + windows[3:6:3]),
+    )
+    assert len(SubperiodIdentifier._todo(one)) == 2
