@@ -236,3 +236,10 @@ def test_the_amplitude_models_scale_is_read_from_its_records_and_kept_for_predic
     rebuilt, _, _ = run.for_record(record=weak)
     again = next(t for t in rebuilt.terms if t.name == "amplitude_softening")
     assert again.a_ref == pytest.approx(scale["a_ref"]) != pytest.approx(structure_scale(weak)["a_ref"])
+
+
+def test_an_amplitude_system_built_directly_asks_for_its_scale():
+    from pidyn.systems import AmplitudeDependent
+
+    with pytest.raises(ValueError, match="a_ref and w0 are null"):
+        AmplitudeDependent(a_ref=None, w0=None)

@@ -48,6 +48,11 @@ class AmplitudeSoftening(ForceTerm):
         tau_range: tuple[float, float] = (0.05, 60.0),
         law: str = "linear",
     ) -> None:
+        if a_ref is None or w0 is None:  # a config's null: the run reads them from its records
+            raise ValueError(
+                f"{self.name}: a_ref and w0 are null; a run reads them from its records "
+                "(system.a_ref=null system.w0=null), a system built directly needs numbers"
+            )
         if not (a_ref > 0 and w0 > 0):
             raise ValueError(f"{self.name}: a_ref and w0 must be > 0, got {a_ref}, {w0}")
         if law not in LAWS:
