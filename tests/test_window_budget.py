@@ -43,3 +43,13 @@ def test_the_identifier_trains_the_informative_windows_within_the_limit():
         dm=SimpleNamespace(windows=windows[:1] + windows[3:6:3]),
     )
     assert len(SubperiodIdentifier._todo(one)) == 2
+
+
+def test_a_simulated_records_budget_is_one_window_and_the_papers_tables_keep_every_one():
+    """train.py on a simulated record trains PIDynNet on one window (the refinement ends at the same
+    estimates); the tables, the paper's settings and generalize.py keep every window."""
+    assert compose("train").model.schedule.max_windows == 1
+    assert compose("train", overrides=["system=bouc_wen"]).model.schedule.max_windows == 1
+    assert compose("generalize").model.schedule.max_windows is None
+    for exp in ("table1", "table2", "table3", "scaling", "paper"):
+        assert compose("train", overrides=[f"experiment={exp}"]).model.schedule.max_windows is None, exp
