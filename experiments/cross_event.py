@@ -39,11 +39,12 @@ SYSTEMS = {
     "duffing": ["system=duffing", "system.signed_k3=true"],
     "rigid_deck": ["system=rigid_deck"],  # every deck channel, each support its own spring (transverse)
     "amplitude": ["system=amplitude"],  # stiffness and damping that follow the response's recent amplitude
+    "default": [],  # what data=csmip gives several events without system= (the amplitude model, its scale from them)
 }
 #: models of the deck's motion across it only (along it, a rigid deck is the linear model)
 ACROSS_ONLY = {"rigid_deck"}
 #: the linear model of each model's own layout, scored beside it (a linear model is its own)
-LINEAR_OF = {"duffing": "linear", "amplitude": "linear"}
+LINEAR_OF = {"duffing": "linear", "amplitude": "linear", "default": "linear"}
 #: a strong event (the issue's bar: the nonlinear model must beat the linear one there)
 STRONG_G = 0.2
 
@@ -284,12 +285,11 @@ def summary_lines(lines: list[dict], all_systems: list[str], others: dict[str, l
                 f"{_f(median([r[f'{s}_nrmse_ref'] for r in rows]))}"
             )
         strong = [r for r in rows if r["pga_g"] >= STRONG_G]
-        if len(systems) > 1 and strong:
-            nl, lin = systems[1], systems[0]
-            better = [r for r in strong if _lt(r[f"{nl}_nrmse_a"], r[f"{lin}_nrmse_a"])]
+        for nl in systems[1:] if strong else []:
+            better = [r for r in strong if _lt(r[f"{nl}_nrmse_a"], r[f"{systems[0]}_nrmse_a"])]
             out.append(
                 f"- strong events (PGA >= {STRONG_G} g): the {nl} model predicts {len(better)} of {len(strong)} "
-                f"better than the linear model"
+                f"better than the {systems[0]} model"
             )
         for s in systems:
             worse = [r["event"] for r in rows if not _lt(r[f"{s}_nrmse_a"], r["trivial_nrmse_a"])]
@@ -326,7 +326,8 @@ def markdown(lines: list[dict], systems: list[str], others: dict, args, seconds:
     head = [
         f"# Leave events out: station {args.station}",
         "",
-        f"`python experiments/cross_event.py --station {args.station} --folds {args.folds} --seed {args.seed}` "
+        f"`python experiments/cross_event.py --station {args.station} --folds {args.folds} --seed {args.seed} "
+        f"--systems {','.join(args.systems)}{_extra(args)}` "
         f"({n_runs} identifications, {seconds / 60:.0f} min of run time on 2 cores, two at a time). Each event is predicted by models identified on the events "
         "of the other folds at once, simulated from rest under its own support motions; NRMSE of the deck "
         "acceleration over the event's shaking span (a model of every deck channel: their mean). `SRIM, same "
@@ -408,6 +409,15 @@ def _args() -> argparse.Namespace:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=ROOT / "outputs" / "cross_event")
     ap.add_argument("--figure-event", default="petrolia_25apr1992")
+    ap.add_argument(
+        "--name", default="", help="a suffix of the results' names (a second study beside the first)"
+    )
+    ap.add_argument(
+        "--beside",
+        type=Path,
+        default=None,
+        help="an earlier study's CSV: its models' columns shown beside this run's (nothing of it run again)",
+    )
     args = ap.parse_args()
     args.systems = [s for s in args.systems.split(",") if s]
     unknown = set(args.systems) - set(SYSTEMS)
@@ -419,8 +429,9 @@ def _args() -> argparse.Namespace:
 def write_results(args, out: Path, rows: list[dict], others: dict) -> Path:
     """The table (CSV and markdown), the chosen event's prediction figure and the period figure."""
     lines = table(rows, per_event(args.per_event), args.systems)
+    systems = beside(lines, args.beside, args.systems) + args.systems
     RESULTS.mkdir(parents=True, exist_ok=True)
-    stem = f"cross_event_{args.station.lower()}"
+    stem = f"cross_event_{args.station.lower()}" + (f"_{args.name}" if args.name else "")
     with (RESULTS / f"{stem}.csv").open("w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(lines[0]))
         w.writeheader()
@@ -428,9 +439,7 @@ def write_results(args, out: Path, rows: list[dict], others: dict) -> Path:
     walls = [
         json.loads(m.read_text()).get("wall_seconds", 0.0) for m in out.glob("*/fold*/*/run/metrics.json")
     ]
-    (RESULTS / f"{stem}.md").write_text(
-        markdown(lines, args.systems, others, args, float(sum(walls)), len(walls))
-    )
+    (RESULTS / f"{stem}.md").write_text(markdown(lines, systems, others, args, float(sum(walls)), len(walls)))
     for r in rows:  # the chosen event predicted by the last model named, which never saw it
         if r["event"] == args.figure_event:
             fold = out / r["direction"] / f"fold{r['fold']}" / args.systems[-1]
@@ -443,6 +452,32 @@ def write_results(args, out: Path, rows: list[dict], others: dict) -> Path:
         figure = RESULTS / "figures" / f"{stem}_period.png"
         period_figure(out, args.station, args.directions.split(","), args.per_event, figure)
     return RESULTS / f"{stem}.md"
+
+
+def _extra(args) -> str:
+    """The command line's options that name a second study beside an earlier one."""
+    out = f" --name {args.name}" if args.name else ""
+    if args.beside is not None:
+        path = args.beside.resolve()
+        out += f" --beside {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path.name}"
+    return out
+
+
+def beside(lines: list[dict], path: Path | None, systems: list[str]) -> list[str]:
+    """The models of an earlier study's CSV (``path``) that this run did not identify, their columns
+    added to ``lines`` by event and direction; returns their names, the linear model first."""
+    if path is None:
+        return []
+    with path.open() as fh:
+        old = {(r["event"], r["direction"]): r for r in csv.DictReader(fh)}
+    names = [k[: -len("_nrmse_a")] for k in next(iter(old.values())) if k.endswith("_nrmse_a")]
+    names = [n for n in names if n in SYSTEMS and n not in systems]
+    for line in lines:
+        row = old.get((line["event"], line["direction"])) or {}
+        for n in names:
+            line[f"{n}_nrmse_a"] = _num(row.get(f"{n}_nrmse_a"))
+            line[f"{n}_nrmse_ref"] = _num(row.get(f"{n}_nrmse_ref"))
+    return sorted(names, key=lambda n: n != "linear")
 
 
 def main() -> None:

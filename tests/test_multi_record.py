@@ -243,3 +243,35 @@ def test_an_amplitude_system_built_directly_asks_for_its_scale():
 
     with pytest.raises(ValueError, match="a_ref and w0 are null"):
         AmplitudeDependent(a_ref=None, w0=None)
+
+
+def test_a_strong_motion_archive_from_several_events_gets_the_amplitude_model_by_default(tmp_path):
+    """``data=csmip`` without ``system=``: one event gets the linear model, several events the
+    amplitude model on the same layout with its scale read from them; a named system wins; a run
+    read back settles its model by its own records, not by the record it predicts."""
+    from omegaconf import OmegaConf, open_dict
+
+    from pidyn.config import compose
+    from pidyn.runs.folder import COMPLETE
+    from pidyn.runs.prediction import Identified
+
+    one = compose("train", groups={"data": "csmip"}, overrides=["data.path=a.zip"])
+    several = compose("train", groups={"data": "csmip"}, overrides=["data.paths=[a.zip,b.zip]"])
+    named = compose(
+        "train", groups={"data": "csmip", "system": "linear"}, overrides=["data.paths=[a.zip,b.zip]"]
+    )
+    assert one.system._target_ == "pidyn.systems.LinearSDOF" and "several_records" not in one.system
+    assert several.system._target_ == "pidyn.systems.AmplitudeDependent"
+    assert several.system.w0 is None and several.system.a_ref is None  # read from the records
+    assert several.system.inputs is None  # the records' supports, as the linear model's
+    assert named.system._target_ == "pidyn.systems.LinearSDOF"
+    # Hydra keeps the config as composed: the run read back chooses again, by its own data.paths
+    raw = compose("train", groups={"data": "csmip"}, overrides=["data.paths=[a.zip,b.zip]"])
+    with open_dict(raw):
+        raw.system = compose("train", groups={"data": "csmip"}).system  # nothing chosen yet
+        raw.system.several_records = OmegaConf.to_container(several.system)
+    (tmp_path / ".hydra").mkdir()
+    OmegaConf.save(raw, tmp_path / ".hydra" / "config.yaml")
+    (tmp_path / "metrics.json").write_text(json.dumps({"params": {}}))
+    (tmp_path / COMPLETE).write_text("{}")
+    assert Identified.load(tmp_path).cfg.system._target_ == "pidyn.systems.AmplitudeDependent"

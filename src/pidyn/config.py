@@ -109,6 +109,28 @@ def compose(
             cfg.paths.output_dir = str(output_dir)
         cfg.paths.root_dir = str(root_dir if root_dir is not None else Path.cwd())
     HydraConfig.instance().set_config(cfg)  # ${hydra:...} interpolations resolve as under @hydra.main
+    return choose_system(cfg)
+
+
+#: a system config's model for a run from several records (``conf/system/for_data/csmip.yaml``)
+SEVERAL = "several_records"
+
+
+def choose_system(cfg: DictConfig) -> DictConfig:
+    """A data set's default model may differ for one record and for several (``data.paths`` or
+    ``data.runs`` of two or more): its ``several_records`` node is the model for several. Settles
+    ``cfg.system`` in place to the one this run's own records call for (idempotent); a run read
+    back (``pidyn.runs.prediction.Identified``) settles it by its own records, not a new one's."""
+    node = cfg.get("system")
+    if not OmegaConf.is_dict(node) or SEVERAL not in node:
+        return cfg
+    many = [OmegaConf.select(cfg, f"data.{k}", default=None) for k in ("paths", "runs")]
+    several = any(OmegaConf.is_list(v) and len(v) > 1 for v in many)
+    with open_dict(cfg):
+        if several:
+            cfg.system = node[SEVERAL]
+        else:
+            del node[SEVERAL]
     return cfg
 
 

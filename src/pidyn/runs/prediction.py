@@ -17,6 +17,7 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 
 from pidyn.adequacy import trivial_predictions
 from pidyn.assessment import heldout_scores, measured_convention
+from pidyn.config import choose_system
 from pidyn.data.layout import sensor_view
 from pidyn.data.sources import Record
 from pidyn.params import fixed_values
@@ -51,7 +52,7 @@ class Identified:
             raise FileNotFoundError(
                 f"{run_dir}: not a finished identification (no {COMPLETE}, metrics.json and .hydra/config.yaml)"
             )
-        cfg = OmegaConf.load(config)
+        cfg = choose_system(OmegaConf.load(config))  # the model the run's own records called for
         if str(cfg.get("task_name", "train")) in ("diagnose", "predict"):
             raise ValueError(f"{run_dir}: a {cfg.task_name} run, not an identification")
         return cls(run_dir, cfg, json.loads((run_dir / "metrics.json").read_text()))

@@ -15,7 +15,7 @@ from typing import Any
 
 from omegaconf import DictConfig
 
-from pidyn.config import check_settings
+from pidyn.config import check_settings, choose_system
 from pidyn.data.sources import Record
 from pidyn.runs.build import build_run
 from pidyn.runs.folder import is_complete, run_folder
@@ -40,6 +40,7 @@ def train(cfg: DictConfig) -> dict[str, Any]:
 def identify_run(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
     """``identify`` holding its run folder (``pidyn.runs.folder``): locked, the same run when
     resumed, ``complete.json`` when it finished, ``failed.json`` and no ``metrics.json`` when not."""
+    choose_system(cfg)  # before the folder keeps the run's config
     with run_folder(cfg, "train", claims=RESULT_FILES):
         return identify(cfg, record)
 
@@ -52,7 +53,7 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     several models on one record builds it once)."""
     t_wall = time.perf_counter()
     stages: dict[str, float] = {}  # where the time goes (metrics.json's stage_seconds, make bench)
-    check_settings(cfg)
+    check_settings(choose_system(cfg))
     run = build_run(cfg, record)
     # the classical baselines need nothing from PIDynNet: they run beside it on another core
     pending = start_baselines(cfg, run.system, run.record, run.hold_out)
