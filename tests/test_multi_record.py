@@ -275,3 +275,37 @@ def test_a_strong_motion_archive_from_several_events_gets_the_amplitude_model_by
     (tmp_path / "metrics.json").write_text(json.dumps({"params": {}}))
     (tmp_path / COMPLETE).write_text("{}")
     assert Identified.load(tmp_path).cfg.system._target_ == "pidyn.systems.AmplitudeDependent"
+
+
+def test_the_default_several_event_run_fits_its_linear_model_beside_and_a_prediction_scores_it(tmp_path):
+    """The amplitude model that several events get by default keeps the linear model of its layout
+    beside it, fitted on the same fitting part; a prediction scores that linear model
+    (``linear_mean_nrmse_a``) without a second run. With no softening and no added damping the
+    amplitude model is that linear model, and the two predictions agree."""
+    from pidyn.config import compose
+    from pidyn.runs.build import system_and_record
+    from pidyn.runs.linear_beside import fit_linear_beside
+    from pidyn.runs.prediction import Identified, predict_record
+
+    records = ROOT / "data" / "painter_street" / "records"
+    paths = [str(records / f"{e}_ce89324p.zip") for e in ("nc73947830", "capemendocino_21nov1986")]
+    over = [f"data.paths=[{','.join(paths)}]", "data.station=CE89324"]
+    cfg = compose("train", groups={"data": "csmip"}, overrides=over)
+    assert cfg.linear_system._target_ == "pidyn.systems.LinearSDOF"
+    system, record = system_and_record(cfg, None)
+    assert system.name == "amplitude" and cfg.system.w0 > 0  # the scale read from the two events
+    linear = fit_linear_beside(cfg, record, hold_out=True)
+    assert linear is not None and linear["system"] == "linear_sdof" and linear["start"] == "data"
+    assert linear["params"]["k"] > 0 and set(linear["params"]) < {s.name for s in system.param_specs()}
+    values = {**{s.name: s.init for s in system.param_specs()}, **linear["params"], "soft": 0.0, "gain": 0.0}
+    metrics = {"params": values, "scale": {k: cfg.system[k] for k in ("w0", "a_ref")}, "linear_model": linear}
+    run = Identified(tmp_path, cfg, metrics)
+    new = Record.from_csmip(
+        records / "riodell82_ce89324p.zip", station="CE89324", max_outputs=1, on_missing="drop"
+    )
+    out, _ = predict_record(run, new)
+    assert out["linear_mean_nrmse_a"] == pytest.approx(out["mean_nrmse_a"], rel=1e-6)
+    assert (
+        compose("train", groups={"data": "csmip"}, overrides=over[:1][:0] + ["data.path=x.zip"]).linear_system
+        is None
+    )

@@ -118,7 +118,9 @@ SEVERAL = "several_records"
 
 def choose_system(cfg: DictConfig) -> DictConfig:
     """A data set's default model may differ for one record and for several (``data.paths`` or
-    ``data.runs`` of two or more): its ``several_records`` node is the model for several. Settles
+    ``data.runs`` of two or more): its ``several_records`` node is the model for several, and the
+    one-record model, its linear model of the same layout, stays beside it as ``linear_system``
+    (fitted beside it, scored beside it in a prediction: ``pidyn.runs.linear_beside``). Settles
     ``cfg.system`` in place to the one this run's own records call for (idempotent); a run read
     back (``pidyn.runs.prediction.Identified``) settles it by its own records, not a new one's."""
     node = cfg.get("system")
@@ -127,10 +129,11 @@ def choose_system(cfg: DictConfig) -> DictConfig:
     many = [OmegaConf.select(cfg, f"data.{k}", default=None) for k in ("paths", "runs")]
     several = any(OmegaConf.is_list(v) and len(v) > 1 for v in many)
     with open_dict(cfg):
+        chosen = node[SEVERAL]
+        del node[SEVERAL]
         if several:
-            cfg.system = node[SEVERAL]
-        else:
-            del node[SEVERAL]
+            cfg.linear_system = node
+            cfg.system = chosen
     return cfg
 
 

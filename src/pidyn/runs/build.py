@@ -99,6 +99,7 @@ class Run:
     run_dir: Path
     start: Any = None  # the start read from the data (``pidyn.starts.data``), or None
     hold_out: bool = False  # identified on the record's fitting part; its held-out part judges the model
+    linear_model: dict | None = None  # the linear model of the same layout fitted beside it (linear_beside)
 
 
 def build_run(cfg: DictConfig, record: Record | None) -> Run:

@@ -24,6 +24,7 @@ from pidyn.params import fixed_values
 from pidyn.reporting import nrmse, plottable, pyplot
 from pidyn.runs.build import system_and_record
 from pidyn.runs.folder import COMPLETE, is_complete
+from pidyn.runs.linear_beside import linear_model
 from pidyn.simulate import simulate_response
 from pidyn.systems.base import StructuralSystem
 
@@ -75,6 +76,15 @@ class Identified:
         if missing:
             raise ValueError(f"{self.run_dir}: the run's metrics.json gives no value of {', '.join(missing)}")
         return system, record, values
+
+    def linear_beside(self) -> Identified | None:
+        """The linear model of the same layout that the run fitted beside its own on the same
+        records (``metrics.json``'s ``linear_model``), as a run of its own; None where it has none."""
+        found = linear_model(self.cfg, self.metrics)
+        if found is None:
+            return None
+        cfg, values = found
+        return Identified(self.run_dir, cfg, {**self.metrics, "params": values, "scale": {}})
 
     @property
     def record_meta(self) -> dict[str, Any]:
@@ -166,7 +176,7 @@ def predict_record(
         system, record, values = run.for_record(record=record)
     check_channels(run, record)
     ours = score(system, values, record)
-    linear = _linear(linear_run, data, system, record, ours)
+    linear = _linear(linear_run or run.linear_beside(), data, system, record, ours)
     knows_nothing = trivial(record)
     offset = float(record.meta.t_offset or 0.0)
     out = {

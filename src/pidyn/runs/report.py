@@ -80,6 +80,8 @@ def write_report(
         metrics["baselines"] = {
             b["method"]: {"error_pct": b.get("error_pct"), "seconds": b["seconds"]} for b in baselines
         }
+    if run.linear_model is not None:
+        metrics["linear_model"] = run.linear_model
     metrics["wall_seconds"] = time.perf_counter() - t_wall
     write_json(run_dir / "windows.json", {"windows": [r.__dict__ for r in results]})
     adequacy = _adequacy(run, final, sim)

@@ -19,6 +19,7 @@ from pidyn.config import check_settings, choose_system
 from pidyn.data.sources import Record
 from pidyn.runs.build import build_run
 from pidyn.runs.folder import is_complete, run_folder
+from pidyn.runs.linear_beside import fit_linear_beside
 from pidyn.runs.methods import run_baselines, run_refinement, start_baselines
 from pidyn.runs.report import write_report
 
@@ -70,7 +71,10 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     baselines = run_baselines(cfg, run.system, run.record, run.run_dir, params.as_floats(), pending)
     t = _lap(stages, "baselines_wait", t)
     refined = run_refinement(cfg, run.system, run.record, pidyn_values, baselines, results, run.start)
-    _lap(stages, "refinement", t)
+    t = _lap(stages, "refinement", t)
+    run.linear_model = fit_linear_beside(cfg, run.record, run.hold_out)
+    if run.linear_model is not None:
+        _lap(stages, "linear_beside", t)
     metrics = write_report(cfg, run, results, pidyn_values, baselines, refined, t_wall, stages)
     objects = {
         "module": run.module,
