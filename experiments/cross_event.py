@@ -477,6 +477,10 @@ def beside(lines: list[dict], path: Path | None, systems: list[str]) -> list[str
         for n in names:
             line[f"{n}_nrmse_a"] = _num(row.get(f"{n}_nrmse_a"))
             line[f"{n}_nrmse_ref"] = _num(row.get(f"{n}_nrmse_ref"))
+        if (
+            line.get("srim_nrmse_a") is None
+        ):  # the same seeded folds: SRIM's models are the same (mdof is optional)
+            line["srim_nrmse_a"] = _num(row.get("srim_nrmse_a"))
     return sorted(names, key=lambda n: n != "linear")
 
 
