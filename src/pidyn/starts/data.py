@@ -30,7 +30,6 @@ from scipy.signal import cont2discrete, dlsim
 from pidyn.baselines.integrated import corner_of, fit_integrated, integrated_applies
 from pidyn.data.checks import record_where
 from pidyn.data.errors import DataError
-from pidyn.data.multi import pieces
 from pidyn.signals import fundamental, response_pair
 from pidyn.systems.modal import first_mode, scaled_to
 
@@ -80,14 +79,16 @@ def structure_scale(record) -> dict[str, float]:
     fundamental resonance (rad/s), and ``a_ref``, a typical response amplitude of the strongest
     shaking (m): the largest relative response of the top measured floor as a displacement
     amplitude at w0 (an acceleration over w0^2, a velocity over w0). Over several records laid
-    end to end, w0 is the median of the records' own resonances and a_ref the strongest record's."""
-    fn = nominal_frequency(record)
-    if fn is None:
+    end to end, both are the joined records': the strongest records set them. (The median of the
+    records' own resonances, steadier from one set of records to the next, predicted 16 of 18
+    unseen Painter Street events worse: experiments/results/real/amplitude_scale_check.md.)"""
+    peak = fundamental(record)
+    if peak is None:
         raise DataError(
             f"{record_where(record)}: no resonance to read the structure's scale from; "
             f"set {' and '.join(f'system.{k}' for k in DATA_SCALES)}"
         )
-    w0 = 2.0 * np.pi * fn
+    w0 = 2.0 * np.pi * float(peak[0])
     kind, relative = response_pair(record)
     power = {"x": 0, "v": 1, "a": 2}[kind]
     a_ref = float(np.max(np.abs(relative))) / w0**power
@@ -98,20 +99,6 @@ def structure_scale(record) -> dict[str, float]:
         a_ref,
     )
     return {"w0": w0, "a_ref": a_ref}
-
-
-def nominal_frequency(record) -> float | None:
-    """The structure's fundamental resonance (Hz); over several records, the median of each
-    record's own. The resonance of the records joined is the strongest records' (their energy
-    outweighs the rest): over Painter Street's leave-events-out folds it ran from 0.26 to 0.39 s
-    transversely as the folds' strong events came and went, each record's median 0.255-0.259 s."""
-    parts = pieces(record)
-    if len(parts) == 1:
-        peak = fundamental(record)
-        return None if peak is None else float(peak[0])
-    found = [fundamental(record.segment(record.t[p.i0], record.t[p.i1 - 1])) for p in parts]
-    freqs = [f[0] for f in found if f is not None]
-    return float(np.median(freqs)) if freqs else None
 
 
 def start_from_data(record, system) -> DataStart | None:
