@@ -5,8 +5,8 @@ same layout identified on the same records (``prediction.json``'s ``linear_mean_
 nonlinear model has to earn its terms on records it never saw. Where the config names that linear
 model (``linear_system``, which ``pidyn.config.choose_system`` sets when a data set's default for
 several records is a nonlinear model), the training run fits it by output error from the data's
-start on the run's own fitting part (a second, a minute at most on a station's events: the linear
-simulation is a one-sample map) and keeps its values in ``metrics.json``'s ``linear_model``.
+start on the run's own fitting part (3-4 s on 17-18 Painter Street events: the linear simulation is
+a one-sample map) and keeps its values in ``metrics.json``'s ``linear_model``.
 """
 
 from __future__ import annotations
@@ -49,6 +49,9 @@ def fit_linear_beside(cfg: DictConfig, record: Record, hold_out: bool) -> dict[s
         return None
     t0 = time.perf_counter()
     system, rec = system_and_record(lin, record)
+    if not getattr(system, "linear_time_invariant", False):  # a data default that names another model
+        log.warning("linear_system names %s, not a linear model: nothing fitted beside", system.name)
+        return None
     split = rec.meta.split
     fitted = rec.segment(*split.fit) if hold_out and split is not None else rec
     start = start_from_data(fitted, system)
