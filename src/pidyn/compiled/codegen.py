@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from pidyn.compiled.dopri_template import SOURCE as TRUTH
 from pidyn.compiled.rk4_template import TEMPLATE
 from pidyn.compiled.tape import Tape
 
@@ -205,7 +206,8 @@ def _block(tape: Tape, names: _Names, nodes: list[int], dual: bool, tail: list[s
 
 
 def source(tape: Tape, n_param: int, n_state: int, n_input: int) -> str:
-    """The C source of ``run`` (see ``pidyn.compiled.kernel``) for this tape."""
+    """The C source of ``run`` (see ``pidyn.compiled.kernel``) for this tape, and of ``truth``
+    (``pidyn.compiled.dopri_template``)."""
     pl = plan(tape)
     names = _Names(tape, pl)
     body = [i for i, (op, *_) in enumerate(tape.nodes) if op not in LEAVES]
@@ -213,13 +215,16 @@ def source(tape: Tape, n_param: int, n_state: int, n_input: int) -> str:
     var = [i for i in body if not pl.invariant[i]]
     out = [f"out[{j}] = {names.value(i)};" for j, i in enumerate(tape.outputs)]
     outd = [f"outd[{j} * D + k] = {names.deriv(i) or '0.0'};" for j, i in enumerate(tape.outputs)]
-    return TEMPLATE.format(
-        NP=n_param,
-        NS=n_state,
-        NW=n_input,
-        NI=max(len(names.inv), 1),
-        prologue=_block(tape, names, inv, False, []),
-        prologue_d=_block(tape, names, inv, True, []),
-        rate=_block(tape, names, var, False, []) + "\n    " + "\n    ".join(out),
-        rate_d="\n    ".join([_block(tape, names, var, True, outd), *out]),
+    return (
+        TEMPLATE.format(
+            NP=n_param,
+            NS=n_state,
+            NW=n_input,
+            NI=max(len(names.inv), 1),
+            prologue=_block(tape, names, inv, False, []),
+            prologue_d=_block(tape, names, inv, True, []),
+            rate=_block(tape, names, var, False, []) + "\n    " + "\n    ".join(out),
+            rate_d="\n    ".join([_block(tape, names, var, True, outd), *out]),
+        )
+        + TRUTH
     )

@@ -24,6 +24,8 @@ log = logging.getLogger(__name__)
 
 #: fewer sample intervals than this are integrated in Python (tracing and packing cost more)
 MIN_INTERVALS = 8
+#: the ground truth gives up after this many evaluations of the state rate (LSODA's mxstep, 1e6 steps)
+MAX_EVALS = 6_000_000
 _KERNELS: dict[tuple, tuple[Any, np.ndarray] | None] = {}
 _DOUBLE_P = ctypes.POINTER(ctypes.c_double)
 
@@ -59,7 +61,7 @@ def rate_function(
     system: Any, params: dict[str, float], sampled: tuple[np.ndarray, float] | None = None
 ) -> Any:
     """``f(t, y, excitation) -> dy/dt`` for one plain state, compiled, or None: what a variable-step
-    integrator (the ground truth's LSODA) calls tens of thousands of times per record. With
+    integrator (LSODA, where the ground truth is asked of it) calls tens of thousands of times per record. With
     ``sampled`` = (samples, dt) of a system's one input, ``f(t, y)`` reads the excitation itself,
     linear between samples and zero outside them, as ``np.interp`` reads it (``GroundMotion``)."""
     if sampled is not None and system.excitation_width != 1:
@@ -180,3 +182,53 @@ def steps(
         *map(_ptr, (tl, TT, F, ST, P, dP, K, Y0v, dY0, Yv, Yd)),
     )
     return (Yv, Yd) if rc == 0 else None
+
+
+def truth(
+    system: Any,
+    params: dict[str, float],
+    sampled: tuple[np.ndarray, float, np.ndarray],
+    t_eval: np.ndarray,
+    y0: np.ndarray,
+    rtol: float,
+    atol: float,
+) -> np.ndarray | None:
+    """The ground truth's states at ``t_eval`` (N, n_state), integrated in C by Dormand and Prince's
+    5(4) pair (``pidyn.compiled.dopri_template``), or None where there is no compiled library.
+    ``sampled`` = (columns (n, W), dt, hold (W,)): the excitation's samples, one column per
+    excitation entry, each linear between samples, zero before the record, and after it zero or
+    (``hold``) its last value. A failed integration raises, naming the system."""
+    cols = np.ascontiguousarray(sampled[0], dtype=float)
+    if cols.ndim != 2 or cols.shape[1] != system.excitation_width or not enabled():
+        return None
+    names = list(params)
+    found = _library(system, names)
+    if found is None or not hasattr(found[0], "truth"):
+        return None
+    lib, K = found
+    P = np.array([float(params[n]) for n in names])
+    T = np.ascontiguousarray(t_eval, dtype=float)
+    hold = np.ascontiguousarray(sampled[2], dtype=np.intc)
+    Y0 = np.ascontiguousarray(y0, dtype=float)
+    Y = np.empty((len(T), system.n_state))
+    call = lib.truth
+    call.restype = ctypes.c_int
+    rc = call(
+        ctypes.c_int(len(T)),
+        _ptr(T),
+        _ptr(cols),
+        ctypes.c_int(len(cols)),
+        ctypes.c_double(float(sampled[1])),
+        hold.ctypes.data_as(ctypes.POINTER(ctypes.c_int)),
+        _ptr(P),
+        _ptr(K),
+        _ptr(Y0),
+        ctypes.c_double(rtol),
+        ctypes.c_double(atol),
+        ctypes.c_long(max(MAX_EVALS, 5000 * len(T))),
+        _ptr(Y),
+    )
+    if rc != 0:
+        why = "too many steps" if rc == -1 else "a value that is not finite"
+        raise RuntimeError(f"simulation of {system.name} failed: {why}")
+    return Y
