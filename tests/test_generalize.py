@@ -49,7 +49,9 @@ def test_physics_only_prediction_tracks_the_true_response():
     module = PIDynNetModule(PIDynNet(s, TaylorMLP()))  # parameters at their (true) initial values
     module.net.params.set_values(s.true_values())
     before = {k: v.clone() for k, v in module.net.rpn.state_dict().items()}
-    pred = predict_response(module, truth, trainer, PredictSettings(iterations=300), x_scale=0.1, v_scale=0.5)
+    pred = predict_response(
+        module, truth, trainer, PredictSettings(iterations=300, lbfgs_steps=10), x_scale=0.1, v_scale=0.5
+    )
     strong = truth.t > 7.0
     assert pearson(pred.x[strong], truth.x[strong]) > 0.9
     assert np.all(pred.x[truth.t < 0.01] == pytest.approx(0.0, abs=1e-6))  # starts at rest, exactly

@@ -1,4 +1,5 @@
-"""The proof that identification works: a real (short) PIDynNet run recovers Duffing parameters."""
+"""Second proofs that identification works (make test-all): a real (short) PIDynNet run recovers Duffing
+parameters; make test proves it by test_train_refine, test_multi_record and test_building."""
 
 import pytest
 from helpers import make_cfg  # noqa: E402
@@ -7,7 +8,7 @@ from pidyn.notes import code_of  # noqa: E402
 from pidyn.tasks.train import train  # noqa: E402
 
 
-@pytest.mark.second_proof  # identification is proven by test_noisy_duffing_still_within_a_few_percent
+@pytest.mark.second_proof  # identification is proven by test_refined_run_reports_final_and_pidynnet_estimates
 def test_duffing_identified_from_one_kobe_window(tmp_path):
     """Default recipe, Kobe 1995 first 12 s, one informative window (~30 s on one core)."""
     cfg = make_cfg(["excitation.duration=12", "model.schedule.max_windows=1", "logger=none"], tmp_path)
@@ -18,7 +19,7 @@ def test_duffing_identified_from_one_kobe_window(tmp_path):
     assert m["sim_nrmse_x"] < 0.05
 
 
-@pytest.mark.slow
+@pytest.mark.second_proof  # identification: test_refined_run_reports_final_and_pidynnet_estimates (Duffing); with noise, test_bouc_wen_from_two_earthquakes_predicts_a_third and test_a_users_accelerometer_file_identifies_a_two_storey_building
 def test_noisy_duffing_still_within_a_few_percent(tmp_path):
     cfg = make_cfg(
         ["excitation.duration=12", "model.schedule.max_windows=1", "noise=0.05", "logger=none"], tmp_path
