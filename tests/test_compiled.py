@@ -244,3 +244,36 @@ def test_the_compiled_ground_truth_is_at_least_as_close_to_the_solution_as_lsoda
         scale = np.abs(exact.x).max()
         # no farther than LSODA, or within 5e-10 of the response (the reference's own error is near 1e-11)
         assert np.abs(auto.x - exact.x).max() <= max(np.abs(lsoda.x - exact.x).max(), 5e-10 * scale)
+
+
+@pytest.mark.parametrize("along_x", [True, False])
+def test_a_latent_path_in_c_is_the_one_in_python(along_x, monkeypatch):
+    """The screening's latent states along a measured motion (``latent_path``: a grid of Bouc-Wen
+    shapes at once, one amplitude-law memory) come from C with Python's operations in Python's
+    order: the same to round-off, and bitwise for one parameter set."""
+    from pidyn.systems.terms import AmplitudeSoftening, BoucWenHysteresis, latent_path
+
+    t = np.arange(3000) * DT
+    x = 0.3 * np.sin(2 * np.pi * 0.5 * t) * np.exp(-0.05 * t) + 0.05 * np.sin(2 * np.pi * 2.3 * t)
+    v = None if along_x else np.gradient(x, t)
+    grid = {
+        "beta": np.linspace(0.5, 3.0, 7),
+        "gamma": np.linspace(-0.5, 2.0, 7),
+        "n": np.linspace(1.0, 3.0, 7),
+    }
+    cases = [
+        (BoucWenHysteresis(1.0, param="kh"), grid),
+        (BoucWenHysteresis(1.0, param="kh"), {"beta": 1.0, "gamma": 0.5, "n": 2.0}),
+        (AmplitudeSoftening(0.0, 0.0, 2.0, a_ref=0.2, w0=3.0), {"tau": 2.0}),
+    ]
+    if build.compiler() is not None:  # the C path is the one taken here, not Python twice
+        assert all(kernel.latent_path(term, t, x, v, values, 4) is not None for term, values in cases)
+    fast = [latent_path(term, t, x, v, values) for term, values in cases]
+    monkeypatch.setenv("PIDYN_COMPILED", "0")
+    for (term, values), got in zip(cases, fast):
+        want = latent_path(term, t, x, v, values)
+        assert got.shape == want.shape
+        if any(np.ndim(val) for val in values.values()):
+            _close(got, want, rtol=1e-12)
+        else:
+            assert np.array_equal(got, want)

@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from pidyn.compiled.dopri_template import SOURCE as TRUTH
+from pidyn.compiled.heun_template import SOURCE as HEUN
 from pidyn.compiled.rk4_template import TEMPLATE
 from pidyn.compiled.tape import Tape
 
@@ -206,8 +207,9 @@ def _block(tape: Tape, names: _Names, nodes: list[int], dual: bool, tail: list[s
 
 
 def source(tape: Tape, n_param: int, n_state: int, n_input: int) -> str:
-    """The C source of ``run`` (see ``pidyn.compiled.kernel``) for this tape, and of ``truth``
-    (``pidyn.compiled.dopri_template``)."""
+    """The C source of ``run`` (see ``pidyn.compiled.kernel``) for this tape, of ``truth``
+    (``pidyn.compiled.dopri_template``) and, for a latent rate along a motion (two inputs: x, x'),
+    of ``heun`` (``pidyn.compiled.heun_template``)."""
     pl = plan(tape)
     names = _Names(tape, pl)
     body = [i for i, (op, *_) in enumerate(tape.nodes) if op not in LEAVES]
@@ -227,4 +229,5 @@ def source(tape: Tape, n_param: int, n_state: int, n_input: int) -> str:
             rate_d="\n    ".join([_block(tape, names, var, True, outd), *out]),
         )
         + TRUTH
+        + (HEUN if n_input == 2 else "")
     )

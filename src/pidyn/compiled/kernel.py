@@ -18,7 +18,7 @@ import numpy as np
 
 from pidyn.autodiff import Dual
 from pidyn.compiled import build, codegen
-from pidyn.compiled.tape import Tape, record
+from pidyn.compiled.tape import Tape, record, record_latent
 
 log = logging.getLogger(__name__)
 
@@ -232,3 +232,44 @@ def truth(
         why = "too many steps" if rc == -1 else "a value that is not finite"
         raise RuntimeError(f"simulation of {system.name} failed: {why}")
     return Y
+
+
+def latent_path(
+    term: Any, t: np.ndarray, x: np.ndarray, v: np.ndarray | None, values: dict[str, Any], substeps: int
+) -> np.ndarray | None:
+    """``pidyn.systems.terms.base.latent_path`` in C for one motion (x of shape (N,)): z (N, P,
+    n_latent) for (P,) parameter arrays, (N, n_latent) for scalars; None where it does not apply
+    (a motion of several columns, a rate a tape cannot follow, no C compiler)."""
+    t, x = np.asarray(t, dtype=float), np.asarray(x, dtype=float)
+    if not enabled() or x.ndim != 1 or len(t) < MIN_INTERVALS or (v is not None and np.ndim(v) != 1):
+        return None
+    shapes = [np.shape(val) for val in values.values()]
+    if any(len(s) > 1 for s in shapes):
+        return None
+    names = list(values)
+    try:  # a tape of a few hundred nodes, recorded again each call; its library is kept by its nodes
+        tape = record_latent(term, names)
+    except Exception as exc:  # noqa: BLE001 - a rate a tape cannot follow stays in Python
+        log.debug("%s: latent path not compiled (%s)", type(term).__name__, exc)
+        return None
+    found = _kernel(tape, len(names), term.n_latent, 2)
+    if found is None or not hasattr(found[0], "heun"):
+        return None
+    lib, K = found
+    B = int(max((s[0] for s in shapes if s), default=1))
+    P = np.ascontiguousarray(
+        np.column_stack([np.broadcast_to(np.asarray(values[n], float), (B,)) for n in names])
+    )
+    nz = term.n_latent
+    Z = np.empty((len(t), B, nz))
+    V = np.ascontiguousarray(x if v is None else v, dtype=float)
+    call = lib.heun
+    call.restype = ctypes.c_int
+    call(
+        ctypes.c_int(len(t)),
+        ctypes.c_int(B),
+        ctypes.c_int(int(substeps)),
+        ctypes.c_int(1 if v is None else 0),
+        *map(_ptr, (np.ascontiguousarray(t), np.ascontiguousarray(x), V, P, K, np.zeros((B, nz)), Z)),
+    )
+    return Z if any(shapes) else Z[:, 0, :]

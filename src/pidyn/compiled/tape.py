@@ -258,3 +258,26 @@ def record(system: Any, param_names: list[str], n_inputs: int) -> Tape:
     finally:
         _RECORDING.tapes.pop()
     return tape
+
+
+def record_latent(term: Any, param_names: list[str]) -> Tape:
+    """The tape of ``term.latent_rate`` for one parameter set: parameters ``param_names`` (in that
+    order), the latent state as the state, the motion's x and x' as inputs 0 and 1, the time."""
+    tape = Tape()
+    _RECORDING.tapes.append(tape)
+    try:
+        t = Traced(np.array([leaf("time")], dtype=object))
+        x = Traced(np.array([leaf("input", 0)], dtype=object))
+        v = Traced(np.array([leaf("input", 1)], dtype=object))
+        z = Traced(np.array([[leaf("state", j) for j in range(term.n_latent)]], dtype=object))
+        p = {name: Traced(np.array(leaf("param", j), dtype=object)) for j, name in enumerate(param_names)}
+        with np.errstate(all="ignore"):
+            out = term.latent_rate(t, x, v, z, p)
+        if not isinstance(out, Traced) or out.shape != (1, term.n_latent):
+            raise NotTraceable(
+                f"the latent rate came back as {type(out).__name__} {getattr(out, 'shape', '')}"
+            )
+        tape.outputs = [_arg(q) for q in out.a[0]]
+    finally:
+        _RECORDING.tapes.pop()
+    return tape

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from pidyn.compiled import kernel
 from pidyn.params import ParamSpec
 
 Array = Any  # torch.Tensor or np.ndarray: the formulas below work on both
@@ -147,6 +148,9 @@ def latent_path(
     the displacement path alone): what the term's z was, given the motion the structure made.
     ``values`` may hold (P,) arrays (P parameter sets at once): z is then (N, P, n_latent), else
     (N, n_latent)."""
+    fast = kernel.latent_path(term, t, x, v, values, substeps)  # the same operations, in C
+    if fast is not None:
+        return fast
     shape = (*np.broadcast_shapes(*(np.shape(val) for val in values.values())), term.n_latent)
 
     def rate(ti, xi, vi, zi):
