@@ -20,11 +20,13 @@ def test_the_window_limit_is_the_smaller_of_the_total_and_the_records_share():
         Schedule(windows_per_record=0)
 
 
-def test_a_strong_motion_records_budget_is_two_windows_and_its_diagnosis_keeps_its_own():
+def test_a_strong_motion_records_budget_is_two_windows_in_its_identification_and_its_diagnosis():
     train = compose("train", groups={"data": "csmip"}).model.schedule
     assert (train.max_windows, train.windows_per_record) == (8, 2)
     diagnose = compose("diagnose", groups={"data": "csmip"}).model.schedule
-    assert (diagnose.max_windows, diagnose.windows_per_record) == (8, None)
+    assert (diagnose.max_windows, diagnose.windows_per_record) == (8, 2)
+    # the diagnosis's own, shorter windows (diagnose.yaml), two of them a record
+    assert (diagnose.pretrain_iters, diagnose.max_iters) == (300, 500)
 
 
 def test_the_identifier_trains_the_informative_windows_within_the_limit():
