@@ -237,47 +237,47 @@ def leaf(kind: str, j: int | None = None) -> Node:
     return Node(tape.node(kind) if j is None else tape.node(kind, j))
 
 
-def record(system: Any, param_names: list[str], n_inputs: int) -> Tape:
-    """The tape of ``system.state_rate`` for one trajectory: parameters ``param_names`` (in that
-    order), the state, the excitation's ``n_inputs`` columns and the time as leaves."""
+def _record(rate: Any, param_names: list[str], n_out: int, what: str) -> Tape:
+    """The tape of ``rate(t, p)`` (its other leaves made by the caller's closure): parameters
+    ``param_names`` in that order and the time as leaves, ``n_out`` outputs of shape (1, n_out)."""
     tape = Tape()
     _RECORDING.tapes.append(tape)
     try:
         t = Traced(np.array([leaf("time")], dtype=object))
-        y = Traced(np.array([[leaf("state", j) for j in range(system.n_state)]], dtype=object))
-        cols = [leaf("input", w) for w in range(n_inputs)]
-        f = Traced(np.array([cols] if system.n_inputs > 1 else cols, dtype=object))
         p = {name: Traced(np.array(leaf("param", j), dtype=object)) for j, name in enumerate(param_names)}
         with np.errstate(all="ignore"):
-            out = system.state_rate(t, y, p, f)
-        if not isinstance(out, Traced) or out.shape != (1, system.n_state):
-            raise NotTraceable(
-                f"the state rate came back as {type(out).__name__} {getattr(out, 'shape', '')}"
-            )
+            out = rate(t, p)
+        if not isinstance(out, Traced) or out.shape != (1, n_out):
+            raise NotTraceable(f"the {what} came back as {type(out).__name__} {getattr(out, 'shape', '')}")
         tape.outputs = [_arg(x) for x in out.a[0]]
     finally:
         _RECORDING.tapes.pop()
     return tape
 
 
+def _row(kind: str, n: int) -> Traced:
+    """One row of ``n`` leaves of a kind (the state: ``("state", j)``)."""
+    return Traced(np.array([[leaf(kind, j) for j in range(n)]], dtype=object))
+
+
+def record(system: Any, param_names: list[str], n_inputs: int) -> Tape:
+    """The tape of ``system.state_rate`` for one trajectory: parameters ``param_names`` (in that
+    order), the state, the excitation's ``n_inputs`` columns and the time as leaves."""
+
+    def rate(t: Traced, p: dict) -> Any:
+        cols = [leaf("input", w) for w in range(n_inputs)]
+        f = Traced(np.array([cols] if system.n_inputs > 1 else cols, dtype=object))
+        return system.state_rate(t, _row("state", system.n_state), p, f)
+
+    return _record(rate, param_names, system.n_state, "state rate")
+
+
 def record_latent(term: Any, param_names: list[str]) -> Tape:
     """The tape of ``term.latent_rate`` for one parameter set: parameters ``param_names`` (in that
     order), the latent state as the state, the motion's x and x' as inputs 0 and 1, the time."""
-    tape = Tape()
-    _RECORDING.tapes.append(tape)
-    try:
-        t = Traced(np.array([leaf("time")], dtype=object))
-        x = Traced(np.array([leaf("input", 0)], dtype=object))
-        v = Traced(np.array([leaf("input", 1)], dtype=object))
-        z = Traced(np.array([[leaf("state", j) for j in range(term.n_latent)]], dtype=object))
-        p = {name: Traced(np.array(leaf("param", j), dtype=object)) for j, name in enumerate(param_names)}
-        with np.errstate(all="ignore"):
-            out = term.latent_rate(t, x, v, z, p)
-        if not isinstance(out, Traced) or out.shape != (1, term.n_latent):
-            raise NotTraceable(
-                f"the latent rate came back as {type(out).__name__} {getattr(out, 'shape', '')}"
-            )
-        tape.outputs = [_arg(q) for q in out.a[0]]
-    finally:
-        _RECORDING.tapes.pop()
-    return tape
+
+    def rate(t: Traced, p: dict) -> Any:
+        x, v = (Traced(np.array([leaf("input", j)], dtype=object)) for j in (0, 1))
+        return term.latent_rate(t, x, v, _row("state", term.n_latent), p)
+
+    return _record(rate, param_names, term.n_latent, "latent rate")
