@@ -227,6 +227,43 @@ def simulation_ms(reps: int = 3) -> list[dict]:
     return out
 
 
+def latent_path_ms(reps: int = 3) -> dict:
+    """The diagnosis screening's latent states along a measured motion (``latent_path``): the
+    Bouc-Wen effect's grid of shapes at once, and one shape, along 25 s of a Bouc-Wen response to
+    El Centro at dt 0.01 s, in C and in Python (``PIDYN_COMPILED=0``), and their largest difference."""
+    import os
+
+    import numpy as np
+
+    from pidyn.data.sources import synthetic_from_motion
+    from pidyn.discrepancy.effects import Signals, get_effect
+    from pidyn.excitation import prepare
+    from pidyn.systems import BoucWen
+    from pidyn.systems.terms import BoucWenHysteresis, latent_path
+
+    gm = prepare("el_centro", dt=0.01, duration=25.0)
+    rec = synthetic_from_motion(BoucWen(), gm)
+    x = rec.x[:, 0]
+    grid = get_effect("hysteresis")._grid(Signals(rec.t, x, rec.v[:, 0], 1.0, 12.0, "k", t_fit_end=16.0))
+    term = BoucWenHysteresis(1.0, param="kh")
+    cases = {
+        f"grid of {len(grid)} shapes": {"beta": grid[:, 0], "gamma": grid[:, 1], "n": grid[:, 2]},
+        "one shape": {"beta": 1.0, "gamma": 0.5, "n": 2.0},
+    }
+    out = {}
+    for label, values in cases.items():
+        fast = latent_path(term, rec.t, x, None, values)
+        row = {"compiled_ms": _best(lambda: latent_path(term, rec.t, x, None, values), reps)}
+        os.environ["PIDYN_COMPILED"] = "0"
+        slow = latent_path(term, rec.t, x, None, values)
+        row["python_ms"] = _best(lambda: latent_path(term, rec.t, x, None, values), 1)
+        os.environ.pop("PIDYN_COMPILED")
+        row["difference"] = float(np.nanmax(np.abs(fast - slow)) / max(np.nanmax(np.abs(slow)), 1e-300))
+        out[label] = row
+        print(label, row, flush=True)
+    return out
+
+
 def linear_map_ms(reps: int = 3) -> list[dict]:
     """A linear time-invariant model simulated with the exact sensitivities to every parameter
     (dual numbers, what an output-error fit does at each step), 25 s of El Centro at dt 0.01 s:
@@ -446,6 +483,7 @@ def main() -> None:
     res["storeys"] = storey_scaling()
     res["simulation"] = simulation_ms()
     res["linear_map"] = linear_map_ms()
+    res["latent_path"] = latent_path_ms()
     if not a.quick:
         res["end_to_end"] = [end_to_end([]), end_to_end(["system=bouc_wen"])]
     elif (OUT / "bench.json").exists():  # keep the last full run's end-to-end rows
@@ -468,6 +506,7 @@ def _simulation_section(res: dict) -> None:
     """The simulation section measured again (``--simulation``), into the last full run's results."""
     res["simulation"] = simulation_ms()
     res["linear_map"] = linear_map_ms()
+    res["latent_path"] = latent_path_ms()
     res["simulation_date"] = time.strftime("%Y-%m-%d")
     # the machine may not be the one of the other rows: its taylor/float32 iteration, to compare
     res["simulation_reference_ms"] = per_iteration_ms(torch.float32, "taylor")
@@ -593,6 +632,20 @@ def _simulation_lines(res: dict) -> list[str]:
             if "compiled_ms" in r
             else f"| {r['system']} | - | {r['map_ms']:.1f} | {r['loop_ms']:.0f} | -, {r['difference']:.1e} |"
             for r in res["linear_map"]
+        ]
+    if "latent_path" in res:
+        lines += [
+            "",
+            "### The screening's latent paths: in C and in Python\n",
+            "The Bouc-Wen effect's latent state along 25 s of a measured motion (`latent_path`: Heun's rule "
+            "along the displacement, what the diagnosis screens every hysteretic and elastoplastic shape "
+            "with); the difference is the largest, as a share of the state.\n",
+            "| case | compiled ms | Python ms | difference |",
+            "|---|---|---|---|",
+        ]
+        lines += [
+            f"| {k} | {r['compiled_ms']:.1f} | {r['python_ms']:.0f} | {r['difference']:.1e} |"
+            for k, r in res["latent_path"].items()
         ]
     return lines
 
