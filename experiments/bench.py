@@ -633,20 +633,25 @@ def _simulation_lines(res: dict) -> list[str]:
             else f"| {r['system']} | - | {r['map_ms']:.1f} | {r['loop_ms']:.0f} | -, {r['difference']:.1e} |"
             for r in res["linear_map"]
         ]
-    if "latent_path" in res:
-        lines += [
-            "",
-            "### The screening's latent paths: in C and in Python\n",
-            "The Bouc-Wen effect's latent state along 25 s of a measured motion (`latent_path`: Heun's rule "
-            "along the displacement, what the diagnosis screens every hysteretic and elastoplastic shape "
-            "with); the difference is the largest, as a share of the state.\n",
-            "| case | compiled ms | Python ms | difference |",
-            "|---|---|---|---|",
-        ]
-        lines += [
-            f"| {k} | {r['compiled_ms']:.1f} | {r['python_ms']:.0f} | {r['difference']:.1e} |"
-            for k, r in res["latent_path"].items()
-        ]
+    return lines + _latent_path_lines(res)
+
+
+def _latent_path_lines(res: dict) -> list[str]:
+    if "latent_path" not in res:
+        return []
+    lines = [
+        "",
+        "### The screening's latent paths: in C and in Python\n",
+        "The Bouc-Wen effect's latent state along 25 s of a measured motion (`latent_path`: Heun's rule "
+        "along the displacement, what the diagnosis screens every hysteretic and elastoplastic shape "
+        "with); the difference is the largest, as a share of the state.\n",
+        "| case | compiled ms | Python ms | difference |",
+        "|---|---|---|---|",
+    ]
+    lines += [
+        f"| {k} | {r['compiled_ms']:.1f} | {r['python_ms']:.0f} | {r['difference']:.1e} |"
+        for k, r in res["latent_path"].items()
+    ]
     return lines
 
 
