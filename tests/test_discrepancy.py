@@ -657,7 +657,7 @@ def test_names_that_do_not_earn_their_place_give_way_to_a_learned_force(tmp_path
             "noise=0.02",
             "data_seed=5",
             "diagnosis.thresholds.min_name_gain=0.95",
-            "diagnosis.learned.max_evaluations=30",
+            "diagnosis.learned.max_evaluations=10",
             *FAST,
         ],
         tmp_path,

@@ -38,7 +38,7 @@ def test_a_learned_force_goes_to_the_storey_the_linear_model_misses(tmp_path):
         record=record,
         fit=(0.0, 10.0),
         held=(10.0, 15.0),
-        settings=SimpleNamespace(learned=LearnedSettings(max_evaluations=16)),
+        settings=SimpleNamespace(learned=LearnedSettings(max_evaluations=10)),
     )
     current = BuildingState(linear, values, heldout_nrmse(record, linear, values, study.held))
     out = learned_storey_force(
