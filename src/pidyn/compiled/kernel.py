@@ -244,7 +244,7 @@ def latent_path(
     if not enabled() or x.ndim != 1 or len(t) < MIN_INTERVALS or (v is not None and np.ndim(v) != 1):
         return None
     shapes = [np.shape(val) for val in values.values()]
-    if any(len(s) > 1 for s in shapes):
+    if not shapes or any(len(s) > 1 for s in shapes):
         return None
     names = list(values)
     try:  # a tape of a few hundred nodes, recorded again each call; its library is kept by its nodes
