@@ -101,6 +101,7 @@ def test_walkthrough_example_runs(tmp_path):
 
 
 @pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="the baselines run in a worker only with a second core")
+@pytest.mark.slow
 def test_a_plain_script_without_a_main_guard_runs_once(tmp_path):
     """The baselines' worker must not import the caller's script: a top-level
     ``pidyn.identify(...)`` without ``if __name__ == "__main__"`` runs (and prints) once."""
@@ -146,6 +147,7 @@ def test_a_notebook_without_logging_sees_the_progress_lines_and_a_configured_pro
         root.handlers[:] = saved
 
 
+@pytest.mark.slow
 def test_a_notebooks_diagnosis_shows_its_steps_with_the_time_left(capfd, tmp_path):
     """``pidyn.diagnose`` in a notebook (nobody configured logging): the diagnosis's steps as k of
     6 and its output-error checks as k of n, with the time left at the pace so far, on stderr."""

@@ -36,6 +36,7 @@ def test_latent_path_matches_the_simulation():
     np.testing.assert_allclose(z[0, :, 0], c.z[:, 0], atol=2e-3 * np.abs(c.z).max())
 
 
+@pytest.mark.slow
 def test_bouc_wen_shape_recovered_from_a_far_start():
     """From beta, gamma, n at half, half and 0.75 of the truth (PIDynNet's usual start), the
     motion of 10 s of El Centro gives them back; c and k come with them."""
@@ -51,6 +52,7 @@ def test_bouc_wen_shape_recovered_from_a_far_start():
     assert out["at_edge"] == []
 
 
+@pytest.mark.slow
 def test_unknown_initial_latent_state_is_estimated():
     """Cut in mid-motion, z0 is an unknown of the problem and comes out right."""
     s = BoucWen()

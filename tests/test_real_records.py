@@ -135,6 +135,7 @@ def test_the_start_from_the_data_finds_the_supports_and_a_stiffness_far_from_the
         assert start.values[n] == pytest.approx(p[n], rel=0.02), n
 
 
+@pytest.mark.slow
 def test_a_measured_record_starts_pidynnet_from_the_data(tmp_path):
     """Without the truth (a measured record) the train task starts from the data unless the user
     gave a start; the config's k = 10 for a structure of k = 1500 is not used."""

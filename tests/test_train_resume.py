@@ -2,6 +2,7 @@
 
 import json
 
+import pytest
 import torch
 import yaml
 from helpers import make_cfg
@@ -17,6 +18,7 @@ FAST = [
 ]
 
 
+@pytest.mark.slow
 def test_run_folder_holds_everything(tmp_path):
     cfg = make_cfg(
         [o for o in FAST if o != "baselines=none"]
