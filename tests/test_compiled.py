@@ -227,7 +227,7 @@ def test_the_compiled_ground_truth_is_at_least_as_close_to_the_solution_as_lsoda
     close to a thousandfold-tighter LSODA reference as LSODA at the usual tolerance does, or closer
     (a kink at zero velocity and a friction's sign included), on an output grid off the samples too."""
     from pidyn.excitation.ground_motion import GroundMotion, SupportMotions
-    from pidyn.simulate import simulate
+    from pidyn.simulate import _rate, simulate
 
     system = SYSTEMS[name]
     rng = np.random.default_rng(5)
@@ -244,6 +244,11 @@ def test_the_compiled_ground_truth_is_at_least_as_close_to_the_solution_as_lsoda
         scale = np.abs(exact.x).max()
         # no farther than LSODA, or within 5e-10 of the response (the reference's own error is near 1e-11)
         assert np.abs(auto.x - exact.x).max() <= max(np.abs(lsoda.x - exact.x).max(), 5e-10 * scale)
+        # the accelerations come from C with the states: the state rate at them, to the bit
+        rate = _rate(system, p, gm)
+        y = np.hstack([auto.x, auto.v] + ([auto.z] if auto.z is not None else []))
+        n = system.n_dof
+        assert np.array_equal(auto.a, np.array([rate(ti, yi) for ti, yi in zip(t, y)])[:, n : 2 * n])
 
 
 @pytest.mark.parametrize("along_x", [True, False])

@@ -66,35 +66,41 @@ def simulate(
     if t_eval.ndim != 1 or t_eval.size < 2 or np.any(np.diff(t_eval) <= 0):
         raise ValueError("t_eval must be a strictly increasing 1-D array")
     y0 = np.zeros(2 * n + nz) if y0 is None else np.asarray(y0, dtype=float)
-    step = max_step if max_step is not None else float(np.min(np.diff(t_eval)))
-    if system.n_inputs > 1:  # several inputs: excitation(t) gives one value per input
-        f_scalar = lambda t: np.asarray(excitation(t), dtype=float)  # noqa: E731
-    else:
-        f_scalar = lambda t: float(excitation(t))  # noqa: E731
-    # the same right-hand side at compiled speed; a record's samples read in it, as GroundMotion reads them
-    sampled = type(excitation) is GroundMotion and system.n_inputs == 1
-    compiled = kernel.rate_function(system, params, (excitation.acc, excitation.dt) if sampled else None)
-    if compiled is not None and sampled:
-        fun = compiled
-    elif compiled is not None:
-        fun = lambda t, y: compiled(t, y, f_scalar(t))  # noqa: E731
-    else:
-        fun = lambda t, y: system.rhs(t, y, params, f_scalar)  # noqa: E731
-    y = None
+    found = None
     columns = _sampled_columns(excitation)
     if method == "auto" and columns is not None and max_step is None:
         # at a hundredth of the tolerance: as close to the exact solution as LSODA at the full one, on
         # every system of the library (a deck on hysteretic supports the hardest), for 20 % more time
-        y = kernel.truth(system, params, columns, t_eval, y0, rtol / 100, atol / 100)
-    if y is None:
+        found = kernel.truth(system, params, columns, t_eval, y0, rtol / 100, atol / 100)
+    if found is not None:
+        y, dy = found  # the rates at the samples come with the states
+    else:
+        fun = _rate(system, params, excitation)
+        step = max_step if max_step is not None else float(np.min(np.diff(t_eval)))
         y = _integrate(
             fun, y0, t_eval, rtol, atol, step, "LSODA" if method == "auto" else method, system.name
         )
-    dy = np.array([fun(t, yi) for t, yi in zip(t_eval, y)])
+        dy = np.array([fun(t, yi) for t, yi in zip(t_eval, y)])
     x, v = y[:, :n], y[:, n : 2 * n]
     a = dy[:, n : 2 * n]
     z = y[:, 2 * n :] if nz else None
     return Trajectory(t=t_eval, x=x, v=v, a=a, f=np.asarray(excitation(t_eval), dtype=float), z=z)
+
+
+def _rate(system: StructuralSystem, params: dict[str, float], excitation: Callable) -> Callable:
+    """The right-hand side ``f(t, y)`` for a variable-step integrator: compiled where it can be (a
+    record's samples read in it, as ``GroundMotion`` reads them), else the system's own."""
+    if system.n_inputs > 1:  # several inputs: excitation(t) gives one value per input
+        f_scalar = lambda t: np.asarray(excitation(t), dtype=float)  # noqa: E731
+    else:
+        f_scalar = lambda t: float(excitation(t))  # noqa: E731
+    sampled = type(excitation) is GroundMotion and system.n_inputs == 1
+    compiled = kernel.rate_function(system, params, (excitation.acc, excitation.dt) if sampled else None)
+    if compiled is not None and sampled:
+        return compiled
+    if compiled is not None:
+        return lambda t, y: compiled(t, y, f_scalar(t))
+    return lambda t, y: system.rhs(t, y, params, f_scalar)
 
 
 def _sampled_columns(excitation: object) -> tuple[np.ndarray, float, np.ndarray] | None:

@@ -206,10 +206,10 @@ def _block(tape: Tape, names: _Names, nodes: list[int], dual: bool, tail: list[s
     return "\n    ".join(lines)
 
 
-def source(tape: Tape, n_param: int, n_state: int, n_input: int) -> str:
-    """The C source of ``run`` (see ``pidyn.compiled.kernel``) for this tape, of ``truth``
-    (``pidyn.compiled.dopri_template``) and, for a latent rate along a motion (two inputs: x, x'),
-    of ``heun`` (``pidyn.compiled.heun_template``)."""
+def source(tape: Tape, n_param: int, n_state: int, n_input: int, along: bool = False) -> str:
+    """The C source of ``run`` (see ``pidyn.compiled.kernel``) for this tape, and of ``truth``
+    (``pidyn.compiled.dopri_template``) for a state rate or, with ``along`` (a latent rate along a
+    given motion, ``tape.record_latent``), of ``heun`` (``pidyn.compiled.heun_template``)."""
     pl = plan(tape)
     names = _Names(tape, pl)
     body = [i for i, (op, *_) in enumerate(tape.nodes) if op not in LEAVES]
@@ -217,17 +217,13 @@ def source(tape: Tape, n_param: int, n_state: int, n_input: int) -> str:
     var = [i for i in body if not pl.invariant[i]]
     out = [f"out[{j}] = {names.value(i)};" for j, i in enumerate(tape.outputs)]
     outd = [f"outd[{j} * D + k] = {names.deriv(i) or '0.0'};" for j, i in enumerate(tape.outputs)]
-    return (
-        TEMPLATE.format(
-            NP=n_param,
-            NS=n_state,
-            NW=n_input,
-            NI=max(len(names.inv), 1),
-            prologue=_block(tape, names, inv, False, []),
-            prologue_d=_block(tape, names, inv, True, []),
-            rate=_block(tape, names, var, False, []) + "\n    " + "\n    ".join(out),
-            rate_d="\n    ".join([_block(tape, names, var, True, outd), *out]),
-        )
-        + TRUTH
-        + (HEUN if n_input == 2 else "")
-    )
+    return TEMPLATE.format(
+        NP=n_param,
+        NS=n_state,
+        NW=n_input,
+        NI=max(len(names.inv), 1),
+        prologue=_block(tape, names, inv, False, []),
+        prologue_d=_block(tape, names, inv, True, []),
+        rate=_block(tape, names, var, False, []) + "\n    " + "\n    ".join(out),
+        rate_d="\n    ".join([_block(tape, names, var, True, outd), *out]),
+    ) + (HEUN if along else TRUTH)

@@ -12,7 +12,8 @@ discontinuous force term, such as a friction's sign, is crossed, not fought).
 
 SOURCE = r"""
 /* Dormand-Prince 5(4), FSAL, the error of the 4th-order embedded solution per step below
-   atol + rtol max(|y|, |y_new|) in the root mean square over the states. Returns 0, -1 when
+   atol + rtol max(|y|, |y_new|) in the root mean square over the states; Y and DY: the states and
+   their rates at the output times T. Returns 0, -1 when
    max_evals evaluations did not reach the end, -2 on a value that is not finite. */
 /* the excitation's W columns at t, each linear between its samples (cols: n x NW, step dt), as
    np.interp reads it: zero before the record, after it zero or (hold[q]) its last sample */
@@ -59,7 +60,8 @@ static double dp_norm(const double *e, const double *y, const double *yn, double
 }
 
 int truth(int N, const double *T, const double *cols, int n, double dt, const int *hold, const double *P,
-          const double *K, const double *Y0, double rtol, double atol, long max_evals, double *Y) {
+          const double *K, const double *Y0, double rtol, double atol, long max_evals, double *Y,
+          double *DY) {
     static const double c2 = 1.0 / 5, c3 = 3.0 / 10, c4 = 4.0 / 5, c5 = 8.0 / 9;
     static const double a21 = 1.0 / 5, a31 = 3.0 / 40, a32 = 9.0 / 40, a41 = 44.0 / 45, a42 = -56.0 / 15,
                         a43 = 32.0 / 9, a51 = 19372.0 / 6561, a52 = -25360.0 / 2187, a53 = 64448.0 / 6561,
@@ -73,6 +75,7 @@ int truth(int N, const double *T, const double *cols, int n, double dt, const in
     for (int j = 0; j < NS; j++) y[j] = Y[j] = Y0[j];
     double t = T[0];
     stage(t, y, cols, n, dt, hold, P, I, K, k1);
+    for (int j = 0; j < NS; j++) DY[j] = k1[j];
     long evals = 1;
     double h = dt < T[1] - T[0] ? dt : T[1] - T[0];
     for (int i = 0; i + 1 < N; i++) {
@@ -127,6 +130,7 @@ int truth(int N, const double *T, const double *cols, int n, double dt, const in
         for (int j = 0; j < NS; j++) {
             if (!(fabs(y[j]) <= 1e300)) return -2;
             Y[(size_t)(i + 1) * NS + j] = y[j];
+            DY[(size_t)(i + 1) * NS + j] = k1[j]; /* the last stage, at T[i + 1] exactly */
         }
     }
     return 0;

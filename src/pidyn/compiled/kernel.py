@@ -34,13 +34,16 @@ def enabled() -> bool:
     return os.environ.get("PIDYN_COMPILED", "1") != "0"
 
 
-def _kernel(tape: Tape, n_param: int, n_state: int, n_input: int) -> tuple[Any, np.ndarray] | None:
-    """The compiled library of a tape and its constants, built once per tape shape."""
-    key = (tuple(tape.nodes), tuple(tape.outputs), n_param, n_state, n_input)
+def _kernel(
+    tape: Tape, n_param: int, n_state: int, n_input: int, along: bool = False
+) -> tuple[Any, np.ndarray] | None:
+    """The compiled library of a tape and its constants, built once per tape shape (``along``: a
+    latent rate along a given motion, ``codegen.source``)."""
+    key = (tuple(tape.nodes), tuple(tape.outputs), n_param, n_state, n_input, along)
     if key not in _KERNELS:
-        lib = build.load(codegen.source(tape, n_param, n_state, n_input))
+        lib = build.load(codegen.source(tape, n_param, n_state, n_input, along))
         if lib is not None:
-            for name in ("run", "run_d"):
+            for name in ("run", "run_d", "heun" if along else "truth"):
                 getattr(lib, name).restype = ctypes.c_int
         _KERNELS[key] = None if lib is None else (lib, np.array(codegen.plan(tape).constants + [0.0]))
     return _KERNELS[key]
@@ -192,9 +195,11 @@ def truth(
     y0: np.ndarray,
     rtol: float,
     atol: float,
-) -> np.ndarray | None:
-    """The ground truth's states at ``t_eval`` (N, n_state), integrated in C by Dormand and Prince's
-    5(4) pair (``pidyn.compiled.dopri_template``), or None where there is no compiled library.
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The ground truth's states at ``t_eval`` and their rates there (N, n_state) twice, integrated
+    in C by Dormand and Prince's 5(4) pair (``pidyn.compiled.dopri_template``; the rate at an
+    output time is the pair's last stage, no extra evaluation), or None where there is no compiled
+    library.
     ``sampled`` = (columns (n, W), dt, hold (W,)): the excitation's samples, one column per
     excitation entry, each linear between samples, zero before the record, and after it zero or
     (``hold``) its last value. A failed integration raises, naming the system."""
@@ -203,17 +208,15 @@ def truth(
         return None
     names = list(params)
     found = _library(system, names)
-    if found is None or not hasattr(found[0], "truth"):
+    if found is None:
         return None
     lib, K = found
     P = np.array([float(params[n]) for n in names])
     T = np.ascontiguousarray(t_eval, dtype=float)
     hold = np.ascontiguousarray(sampled[2], dtype=np.intc)
     Y0 = np.ascontiguousarray(y0, dtype=float)
-    Y = np.empty((len(T), system.n_state))
-    call = lib.truth
-    call.restype = ctypes.c_int
-    rc = call(
+    Y, DY = np.empty((len(T), system.n_state)), np.empty((len(T), system.n_state))
+    rc = lib.truth(
         ctypes.c_int(len(T)),
         _ptr(T),
         _ptr(cols),
@@ -227,11 +230,12 @@ def truth(
         ctypes.c_double(atol),
         ctypes.c_long(max(MAX_EVALS, 5000 * len(T))),
         _ptr(Y),
+        _ptr(DY),
     )
     if rc != 0:
         why = "too many steps" if rc == -1 else "a value that is not finite"
         raise RuntimeError(f"simulation of {system.name} failed: {why}")
-    return Y
+    return Y, DY
 
 
 def latent_path(
@@ -252,8 +256,8 @@ def latent_path(
     except Exception as exc:  # noqa: BLE001 - a rate a tape cannot follow stays in Python
         log.debug("%s: latent path not compiled (%s)", type(term).__name__, exc)
         return None
-    found = _kernel(tape, len(names), term.n_latent, 2)
-    if found is None or not hasattr(found[0], "heun"):
+    found = _kernel(tape, len(names), term.n_latent, 2, along=True)
+    if found is None:
         return None
     lib, K = found
     B = int(max((s[0] for s in shapes if s), default=1))
@@ -263,9 +267,7 @@ def latent_path(
     nz = term.n_latent
     Z = np.empty((len(t), B, nz))
     V = np.ascontiguousarray(x if v is None else v, dtype=float)
-    call = lib.heun
-    call.restype = ctypes.c_int
-    call(
+    lib.heun(
         ctypes.c_int(len(t)),
         ctypes.c_int(B),
         ctypes.c_int(int(substeps)),
