@@ -154,3 +154,18 @@ def test_least_squares_standard_errors_see_a_weak_column():
     )
     assert abs(est["k1"] - 25) < 1.0
     assert std["k3"] > 0.5 * abs(est["k3"]) and std["k3"] > 100, (est, std)
+
+
+def test_the_least_squares_start_does_not_depend_on_where_its_matrix_lies_in_memory():
+    """The same problem gives the same bits wherever its matrix is allocated (torch's default
+    driver did not: the same run's estimates changed from run to run)."""
+    from pidyn.systems.lstsq import lstsq
+
+    gen = torch.Generator().manual_seed(0)
+    J = torch.randn(1500, 3, generator=gen) * torch.tensor([1.0, 10.0, 1e3])
+    b = torch.randn(1500, generator=gen)
+    ref = lstsq(J, b)
+    for offset in range(1, 32):
+        moved = torch.empty(J.numel() + offset)[offset:].view(J.shape)
+        moved.copy_(J)
+        assert torch.equal(lstsq(moved, b), ref), offset

@@ -87,13 +87,13 @@ class TaylorMLP(nn.Module):
         tau = (t - self.t_mid) / self.t_half
         h = self._features(tau, order, f)  # (K, N, d)
         last = len(self.layers) - 1
+        # the bias enters the value only, added where it is used: no (value, d, d2) block is
+        # rebuilt around it (one copy less a layer, forward and backward; the same arithmetic)
         for i, layer in enumerate(self.layers):
             z = h @ layer.weight.T
-            z = torch.cat([z[:1] + layer.bias, z[1:]], dim=0)
             if i == last:
-                h = z
                 break
-            y = torch.tanh(z[0])
+            y = torch.tanh(z[0] + layer.bias)
             s = 1 - y * y
             parts = [y]
             if order >= 1:
@@ -101,9 +101,9 @@ class TaylorMLP(nn.Module):
             if order >= 2:
                 parts.append(s * z[2] - 2 * y * s * z[1] * z[1])
             h = torch.stack(parts)
-        out = [h[0] * self.out_scale + self.out_shift]
+        out = [(z[0] + layer.bias) * self.out_scale + self.out_shift]
         for k in range(1, order + 1):
-            out.append(h[k] * self.out_scale / self.t_half**k)
+            out.append(z[k] * self.out_scale / self.t_half**k)
         return out
 
     def forward(self, t: torch.Tensor, f: torch.Tensor | None = None) -> torch.Tensor:

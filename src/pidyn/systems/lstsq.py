@@ -26,6 +26,13 @@ def forward_jacobian(fn, u: torch.Tensor) -> torch.Tensor:
     return torch.stack([jvp(fn, (u,), (eye[i],))[1] for i in range(u.numel())], dim=1)
 
 
+def lstsq(J: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """min |J x - b| by the SVD (LAPACK's gelsd). torch's default driver on the CPU, gelsy, gives
+    answers that differ in their last bits with where J happens to lie in memory: a run's
+    least-squares start, and so its whole PIDynNet estimate, changed from run to run."""
+    return torch.linalg.lstsq(J, b[:, None], driver="gelsd").solution[:, 0]
+
+
 def solve_linear_params(
     system: StructuralSystem,
     k: Kinematics,
@@ -47,7 +54,7 @@ def solve_linear_params(
 
     r0 = r(theta0).detach()
     J = forward_jacobian(r, theta0)
-    sol = torch.linalg.lstsq(J, -r0[:, None]).solution[:, 0]
+    sol = lstsq(J, -r0)
     if std is not None:
         # in float64 on unit-norm columns: x^3 beside x can be 1e-4 of its size, and a float32
         # pseudo-inverse would drop that direction and call it exactly determined
