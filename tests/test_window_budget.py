@@ -25,8 +25,15 @@ def test_a_strong_motion_records_budget_is_two_windows_in_its_identification_and
     assert (train.max_windows, train.windows_per_record) == (8, 2)
     diagnose = compose("diagnose", groups={"data": "csmip"}).model.schedule
     assert (diagnose.max_windows, diagnose.windows_per_record) == (8, 2)
-    # the diagnosis's own, shorter windows (diagnose.yaml), two of them a record
-    assert (diagnose.pretrain_iters, diagnose.max_iters) == (300, 500)
+    # the diagnosis's shorter windows (diagnose.yaml), two of them a record, in both
+    for schedule in (train, diagnose):
+        assert (schedule.pretrain_iters, schedule.pretrain_iters_window, schedule.max_iters) == (
+            300,
+            300,
+            500,
+        )
+    # a simulated record keeps train.py's full schedule
+    assert compose("train").model.schedule.max_iters == 1500
 
 
 def test_the_identifier_trains_the_informative_windows_within_the_limit():

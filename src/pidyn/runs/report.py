@@ -82,7 +82,6 @@ def write_report(
         }
     if run.linear_model is not None:
         metrics["linear_model"] = run.linear_model
-    metrics["wall_seconds"] = time.perf_counter() - t_wall
     write_json(run_dir / "windows.json", {"windows": [r.__dict__ for r in results]})
     adequacy = _adequacy(run, final, sim)
     _assess(run, final, refined, sim, metrics, adequacy["adequate"])
@@ -97,6 +96,9 @@ def write_report(
     _figures(run, results, truths, baselines, refined, sim, metrics, final)
     if stages is not None:
         metrics["stage_seconds"] = {**stages, "report": time.perf_counter() - t_report}
+    # the whole identification, its assessment and figures included (they were left out before)
+    metrics["wall_seconds"] = time.perf_counter() - t_wall
+    log_hparams(run.logger, metrics)
     write_json(run_dir / "metrics.json", metrics)
     write_run_report(run_dir, system.describe(final), metrics)
     _log_summary(system.describe(final), errors, pidyn_errors, metrics, run_dir)
@@ -345,7 +347,6 @@ def _figures(
         metrics["transfer_function"] = spectrum
     _modal_figures(run, fig_dir, metrics, baselines, final, sim)
     tb_figures(run.logger, fig_dir, int(run.module.iteration), metrics, refined)
-    log_hparams(run.logger, metrics)
 
 
 def _modal_figures(
