@@ -96,8 +96,7 @@ def write_report(
     _figures(run, results, truths, baselines, refined, sim, metrics, final)
     if stages is not None:
         metrics["stage_seconds"] = {**stages, "report": time.perf_counter() - t_report}
-    # the whole identification, its assessment and figures included (they were left out before)
-    metrics["wall_seconds"] = time.perf_counter() - t_wall
+    metrics["wall_seconds"] = time.perf_counter() - t_wall  # the whole run, its report and figures too
     log_hparams(run.logger, metrics)
     write_json(run_dir / "metrics.json", metrics)
     write_run_report(run_dir, system.describe(final), metrics)
