@@ -257,6 +257,19 @@ def test_mdof_peers_on_a_shipped_record():
     assert nrmse(a[fit], rec.a[fit, 0]) == pytest.approx(peer.fit_nrmse_a, rel=0.05)
 
 
+def test_a_record_cut_to_its_fitting_part_has_no_held_out_part_for_the_peers():
+    """The diagnosis gives the peers the fitting part with its split kept: no held-out part, not an
+    empty one (an empty mask's mean warned on every diagnosis of a strong-motion record)."""
+    from pidyn.baselines.peers import spans
+
+    rec = csmip_record(RECORDS / "nc73667866_ce89324p.zip", station="CE89324", max_outputs=1)
+    fit, held = spans(rec)
+    assert held is not None and held.any() and fit.any()
+    cut = rec.segment(None, rec.meta.split.fit[1])
+    fit, held = spans(cut)
+    assert held is None and fit.all()
+
+
 def test_an_order_two_realization_maps_onto_the_supports_model_exactly():
     """A peer's state-space model of order 2 is the single degree of freedom on several supports:
     the model's first-order-hold discretization (the input linear between samples) maps back to its own parameters."""

@@ -94,7 +94,10 @@ def spans(record) -> tuple[np.ndarray, np.ndarray | None]:
     if not sp:
         return np.ones(len(record.t), bool), None
     t = record.t
-    return (t >= sp.fit[0] - 1e-9) & (t <= sp.fit[1] + 1e-9), t > sp.fit[1] + 1e-9
+    held = t > sp.fit[1] + 1e-9
+    # a record cut to its fitting part keeps its split: no held-out part, not an empty one (whose
+    # mean warned, "Mean of empty slice", on every diagnosis of a strong-motion record)
+    return (t >= sp.fit[0] - 1e-9) & (t <= sp.fit[1] + 1e-9), held if held.any() else None
 
 
 def _require_mdof():
