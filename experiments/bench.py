@@ -490,7 +490,7 @@ def main() -> None:
         prev = json.loads((OUT / "bench.json").read_text())
         if "end_to_end" in prev:
             res["end_to_end"] = prev["end_to_end"]
-            res["end_to_end_date"] = prev.get("date", "")
+            res["end_to_end_date"] = prev.get("end_to_end_date") or prev.get("date", "")
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "bench.json").write_text(json.dumps(res, indent=2))
     write_markdown(res)
