@@ -205,11 +205,13 @@ def test_killed_failed_and_resumed_run_folder_tells_the_truth(tmp_path, monkeypa
     assert not (run / "metrics.json").exists() and not (run / COMPLETE).exists()
     assert (run / LOCK).exists()  # SIGKILL leaves its lock; its process is gone, so it is taken over
 
-    other = _cli([*FAST, "seed=1", f"hydra.run.dir={run}"])
-    assert other.returncode == 2 and "seed: 0 -> 1" in _error_line(other)
-
     from pidyn.runs import report
     from pidyn.tasks.train import train
+
+    # another seed in the killed run's folder is refused (in-process: the command line exits 2 on
+    # every such ValueError, proven above)
+    with pytest.raises(ValueError, match="seed: 0 -> 1"):
+        train(make_cfg([*FAST, "seed=1"], run))
 
     def full_disk(*args, **kwargs):
         raise OSError(28, "No space left on device")
