@@ -32,8 +32,14 @@ def test_a_strong_motion_records_budget_is_two_windows_in_its_identification_and
             300,
             500,
         )
-    # a simulated record keeps train.py's full schedule
+    # a simulated record keeps train.py's full schedule, and so does a run from several strong-motion
+    # records (the leave-events-out studies were made with it)
     assert compose("train").model.schedule.max_iters == 1500
+    several = Schedule(**train).for_records(3)
+    assert (several.pretrain_iters, several.pretrain_iters_window, several.max_iters) == (1000, 1000, 1500)
+    assert Schedule(**train).for_records(1).max_iters == 500
+    with pytest.raises(ValueError, match="several_records"):
+        Schedule(several_records={"max_iter": 5})
 
 
 def test_the_identifier_trains_the_informative_windows_within_the_limit():

@@ -3,7 +3,10 @@ window leaves behind (its estimates, losses, clamp box and notes)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+
+#: the iteration counts a schedule sets
+ITERATIONS = ("pretrain_iters", "pretrain_iters_window", "max_iters")
 
 
 @dataclass
@@ -25,6 +28,9 @@ class Schedule:
     latent_init: bool = (
         False  # with ls_init: start latent shape parameters (beta, gamma, n) by variable projection
     )
+    # the iterations of a run from several records where they differ from one record's
+    # (pretrain_iters, pretrain_iters_window, max_iters); None: the same
+    several_records: dict[str, int] | None = None
 
     def __post_init__(self) -> None:
         """A misspelled option fails here, naming the valid ones, instead of silently changing behaviour."""
@@ -35,10 +41,22 @@ class Schedule:
         for name in ("pretrain_iters", "pretrain_iters_window", "max_iters"):
             if int(getattr(self, name)) < 0:
                 raise ValueError(f"model.schedule.{name} must be >= 0, got {getattr(self, name)}")
+        unknown = set(self.several_records or {}) - set(ITERATIONS)
+        if unknown:
+            raise ValueError(
+                f"model.schedule.several_records: {sorted(unknown)} not among {', '.join(ITERATIONS)}"
+            )
         for name in ("max_windows", "windows_per_record"):
             value = getattr(self, name)
             if value is not None and int(value) < 1:
                 raise ValueError(f"model.schedule.{name} must be >= 1 or null, got {value}")
+
+    def for_records(self, n_records: int) -> Schedule:
+        """The schedule of a run from ``n_records`` records: ``several_records``'s iterations where
+        there are several."""
+        if n_records <= 1 or not self.several_records:
+            return self
+        return replace(self, **{k: int(v) for k, v in self.several_records.items()})
 
     def window_limit(self, n_records: int) -> int | None:
         """How many windows a run of ``n_records`` records may train (None: every one)."""

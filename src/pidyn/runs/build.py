@@ -20,7 +20,7 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 from pidyn.config import user_settings
 from pidyn.data.checks import check_floors, check_record
 from pidyn.data.datamodule import SubperiodDataModule
-from pidyn.data.multi import concatenate
+from pidyn.data.multi import concatenate, pieces
 from pidyn.data.sources import Record
 from pidyn.models.identify import SubperiodIdentifier
 from pidyn.models.lit_module import PIDynNetModule
@@ -128,6 +128,7 @@ def build_run(cfg: DictConfig, record: Record | None) -> Run:
     core.params.specs = [replace(s, true=(record.truth or {}).get(s.name)) for s in core.params.specs]
     module: PIDynNetModule = hydra.utils.instantiate(cfg.model.module, net=core)
     schedule = Schedule(**OmegaConf.to_container(cfg.model.schedule, resolve=True))  # type: ignore[arg-type]
+    schedule = schedule.for_records(len(pieces(record)))
     clamp, stopper, extras = _callbacks(cfg)
     logger = hydra.utils.instantiate(cfg.logger) if cfg.get("logger") else None
     trainer_factory = _trainer_factory(cfg, logger)
