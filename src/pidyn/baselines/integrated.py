@@ -21,7 +21,7 @@ import torch
 from pidyn.params import in_range
 from pidyn.signals import fundamental, integrate
 from pidyn.systems.base import Kinematics
-from pidyn.systems.lstsq import forward_jacobian, solve_linear_params
+from pidyn.systems.lstsq import forward_jacobian, lstsq, solve_linear_params
 from pidyn.systems.modal import damping_params, scaled_to
 from pidyn.systems.sdof import feedthrough_name, influence_name, support_damping_name
 
@@ -137,7 +137,7 @@ def _bilinear_fit(
 
     for _ in range(30):
         J = forward_jacobian(residual, u)
-        step = torch.linalg.lstsq(J, -residual(u)[:, None], driver="gelsd").solution[:, 0]
+        step = lstsq(J, -residual(u))
         u = u + step
         if float(step.abs().max() / u.abs().clamp_min(1e-12).max()) < 1e-10:
             break

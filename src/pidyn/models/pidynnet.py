@@ -14,7 +14,7 @@ from pidyn.data.windows import Window
 from pidyn.nets import TaylorMLP
 from pidyn.params import PhysicalParameters, in_range
 from pidyn.systems.base import Kinematics, StructuralSystem
-from pidyn.systems.lstsq import forward_jacobian, solve_linear_params
+from pidyn.systems.lstsq import forward_jacobian, lstsq, solve_linear_params
 
 
 class PIDynNet(nn.Module):
@@ -406,7 +406,7 @@ def _drift_solve(
     for _ in range(iters):
         r = residual(u)
         J = forward_jacobian(residual, u) * scale
-        step = torch.linalg.lstsq(J, -r[:, None], driver="gelsd").solution[:, 0] * scale
+        step = lstsq(J, -r) * scale
         u = u + step
         if float(step.abs().div(scale).max()) < 1e-10:
             break

@@ -38,7 +38,7 @@ class Schedule:
             value = getattr(self, name)
             if value not in allowed:
                 raise ValueError(f"model.schedule.{name}: '{value}' is not one of {', '.join(allowed)}")
-        for name in ("pretrain_iters", "pretrain_iters_window", "max_iters"):
+        for name in ITERATIONS:
             if int(getattr(self, name)) < 0:
                 raise ValueError(f"model.schedule.{name} must be >= 0, got {getattr(self, name)}")
         unknown = set(self.several_records or {}) - set(ITERATIONS)

@@ -29,7 +29,8 @@ def forward_jacobian(fn, u: torch.Tensor) -> torch.Tensor:
 def lstsq(J: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """min |J x - b| by the SVD (LAPACK's gelsd). torch's default driver on the CPU, gelsy, gives
     answers that differ in their last bits with where J happens to lie in memory: a run's
-    least-squares start, and so its whole PIDynNet estimate, changed from run to run."""
+    least-squares start, and so its whole PIDynNet estimate, changed from run to run. Every linear
+    least-squares solve in torch goes through here."""
     return torch.linalg.lstsq(J, b[:, None], driver="gelsd").solution[:, 0]
 
 
