@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from pidyn import integrate
+from pidyn import cores, integrate
 from pidyn.autodiff import Dual, value
 from pidyn.compiled import build, kernel
 from pidyn.compiled.tape import record
@@ -139,6 +139,51 @@ def test_sensitivities_agree(name):
     (Yf, dYf), (Ys, dYs) = _both(system, p, f, y0)
     _close(Yf, Ys)
     _close(dYf, dYs, rtol=1e-9)
+
+
+@pytest.mark.parametrize("dual", [False, True])
+def test_trajectories_split_over_threads_give_the_same_bits(dual, monkeypatch):
+    """A batch split into ranges run in threads side by side is bitwise the batch run in one."""
+    rng = np.random.default_rng(4)
+    system = SYSTEMS["hysteresis"]
+    B = 7
+    plain = _params(system, B, rng)
+    f = _excitation(system, B, rng)
+    y0 = 0.01 * rng.standard_normal((B, system.n_state))
+    p, D = plain, 0
+    if dual:
+        D = len(plain)
+        p = {
+            n: Dual(v, np.broadcast_to(np.eye(D)[j], (B, D)).copy()) for j, (n, v) in enumerate(plain.items())
+        }
+    t = np.arange(N) * DT
+    monkeypatch.setattr(kernel, "MIN_SPLIT_WORK", 1)
+    out = {}
+    for n in (1, 3):
+        monkeypatch.setenv("PIDYN_THREADS", str(n))
+        calls = []
+        real = kernel._in_threads
+        monkeypatch.setattr(kernel, "_in_threads", lambda c, b, w: calls.append(b) or real(c, b, w))
+        out[n] = kernel.steps(system, p, t, t, f, None, y0, 4, D)
+        monkeypatch.setattr(kernel, "_in_threads", real)
+        assert calls == [B]
+    assert cores.threads() == 3
+    for one, three in zip(out[1], out[3]):
+        assert (one is None) == (three is None)
+        if one is not None:
+            assert np.array_equal(one, three)
+
+
+def test_threads_follow_the_environment(monkeypatch):
+    """PIDYN_THREADS decides; else OMP_NUM_THREADS caps the cores (a test worker, a job of several)."""
+    monkeypatch.delenv("PIDYN_THREADS", raising=False)
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    assert cores.threads() == 1
+    monkeypatch.setenv("PIDYN_THREADS", "2")
+    assert cores.threads() == 2
+    monkeypatch.delenv("PIDYN_THREADS")
+    monkeypatch.delenv("OMP_NUM_THREADS")
+    assert cores.threads() == cores.cores()
 
 
 def test_band_limited_stages_agree():

@@ -16,7 +16,6 @@ import pickle
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
 
@@ -91,13 +90,13 @@ class BaselineJob:
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
             stderr=self._stderr,
+            env={**os.environ, "PIDYN_THREADS": "1"},  # PIDynNet has the other core
         )
 
     def result(self) -> list[dict]:
         if self._proc is not None:
             try:
-                while self._proc.poll() is None:
-                    time.sleep(0.5)
+                self._proc.wait()
                 folder = Path(self._dir.name)
                 if not (folder / "result.pkl").exists():
                     tail = (folder / "stderr.txt").read_text(errors="replace")[-400:]

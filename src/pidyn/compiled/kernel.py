@@ -12,6 +12,7 @@ from __future__ import annotations
 import ctypes
 import logging
 import os
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -19,6 +20,7 @@ import numpy as np
 from pidyn.autodiff import Dual
 from pidyn.compiled import build, codegen
 from pidyn.compiled.tape import Tape, record, record_latent
+from pidyn.cores import threads
 
 log = logging.getLogger(__name__)
 
@@ -28,6 +30,10 @@ MIN_INTERVALS = 8
 MAX_EVALS = 6_000_000
 _KERNELS: dict[tuple, tuple[Any, np.ndarray] | None] = {}
 _DOUBLE_P = ctypes.POINTER(ctypes.c_double)
+#: RK4 substeps (trajectories x substeps a trajectory) below which a call stays in one thread:
+#: about 0.2 ms of a small system's arithmetic, a few times what handing a range to a thread costs
+MIN_SPLIT_WORK = 20_000
+_POOL: ThreadPoolExecutor | None = None
 
 
 def enabled() -> bool:
@@ -126,19 +132,22 @@ def _params(p: dict[str, Any], names: list[str], B: int, D: int) -> tuple[np.nda
     return P, dP
 
 
-def _inputs(ff: np.ndarray, per_trajectory: bool, multi: bool, B: int) -> np.ndarray:
-    """The excitation samples as (N, B, W)."""
+def _inputs(ff: np.ndarray, per_trajectory: bool, multi: bool) -> np.ndarray:
+    """The excitation samples as (N, B, W), or (N, 1, W) where every trajectory reads the same:
+    the loop reads that one copy (a band-limited record's stage inputs, copied for each of a
+    Jacobian's trajectories, cost more than integrating them)."""
     f = ff if multi else ff[..., None]
     if not per_trajectory:
         f = f[:, None, :]
-    return np.ascontiguousarray(np.broadcast_to(f, (f.shape[0], B, f.shape[-1])), dtype=float)
+    return np.ascontiguousarray(f, dtype=float)
 
 
-def _stages(stages: np.ndarray, per_trajectory: bool, multi: bool, B: int) -> np.ndarray:
+def _stages(stages: np.ndarray, per_trajectory: bool, multi: bool) -> np.ndarray:
+    """The stage inputs as (N-1, 2S+1, B, W), or with 1 for B (as ``_inputs``)."""
     s = stages if multi else stages[..., None]
     if not per_trajectory:
         s = s[:, :, None, :]
-    return np.ascontiguousarray(np.broadcast_to(s, s.shape[:2] + (B, s.shape[-1])), dtype=float)
+    return np.ascontiguousarray(s, dtype=float)
 
 
 def steps(
@@ -167,24 +176,49 @@ def steps(
     B = Y0v.shape[0]
     P, dP = _params(p, names, B, D)
     TT = np.ascontiguousarray(np.broadcast_to(tt if np.ndim(tt) == 2 else np.asarray(tt)[:, None], (N, B)))
-    F = _inputs(ff, per_trajectory, multi, B)
-    ST = None if stages is None else _stages(stages, per_trajectory, multi, B)
+    F = _inputs(ff, per_trajectory, multi)
+    ST = None if stages is None else _stages(stages, per_trajectory, multi)
+    FB = F.shape[1]
+    if FB not in (1, B) or (ST is not None and ST.shape[2] != FB):
+        raise ValueError(f"{system.name}: excitation for {FB} trajectories, states for {B}")
     tl = np.ascontiguousarray(t, dtype=float)
     Yv = np.empty((N, B, system.n_state))
-    common = (ctypes.c_int(N), ctypes.c_int(B), ctypes.c_int(int(substeps)))
+    work = (N - 1) * int(substeps) * (1 + D)
     if not D:
-        rc = lib.run(*common, _ptr(tl), _ptr(TT), _ptr(F), _ptr(ST), _ptr(P), _ptr(K), _ptr(Y0v), _ptr(Yv))
+        tail = tuple(map(_ptr, (tl, TT, F, ST, P, K, Y0v, Yv)))
+        rc = _in_threads(lambda b0, b1: lib.run(N, B, b0, b1, int(substeps), FB, *tail), B, work)
         return (Yv, None) if rc == 0 else None
     dY0 = np.zeros((B, system.n_state, D))
     if isinstance(y0, Dual):
         dY0[...] = y0.d
     Yd = np.empty((N, B, system.n_state, D))
-    rc = lib.run_d(
-        *common,
-        ctypes.c_int(D),
-        *map(_ptr, (tl, TT, F, ST, P, dP, K, Y0v, dY0, Yv, Yd)),
-    )
+    tail = tuple(map(_ptr, (tl, TT, F, ST, P, dP, K, Y0v, dY0, Yv, Yd)))
+    rc = _in_threads(lambda b0, b1: lib.run_d(N, B, b0, b1, int(substeps), FB, D, *tail), B, work)
     return (Yv, Yd) if rc == 0 else None
+
+
+def _in_threads(call: Any, B: int, work: int) -> int:
+    """``call(b0, b1)`` over the B trajectories, split into contiguous ranges run side by side
+    (ctypes lets go of the GIL in the call); the first range runs in this thread. Each trajectory is
+    integrated by itself, so the split changes no bit. ``work``: RK4 substeps a trajectory, a split
+    pays where there are at least ``MIN_SPLIT_WORK`` of them in a range. Returns the worst status."""
+    n = min(threads(), B, max(1, B * work // MIN_SPLIT_WORK))
+    if n <= 1:
+        return int(call(0, B))
+    edges = [B * k // n for k in range(n + 1)]
+    pool = _pool(n - 1)
+    pending = [pool.submit(call, edges[k], edges[k + 1]) for k in range(1, n)]
+    rc = int(call(edges[0], edges[1]))
+    return max([rc] + [int(f.result()) for f in pending])
+
+
+def _pool(workers: int) -> ThreadPoolExecutor:
+    """The threads of ``_in_threads``, started once and kept (a new thread a call costs more than
+    a short integration)."""
+    global _POOL
+    if _POOL is None or _POOL._max_workers < workers:
+        _POOL = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="pidyn-kernel")
+    return _POOL
 
 
 def truth(

@@ -2,8 +2,11 @@
 (``str.format``: the blocks in single braces are filled, C's own braces are doubled)."""
 
 TEMPLATE = r"""/* A compiled RK4 loop for one system (pidyn.compiled.codegen fills the blocks in braces).
-   Layouts (C order): tl (N), TT (N, B), F (N, B, NW), ST (N-1, 2S+1, B, NW) or NULL,
-   P (B, NP), dP (B, NP, D), Y0 (B, NS), dY0 (B, NS, D), Y (N, B, NS), dY (N, B, NS, D). */
+   Layouts (C order): tl (N), TT (N, B), F (N, FB, NW), ST (N-1, 2S+1, FB, NW) or NULL (FB: 1 where
+   every trajectory reads the same excitation, else B),
+   P (B, NP), dP (B, NP, D), Y0 (B, NS), dY0 (B, NS, D), Y (N, B, NS), dY (N, B, NS, D).
+   run and run_d integrate trajectories b0 <= b < b1 of the B: each trajectory's arithmetic is its
+   own, so threads that share the arrays and split the range give the same bits as one call. */
 #include <math.h>
 #include <stdlib.h>
 
@@ -89,10 +92,10 @@ void rhs_sampled(double t, const double *y, const double *acc, int n, double dt,
     rate(t, y, f, P, I, K, out);
 }}
 
-int run(int N, int B, int S, const double *tl, const double *TT, const double *F, const double *ST,
+int run(int N, int B, int b0, int b1, int S, int FB, const double *tl, const double *TT, const double *F, const double *ST,
         const double *P, const double *K, const double *Y0, double *Y) {{
     double I[NI], y[NS], k1[NS], k2[NS], k3[NS], k4[NS], u[NS], fa[NW], fm[NW], fb[NW];
-    for (int b = 0; b < B; b++) {{
+    for (int b = b0; b < b1; b++) {{
         const double *Pb = P + (size_t)b * NP;
         prologue(Pb, K, I);
         for (int j = 0; j < NS; j++) {{
@@ -103,7 +106,7 @@ int run(int N, int B, int S, const double *tl, const double *TT, const double *F
             double h = (tl[i + 1] - tl[i]) / S;
             for (int s = 0; s < S; s++) {{
                 double ta = TT[(size_t)i * B + b] + s * h;
-                inputs(B, S, i, s, b, F, ST, fa, fm, fb);
+                inputs(FB, S, i, s, FB == 1 ? 0 : b, F, ST, fa, fm, fb);
                 rate(ta, y, fa, Pb, I, K, k1);
                 for (int j = 0; j < NS; j++) u[j] = y[j] + (0.5 * h) * k1[j];
                 rate(ta + 0.5 * h, u, fm, Pb, I, K, k2);
@@ -119,7 +122,7 @@ int run(int N, int B, int S, const double *tl, const double *TT, const double *F
     return 0;
 }}
 
-int run_d(int N, int B, int S, int D, const double *tl, const double *TT, const double *F, const double *ST,
+int run_d(int N, int B, int b0, int b1, int S, int FB, int D, const double *tl, const double *TT, const double *F, const double *ST,
           const double *P, const double *dP, const double *K, const double *Y0, const double *dY0, double *Y,
           double *dY) {{
     size_t nd = (size_t)NS * D;
@@ -128,7 +131,7 @@ int run_d(int N, int B, int S, int D, const double *tl, const double *TT, const 
     double *Id = buf, *yd = Id + (size_t)NI * D, *k1d = yd + nd, *k2d = k1d + nd, *k3d = k2d + nd;
     double *k4d = k3d + nd, *ud = k4d + nd;
     double I[NI], y[NS], k1[NS], k2[NS], k3[NS], k4[NS], u[NS], fa[NW], fm[NW], fb[NW];
-    for (int b = 0; b < B; b++) {{
+    for (int b = b0; b < b1; b++) {{
         const double *Pb = P + (size_t)b * NP, *dPb = dP + (size_t)b * NP * D;
         prologue_d(D, Pb, dPb, K, I, Id);
         for (int j = 0; j < NS; j++) {{
@@ -143,7 +146,7 @@ int run_d(int N, int B, int S, int D, const double *tl, const double *TT, const 
             double h = (tl[i + 1] - tl[i]) / S;
             for (int s = 0; s < S; s++) {{
                 double ta = TT[(size_t)i * B + b] + s * h;
-                inputs(B, S, i, s, b, F, ST, fa, fm, fb);
+                inputs(FB, S, i, s, FB == 1 ? 0 : b, F, ST, fa, fm, fb);
                 rate_d(D, ta, y, yd, fa, Pb, dPb, I, Id, K, k1, k1d);
                 for (int j = 0; j < NS; j++) u[j] = y[j] + (0.5 * h) * k1[j];
                 for (size_t q = 0; q < nd; q++) ud[q] = yd[q] + k1d[q] * (0.5 * h);

@@ -1,0 +1,24 @@
+"""How many threads one pidyn process may use for work that splits (a compiled integration's
+trajectories, independent trainings): ``PIDYN_THREADS`` where it is set, else the cores this
+process may run on, at most ``OMP_NUM_THREADS`` where that is set (a test worker, or one of
+several jobs sharing the cores, says so by it)."""
+
+from __future__ import annotations
+
+import os
+
+
+def threads() -> int:
+    for name in ("PIDYN_THREADS", "OMP_NUM_THREADS"):
+        value = os.environ.get(name, "").strip()
+        if value.isdigit() and int(value) > 0:
+            return min(int(value), cores()) if name == "OMP_NUM_THREADS" else int(value)
+    return cores()
+
+
+def cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # no affinity call on this platform
+        return os.cpu_count() or 1
