@@ -78,7 +78,7 @@ def main() -> None:
         ]
         sys.setprofile(_profile)
         try:
-            diagnose_main()
+            diagnose_main(leave=False)
         except SystemExit:
             pass
         finally:
