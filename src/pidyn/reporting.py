@@ -106,18 +106,23 @@ def pyplot():
     return plt
 
 
-def _param_grid(n_params: int):
-    """One row per parameter: estimate (left), relative error (right), shared record-time axis."""
+def _param_grid(n_params: int, errors: bool = True):
+    """One row per parameter: estimate (left), relative error (right; ``errors=False``, as for a
+    measured record, where there is no truth to err from: the estimate alone), shared record-time
+    axis. Without the error column, each row's second entry is its first axis again."""
     plt = pyplot()
-    return plt.subplots(n_params, 2, figsize=(10, 2.2 * n_params), squeeze=False, sharex=True)
+    if errors:
+        return plt.subplots(n_params, 2, figsize=(10, 2.2 * n_params), squeeze=False, sharex=True)
+    fig, axes = plt.subplots(n_params, 1, figsize=(7, 1.8 * n_params), squeeze=False, sharex=True)
+    return fig, [(row[0], row[0]) for row in axes]
 
 
 def _finish_grid(fig, axes, title: str, path: Path | None, dpi: int, palette: bool = False) -> None:
     """Label and save the grid; ``path=None`` leaves the figure open for the caller."""
     plt = pyplot()
 
-    axes[-1][0].set_xlabel("record time (s)")
-    axes[-1][1].set_xlabel("record time (s)")
+    for ax in set(axes[-1]):
+        ax.set_xlabel("record time (s)")
     fig.suptitle(title)
     fig.tight_layout()
     if path is None:
@@ -144,7 +149,7 @@ def plot_convergence(
     names = [k for k in trajectory[0] if k not in ("iteration", "t")] if trajectory else []
     if not names:
         return None
-    fig, axes = _param_grid(len(names))
+    fig, axes = _param_grid(len(names), errors=any(truths.get(n) is not None for n in names))
     t = np.array([p["t"] for p in trajectory])
     for i, n in enumerate(names):
         v = plottable([p[n] for p in trajectory])
@@ -170,8 +175,8 @@ def plot_convergence(
                 )
         ax.set_ylabel(n)
         for w in windows:
-            ax.axvline(w["t1"], color="0.85", lw=0.6)
-            axe.axvline(w["t1"], color="0.85", lw=0.6)
+            for a in {ax, axe}:
+                a.axvline(w["t1"], color="0.85", lw=0.6)
         if i == 0:
             ax.legend(fontsize=8)
     _finish_grid(fig, axes, title, path, dpi=110)
