@@ -41,6 +41,7 @@ VOLATILE = (
     "skip_done",
     "raise_errors",
     "num_threads",
+    "figures",
     "trainer.enable_progress_bar",
     "model.schedule.max_windows",
     "model.schedule.windows_per_record",

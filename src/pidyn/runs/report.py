@@ -34,6 +34,7 @@ from pidyn.runs.metrics import channel_nrmse, record_noise, reference_channel, r
 from pidyn.runs.mode_shape_figure import mode_shape_figure
 from pidyn.runs.stabilization_figure import stabilization_figure
 from pidyn.runs.supports import support_lines, support_table
+from pidyn.runs.tb_images import add_png
 from pidyn.runs.transfer_figure import transfer_figure
 from pidyn.simulate import simulate_response
 from pidyn.starts.data import DATA_SCALES
@@ -93,7 +94,7 @@ def write_report(
         for text in support_notes:
             log.warning(text)
         metrics["notes"] = list(metrics.get("notes") or []) + support_notes
-    _figures(run, results, truths, baselines, refined, sim, metrics, final)
+    _figures(run, results, truths, baselines, refined, sim, metrics, final, draw=cfg.get("figures", True))
     if stages is not None:
         metrics["stage_seconds"] = {**stages, "report": time.perf_counter() - t_report}
     metrics["wall_seconds"] = time.perf_counter() - t_wall  # the whole run, its report and figures too
@@ -313,7 +314,11 @@ def _figures(
     sim: dict[str, np.ndarray],
     metrics: dict,
     final: dict[str, float],
+    draw: bool = True,
 ) -> None:
+    """The run's figures and their numbers in metrics (``draw=False``: none of them)."""
+    if not draw:
+        return
     system, record = run.system, run.record
     fig_dir = run.run_dir / "figures"
     fig_dir.mkdir(exist_ok=True)
@@ -419,11 +424,8 @@ def tb_figures(logger: Any, fig_dir: Path, step: int, metrics: dict, refined: An
             exp.add_scalar(f"noise_std/{c}", sd, step)
         if refined.notes:
             exp.add_text("identifiability", "\n\n".join(refined.notes), step)
-    import matplotlib.image as mpimg  # lazy: with matplotlib (see reporting.pyplot)
-
     for png in sorted(fig_dir.glob("*.png")):
-        img = mpimg.imread(png)[..., :3]
-        exp.add_image(f"figures/{png.stem}", np.transpose(img, (2, 0, 1)), step)
+        add_png(exp, f"figures/{png.stem}", png, step)
     for k, v in (metrics.get("error_pct") or {}).items():
         exp.add_scalar(f"final/error_pct_{k}", v, step)
     for k, v in (metrics["pidynnet"].get("error_pct") or {}).items():

@@ -90,7 +90,8 @@ class SubRun:
     node), its run folder and fitting span. The rest is how the diagnosis identifies: PIDynNet
     alone (the diagnosis polishes by output error itself, ``diagnosis.polish``), no baselines (the
     screening is their peer), started where the diagnosis puts it (the weak form, then each step's
-    estimate: ``model.start=config``) and with the diagnosis's least-squares start."""
+    estimate: ``model.start=config``) and with the diagnosis's least-squares start; its figures
+    only with ``subrun_figures`` (the diagnosis draws both models in its own)."""
 
     system: dict
     folder: Path
@@ -103,6 +104,7 @@ class SubRun:
             "paths": {"output_dir": str(self.folder)},
             "baselines": {"run": [], "cramer_rao": False},
             "model": {"refine": {"method": "none"}, "start": "config"},
+            "figures": bool(cfg.get("subrun_figures", False)),
         }
         if cfg.diagnosis.get("ls_init") is not None:
             own["model"]["schedule"] = {"ls_init": cfg.diagnosis.ls_init}
