@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from pidyn.bench.tables import median
+from pidyn.cores import share_cores
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"
@@ -496,6 +497,7 @@ def main() -> None:
         for k, test in enumerate(parts):
             train = [r for r in keep if r not in test]
             jobs.append((direction, k, train, test))
+    share_cores(args.jobs)
     with ThreadPoolExecutor(max_workers=args.jobs) as pool:
         done = list(pool.map(lambda j: fold_job(args, out, *j), jobs))
     print(write_results(args, out, [r for part in done for r in part], others).read_text())

@@ -33,6 +33,7 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 
+from pidyn.cores import share_cores  # noqa: E402
 from pidyn.discrepancy.effects import EFFECTS, LIBRARY  # noqa: E402
 from pidyn.discrepancy.hidden import EQUIVALENT  # noqa: E402
 from pidyn.errors import error_pct  # noqa: E402
@@ -373,6 +374,7 @@ def main() -> None:
         print(f"{len(kept)} case(s) kept from the committed table; {len(todo)} to run", flush=True)
     commit = code_commit()
     lines: list[str] = []
+    share_cores(args.jobs)
     with ThreadPoolExecutor(max_workers=args.jobs) as pool:
         futs = {pool.submit(run_case, i, args.out, extra, kinds): i for i in todo}
         for n, fut in enumerate(as_completed(futs), 1):

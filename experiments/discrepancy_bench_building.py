@@ -33,6 +33,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 
 from pidyn.bench.draws import draw_building, draw_sensors  # noqa: E402
+from pidyn.cores import share_cores  # noqa: E402
 from pidyn.discrepancy.effects import EFFECTS, LIBRARY, Signals  # noqa: E402
 from pidyn.discrepancy.hidden import EQUIVALENT, OUTSIDE, RECORDS, _outside_term  # noqa: E402
 from pidyn.runs.provenance import code_commit  # noqa: E402  (the checkout's commit, "+dirty" for changed code)
@@ -277,6 +278,7 @@ def main() -> None:
         write_results(rows, a.results, a.name, a.cases)
         return
     rows: list[dict] = []
+    share_cores(a.jobs)
     with ThreadPoolExecutor(a.jobs) as pool:
         cases = a.only or range(a.first, a.cases)
         futures = {pool.submit(run_case, i, a.out, a.duration): i for i in cases}

@@ -34,6 +34,7 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 
+from pidyn.cores import share_cores  # noqa: E402
 from pidyn.data.sources import synthetic_from_motion  # noqa: E402
 from pidyn.discrepancy.heldout_check import (  # noqa: E402
     HELDOUT_BAND,
@@ -150,6 +151,7 @@ def run(todo: list[dict], jobs: int) -> pd.DataFrame:
     from concurrent.futures import ProcessPoolExecutor
 
     rows = []
+    share_cores(jobs)
     with ProcessPoolExecutor(max_workers=jobs) as pool:
         for n, row in enumerate(pool.map(one, todo), 1):
             rows.append(row)

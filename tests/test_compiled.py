@@ -184,6 +184,11 @@ def test_threads_follow_the_environment(monkeypatch):
     monkeypatch.delenv("PIDYN_THREADS")
     monkeypatch.delenv("OMP_NUM_THREADS")
     assert cores.threads() == cores.cores()
+    monkeypatch.setattr(cores, "cores", lambda: 4)
+    cores.share_cores(2)  # two jobs side by side: two threads each
+    assert cores.threads() == 2
+    cores.share_cores(8)  # a value already set is kept
+    assert cores.threads() == 2
 
 
 def test_band_limited_stages_agree():

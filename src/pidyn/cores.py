@@ -22,3 +22,11 @@ def cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # no affinity call on this platform
         return os.cpu_count() or 1
+
+
+def share_cores(jobs: int) -> None:
+    """``jobs`` processes about to run side by side (a study's jobs, started from here): each may
+    split its work over its share of the cores, not over all of them (``PIDYN_THREADS``, which
+    they inherit; a value the user set is kept)."""
+    if jobs > 1:
+        os.environ.setdefault("PIDYN_THREADS", str(max(1, cores() // jobs)))

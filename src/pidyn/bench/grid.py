@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from pidyn.cores import share_cores
+
 
 def calibration_args(doc: str | None, records: Iterable[str], results: Path) -> argparse.Namespace:
     """``--records``, ``--jobs``, ``--results`` (default ``results``) and ``--fresh`` (run every
@@ -40,6 +42,7 @@ def run_grid(
     """``one`` over ``todo`` (a row or a list of rows each), every finished one appended to ``csv``
     and said in a line; returns every row and the seconds this run took."""
     t0, rows = time.perf_counter(), [done] if len(done) else []
+    share_cores(jobs)
     with ProcessPoolExecutor(jobs) as pool:
         for k, out in enumerate(pool.map(one, todo), start=1):
             out = out if isinstance(out, list) else [out]
