@@ -34,12 +34,13 @@ def _plain(value: Any) -> Any:
 
 def log_hparams(logger: Any, metrics: dict) -> dict[str, Any]:
     """Write the run's knobs and scores to the logger's HParams (a TensorBoard logger; nothing
-    otherwise); returns the knobs written."""
+    otherwise), the run's last words to TensorBoard: its writer is flushed, so the event files
+    are whole when the task returns, not when the writer's thread next flushes (every 2 min) or
+    the process ends. Returns the knobs written."""
     hp = {k: _plain(metrics[k]) for k in KNOBS if metrics.get(k) is not None}
-    if (
-        logger is not None
-        and hasattr(logger, "log_hyperparams")
-        and getattr(logger, "experiment", None) is not None
-    ):
+    exp = getattr(logger, "experiment", None) if logger is not None else None
+    if exp is not None and hasattr(logger, "log_hyperparams"):
         logger.log_hyperparams(hp, _scores(metrics))
+        if hasattr(exp, "flush"):
+            exp.flush()
     return hp
