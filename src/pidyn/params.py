@@ -188,7 +188,8 @@ def from_theta(specs: list[ParamSpec], theta: np.ndarray) -> dict[str, np.ndarra
     for i, s in enumerate(specs):
         th = theta[i]
         if s.transform == "log":
-            out[s.name] = s.scale * np.exp(th)
+            with np.errstate(over="ignore"):  # a parameter run to infinity is inf, named by the caller
+                out[s.name] = s.scale * np.exp(th)
         elif s.transform == "box":
             assert s.lower is not None and s.upper is not None
             out[s.name] = s.lower + (s.upper - s.lower) / (1 + np.exp(-th))

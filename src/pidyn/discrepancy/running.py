@@ -77,10 +77,11 @@ def running_modes(
         zeta = c / (2 * np.sqrt(k * m))
         s_log_zeta = np.sqrt(max(sc**2 + 0.25 * sk**2 - rho * sc * sk, 0.0))
         rows["damping"][i] = zeta
-        rows["damping_lo"][i], rows["damping_hi"][i] = (
-            zeta * np.exp(-Z95 * s_log_zeta),
-            zeta * np.exp(Z95 * s_log_zeta),
-        )
+        with np.errstate(over="ignore"):  # a window that knows nothing of the damping: an open interval
+            rows["damping_lo"][i], rows["damping_hi"][i] = (
+                zeta * np.exp(-Z95 * s_log_zeta),
+                zeta * np.exp(Z95 * s_log_zeta),
+            )
     return rows
 
 

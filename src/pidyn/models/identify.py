@@ -477,6 +477,7 @@ def posterior_std(info: torch.Tensor | None, names: list[str]) -> dict[str, floa
     direction the window does not inform comes out large (a pseudo-inverse would hide it)."""
     if info is None:
         return None
+    info = info.detach()  # numbers from here on (a learned force's weights leave it in the graph)
     n = info.shape[0]
     ridge = 1e-12 * float(torch.trace(info).abs()) / max(n, 1) + 1e-30
     cov = torch.linalg.inv(info.double() + ridge * torch.eye(n, dtype=torch.float64))

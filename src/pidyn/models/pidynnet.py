@@ -408,15 +408,15 @@ def _drift_solve(
         J = forward_jacobian(residual, u) * scale
         step = lstsq(J, -r) * scale
         u = u + step
-        if float(step.abs().div(scale).max()) < 1e-10:
+        if float(step.detach().abs().div(scale).max()) < 1e-10:
             break
     if std is not None and names:
         r = residual(u)
         J = forward_jacobian(residual, u) * scale
         dof = max(J.shape[0] - J.shape[1], 1)
-        cov = torch.linalg.pinv(J.T @ J, hermitian=True) * float(r @ r) / dof
+        cov = torch.linalg.pinv(J.T @ J, hermitian=True) * float((r @ r).detach()) / dof
         var = torch.diagonal(cov)[2 * nd :] * scale[2 * nd :] ** 2
-        std.update({n: float(var[i].clamp_min(0).sqrt()) for i, n in enumerate(names)})
+        std.update({n: float(var[i].detach().clamp_min(0).sqrt()) for i, n in enumerate(names)})
     with torch.no_grad():
         net.drift.copy_(torch.stack([u[:nd], u[nd : 2 * nd]]).to(net.drift.dtype))
     return {n: float(u[2 * nd + i]) for i, n in enumerate(names)}

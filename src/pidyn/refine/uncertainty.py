@@ -132,7 +132,8 @@ def correlation(cov: np.ndarray) -> np.ndarray:
     sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
     # a near-singular information matrix (a parameter on its bound) leaves a covariance whose
     # round-off is not positive definite: a correlation is never beyond +-1
-    return np.clip(cov / np.outer(sd, sd), -1.0, 1.0)
+    with np.errstate(invalid="ignore"):  # a blown-up fit's covariance: NaN correlations, said elsewhere
+        return np.clip(cov / np.outer(sd, sd), -1.0, 1.0)
 
 
 #: the one-sided 95 % point of the standard normal: a parameter on its bound has the likelihood
