@@ -203,6 +203,9 @@ def test_diagnosis_finds_estimates_and_gains(effect, tmp_path):
         "nominal/identified_params.yaml",
     ]:
         assert (tmp_path / f).exists(), f
+    # its own identifications draw nothing (subrun_figures): the diagnosis's figures show both models
+    assert not (tmp_path / "nominal" / "figures").exists()
+    assert "transfer_function" not in json.loads((tmp_path / "nominal" / "metrics.json").read_text())
     if effect == "none":
         assert d["verdict"] == "none" and d["cause"] is None and d["gain"]["extended"] is None
         return
