@@ -174,6 +174,24 @@ def test_trajectories_split_over_threads_give_the_same_bits(dual, monkeypatch):
             assert np.array_equal(one, three)
 
 
+def test_a_forked_child_starts_its_own_threads(monkeypatch):
+    """A process pool's forked worker does not inherit the parent's threads (its tasks would wait
+    for ever): it integrates with threads of its own, and gets the parent's bits."""
+    import multiprocessing
+
+    monkeypatch.setattr(kernel, "MIN_SPLIT_WORK", 1)
+    monkeypatch.setenv("PIDYN_THREADS", "2")
+    system = SYSTEMS["hysteresis"]
+    rng = np.random.default_rng(5)
+    p, f = _params(system, 4, rng), _excitation(system, 4, rng)
+    y0, t = np.zeros((4, system.n_state)), np.arange(N) * DT
+    here = kernel.steps(system, p, t, t, f, None, y0, 4, 0)[0]
+    assert kernel._POOL is not None
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        there = pool.apply_async(kernel.steps, (system, p, t, t, f, None, y0, 4, 0)).get(timeout=60)[0]
+    assert np.array_equal(here, there)
+
+
 def test_threads_follow_the_environment(monkeypatch):
     """PIDYN_THREADS decides; else OMP_NUM_THREADS caps the cores (a test worker, a job of several)."""
     monkeypatch.delenv("PIDYN_THREADS", raising=False)

@@ -33,7 +33,7 @@ _DOUBLE_P = ctypes.POINTER(ctypes.c_double)
 #: RK4 substeps (trajectories x substeps a trajectory) below which a call stays in one thread:
 #: about 0.2 ms of a small system's arithmetic, a few times what handing a range to a thread costs
 MIN_SPLIT_WORK = 20_000
-_POOL: ThreadPoolExecutor | None = None
+_POOL: tuple[ThreadPoolExecutor, int] | None = None  # the pool and its number of threads
 
 
 def enabled() -> bool:
@@ -214,11 +214,24 @@ def _in_threads(call: Any, B: int, work: int) -> int:
 
 def _pool(workers: int) -> ThreadPoolExecutor:
     """The threads of ``_in_threads``, started once and kept (a new thread a call costs more than
-    a short integration)."""
+    a short integration); more are started when more are asked for."""
     global _POOL
-    if _POOL is None or _POOL._max_workers < workers:
-        _POOL = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="pidyn-kernel")
-    return _POOL
+    if _POOL is None or _POOL[1] < workers:
+        if _POOL is not None:
+            _POOL[0].shutdown(wait=False)
+        _POOL = (ThreadPoolExecutor(max_workers=workers, thread_name_prefix="pidyn-kernel"), workers)
+    return _POOL[0]
+
+
+def _forget_pool() -> None:
+    """In a forked child (a process pool's worker) the parent's threads do not exist: a task handed
+    to its pool would wait for ever. The child starts its own."""
+    global _POOL
+    _POOL = None
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pool)
 
 
 def truth(
