@@ -1,7 +1,5 @@
 """How many threads one pidyn process may use for work that splits (a compiled integration's
-trajectories, independent trainings): ``PIDYN_THREADS`` where it is set, else the cores this
-process may run on, at most ``OMP_NUM_THREADS`` where that is set (a test worker, or one of
-several jobs sharing the cores, says so by it)."""
+trajectories), and how many cores it may run on."""
 
 from __future__ import annotations
 
@@ -9,6 +7,9 @@ import os
 
 
 def threads() -> int:
+    """``PIDYN_THREADS`` where it is set, else the cores this process may run on, at most
+    ``OMP_NUM_THREADS`` where that is set (a test worker, or one of several jobs sharing the
+    cores, says so by it)."""
     for name in ("PIDYN_THREADS", "OMP_NUM_THREADS"):
         value = os.environ.get(name, "").strip()
         if value.isdigit() and int(value) > 0:

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from pidyn.baselines.registry import ESTIMATORS, PARAMETRIC, check_names
+from pidyn.cores import cores
 from pidyn.errors import errors_pct
 
 
@@ -70,7 +71,7 @@ class BaselineJob:
         self._dir: tempfile.TemporaryDirectory | None = None
         names = list(bcfg.get("run") or [])
         check_names("baselines.run", names)  # a typo fails now, not after PIDynNet's minutes
-        if names and parallel and (os.cpu_count() or 1) > 1:
+        if names and parallel and cores() > 1:
             try:
                 self._start()
             except Exception as exc:  # no worker here: run them in this process afterwards

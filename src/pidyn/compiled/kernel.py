@@ -202,7 +202,9 @@ def _in_threads(call: Any, B: int, work: int) -> int:
     (ctypes lets go of the GIL in the call); the first range runs in this thread. Each trajectory is
     integrated by itself, so the split changes no bit. ``work``: RK4 substeps a trajectory, a split
     pays where there are at least ``MIN_SPLIT_WORK`` of them in a range. Returns the worst status."""
-    n = min(threads(), B, max(1, B * work // MIN_SPLIT_WORK))
+    n = min(B, B * work // MIN_SPLIT_WORK)  # most calls are small: the environment is read only for the rest
+    if n > 1:
+        n = min(n, threads())
     if n <= 1:
         return int(call(0, B))
     edges = [B * k // n for k in range(n + 1)]
