@@ -134,7 +134,7 @@ def test_supports_the_data_cannot_tell_apart_are_said_so_and_their_values_not_re
     from types import SimpleNamespace
 
     from pidyn.notes import codes
-    from pidyn.runs.supports import support_lines, support_table
+    from pidyn.supports import support_lines, support_table
 
     deck = _deck()
     names = ["c1", "k1", "c2", "k2", "c3", "k3"]
@@ -195,15 +195,101 @@ def test_each_kind_of_data_gets_its_default_model_and_a_named_system_wins():
     assert compose("train", groups={"system": "shear_building"}).system._target_.endswith("ShearBuilding")
 
 
-def test_the_diagnosis_of_a_deck_support_by_support_is_refused_by_name(tmp_path):
-    from pidyn.config import compose
-    from pidyn.tasks.diagnose import _diagnose
+LAYOUT6 = {"length": 80.0, "positions": {1: 0.0, 2: 45.0, 3: 80.0, 4: 0.0, 5: 45.0, 6: 80.0}}
 
-    cfg = compose(
-        "diagnose",
-        groups={"data": "csmip", "system": "rigid_deck"},
-        values={"data.station": "CE89324"},
-        output_dir=tmp_path,
+
+def _deck_record(support_terms, duration: float = 24.0, noise: float = 0.02):
+    """A simulated deck on three supports that move differently, read by three deck sensors
+    where they stand (over each support), with 2 % noise on each."""
+    from pidyn.data.layout import read_where_they_stand, station_deck
+    from pidyn.data.sources import synthetic_from_motion
+    from pidyn.excitation.ground_motion import SupportMotions, prepare
+
+    params = {n: {"true": v} for n, v in TRUTH.items()}
+    deck = station_deck(
+        None, layout=LAYOUT6, inputs=[1, 2, 3], outputs=[4, 5, 6], params=params, support_terms=support_terms
     )
-    with pytest.raises(ValueError, match="diagnosis support by support"):  # no subject takes a deck
-        _diagnose(cfg, None)
+    gm = SupportMotions.from_motions(
+        {
+            "ch1": prepare("el_centro", dt=0.02, duration=duration),
+            "ch2": prepare("kobe", dt=0.02, duration=duration, scale=0.6),
+            "ch3": prepare("northridge", dt=0.02, duration=duration, scale=0.8),
+        }
+    )
+    rec = synthetic_from_motion(deck, gm, channels=["a"])
+    return read_where_they_stand(rec, deck, noise=noise)
+
+
+def _diagnose_deck(rec, tmp_path, *extra):
+    from helpers import make_cfg
+
+    from pidyn.tasks.diagnose import diagnose
+
+    cfg = make_cfg(
+        [
+            "system=rigid_deck",
+            "system.inputs=[1,2,3]",
+            "system.outputs=[4,5,6]",
+            "+system.layout.length=80.0",
+            "+system.layout.positions={1: 0.0, 2: 45.0, 3: 80.0, 4: 0.0, 5: 45.0, 6: 80.0}",
+            "logger=none",
+            *extra,
+        ],
+        tmp_path,
+        config_name="diagnose",
+    )
+    return diagnose(cfg, rec)
+
+
+@pytest.mark.slow
+def test_the_diagnosis_finds_a_gap_hidden_at_the_bent_and_names_that_support(tmp_path):
+    """A stop that engages at the middle support (the bent) in a deck read only by its three deck
+    channels: every (effect, support) is scored on what it changes in the channels, and the gap at
+    support 2 is named, with a held-out gain, and its size recovered."""
+    rec = _deck_record({2: [{"term": "gap_contact", "kg": 400.0, "gap": 0.0025}]})
+    d = _diagnose_deck(rec, tmp_path, "diagnosis.confirm.misfit_candidates=1")
+    assert d["verdict"] == "discrepancy" and d["subject"] == "bridge deck", d["notes"]
+    assert d["findings"] == [{"effect": "gap_contact", "place": "support", "at": 2}]
+    assert d["gain"]["extended"] < 0.8 * d["gain"]["nominal"]
+    assert d["ranking"][0]["effect"] == "gap_contact" and d["ranking"][0]["support"] == 2
+    step = next(s for s in d["steps"] if s["accepted"])
+    assert step["parameters"]["gap2"] == pytest.approx(0.0025, rel=0.1)
+    assert step["parameters"]["kg2"] == pytest.approx(400.0, rel=0.25)
+    report = (tmp_path / "report.md").read_text()
+    assert "gap_contact in support 2" in report and "## Which support misses what" in report
+    assert (tmp_path / "figures" / "deck_channels.png").stat().st_size > 10_000
+
+
+@pytest.mark.slow
+def test_a_clean_deck_gives_none_and_nothing_is_tried(tmp_path):
+    d = _diagnose_deck(_deck_record(None), tmp_path)
+    assert d["verdict"] == "none" and d["findings"] == [] and d["steps"] == []
+    assert not d["fit_test"]["failed"]
+
+
+def test_an_effect_that_changes_the_channels_alike_at_two_supports_is_said_so():
+    """Two supports whose candidates move the deck channels in nearly the same direction: the
+    data name the effect, not which of the two supports."""
+    from pidyn.discrepancy.deck_steps import Scored, alike
+
+    rng = np.random.default_rng(0)
+    base = rng.normal(size=200)
+    same = base + 0.01 * rng.normal(size=200)
+    other = rng.normal(size=200)
+    chosen = Scored("gap_contact", 1, {}, {}, 10.0, 0.5, base)
+    scored = [
+        chosen,
+        Scored("gap_contact", 3, {}, {}, 9.9, 0.49, same),
+        Scored("gap_contact", 2, {}, {}, 1.0, 0.05, other),
+        Scored("cubic_stiffness", 3, {}, {}, 9.0, 0.4, same),  # another effect: not the question
+    ]
+    out = alike(scored, chosen)
+    assert [a["supports"] for a in out] == [[1, 3]] and out[0]["correlation"] > 0.99
+
+
+def test_a_deck_record_without_its_sensor_layout_is_refused_by_name():
+    from pidyn.discrepancy.deck_model import channels
+
+    rec = _three_support_record(noise=0.0)
+    with pytest.raises(ValueError, match="no sensor layout"):
+        channels(rec)

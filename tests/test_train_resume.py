@@ -141,3 +141,17 @@ def test_baselines_take_the_noise_a_data_source_drew(tmp_path):
     assert 0.0 <= level <= 0.05 and level == record.meta.noise
     rows = start_baselines(cfg, system, record).result()
     assert rows[0]["method"] == "equation_error" and rows[0]["params"]
+
+
+def test_a_config_with_integer_keys_compares_equal_to_itself_as_the_folder_keeps_it():
+    """A deck layout's channel positions are a mapping with integer keys; the folder keeps the
+    configuration as JSON (string keys), and the same run must not be refused as another."""
+    import json
+
+    from helpers import make_cfg
+
+    from pidyn.runs.folder import comparable_config, config_differences
+
+    cfg = make_cfg(["system=rigid_deck", "+system.layout.positions={1: 0.0, 2: 45.0}"])
+    now = comparable_config(cfg)
+    assert config_differences(json.loads(json.dumps(now)), now) == []

@@ -49,7 +49,8 @@ CODES: dict[str, str] = {
     "refused_undetermined": "a storey effect predicted better, but its size is not determined",
     "refused_no_heldout_gain": "a storey effect passed the screening but did not predict the held-out part better",
     "heldout_fails": "nothing named, but the nominal building fails the held-out test",
-    "fit_fails": "nothing named, but the nominal building does not fit its fitting part down to the noise",
+    "fit_fails": "nothing named, but the nominal building or deck does not fit its fitting part down to the noise",
+    "effect_support_not_distinguished": "the deck channels change alike for an effect at either of two supports",
 }
 
 

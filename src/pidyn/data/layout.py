@@ -121,3 +121,20 @@ def sensor_view(record, sim: dict[str, np.ndarray]) -> tuple[Any, dict[str, np.n
     if "a" in sim:
         out["a"] = np.asarray(sim["a"], float) @ H.T
     return view, out
+
+
+def read_where_they_stand(record, system: RigidDeck, noise: float = 0.0, seed: int = 0):
+    """A simulated deck record (its two end motions, absolute) as its deck sensors read it: each
+    channel of ``system.sensors`` at its position, with white noise of ``noise`` times the
+    channel's RMS, and the end motions read back from them by least squares, as a strong-motion
+    archive is read. What a test or a benchmark hides an effect at a support in."""
+    names = sorted(system.sensors, key=lambda c: int(str(c).lstrip("ch")))
+    channels = [int(str(c).lstrip("ch")) for c in names]
+    H = observation(system, channels)
+    clean = np.asarray(record.a, float) @ H.T
+    rng = np.random.default_rng(seed)
+    raw = clean + noise * np.sqrt(np.mean(clean**2, axis=0)) * rng.standard_normal(clean.shape)
+    meta = record.meta.with_(
+        sensor_channels=channels, observation=H.tolist(), sensor_a=raw, output_channels=[]
+    )
+    return replace(record, a=end_motions(raw, H), x=None, v=None, meta=meta)

@@ -63,8 +63,10 @@ def is_complete(folder: str | Path) -> bool:
 
 
 def comparable_config(cfg: DictConfig) -> dict[str, Any]:
-    """The configuration that decides what a run computes: everything but ``VOLATILE``."""
-    data = OmegaConf.to_container(cfg, resolve=False)
+    """The configuration that decides what a run computes: everything but ``VOLATILE``; in JSON's
+    terms, as the folder keeps it (a mapping's integer keys, a deck layout's channel positions,
+    are strings there, and the same run must compare equal to itself)."""
+    data = json.loads(json.dumps(OmegaConf.to_container(cfg, resolve=False), default=str))
     assert isinstance(data, dict)
     for key in VOLATILE:
         node: Any = data

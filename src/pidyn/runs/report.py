@@ -33,11 +33,11 @@ from pidyn.runs.loop_figure import loop_figure, support_loops
 from pidyn.runs.metrics import channel_nrmse, record_noise, reference_channel, relative_errors, sim_nrmse_x
 from pidyn.runs.mode_shape_figure import mode_shape_figure
 from pidyn.runs.stabilization_figure import stabilization_figure
-from pidyn.runs.supports import support_lines, support_table
 from pidyn.runs.tb_images import add_png
 from pidyn.runs.transfer_figure import transfer_figure
 from pidyn.simulate import simulate_response
 from pidyn.starts.data import DATA_SCALES
+from pidyn.supports import support_lines, support_table
 from pidyn.systems.base import StructuralSystem
 
 log = logging.getLogger(__name__)

@@ -93,6 +93,7 @@ class RigidDeck(PlacedTerms, StructuralSystem):
         self.sensors = {str(k): float(v) for k, v in (sensors or {}).items()}
         _check_layout(self.inputs, self.positions, self.length)
         rho = self.length / np.sqrt(12.0) if gyration is None else float(gyration)
+        self.gyration = gyration
         if not rho > 0:
             raise ValueError(f"{name}: gyration must be positive, got {gyration}")
         r = (rho / self.length) ** 2
@@ -136,6 +137,22 @@ class RigidDeck(PlacedTerms, StructuralSystem):
     def support_stiffness_params(self) -> list[list[str]]:
         """Each support's parameters whose sum is its stiffness about rest."""
         return [[t.initial_stiffness_param for t in s if t.initial_stiffness_param] for s in self.supports]
+
+    def extended(self, values: Mapping[str, float], terms: Mapping[int, list], name: str) -> RigidDeck:
+        """A deck with this one's layout, its supports' springs and dashpots at ``values`` and
+        ``terms`` (term objects, by 1-based support) added: how the diagnosis extends a nominal deck."""
+        n = len(self.inputs)
+        return RigidDeck(
+            inputs=self.inputs,
+            positions=self.positions,
+            length=self.length,
+            gyration=self.gyration,
+            stiffnesses=[float(values[f"k{j + 1}"]) for j in range(n)],
+            dampings=[float(values[f"c{j + 1}"]) for j in range(n)],
+            support_terms=dict(terms),
+            name=name,
+            sensors=self.sensors,
+        )
 
     # ------------------------------------------------------------------ kinematics
     def _stiffness(self, p):
@@ -191,6 +208,11 @@ class RigidDeck(PlacedTerms, StructuralSystem):
             sum_of([(1 - xi) * F for xi, F in zip(self.xi, forces)]),
             sum_of([xi * F for xi, F in zip(self.xi, forces)]),
         ]
+
+    def support_deformation(self, x, v, f, p) -> tuple[list, list]:
+        """Each support's dynamic deformation and whole deformation rate along a motion of the
+        deck ends ``x``, ``v`` (what its force terms act on)."""
+        return self._support_motion(x, v, f, p, self.influence(p))
 
     def support_response(self, t, x, v, z, f, p) -> tuple[list, list]:
         """Each support's deformation and its force along a motion of the deck ends ``x``, ``v``

@@ -24,8 +24,7 @@ def subject_for(system: Any) -> type[Subject]:
             return subject
     takes = ", ".join(s.takes_words for s in SUBJECTS)
     raise ValueError(
-        f"system '{system.name}': the diagnosis takes {takes}; a structure's diagnosis support by support "
-        "is not built yet: diagnose system=linear"
+        f"system '{system.name}': the diagnosis takes {takes}; diagnose this structure as one of them"
     )
 
 

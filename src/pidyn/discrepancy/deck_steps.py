@@ -1,0 +1,301 @@
+"""The steps of a deck's diagnosis: the nominal deck refined, every (effect, support) scored by
+what it would change in the deck channels, the best tried by output error and named only when it
+predicts the held-out part better; and which supports the data cannot tell apart.
+
+The score is the building's score test (``pidyn.discrepancy.storey_ranking``) on the deck
+channels: each candidate is simulated once at a typical size (the effect's own ``sample``, sized
+against the support's deformation along the current model's motion); its change of the channels,
+with the current model's parameters profiled out, is the direction it adds; the share of the
+fitting part's misfit one step along it removes is its score. Two candidates whose directions are
+nearly parallel change the channels alike: no record of these channels can say which it is.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pidyn.discrepancy.deck_model import (
+    DeckState,
+    Placed,
+    channel_errors,
+    channels,
+    deck_with,
+    simulated_channels,
+    support_signals,
+)
+from pidyn.discrepancy.effects import EFFECTS
+from pidyn.discrepancy.fit_test import fit_test
+from pidyn.refine.stage import refine
+from pidyn.starts.data import start_from_data
+from pidyn.supports import support_table
+from pidyn.systems.modal import linear_matrices, modal_properties
+from pidyn.systems.places import storey_param
+
+log = logging.getLogger(__name__)
+
+#: two candidates whose changes of the deck channels correlate this much (profiled directions)
+#: are the same to these data: the supports they sit at are not told apart
+ALIKE = 0.95
+#: the effects tried at a support by default: the library's, and the stiffness that follows the
+#: amplitude (the literature on bridge abutments: Goel and Chopra 1997, McCallen and Romstad 1994)
+DECK_EFFECTS = ("amplitude_softening",)
+
+
+@dataclass
+class Scored:
+    """One (effect, support) scored: its trial parameters, the misfit (in units of each channel's
+    nominal misfit) one linearised step removes, that as a share, and its direction."""
+
+    effect: str
+    support: int
+    params: dict[str, float]
+    ctx: dict
+    chi2: float
+    share: float
+    direction: np.ndarray
+
+    def row(self) -> dict[str, Any]:
+        return {"effect": self.effect, "support": self.support, "share": self.share, "chi2": self.chi2}
+
+
+def fit_mask(record, span: tuple[float, float]) -> np.ndarray:
+    return (record.t >= span[0] - 1e-9) & (record.t <= span[1] + 1e-9)
+
+
+def nominal_deck(study) -> tuple[DeckState, dict[str, Any]]:
+    """The linear deck refined on the fitting part from the config's and the data's starts (the
+    one whose simulation fits the fitting part's channels better kept); its report."""
+    system, record, fit = study.system, study.record, study.fit
+    config = {s.name: float(s.init) for s in system.param_specs()}
+    starts = {"config": config}
+    try:
+        starts["data"] = {**config, **start_from_data(record.segment(*fit), system).values}
+    except Exception as exc:  # a start that cannot be read leaves the config's
+        log.info("no start from the data (%s)", exc)
+    best = None
+    for label, values in starts.items():
+        try:
+            res = refine(
+                system,
+                record,
+                {label: values},
+                study.refine_settings,
+                t_start=fit[0],
+                t_end=fit[1],
+                prefer=label,
+            )
+        except Exception as exc:  # a start that fails leaves the others
+            log.warning("the nominal deck from the %s start failed (%s)", label, exc)
+            continue
+        est = {**config, **res.params}
+        score = channel_errors(record, system, est, fit, fit).mean
+        log.info("nominal deck from the %s start: NRMSE %.4g on the fitting part", label, score)
+        if best is None or score < best[0]:
+            best = (score, est, res)
+    if best is None:
+        raise RuntimeError(f"record '{record.name}': the nominal deck could not be refined from any start")
+    _, values, res = best
+    state = DeckState(system, values, channel_errors(record, system, values, study.held, fit), res)
+    return state, {
+        "params": values,
+        "intervals": res.intervals,
+        "heldout": state.heldout.to_dict(),
+        "fit": channel_errors(record, system, values, fit, fit).to_dict(),
+        "fit_test": deck_fit_test(study, system, values),
+        "supports": support_table(system, values, res),
+    }
+
+
+def deck_fit_test(study, system, values: dict[str, float]) -> dict:
+    """The fit test (``pidyn.discrepancy.fit_test``) of every deck channel on the fitting part."""
+    record = study.record
+    meas, _, names = channels(record)
+    sim = simulated_channels(system, [values], record)[0]
+    m = fit_mask(record, study.fit)
+    f_top = float(max(modal_properties(*linear_matrices(system, values))["frequency_hz"]))
+    th = study.settings.fit_test
+    return fit_test(
+        {n: meas[m, i] for i, n in enumerate(names)},
+        {n: sim[m, i] for i, n in enumerate(names)},
+        {n: float(np.std(meas[m, i])) for i, n in enumerate(names)},
+        record.dt,
+        f_top,
+        float(th.rms_ratio),
+        float(th.min_excess),
+    )
+
+
+def score_candidates(study, current: DeckState, found: list[Placed]) -> list[Scored]:
+    """Every (effect, support) not yet in the model, scored (the module's docstring), best first."""
+    record, m = study.record, fit_mask(study.record, study.fit)
+    meas = channels(record)[0][m]
+    base = simulated_channels(current.system, [current.values], record)[0][m]
+    scale = np.sqrt(np.mean((meas - base) ** 2, axis=0))  # each channel in units of its own misfit
+    scale = np.where(scale > 0, scale, 1.0)
+    r = ((meas - base) / scale).reshape(-1)
+    q = _profiled(current, record, m, scale)
+    r = r - q @ (q.T @ r)
+    total = max(float(r @ r), 1e-300)
+    signals = support_signals(record, current.system, current.values)
+    taken = {(f.effect, f.support) for f in found}
+    out = []
+    for j, sig in enumerate(signals, start=1):
+        for effect in study.effects:
+            if (effect, j) in taken:
+                continue
+            params = EFFECTS[effect].sample(np.random.default_rng(0), sig)
+            trials = EFFECTS[effect].storey_trials(params, study.fit, sig.x_peak, sig.k_nominal)
+            sets = [
+                deck_with(study.system, current.values, [*found, Placed(effect, j, p, sig.context())])
+                for p in trials
+            ]
+            sims = simulated_channels(sets[0][0], [s[1] for s in sets], record)[:, m]
+            best = None
+            for p, sim in zip(trials, sims):
+                d = ((sim - base) / scale).reshape(-1)
+                cand = _one(effect, j, p, sig.context(), d, q, r, total)
+                if cand is not None and (best is None or cand.chi2 > best.chi2):
+                    best = cand
+            if best is not None:
+                out.append(best)
+    out.sort(key=lambda c: -c.chi2)
+    return out
+
+
+def _profiled(current: DeckState, record, m: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of how the channels move with the current model's trainable parameters."""
+    values = current.values
+    names = [s.name for s in current.system.param_specs() if s.trainable and s.name in values]
+    sets, steps = [], []
+    for n in names:
+        h = 1e-6 * max(abs(float(values[n])), 1e-12)
+        sets += [{**values, n: values[n] + h}, {**values, n: values[n] - h}]
+        steps.append(2 * h)
+    if not sets:
+        return np.zeros((int(m.sum()) * len(scale), 0))
+    sim = simulated_channels(current.system, sets, record)[:, m] / scale
+    sim = sim.reshape(len(sets), -1)
+    jac = ((sim[0::2] - sim[1::2]) / np.array(steps)[:, None]).T
+    jac = jac[:, np.all(np.isfinite(jac), axis=0)]
+    q, rr = np.linalg.qr(jac)
+    keep = np.abs(np.diag(rr)) > 1e-10 * max(np.abs(np.diag(rr)).max(initial=0.0), 1e-300)
+    return q[:, keep]
+
+
+def _one(effect, support, params, ctx, d, q, r, total) -> Scored | None:
+    """A candidate's linearised score from its change ``d`` of the channels."""
+    if not np.all(np.isfinite(d)):
+        return None
+    pd_ = d - q @ (q.T @ d)
+    dd = float(pd_ @ pd_)
+    if dd <= 0:
+        return None
+    step = float(r @ pd_) / dd
+    chi2 = step * float(r @ pd_) if (step > 0 or EFFECTS[effect].signed) else 0.0
+    return Scored(effect, support, params, ctx, chi2, chi2 / total, pd_)
+
+
+def alike(scored: list[Scored], chosen: Scored) -> list[dict[str, Any]]:
+    """The other supports whose same effect changes the channels as the chosen one does."""
+    out = []
+    for c in scored:
+        if c.effect != chosen.effect or c.support == chosen.support:
+            continue
+        a, b = c.direction, chosen.direction
+        rho = float(a @ b / max(np.sqrt((a @ a) * (b @ b)), 1e-300))
+        if abs(rho) >= ALIKE:
+            out.append({"effect": c.effect, "supports": [chosen.support, c.support], "correlation": rho})
+    return out
+
+
+def try_candidate(study, current: DeckState, found: list[Placed], cand: Scored) -> tuple[DeckState, dict]:
+    """The deck with ``cand`` added, refined on the fitting part: its state and its report, with
+    its fitting part's BIC (what candidates are chosen by) and whether it may be named: it predicts
+    the held-out channels better by ``thresholds.min_name_gain`` and its size is determined
+    (``storey_max_rel_std``)."""
+    place = Placed(cand.effect, cand.support, cand.params, cand.ctx)
+    ext, start = deck_with(study.system, current.values, [*found, place])
+    log.info(
+        "support %d: %s (score %.3g of the misfit), extending and refining",
+        cand.support,
+        cand.effect,
+        cand.share,
+    )
+    fit = study.fit
+    res = refine(
+        ext,
+        study.record,
+        {"screening": start},
+        study.refine_settings,
+        t_start=fit[0],
+        t_end=fit[1],
+        prefer="screening",
+    )
+    values = {**start, **res.params}
+    ho = channel_errors(study.record, ext, values, study.held, fit)
+    before = current.heldout.mean
+    gain = float(study.settings.thresholds.min_name_gain)
+    gain_ok = bool(np.isfinite(ho.mean) and ho.mean < before * (1.0 - gain))
+    key = storey_param(EFFECTS[cand.effect].key, cand.support)
+    rel = (res.intervals.get(key) or {}).get("rel_std_pct")
+    spread = float(rel) / 100.0 if rel is not None and np.isfinite(rel) else 0.0
+    determined = spread <= float(study.settings.storey_max_rel_std)
+    names = [
+        storey_param(s.name, cand.support) for s in EFFECTS[cand.effect].term(cand.params, cand.ctx).specs()
+    ]
+    report = {
+        **cand.row(),
+        "parameters": {f: float(values[f]) for f in names if f in values},
+        "intervals": {f: res.intervals.get(f) for f in names if f in res.intervals},
+        "fit_bic": fit_bic(study, ext, values),
+        "heldout_before": before,
+        "heldout_after": ho.mean,
+        "size_rel_std": spread,
+        "passes": gain_ok and determined,
+        "accepted": False,
+        "outcome": "passes"
+        if gain_ok and determined
+        else ("refused: its size is not determined" if gain_ok else "refused: no held-out gain"),
+    }
+    log.info(
+        "support %d %s: held-out NRMSE %.4g -> %.4g, fitting-part BIC %.6g (%s)",
+        cand.support,
+        cand.effect,
+        before,
+        ho.mean,
+        report["fit_bic"],
+        report["outcome"],
+    )
+    return DeckState(ext, values, ho, res), report
+
+
+def fit_bic(study, system, values: dict[str, float]) -> float:
+    """BIC of a model's simulation from rest on the fitting part: every deck channel's residual in
+    units of its noise (the nominal deck's fit test's), and its trainable parameters."""
+    record, m = study.record, fit_mask(study.record, study.fit)
+    meas, _, names = channels(record)
+    sim = simulated_channels(system, [values], record)[0]
+    sd = np.array([study.noise.get(n) or np.std(meas[m, i]) for i, n in enumerate(names)], float)
+    r = (sim[m] - meas[m]) / np.maximum(sd, 1e-300)
+    chi2, n = float(np.sum(r**2)), int(r.size)
+    k = sum(1 for s in system.param_specs() if s.trainable)
+    return chi2 + k * float(np.log(max(n, 1))) if np.isfinite(chi2) else float("inf")
+
+
+def choose(tried: list[tuple[Scored, DeckState, dict]]) -> tuple[Scored, DeckState, dict] | None:
+    """Of the candidates tried, the one that fits the fitting part best (BIC) among those that may
+    be named; the others' reports say why not."""
+    passing = sorted((t for t in tried if t[2]["passes"]), key=lambda t: t[2]["fit_bic"])
+    if not passing:
+        return None
+    best = passing[0]
+    best[2]["accepted"], best[2]["outcome"] = True, "named"
+    for _, _, rep in passing[1:]:
+        rep["outcome"] = (
+            f"passes, but {best[0].effect} at support {best[0].support} fits the fitting part better"
+        )
+    return best
