@@ -260,6 +260,17 @@ def test_the_diagnosis_finds_a_gap_hidden_at_the_bent_and_names_that_support(tmp
     assert (tmp_path / "figures" / "deck_channels.png").stat().st_size > 10_000
 
 
+@pytest.mark.second_proof  # a support's effect named where it sits: test_the_diagnosis_finds_a_gap_hidden_at_the_bent
+def test_a_stiffness_that_follows_the_amplitude_at_an_abutment_is_named_there(tmp_path):
+    """The literature's finding at this kind of bridge, simulated: an abutment whose spring and
+    dashpot follow the amplitude. A step in time at the same support scores higher on the fitting
+    part and is refused for its held-out error; the amplitude law is named at support 1."""
+    law = {"term": "amplitude_softening", "soft": 0.4, "gain": 0.5, "tau": 1.5, "a_ref": 0.01, "w0": 20.0}
+    d = _diagnose_deck(_deck_record({1: [law]}, duration=30.0), tmp_path)
+    assert d["findings"] == [{"effect": "amplitude_softening", "place": "support", "at": 1}], d["steps"]
+    assert d["gain"]["extended"] < 0.5 * d["gain"]["nominal"]
+
+
 @pytest.mark.slow
 def test_a_clean_deck_gives_none_and_nothing_is_tried(tmp_path):
     d = _diagnose_deck(_deck_record(None), tmp_path)

@@ -192,7 +192,8 @@ def from_theta(specs: list[ParamSpec], theta: np.ndarray) -> dict[str, np.ndarra
                 out[s.name] = s.scale * np.exp(th)
         elif s.transform == "box":
             assert s.lower is not None and s.upper is not None
-            out[s.name] = s.lower + (s.upper - s.lower) / (1 + np.exp(-th))
+            with np.errstate(over="ignore"):  # far below the box: exp overflows, the value is its lower bound
+                out[s.name] = s.lower + (s.upper - s.lower) / (1 + np.exp(-th))
         else:
             out[s.name] = s.scale * th
     return out
