@@ -40,9 +40,14 @@ log = logging.getLogger(__name__)
 #: two candidates whose changes of the deck channels correlate this much (profiled directions)
 #: are the same to these data: the supports they sit at are not told apart
 ALIKE = 0.95
-#: the effects tried at a support by default: the library's, and the stiffness that follows the
-#: amplitude (the literature on bridge abutments: Goel and Chopra 1997, McCallen and Romstad 1994)
-DECK_EFFECTS = ("amplitude_softening",)
+
+
+def support_effects() -> list[str]:
+    """The effects tried at a support by default: the library's, and the structure that follows the
+    amplitude (``Effect.tried_where_period_moves``: what the literature on bridge abutments finds,
+    Goel and Chopra 1997, McCallen and Romstad 1994), which a single degree of freedom tries only
+    where its running period moves."""
+    return [n for n, e in EFFECTS.items() if e.library or e.tried_where_period_moves]
 
 
 @dataclass

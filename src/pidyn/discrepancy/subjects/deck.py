@@ -19,16 +19,16 @@ from pidyn.discrepancy.case import split_spans
 from pidyn.discrepancy.deck_model import DeckDiagnosis, DeckState, Placed, channels
 from pidyn.discrepancy.deck_report import deck_notes, deck_sections, deck_summary, write_deck_figures
 from pidyn.discrepancy.deck_steps import (
-    DECK_EFFECTS,
     alike,
     choose,
     deck_fit_test,
     fit_mask,
     nominal_deck,
     score_candidates,
+    support_effects,
     try_candidate,
 )
-from pidyn.discrepancy.effects import EFFECTS, LIBRARY
+from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.loop import Inputs, Step, Subject
 from pidyn.discrepancy.result import DiagnosisResult, Finding, HeldoutErrors
 from pidyn.discrepancy.settings import DiagnosisSettings
@@ -95,7 +95,7 @@ class Deck(Subject):
                 "diagnose: a deck's diagnosis refines every model; model.refine=none is not possible"
             )
         settings = inputs.settings
-        effects = list(settings.effects or [*LIBRARY, *DECK_EFFECTS])
+        effects = list(settings.effects or support_effects())
         unknown = [e for e in effects if e not in EFFECTS]
         if unknown:
             raise ValueError(f"diagnosis.effects: unknown effect(s) {unknown}; choose from {sorted(EFFECTS)}")
