@@ -50,7 +50,7 @@ def test_physics_only_prediction_tracks_the_true_response():
     module.net.params.set_values(s.true_values())
     before = {k: v.clone() for k, v in module.net.rpn.state_dict().items()}
     pred = predict_response(
-        module, truth, trainer, PredictSettings(iterations=300, lbfgs_steps=10), x_scale=0.1, v_scale=0.5
+        module, truth, trainer, PredictSettings(iterations=200, lbfgs_steps=3), x_scale=0.1, v_scale=0.5
     )
     strong = truth.t > 7.0
     assert pearson(pred.x[strong], truth.x[strong]) > 0.9
