@@ -166,3 +166,15 @@ def test_a_notebooks_diagnosis_shows_its_steps_with_the_time_left(capfd, tmp_pat
     for k, label in enumerate(["the nominal model", "screening", "held-out check", "the first cause"], 1):
         assert f"diagnosis {k}/6: {label}" in err, err[-3000:]
     assert "s left at this pace" in err and "diagnosis 6/6: simulations and modes" in err
+
+
+def test_a_data_reader_is_a_group_choice_and_its_settings_follow_it():
+    """``data="csmip", data__station="CE89324"``: the reader chosen as a group (not a string
+    written over the data node), its settings applied after it."""
+    from pidyn.api import _split_options
+    from pidyn.config import compose
+
+    groups, values = _split_options({"data": "csmip", "data__station": "CE89324"})
+    assert groups == {"data": "csmip"} and values == {"data.station": "CE89324"}
+    cfg = compose("diagnose", groups=groups, values=values)
+    assert cfg.data.station == "CE89324" and cfg.data.on_missing == "error"  # the csmip reader's node

@@ -50,6 +50,7 @@ ALIASES = {
     "debug": "debug",
     "trainer": "trainer",
     "excitation": "excitation",
+    "data": "data",  # data="csmip", data__station="CE89324": a record's reader and its settings
 }
 
 

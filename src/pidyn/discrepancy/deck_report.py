@@ -57,6 +57,7 @@ def deck_summary(study, d: DeckDiagnosis) -> dict[str, Any]:
         },
         "verdict": d.verdict,
         "cause": d.found[0].effect if d.found else None,
+        "change": None,  # a support's change in time is one of its effects (stiffness_loss, damping_change)
         "supports": [f.support for f in d.found],
         "nominal_parameters": d.nominal["params"],
         "nominal_intervals": d.nominal["intervals"],
