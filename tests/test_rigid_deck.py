@@ -275,7 +275,7 @@ def test_a_stiffness_that_follows_the_amplitude_at_an_abutment_is_named_there(tm
 def test_a_clean_deck_gives_none_and_nothing_is_tried(tmp_path):
     d = _diagnose_deck(_deck_record(None), tmp_path)
     assert d["verdict"] == "none" and d["findings"] == [] and d["steps"] == []
-    assert not d["fit_test"]["failed"]
+    assert not d["fit_test"]["failed"] and d["rigid_test"]["rigid"]
 
 
 def test_an_effect_that_changes_the_channels_alike_at_two_supports_is_said_so():
@@ -296,6 +296,30 @@ def test_an_effect_that_changes_the_channels_alike_at_two_supports_is_said_so():
     ]
     out = alike(scored, chosen)
     assert [a["supports"] for a in out] == [[1, 3]] and out[0]["correlation"] > 0.99
+
+
+def test_deck_channels_that_no_rigid_deck_can_move_are_said_so():
+    """A deck whose channel over the bent also carries a motion of its own (a deck that bends in
+    plan): the channels fail the rigid-motion test before any model is fitted, and the same record
+    without it passes."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from pidyn.data.layout import station_deck
+    from pidyn.discrepancy.deck_steps import rigid_test
+    from pidyn.discrepancy.settings import DiagnosisSettings
+
+    rec = _deck_record(None, duration=16.0)
+    deck = station_deck(None, layout=LAYOUT6, inputs=[1, 2, 3], outputs=[4, 5, 6])
+    values = {"m": 1.0, **TRUTH}
+    study = SimpleNamespace(record=rec, fit=(0.0, 10.0), system=deck, settings=DiagnosisSettings())
+    assert rigid_test(study, values)["rigid"]
+    raw = np.array(rec.meta.sensor_a)
+    t = rec.t
+    raw[:, 1] += 0.3 * np.std(raw[:, 1]) * np.sin(2 * np.pi * 1.3 * t) * np.exp(-(((t - 6.0) / 3.0) ** 2))
+    bent = replace(rec, meta=rec.meta.with_(sensor_a=raw))
+    out = rigid_test(SimpleNamespace(**{**study.__dict__, "record": bent}), values)
+    assert not out["rigid"] and "a5" in out["failed_channels"] and out["off_share"]["a5"] > 0.05
 
 
 def test_a_deck_record_without_its_sensor_layout_is_refused_by_name():

@@ -50,6 +50,7 @@ CODES: dict[str, str] = {
     "refused_no_heldout_gain": "a storey effect passed the screening but did not predict the held-out part better",
     "heldout_fails": "nothing named, but the nominal building fails the held-out test",
     "fit_fails": "nothing named, but the nominal building or deck does not fit its fitting part down to the noise",
+    "deck_not_rigid": "the deck channels do not move as a deck rigid in plan: the deck itself bends or twists",
     "effect_support_not_distinguished": "the deck channels change alike for an effect at either of two supports",
 }
 

@@ -29,6 +29,17 @@ def deck_notes(study, d: DeckDiagnosis) -> list[str]:
                 f"(correlation {a['correlation']:.3f}); the data name the effect, not which of the two supports",
             )
         )
+    rigid = d.nominal["rigid_test"]
+    if not rigid["rigid"]:
+        worst = max(rigid["failed_channels"], key=lambda n: rigid["off_share"][n])
+        out.append(
+            note(
+                "deck_not_rigid",
+                f"the deck channels do not move as a deck rigid in plan: {100 * rigid['off_share'][worst]:.0f} % of "
+                f"channel {worst} (RMS) is off the best rigid motion of the deck, beyond its noise; the deck bends or "
+                "twists in plan, and an effect named at a support may stand for that as much as for the support",
+            )
+        )
     if not d.found and d.nominal["fit_test"]["failed"]:
         out.append(
             note(
@@ -66,6 +77,7 @@ def deck_summary(study, d: DeckDiagnosis) -> dict[str, Any]:
         "support_table": d.nominal["supports"][0],
         "alike": d.alike,
         "fit_test": d.nominal["fit_test"],
+        "rigid_test": d.nominal["rigid_test"],
         "heldout_check": {"metric": "nrmse_a", "fit": d.nominal["fit"], "heldout": d.nominal["heldout"]},
         "ranking": d.ranking,
         "steps": d.steps,
@@ -110,6 +122,17 @@ def deck_sections(summary: dict[str, Any]) -> list[str]:
             for name, value in step["parameters"].items():
                 ci = (step["intervals"].get(name) or {}).get("ci95")
                 lines.append(f"| {name} ({step['effect']}) | {value:.4g} | {_ci(ci)} |")
+    rt = summary["rigid_test"]
+    lines += [
+        "",
+        "The deck channels against the best rigid motion of the deck (before any model): "
+        + ", ".join(f"{n} {100 * v:.0f} % off" for n, v in rt["off_share"].items())
+        + (
+            " (within their noise)."
+            if rt["rigid"]
+            else f"; beyond their noise on {', '.join(rt['failed_channels'])}."
+        ),
+    ]
     ft = summary["fit_test"]
     lines += [
         "",

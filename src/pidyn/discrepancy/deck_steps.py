@@ -42,6 +42,36 @@ log = logging.getLogger(__name__)
 ALIKE = 0.95
 
 
+def rigid_test(study, values: dict[str, float]) -> dict[str, Any]:
+    """Do the deck channels move as a deck rigid in plan does, before any model is fitted? With more
+    channels than the deck's two motions, the part of the channels no rigid deck can move (their
+    least-squares residual about the best end motions) is measured against its own noise floor, as
+    the fit test measures a model's residual (``pidyn.discrepancy.fit_test``). Where it stands
+    clear of the noise, the deck bends or twists in plan, and what the diagnosis names at a support
+    may stand for that as much as for the support."""
+    record, m = study.record, fit_mask(study.record, study.fit)
+    meas, H, names = channels(record)
+    off = meas[m] - (meas[m] @ np.linalg.pinv(H).T) @ H.T
+    th = study.settings.fit_test
+    f_top = float(max(modal_properties(*linear_matrices(study.system, values))["frequency_hz"]))
+    test = fit_test(
+        {n: meas[m, i] for i, n in enumerate(names)},
+        {n: meas[m, i] - off[:, i] for i, n in enumerate(names)},
+        {n: float(np.std(meas[m, i])) for i, n in enumerate(names)},
+        record.dt,
+        f_top,
+        float(th.rms_ratio),
+        float(th.min_excess),
+    )
+    shares = {n: float(np.std(off[:, i]) / max(np.std(meas[m, i]), 1e-300)) for i, n in enumerate(names)}
+    return {
+        "rigid": not test["failed"],
+        "off_share": shares,
+        "channels": test["channels"],
+        "failed_channels": test["failed_channels"],
+    }
+
+
 def support_effects() -> list[str]:
     """The effects tried at a support by default: the library's, and the structure that follows the
     amplitude (``Effect.tried_where_period_moves``: what the literature on bridge abutments finds,
@@ -112,6 +142,7 @@ def nominal_deck(study) -> tuple[DeckState, dict[str, Any]]:
         "fit": channel_errors(record, system, values, fit, fit).to_dict(),
         "fit_test": deck_fit_test(study, system, values),
         "supports": support_table(system, values, res),
+        "rigid_test": rigid_test(study, values),
     }
 
 
