@@ -17,12 +17,12 @@ import numpy as np
 
 from pidyn.adequacy import trivial_predictions
 from pidyn.data.sources import Record
-from pidyn.discrepancy.effects import EFFECTS, Signals
+from pidyn.discrepancy.effects import Signals
+from pidyn.discrepancy.score_test import terms_at_places
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.reporting import nrmse
 from pidyn.simulate import input_hold, simulate_batch, simulate_response
 from pidyn.systems.deck import RigidDeck
-from pidyn.systems.places import storey_param
 
 
 @dataclass(frozen=True)
@@ -157,14 +157,8 @@ def support_signals(record: Record, system: RigidDeck, values: dict[str, float])
 def deck_with(system: RigidDeck, values: dict[str, float], found: list[Placed]) -> tuple[RigidDeck, dict]:
     """The deck with the found terms at their supports, started at ``values`` and the terms' own
     starting values."""
-    terms: dict[int, list] = {}
     start = dict(values)
-    for f in found:
-        ctx = {**f.ctx, "stiffness": f"k{f.support}", "damping": f"c{f.support}"}
-        term = EFFECTS[f.effect].term(f.params, ctx)
-        terms.setdefault(f.support, []).append(term)
-        for s in term.specs():
-            start[storey_param(s.name, f.support)] = float(s.init)
+    terms = terms_at_places([(f.effect, f.support, f.params, f.ctx) for f in found], start)
     name = f"{system.name}+" + "+".join(f"{f.effect}@{f.support}" for f in found) if found else system.name
     ext = system.extended(start, terms, name)
     names = {s.name for s in ext.param_specs()}

@@ -29,6 +29,7 @@ from pidyn.discrepancy.deck_model import (
 )
 from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.fit_test import fit_test
+from pidyn.discrepancy.score_test import linearised_chi2, profiled_basis
 from pidyn.refine.stage import refine
 from pidyn.starts.data import start_from_data
 from pidyn.supports import support_table
@@ -204,34 +205,19 @@ def score_candidates(study, current: DeckState, found: list[Placed]) -> list[Sco
 
 def _profiled(current: DeckState, record, m: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """An orthonormal basis of how the channels move with the current model's trainable parameters."""
-    values = current.values
-    names = [s.name for s in current.system.param_specs() if s.trainable and s.name in values]
-    sets, steps = [], []
-    for n in names:
-        h = 1e-6 * max(abs(float(values[n])), 1e-12)
-        sets += [{**values, n: values[n] + h}, {**values, n: values[n] - h}]
-        steps.append(2 * h)
-    if not sets:
-        return np.zeros((int(m.sum()) * len(scale), 0))
-    sim = simulated_channels(current.system, sets, record)[:, m] / scale
-    sim = sim.reshape(len(sets), -1)
-    jac = ((sim[0::2] - sim[1::2]) / np.array(steps)[:, None]).T
-    jac = jac[:, np.all(np.isfinite(jac), axis=0)]
-    q, rr = np.linalg.qr(jac)
-    keep = np.abs(np.diag(rr)) > 1e-10 * max(np.abs(np.diag(rr)).max(initial=0.0), 1e-300)
-    return q[:, keep]
+
+    def simulate(sets: list[dict[str, float]]) -> np.ndarray:
+        return (simulated_channels(current.system, sets, record)[:, m] / scale).reshape(len(sets), -1)
+
+    return profiled_basis(simulate, current.system, current.values, int(m.sum()) * len(scale))
 
 
 def _one(effect, support, params, ctx, d, q, r, total) -> Scored | None:
     """A candidate's linearised score from its change ``d`` of the channels."""
-    if not np.all(np.isfinite(d)):
+    scored = linearised_chi2(d, q, r, EFFECTS[effect].signed)
+    if scored is None:
         return None
-    pd_ = d - q @ (q.T @ d)
-    dd = float(pd_ @ pd_)
-    if dd <= 0:
-        return None
-    step = float(r @ pd_) / dd
-    chi2 = step * float(r @ pd_) if (step > 0 or EFFECTS[effect].signed) else 0.0
+    chi2, pd_ = scored
     return Scored(effect, support, params, ctx, chi2, chi2 / total, pd_)
 
 

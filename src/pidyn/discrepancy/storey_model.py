@@ -12,13 +12,13 @@ import numpy as np
 from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS, Signals
 from pidyn.discrepancy.evidence import Evidence
+from pidyn.discrepancy.score_test import terms_at_places
 from pidyn.discrepancy.screening import Screening
 from pidyn.discrepancy.step_reports import StoreyStep
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.params import positive
 from pidyn.signals import integrate
 from pidyn.simulate import simulate_response
-from pidyn.systems.places import storey_param
 from pidyn.systems.sdof import SDOFSystem
 from pidyn.systems.shear_building import ShearBuilding
 from pidyn.systems.terms import LinearStiffness, ViscousDamping
@@ -197,7 +197,6 @@ def building_with(
     system: ShearBuilding, values: dict[str, float], found: list[Found]
 ) -> tuple[ShearBuilding, dict[str, float]]:
     """The building with the found terms in their storeys, started at ``values`` and their estimates."""
-    terms: dict[int, list] = {}
     start = dict(values)
     dampers = [f"c{i + 1}" for i in range(system.n_dof) if f"c{i + 1}" in start]
     largest = max((start[c] for c in dampers), default=0.0)
@@ -210,12 +209,7 @@ def building_with(
         # put the dissipation back
         if start[c] < COLLAPSED * typical:
             start[c] = RESTART * typical
-    for f in found:
-        ctx = {**f.ctx, "stiffness": f"k{f.storey}", "damping": f"c{f.storey}"}
-        term = EFFECTS[f.effect].term(f.params, ctx)
-        terms.setdefault(f.storey, []).append(term)
-        for s in term.specs():
-            start[storey_param(s.name, f.storey)] = float(s.init)
+    terms = terms_at_places([(f.effect, f.storey, f.params, f.ctx) for f in found], start)
     ext = system.linear_at(
         start, terms, f"{system.name}+" + "+".join(f"{f.effect}@{f.storey}" for f in found)
     )

@@ -24,6 +24,7 @@ import numpy as np
 from pidyn.data.sources import Record
 from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.evidence import Evidence
+from pidyn.discrepancy.score_test import linearised_chi2, profiled_basis
 from pidyn.discrepancy.storey_model import BuildingState, Found, building_with, storey_signals
 from pidyn.simulate import input_hold, simulate_batch
 
@@ -65,20 +66,10 @@ def _simulate(system, sets: list[dict[str, float]], record: Record, floors: list
 def _profiled(system, values: dict[str, float], record, floors, mask, scale) -> np.ndarray:
     """An orthonormal basis of how the floors' accelerations move with the current model's
     trainable parameters (central differences, in noise units)."""
-    names = [s.name for s in system.param_specs() if s.trainable and s.name in values]
-    sets, steps = [], []
-    for n in names:
-        h = 1e-6 * max(abs(float(values[n])), 1e-12)
-        sets += [{**values, n: values[n] + h}, {**values, n: values[n] - h}]
-        steps.append(2 * h)
-    if not sets:
-        return np.zeros((int(mask.sum()) * len(floors), 0))
-    sim = _simulate(system, sets, record, floors, mask)
-    jac = ((sim[0::2] - sim[1::2]) / np.array(steps)[:, None]).T / scale[:, None]
-    jac = jac[:, np.all(np.isfinite(jac), axis=0)]
-    q, r = np.linalg.qr(jac)
-    keep = np.abs(np.diag(r)) > 1e-10 * max(np.abs(np.diag(r)).max(initial=0.0), 1e-300)
-    return q[:, keep]
+    rows = int(mask.sum()) * len(floors)
+    return profiled_basis(
+        lambda sets: _simulate(system, sets, record, floors, mask), system, values, rows, scale
+    )
 
 
 def spring_shares(screening) -> None:
@@ -198,14 +189,10 @@ def _memo(study, current: BuildingState, found: list) -> dict:
 
 def _one(storey: int, row: Evidence, params: dict, d: np.ndarray, q: np.ndarray, r: np.ndarray, total: float):
     """One candidate's linearised score from its change ``d`` of the floor accelerations."""
-    if not np.all(np.isfinite(d)):
+    scored = linearised_chi2(d, q, r, _signed(row.effect))
+    if scored is None:
         return None
-    pd_ = d - q @ (q.T @ d)
-    dd = float(pd_ @ pd_)
-    if dd <= 0:
-        return None
-    step = float(r @ pd_) / dd
-    chi2 = step * float(r @ pd_) if (step > 0 or _signed(row.effect)) else 0.0
+    chi2, pd_ = scored
     return Ranked(storey, replace(row, parameters=params), chi2, chi2 / total, pd_)
 
 
