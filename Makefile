@@ -144,4 +144,5 @@ $(PEER): $(STAMP)
 
 real: $(PEER)
 	$(PY) experiments/real.py $(ARGS)
+	$(PY) experiments/deck_diagnosis.py
 	$(PY) experiments/shake_table.py
