@@ -163,3 +163,22 @@ def deck_with(system: RigidDeck, values: dict[str, float], found: list[Placed]) 
     ext = system.extended(start, terms, name)
     names = {s.name for s in ext.param_specs()}
     return ext, {k: v for k, v in start.items() if k in names}
+
+
+def candidate_deck(
+    system: RigidDeck, values: dict[str, float], found: list[Placed], cand: Placed
+) -> tuple[RigidDeck, dict]:
+    """The deck with ``found`` and the candidate ``cand`` added. A candidate that is a spring at rest
+    too (a hysteresis: k d + kh z, and z follows d near rest) starts with its support's linear
+    spring lowered by its own stiffness at rest, so that the deck starts as stiff as the model it
+    extends. On top of the whole spring it started far stiffer, and on case 22 of
+    ``experiments/discrepancy_bench_deck.py`` (a Bouc-Wen abutment) its refinement ended at a
+    held-out NRMSE of 0.62 against the nominal's 0.21; lowered, it reaches 0.197 and is named."""
+    before = set(deck_with(system, values, found)[0].support_stiffness_params()[cand.support - 1])
+    ext, start = deck_with(system, values, [*found, cand])
+    added = [n for n in ext.support_stiffness_params()[cand.support - 1] if n not in before]
+    spring = f"k{cand.support}"
+    at_rest = sum(float(start[n]) for n in added)
+    if at_rest > 0 and spring in start:
+        start[spring] = max(float(start[spring]) - at_rest, 0.1 * float(start[spring]))
+    return ext, start

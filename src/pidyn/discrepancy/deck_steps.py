@@ -21,9 +21,9 @@ import numpy as np
 from pidyn.discrepancy.deck_model import (
     DeckState,
     Placed,
+    candidate_deck,
     channel_errors,
     channels,
-    deck_with,
     simulated_channels,
     support_signals,
 )
@@ -187,7 +187,7 @@ def score_candidates(study, current: DeckState, found: list[Placed]) -> list[Sco
             params = EFFECTS[effect].sample(np.random.default_rng(0), sig)
             trials = EFFECTS[effect].storey_trials(params, study.fit, sig.x_peak, sig.k_nominal)
             sets = [
-                deck_with(study.system, current.values, [*found, Placed(effect, j, p, sig.context())])
+                candidate_deck(study.system, current.values, found, Placed(effect, j, p, sig.context()))
                 for p in trials
             ]
             sims = simulated_channels(sets[0][0], [s[1] for s in sets], record)[:, m]
@@ -240,7 +240,7 @@ def try_candidate(study, current: DeckState, found: list[Placed], cand: Scored) 
     the held-out channels better by ``thresholds.min_name_gain`` and its size is determined
     (``storey_max_rel_std``)."""
     place = Placed(cand.effect, cand.support, cand.params, cand.ctx)
-    ext, start = deck_with(study.system, current.values, [*found, place])
+    ext, start = candidate_deck(study.system, current.values, found, place)
     log.info(
         "support %d: %s (score %.3g of the misfit), extending and refining",
         cand.support,
