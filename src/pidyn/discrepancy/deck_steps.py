@@ -13,7 +13,7 @@ nearly parallel change the channels alike: no record of these channels can say w
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -38,6 +38,10 @@ from pidyn.systems.places import storey_param
 
 log = logging.getLogger(__name__)
 
+#: a candidate's fit starts from its best-scored trial and from this many next ones (the scores
+#: are linearised: a Bouc-Wen support's best-scored loop shape ended in a poor optimum on simulated
+#: decks where another shape of the grid did not)
+OTHER_STARTS = 2
 #: two candidates whose changes of the deck channels correlate this much (profiled directions)
 #: are the same to these data: the supports they sit at are not told apart
 ALIKE = 0.95
@@ -93,6 +97,8 @@ class Scored:
     chi2: float
     share: float
     direction: np.ndarray
+    #: the next best trial parameters (a hysteresis's other loop shapes): further starts of its fit
+    others: list[dict[str, float]] = field(default_factory=list)
 
     def row(self) -> dict[str, Any]:
         return {"effect": self.effect, "support": self.support, "share": self.share, "chi2": self.chi2}
@@ -185,20 +191,24 @@ def score_candidates(study, current: DeckState, found: list[Placed]) -> list[Sco
             if (effect, j) in taken:
                 continue
             params = EFFECTS[effect].sample(np.random.default_rng(0), sig)
-            trials = EFFECTS[effect].storey_trials(params, study.fit, sig.x_peak, sig.k_nominal)
+            trials = [
+                t
+                for shape in EFFECTS[effect].shape_trials(params, sig)
+                for t in EFFECTS[effect].storey_trials(shape, study.fit, sig.x_peak, sig.k_nominal)
+            ]
             sets = [
                 candidate_deck(study.system, current.values, found, Placed(effect, j, p, sig.context()))
                 for p in trials
             ]
             sims = simulated_channels(sets[0][0], [s[1] for s in sets], record)[:, m]
-            best = None
-            for p, sim in zip(trials, sims):
-                d = ((sim - base) / scale).reshape(-1)
-                cand = _one(effect, j, p, sig.context(), d, q, r, total)
-                if cand is not None and (best is None or cand.chi2 > best.chi2):
-                    best = cand
-            if best is not None:
-                out.append(best)
+            scored = [
+                _one(effect, j, p, sig.context(), ((sim - base) / scale).reshape(-1), q, r, total)
+                for p, sim in zip(trials, sims)
+            ]
+            scored = sorted((c for c in scored if c is not None), key=lambda c: -c.chi2)
+            if scored:
+                scored[0].others = [c.params for c in scored[1 : OTHER_STARTS + 1]]
+                out.append(scored[0])
     out.sort(key=lambda c: -c.chi2)
     return out
 
@@ -239,25 +249,8 @@ def try_candidate(study, current: DeckState, found: list[Placed], cand: Scored) 
     its fitting part's BIC (what candidates are chosen by) and whether it may be named: it predicts
     the held-out channels better by ``thresholds.min_name_gain`` and its size is determined
     (``storey_max_rel_std``)."""
-    place = Placed(cand.effect, cand.support, cand.params, cand.ctx)
-    ext, start = candidate_deck(study.system, current.values, found, place)
-    log.info(
-        "support %d: %s (score %.3g of the misfit), extending and refining",
-        cand.support,
-        cand.effect,
-        cand.share,
-    )
+    ext, values, res = _refined(study, current, found, cand)
     fit = study.fit
-    res = refine(
-        ext,
-        study.record,
-        {"screening": start},
-        study.refine_settings,
-        t_start=fit[0],
-        t_end=fit[1],
-        prefer="screening",
-    )
-    values = {**start, **res.params}
     ho = channel_errors(study.record, ext, values, study.held, fit)
     before = current.heldout.mean
     gain = float(study.settings.thresholds.min_name_gain)
@@ -293,6 +286,30 @@ def try_candidate(study, current: DeckState, found: list[Placed], cand: Scored) 
         report["outcome"],
     )
     return DeckState(ext, values, ho, res), report
+
+
+def _refined(study, current: DeckState, found: list[Placed], cand: Scored):
+    """The candidate's deck refined on the fitting part from its best-scored trial and the next
+    ones (``OTHER_STARTS``; the refinement keeps the start that simulates best, and the lower
+    cost): (system, values, the refinement's result)."""
+    place = Placed(cand.effect, cand.support, cand.params, cand.ctx)
+    ext, start = candidate_deck(study.system, current.values, found, place)
+    log.info(
+        "support %d: %s (score %.3g of the misfit), extending and refining",
+        cand.support,
+        cand.effect,
+        cand.share,
+    )
+    starts = {"screening": start}
+    for i, params in enumerate(cand.others, start=2):
+        starts[f"shape {i}"] = candidate_deck(
+            study.system, current.values, found, replace(place, params=params)
+        )[1]
+    fit = study.fit
+    res = refine(
+        ext, study.record, starts, study.refine_settings, t_start=fit[0], t_end=fit[1], prefer="screening"
+    )
+    return ext, {**starts.get(res.start, start), **res.params}, res
 
 
 def fit_bic(study, system, values: dict[str, float]) -> float:

@@ -136,6 +136,12 @@ class Effect(ABC):
         estimate alone by default."""
         return [params]
 
+    def shape_trials(self, params: dict[str, float], s: Signals) -> list[dict[str, float]]:
+        """Starts over the effect's grid of shapes at ``params``'s size, for a fit that has no
+        screening to read the shape from (a deck's support, scored on what it changes in the
+        channels); ``params`` alone by default."""
+        return [params]
+
     def admissible(self, params: dict[str, float], nominal: dict[str, float]) -> bool:
         """Whether a fit (the effect's ``params``, the ``nominal`` parameters refitted with it)
         describes a physical structure, beyond the coefficient signs a ``Candidate`` fixes; a

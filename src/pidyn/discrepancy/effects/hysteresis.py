@@ -44,6 +44,11 @@ class Hysteresis(Effect):
                 positive=(True,),
             )
 
+    def shape_trials(self, params, s):
+        """Every loop shape of the grid at the sampled size: a Bouc-Wen fitted from one typical
+        shape ended in a poor optimum on simulated decks (named on 1 of 6)."""
+        return [{**params, "beta": b, "gamma": g, "n": n} for b, g, n in self._grid(s)]
+
     def parameters(self, coef, fixed, nominal):
         out = {**coef, **fixed}
         out["z_max"] = float((fixed["beta"] + fixed["gamma"]) ** (-1.0 / fixed["n"]))
