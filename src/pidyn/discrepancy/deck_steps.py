@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from pidyn.data.layout import end_motions
 from pidyn.discrepancy.deck_model import (
     DeckState,
     Placed,
@@ -30,6 +31,7 @@ from pidyn.discrepancy.deck_model import (
 from pidyn.discrepancy.effects import EFFECTS
 from pidyn.discrepancy.fit_test import fit_test
 from pidyn.discrepancy.score_test import linearised_chi2, profiled_basis
+from pidyn.discrepancy.storey_nominal import refined_best
 from pidyn.refine.stage import refine
 from pidyn.starts.data import start_from_data
 from pidyn.supports import support_table
@@ -56,18 +58,9 @@ def rigid_test(study, values: dict[str, float]) -> dict[str, Any]:
     may stand for that as much as for the support."""
     record, m = study.record, fit_mask(study.record, study.fit)
     meas, H, names = channels(record)
-    off = meas[m] - (meas[m] @ np.linalg.pinv(H).T) @ H.T
-    th = study.settings.fit_test
-    f_top = float(max(modal_properties(*linear_matrices(study.system, values))["frequency_hz"]))
-    test = fit_test(
-        {n: meas[m, i] for i, n in enumerate(names)},
-        {n: meas[m, i] - off[:, i] for i, n in enumerate(names)},
-        {n: float(np.std(meas[m, i])) for i, n in enumerate(names)},
-        record.dt,
-        f_top,
-        float(th.rms_ratio),
-        float(th.min_excess),
-    )
+    rigid = end_motions(meas[m], H) @ H.T  # the best rigid motion of the deck, read by each channel
+    off = meas[m] - rigid
+    test = _channels_test(study, study.system, rigid, values)
     shares = {n: float(np.std(off[:, i]) / max(np.std(meas[m, i]), 1e-300)) for i, n in enumerate(names)}
     return {
         "rigid": not test["failed"],
@@ -118,26 +111,15 @@ def nominal_deck(study) -> tuple[DeckState, dict[str, Any]]:
         starts["data"] = {**config, **start_from_data(record.segment(*fit), system).values}
     except Exception as exc:  # a start that cannot be read leaves the config's
         log.info("no start from the data (%s)", exc)
-    best = None
-    for label, values in starts.items():
-        try:
-            res = refine(
-                system,
-                record,
-                {label: values},
-                study.refine_settings,
-                t_start=fit[0],
-                t_end=fit[1],
-                prefer=label,
-            )
-        except Exception as exc:  # a start that fails leaves the others
-            log.warning("the nominal deck from the %s start failed (%s)", label, exc)
-            continue
-        est = {**config, **res.params}
-        score = channel_errors(record, system, est, fit, fit).mean
-        log.info("nominal deck from the %s start: NRMSE %.4g on the fitting part", label, score)
-        if best is None or score < best[0]:
-            best = (score, est, res)
+    best = refined_best(
+        record,
+        system,
+        starts,
+        study.refine_settings,
+        fit,
+        config,
+        lambda est: channel_errors(record, system, est, fit, fit).mean,
+    )
     if best is None:
         raise RuntimeError(f"record '{record.name}': the nominal deck could not be refined from any start")
     _, values, res = best
@@ -155,15 +137,21 @@ def nominal_deck(study) -> tuple[DeckState, dict[str, Any]]:
 
 def deck_fit_test(study, system, values: dict[str, float]) -> dict:
     """The fit test (``pidyn.discrepancy.fit_test``) of every deck channel on the fitting part."""
+    sim = simulated_channels(system, [values], study.record)[0]
+    return _channels_test(study, system, sim[fit_mask(study.record, study.fit)], values)
+
+
+def _channels_test(study, system, predicted: np.ndarray, values: dict[str, float]) -> dict:
+    """The fit test of the deck channels on the fitting part against ``predicted`` (rows of the
+    fitting part, one column a channel); the noise read above the deck's modes at ``values``."""
     record = study.record
     meas, _, names = channels(record)
-    sim = simulated_channels(system, [values], record)[0]
     m = fit_mask(record, study.fit)
     f_top = float(max(modal_properties(*linear_matrices(system, values))["frequency_hz"]))
     th = study.settings.fit_test
     return fit_test(
         {n: meas[m, i] for i, n in enumerate(names)},
-        {n: sim[m, i] for i, n in enumerate(names)},
+        {n: predicted[:, i] for i, n in enumerate(names)},
         {n: float(np.std(meas[m, i])) for i, n in enumerate(names)},
         record.dt,
         f_top,

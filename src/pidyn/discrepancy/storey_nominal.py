@@ -94,7 +94,25 @@ POOR_FIT = 0.5
 def _refined_best(
     record: Record, system: ShearBuilding, starts: dict, settings: Any, fit: tuple[float, float], config: dict
 ) -> tuple[float, dict, Any] | None:
-    """Each start refined on its own; (fitting-part NRMSE, values, result) of the best, or None."""
+    """Each start refined on its own; (fitting-part NRMSE of the floors, values, result) of the best."""
+    return refined_best(
+        record,
+        system,
+        starts,
+        settings,
+        fit,
+        config,
+        lambda est: heldout_nrmse(record, system, est, fit).mean,
+    )
+
+
+def refined_best(
+    record: Record, system: Any, starts: dict, settings: Any, fit: tuple[float, float], config: dict, score
+) -> tuple[float, dict, Any] | None:
+    """Each start refined on its own (scoring the starts by a free simulation before refining them
+    misleads, ``nominal_fit``); (``score(values)`` on the fitting part, values, result) of the one
+    that scores lowest, or None when every start fails. Shared by the places' nominal models (a
+    building's, a deck's)."""
     best = None
     for label, values in starts.items():
         try:
@@ -105,10 +123,10 @@ def _refined_best(
             log.warning("the nominal refinement from the %s start failed (%s)", label, exc)
             continue
         est = {**config, **res.params}
-        score = heldout_nrmse(record, system, est, fit).mean
-        log.info("nominal model from the %s start: NRMSE %.4g on the fitting part", label, score)
-        if best is None or score < best[0]:
-            best = (score, est, res)
+        value = score(est)
+        log.info("nominal model from the %s start: NRMSE %.4g on the fitting part", label, value)
+        if best is None or value < best[0]:
+            best = (value, est, res)
     return best
 
 
