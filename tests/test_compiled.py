@@ -234,6 +234,31 @@ def test_rk4_uses_it_and_restarts_still_apply(monkeypatch):
     _close(on[1], off[1])
 
 
+def test_a_fit_records_its_systems_tape_once_and_simulates_the_same_bits(monkeypatch):
+    """``kernel.tapes_kept``: within a fit a system's state rate is recorded once per parameter
+    list, and every simulation is what a fresh recording gives; outside the block, each call records."""
+    system = SYSTEMS["cubic_stiffness"]
+    rng = np.random.default_rng(4)
+    t = np.arange(N) * DT
+    f = _excitation(system, 1, rng)[:, 0]
+    p = system.true_values()
+    calls = []
+    recorded = kernel._recorded
+    monkeypatch.setattr(kernel, "_recorded", lambda *a: calls.append(a) or recorded(*a))
+    fresh = [integrate.rk4(system, {**p, "k": k}, t, f, np.zeros((1, 2)))[0] for k in (25.0, 35.0)]
+    assert len(calls) == 2
+    with kernel.tapes_kept():
+        kept = [integrate.rk4(system, {**p, "k": k}, t, f, np.zeros((1, 2)))[0] for k in (25.0, 35.0)]
+        with kernel.tapes_kept():  # an inner block uses the outer one's
+            integrate.rk4(system, p, t, f, np.zeros((1, 2)))
+        other = SYSTEMS["linear_stiffness"]
+        integrate.rk4(other, other.true_values(), t, f, np.zeros((1, 2)))
+    assert len(calls) == 4  # the cubic system once, the linear one once
+    assert all(np.array_equal(a, b) for a, b in zip(fresh, kept, strict=True))
+    integrate.rk4(system, p, t, f, np.zeros((1, 2)))
+    assert len(calls) == 5  # the block's tapes are gone with it
+
+
 def test_untraceable_rates_fall_back():
     """A force that branches on a value in Python is not compiled, and the loop in Python runs it."""
     system = LinearSDOF().with_term(_Branching())

@@ -9,9 +9,12 @@ a run of a few samples, as the UKF's one-sample predictions, where Python is as 
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import ctypes
 import logging
 import os
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -34,6 +37,8 @@ _DOUBLE_P = ctypes.POINTER(ctypes.c_double)
 #: about 0.2 ms of a small system's arithmetic, a few times what handing a range to a thread costs
 MIN_SPLIT_WORK = 20_000
 _POOL: tuple[ThreadPoolExecutor, int] | None = None  # the pool and its number of threads
+#: within ``tapes_kept``: (id(system), parameter names) -> (the system, its library or None)
+_KEPT: contextvars.ContextVar[dict | None] = contextvars.ContextVar("pidyn_kept_tapes", default=None)
 
 
 def enabled() -> bool:
@@ -55,9 +60,35 @@ def _kernel(
     return _KERNELS[key]
 
 
+@contextlib.contextmanager
+def tapes_kept() -> Iterator[None]:
+    """Within the block a system's state rate is recorded once per parameter list, not at every
+    simulation: for a fit, whose hundreds of simulations change parameter values and nothing of
+    the system itself (recording a tape costs about what a short simulation does). Only around
+    code that changes no system it simulates (a learned force's weights are its tape's constants)."""
+    if _KEPT.get() is not None:  # an outer block keeps them
+        yield
+        return
+    token = _KEPT.set({})
+    try:
+        yield
+    finally:
+        _KEPT.reset(token)
+
+
 def _library(system: Any, names: list[str]) -> tuple[Any, np.ndarray] | None:
     """The compiled library of ``system``'s state rate with parameters ``names`` and its constants,
     or None where there is none (code a tape cannot follow, no C compiler)."""
+    kept = _KEPT.get()
+    if kept is None:
+        return _recorded(system, names)
+    key = (id(system), tuple(names))
+    if key not in kept:  # the system is held with it: its id is not another's while the block lasts
+        kept[key] = (system, _recorded(system, names))
+    return kept[key][1]
+
+
+def _recorded(system: Any, names: list[str]) -> tuple[Any, np.ndarray] | None:
     try:
         tape = record(system, names, system.excitation_width)
     except Exception as exc:  # noqa: BLE001 - any code a tape cannot follow is integrated in Python

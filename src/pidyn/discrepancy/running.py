@@ -18,6 +18,7 @@ import logging
 import numpy as np
 from scipy.optimize import least_squares
 
+from pidyn.compiled.kernel import tapes_kept
 from pidyn.params import to_theta
 from pidyn.refine.problem import ShootingProblem, record_channels
 from pidyn.refine.uncertainty import residual_covariance
@@ -30,6 +31,7 @@ log = logging.getLogger(__name__)
 Z95 = 1.959963984540054
 
 
+@tapes_kept()  # one system, hundreds of simulations: its tape recorded once
 def running_modes(
     record, system, values: dict[str, float], width: float, step: float | None = None, substeps: int = 4
 ) -> dict[str, np.ndarray]:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from pidyn.compiled.kernel import tapes_kept
 from pidyn.params import to_theta, trainable_specs
 from pidyn.refine.problem import ShootingProblem
 
@@ -37,6 +38,7 @@ class OutputErrorFit:
         return f"nfev={self.nfev}, cost={self.cost:.3g}"
 
 
+@tapes_kept()  # one system, hundreds of simulations: its tape recorded once
 def fit_output_error(
     record,
     system,

@@ -24,6 +24,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from pidyn.compiled.kernel import tapes_kept
 from pidyn.params import to_theta, trainable_specs
 from pidyn.refine.output_error import output_error_problem
 from pidyn.refine.period_scan import profile_point, scaled
@@ -51,6 +52,7 @@ class PeriodProfile:
         return asdict(self)
 
 
+@tapes_kept()  # one system, hundreds of simulations: its tape recorded once
 def profile_period(
     system,
     record,

@@ -24,6 +24,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
+from pidyn.compiled.kernel import tapes_kept
 from pidyn.params import to_theta, trainable_specs
 from pidyn.refine.output_error import output_error_problem
 from pidyn.refine.problem import ShootingProblem
@@ -63,6 +64,7 @@ def scaled(values: dict[str, float], powers: dict[str, float], lam: float) -> di
     return {k: v * lam ** powers[k] if k in powers else v for k, v in values.items()}
 
 
+@tapes_kept()  # one system, hundreds of simulations: its tape recorded once
 def scan_period(
     system,
     record,
@@ -110,6 +112,7 @@ def scan_period(
     return out
 
 
+@tapes_kept()  # one system, hundreds of simulations: its tape recorded once
 def profile_point(
     problem: ShootingProblem, theta0: np.ndarray, free: np.ndarray, max_nfev: int
 ) -> tuple[np.ndarray, float]:

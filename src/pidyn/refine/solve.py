@@ -23,6 +23,7 @@ from scipy.linalg import null_space
 from scipy.optimize import least_squares
 from scipy.sparse import vstack as sparse_vstack
 
+from pidyn.compiled.kernel import tapes_kept
 from pidyn.refine.normal_lm import levenberg_marquardt
 from pidyn.refine.problem import ShootingProblem
 
@@ -62,6 +63,7 @@ def _penalised(problem: ShootingProblem, mu: float, sparse: bool = False):
 DENSE_QR_LIMIT = 1e9
 
 
+@tapes_kept()  # one system, hundreds of simulations: its tape recorded once
 def _least_squares(fun, jac, u: np.ndarray, max_nfev: int, big: bool) -> tuple[np.ndarray, int, int]:
     if big:
         out = levenberg_marquardt(fun, jac, u, max_nfev=max_nfev)
