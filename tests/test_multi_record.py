@@ -15,7 +15,7 @@ from pidyn import Record
 from pidyn.config import make_system
 from pidyn.data.errors import DataError
 from pidyn.data.meta import RecordMeta
-from pidyn.data.multi import concatenate, pieces
+from pidyn.data.multi import concatenate, pieces, split
 from pidyn.data.windows import make_windows
 from pidyn.refine.problem import ShootingProblem, record_channels, segment_bounds
 from pidyn.simulate import simulate_response
@@ -314,3 +314,104 @@ def test_the_default_several_event_run_fits_its_linear_model_beside_and_a_predic
         compose("train", groups={"data": "csmip"}, overrides=over[:1][:0] + ["data.path=x.zip"]).linear_system
         is None
     )
+
+
+def test_a_record_of_several_splits_back_into_its_records():
+    a, b = _records()
+    parts = split(concatenate([a, b]))
+    assert [p.name for p in parts] == [a.name, b.name]
+    for part, own in zip(parts, (a, b), strict=True):
+        assert np.allclose(part.t, own.t - own.t[0], rtol=0, atol=1e-9) and np.array_equal(part.x, own.x)
+        assert np.array_equal(part.f, own.f) and part.meta.pieces is None
+    assert split(a) == [a]
+    # a run that held out the end of its last record chooses its model without that part
+    from dataclasses import replace
+
+    from pidyn.data.meta import Split
+    from pidyn.runs.model_choice import fitting_records
+
+    held = [replace(r, meta=r.meta.with_(split=Split.at(5.0, float(r.t[-1])))) for r in (a, b)]
+    joined = concatenate(held)
+    first, last = fitting_records(joined, hold_out=True)
+    assert first.t[-1] == pytest.approx(a.t[-1]) and last.t[-1] == pytest.approx(5.0)
+    assert fitting_records(joined, hold_out=False)[1].t[-1] == pytest.approx(b.t[-1])
+
+
+def _amplitude_runs(soft: float, gain: float):
+    """Three records of an amplitude-dependent structure, weak to strong, and the config of a run
+    from several records with the linear model of the same layout beside it."""
+    from omegaconf import open_dict
+
+    from pidyn.config import compose
+    from pidyn.data.multi import concatenate
+    from pidyn.starts.data import structure_scale
+
+    system = make_system("amplitude", soft=soft, gain=gain, tau=1.0)
+    kw = dict(duration=10.0, dt=0.02, channels=("a",))
+    recs = [
+        Record.simulate(system, ev, scale=s, seed=i, noise=0.01, **kw)
+        for i, (ev, s) in enumerate((("el_centro", 0.1), ("kobe", 0.3), ("northridge", 0.5)))
+    ]
+    joined = concatenate(recs)
+    cfg = compose(
+        "train",
+        groups={"system": "amplitude"},
+        values={f"system.{k}": v for k, v in structure_scale(joined).items()},
+    )
+    with open_dict(cfg):
+        cfg.linear_system = compose("train", groups={"system": "linear"}).system
+    return cfg, joined
+
+
+def test_the_run_keeps_its_amplitude_model_where_its_left_out_records_say_it_predicts_better():
+    """``model_choice``: each record predicted by both models refitted without it. Records of a
+    structure that softens in strong shaking: the amplitude model predicts every left-out record
+    better than the linear model of its layout, and is kept."""
+    from pidyn.refine.output_error import fit_output_error
+    from pidyn.runs.build import system_and_record
+    from pidyn.runs.linear_beside import linear_config
+    from pidyn.runs.model_choice import ChoiceSettings, choose_model
+
+    cfg, joined = _amplitude_runs(soft=0.8, gain=1.5)
+    system, _ = system_and_record(cfg, joined)
+    linear, _ = system_and_record(linear_config(cfg), joined)
+    lin_fit = fit_output_error(joined, linear, {"k": 500.0, "c": 3.0})
+    truth = make_system("amplitude", soft=0.8, gain=1.5, tau=1.0).true_values()
+    out = choose_model(cfg, system, joined, truth, {"params": lin_fit.params}, ChoiceSettings(folds=5))
+    assert out is not None and out["chosen"] == "nonlinear" and "note" not in out
+    assert [r["record"] for r in out["records"]] == [p.name for p in pieces(joined)]  # each left out once
+    assert out["nonlinear_better"] == "3 of 3"
+    assert out["mean_nrmse_a"]["nonlinear"] < 0.5 * out["mean_nrmse_a"]["linear"]
+    assert (
+        choose_model(cfg, system, split(joined)[0], truth, {"params": lin_fit.params}) is None
+    )  # one record
+
+
+def test_a_run_whose_records_chose_the_linear_model_predicts_with_it(tmp_path):
+    """Where ``model_choice`` chose the linear model beside the run's own, ``predict.py`` and
+    ``pidyn.predict`` simulate that one: its prediction is the linear model's score."""
+    from pidyn.runs.model_choice import ChoiceSettings, _decide
+    from pidyn.runs.prediction import Identified, predict_record
+
+    rows = [
+        {"record": "a", "nonlinear": 0.9, "linear": 0.5},
+        {"record": "b", "nonlinear": 0.4, "linear": 0.45},
+    ]
+    choice = _decide("amplitude", "linear_sdof", rows, 1.0)
+    assert choice["chosen"] == "linear" and choice["note"].endswith("[nonlinear_not_earned]")
+    assert choice["nonlinear_better"] == "1 of 2"
+    cfg, joined = _amplitude_runs(soft=0.8, gain=1.5)
+    truth = make_system("amplitude", soft=0.8, gain=1.5, tau=1.0).true_values()
+    linear = {"system": "linear_sdof", "params": {"k": 450.0, "c": 4.0}}
+    scale = {k: cfg.system[k] for k in ("w0", "a_ref")}
+    run = Identified(
+        tmp_path, cfg, {"params": truth, "scale": scale, "linear_model": linear, "system": "amplitude"}
+    )
+    own, _ = predict_record(run, split(joined)[2])
+    chosen = Identified(tmp_path, cfg, {**run.metrics, "model_choice": choice}).chosen()
+    assert chosen.metrics["system"] == "linear_sdof" and run.chosen() is run
+    out, _ = predict_record(chosen, split(joined)[2])
+    assert out["mean_nrmse_a"] == pytest.approx(out["linear_mean_nrmse_a"], rel=1e-9)
+    assert out["mean_nrmse_a"] > own["mean_nrmse_a"] and out["model_choice"] == "linear"
+    with pytest.raises(ValueError, match="model_choice: unknown setting"):
+        ChoiceSettings.of({"fold": 3})

@@ -296,7 +296,7 @@ def _predict_record(result: Result, record: Record) -> RecordPrediction:
     )
 
     with _user_errors(), _progress():
-        run = Identified.load(result.run_dir)
+        run = Identified.load(result.run_dir).chosen()  # as predict.py: the model the run's records chose
         system, rec, values = run.for_record(record=record)
         scores, sim = predict_record(run, rec, system, values)
     measured, predicted = {}, {}

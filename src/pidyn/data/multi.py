@@ -98,6 +98,46 @@ def concatenate(records: Sequence, name: str | None = None):
     )
 
 
+def split(record) -> list:
+    """The records a record of several is made of (``pieces``), each by itself again: its own
+    time from 0 and its own metadata. A plain record: itself."""
+    parts = pieces(record)
+    if len(parts) == 1:
+        return [record]
+    out = []
+    for p in parts:
+        sl = slice(p.i0, p.i1)
+        origin = p.origin or RecordMeta()
+        meta = record.meta.with_(
+            pieces=None,
+            sensor_a=None if record.meta.sensor_a is None else np.asarray(record.meta.sensor_a)[sl],
+            paths=None,
+            notes=[],
+            pga=origin.pga,
+            split=None,
+            path=origin.path,
+            span=origin.span,
+            t_offset=origin.t_offset,
+            event=origin.event,
+            run=origin.run,
+        )
+        cut = lambda a: None if a is None else a[sl]  # noqa: E731
+        out.append(
+            replace(
+                record,
+                name=p.name,
+                t=record.t[sl] - p.t_offset,
+                f=record.f[sl],
+                x=cut(record.x),
+                v=cut(record.v),
+                a=cut(record.a),
+                clean=None,
+                meta=meta,
+            )
+        )
+    return out
+
+
 def _joined_split(records: list, last: Piece, t: np.ndarray) -> Split | None:
     """The fitting part of records laid end to end: all but the last one's held-out share."""
     split = records[-1].meta.split

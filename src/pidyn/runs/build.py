@@ -100,6 +100,7 @@ class Run:
     start: Any = None  # the start read from the data (``pidyn.starts.data``), or None
     hold_out: bool = False  # identified on the record's fitting part; its held-out part judges the model
     linear_model: dict | None = None  # the linear model of the same layout fitted beside it (linear_beside)
+    model_choice: dict | None = None  # which of the two its own records, each left out, predict better
 
 
 def build_run(cfg: DictConfig, record: Record | None) -> Run:

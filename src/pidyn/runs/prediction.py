@@ -84,7 +84,20 @@ class Identified:
         if found is None:
             return None
         cfg, values = found
-        return Identified(self.run_dir, cfg, {**self.metrics, "params": values, "scale": {}})
+        system = (self.metrics.get("linear_model") or {}).get("system")
+        return Identified(
+            self.run_dir, cfg, {**self.metrics, "params": values, "scale": {}, "system": system}
+        )
+
+    def chosen(self) -> Identified:
+        """The model the run stands behind: its own, or the linear model beside it where its own
+        records, each left out and predicted, said its nonlinear terms did not earn their place
+        (``metrics.json``'s ``model_choice``, ``pidyn.runs.model_choice``)."""
+        if (self.metrics.get("model_choice") or {}).get("chosen") == "linear":
+            linear = self.linear_beside()
+            if linear is not None:
+                return linear
+        return self
 
     @property
     def record_meta(self) -> dict[str, Any]:
@@ -190,6 +203,7 @@ def predict_record(
         "beats_trivial": _beats(ours["mean_nrmse_a"], knows_nothing["mean_nrmse_a"]),
         "run": str(run.run_dir),
         "system": run.metrics.get("system"),
+        "model_choice": (run.metrics.get("model_choice") or {}).get("chosen"),
         "identified_on": run.metrics.get("record"),
         "record": record.name,
         "seen_by_run": record.name in str(run.metrics.get("record") or "").split("+"),

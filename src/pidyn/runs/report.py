@@ -83,6 +83,10 @@ def write_report(
         }
     if run.linear_model is not None:
         metrics["linear_model"] = run.linear_model
+    if run.model_choice is not None:
+        metrics["model_choice"] = run.model_choice
+        if run.model_choice.get("note"):
+            metrics["notes"] = list(metrics.get("notes") or []) + [run.model_choice["note"]]
     write_json(run_dir / "windows.json", {"windows": [r.__dict__ for r in results]})
     adequacy = _adequacy(run, final, sim)
     _assess(run, final, refined, sim, metrics, adequacy["adequate"])
@@ -212,9 +216,26 @@ def write_run_report(run_dir: Path, equation: str, metrics: dict) -> None:
     lines += ["", f"Knowing nothing: {ad['trivial']}."]
     if metrics.get("supports"):
         lines += ["", "## Supports (per kg of deck)", "", *support_lines(metrics["supports"])]
+    if metrics.get("model_choice"):
+        lines += ["", *_choice_lines(metrics["model_choice"], metrics["system"])]
     if metrics.get("notes"):
         lines += ["", "## Notes", ""] + [f"- {n}" for n in metrics["notes"]]
     write_text_atomic(run_dir / "report.md", "\n".join(lines) + "\n")
+
+
+def _choice_lines(choice: dict, system: str) -> list[str]:
+    """report.md's table of the run's own records, each predicted by both models refitted without it."""
+    used = (
+        "its own" if choice["chosen"] == "nonlinear" else f"the linear model beside it ({choice['system']})"
+    )
+    lines = ["## Which model predicts (each record left out)", ""]
+    lines += [f"Predictions use {used}: {choice['rule']}.", ""]
+    lines += [f"| left-out record | {system} | linear |", "|---|---|---|"]
+    for r in choice["records"]:
+        lines.append(f"| {r['record']} | {r['nonlinear']:.3g} | {r['linear']:.3g} |")
+    means = choice["mean_nrmse_a"]
+    lines.append(f"| mean | {means['nonlinear']:.3g} | {means['linear']:.3g} |")
+    return lines
 
 
 def _building(run: Run, final: dict[str, float], truths: dict, refined: Any, metrics: dict) -> None:

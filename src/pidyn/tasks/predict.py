@@ -19,7 +19,7 @@ from pidyn.config import check_settings
 from pidyn.reporting import write_json
 from pidyn.runs.folder import run_folder
 from pidyn.runs.physics_only import physics_only
-from pidyn.runs.prediction import Identified, figure, predict_record
+from pidyn.runs.prediction import Identified, figure, predict_record, score
 
 log = logging.getLogger(__name__)
 
@@ -42,10 +42,20 @@ def predict_in(cfg: DictConfig, folder: Path) -> dict[str, Any]:
         raise ValueError(
             "the record to predict is needed: data=csmip data.path=C.zip (or data=xsens, data=csv)"
         )
-    run = Identified.load(cfg.run)
+    own = Identified.load(cfg.run)
+    run = own.chosen()  # the linear model beside it, where the run's own records chose it
     system, record, values = run.for_record(cfg.data)
     linear_run = Identified.load(cfg.linear_run) if cfg.get("linear_run") else None
     out, sim = predict_record(run, record, system, values, linear_run, cfg.data)
+    if run is not own:
+        own_system, _, own_values = own.for_record(record=record)
+        out["nonlinear_mean_nrmse_a"] = score(own_system, own_values, record)["mean_nrmse_a"]
+        log.warning(
+            "the run's own records chose its linear model (model_choice): %s predicts; its nonlinear model "
+            "would have scored mean NRMSE %s",
+            run.metrics.get("system"),
+            _fmt(out["nonlinear_mean_nrmse_a"]),
+        )
     if cfg.get("physics_only"):
         entry = physics_only(run.cfg, system, values, record, sim, cfg.physics)
         out["physics_only"] = {k: v for k, v in entry.items() if k != "response"}

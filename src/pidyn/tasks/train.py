@@ -21,6 +21,7 @@ from pidyn.runs.build import build_run
 from pidyn.runs.folder import is_complete, run_folder
 from pidyn.runs.linear_beside import fit_linear_beside
 from pidyn.runs.methods import run_baselines, run_refinement, start_baselines
+from pidyn.runs.model_choice import ChoiceSettings, choose_model
 from pidyn.runs.report import write_report
 
 log = logging.getLogger(__name__)
@@ -74,7 +75,22 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     t = _lap(stages, "refinement", t)
     run.linear_model = fit_linear_beside(cfg, run.record, run.hold_out)
     if run.linear_model is not None:
-        _lap(stages, "linear_beside", t)
+        t = _lap(stages, "linear_beside", t)
+        final = {
+            **run.module.net.params.as_floats(),
+            **(refined.params if refined is not None else pidyn_values),
+        }
+        run.model_choice = choose_model(
+            cfg,
+            run.system,
+            run.record,
+            final,
+            run.linear_model,
+            ChoiceSettings.of(cfg.get("model_choice")),
+            run.hold_out,
+        )
+        if run.model_choice is not None:
+            _lap(stages, "model_choice", t)
     metrics = write_report(cfg, run, results, pidyn_values, baselines, refined, t_wall, stages)
     objects = {
         "module": run.module,

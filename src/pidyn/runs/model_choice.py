@@ -1,0 +1,164 @@
+"""Which model a run from several records stands behind: its own nonlinear model, or the linear
+model of the same layout fitted beside it (``linear_beside``), chosen by how each predicts the
+run's records that it was not fitted to.
+
+The records are split into folds (each record by itself where there are few). For each fold both
+models are refitted by output error on the other records, from the run's own values, and each
+fold's records are simulated from rest under their own input motions, as ``predict.py`` does
+with a record the run never saw. The nonlinear model is kept when its mean NRMSE over those
+predictions is below the linear model's; otherwise the run says its nonlinear terms did not earn
+their place on its own records, and its predictions use the linear model. The mean, not the
+median: a model that fails badly on one unseen record is the one not to hand on. The choice
+looks at the run's own records only; nothing of a record to be predicted enters it.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+from omegaconf import DictConfig
+
+from pidyn.data.multi import concatenate, pieces, split
+from pidyn.data.sources import Record
+from pidyn.notes import note
+from pidyn.params import fixed_values
+from pidyn.refine.output_error import fit_output_error
+from pidyn.runs.build import system_and_record
+from pidyn.runs.linear_beside import linear_config
+from pidyn.runs.prediction import score
+from pidyn.systems.base import StructuralSystem
+
+log = logging.getLogger(__name__)
+
+NONLINEAR, LINEAR = "nonlinear", "linear"
+
+
+@dataclass(frozen=True)
+class ChoiceSettings:
+    """``model.choice``: the folds (at most; fewer records: one a fold) and each refit's budget."""
+
+    enabled: bool = True
+    folds: int = 5
+    max_nfev: int = 20
+
+    @classmethod
+    def of(cls, node: Any) -> ChoiceSettings:
+        """From the config's ``model_choice`` (None: the defaults); a key it does not know is named."""
+        values = dict(node or {})
+        unknown = sorted(set(values) - {f.name for f in fields(cls)})
+        if unknown:
+            raise ValueError(f"model_choice: unknown setting(s) {unknown}; known: enabled, folds, max_nfev")
+        return cls(**values)
+
+
+def fold_indices(n: int, folds: int) -> list[list[int]]:
+    """Record i in fold i mod k, k = min(n, folds): every record is left out once."""
+    k = max(1, min(n, int(folds)))
+    return [list(range(j, n, k)) for j in range(k)]
+
+
+def choose_model(
+    cfg: DictConfig,
+    system: StructuralSystem,
+    record: Record,
+    values: dict[str, float],
+    linear: dict[str, Any] | None,
+    settings: ChoiceSettings | None = None,
+    hold_out: bool = False,
+) -> dict[str, Any] | None:
+    """metrics.json's ``model_choice``: the chosen model, both means and every left-out record's
+    NRMSE; None where there is nothing to choose (one record, no linear model beside, off)."""
+    settings = settings or ChoiceSettings()
+    records = fitting_records(record, hold_out)
+    lin_cfg = linear_config(cfg)
+    if not settings.enabled or linear is None or lin_cfg is None or len(records) < 2:
+        return None
+    t0 = time.perf_counter()
+    lin_system, _ = system_and_record(lin_cfg, record)
+    lin_values = {**fixed_values(lin_system), **linear["params"]}
+    rows = []
+    for held in fold_indices(len(records), settings.folds):
+        train = concatenate([r for i, r in enumerate(records) if i not in held])
+        fits = {
+            NONLINEAR: _refit(train, system, values, settings.max_nfev),
+            LINEAR: _refit(train, lin_system, lin_values, settings.max_nfev),
+        }
+        for i in held:
+            row = {"record": records[i].name}
+            for key, model in ((NONLINEAR, system), (LINEAR, lin_system)):
+                row[key] = _scored(model, fits[key], records[i])
+            rows.append(row)
+            log.info(
+                "left out %s: NRMSE %.3g with the nonlinear model, %.3g with the linear one (fitted on the others)",
+                row["record"],
+                row[NONLINEAR],
+                row[LINEAR],
+            )
+    return _decide(system.name, lin_system.name, rows, time.perf_counter() - t0)
+
+
+def fitting_records(record: Record, hold_out: bool) -> list[Record]:
+    """The run's records, each by itself; where the run held out the end of its last record
+    (``hold_out``), that record up to its fitting part's end: the held-out part judges the run
+    afterwards and takes no part in choosing its model."""
+    records = split(record)
+    fit = record.meta.split.fit if hold_out and record.meta.split is not None else None
+    if fit is not None and len(records) > 1:
+        records[-1] = records[-1].segment(None, fit[1] - pieces(record)[-1].t_offset)
+    return records
+
+
+def _refit(
+    train: Record, system: StructuralSystem, values: dict[str, float], max_nfev: int
+) -> dict[str, float] | None:
+    """The model's values refitted on ``train`` from ``values`` (None: the fit failed)."""
+    try:
+        fit = fit_output_error(train, system, values, max_nfev=max_nfev)
+    except (ValueError, RuntimeError, FloatingPointError, np.linalg.LinAlgError) as exc:
+        log.warning("%s could not be refitted without the left-out records: %s", system.name, exc)
+        return None
+    return {**values, **fit.params}
+
+
+def _scored(system: StructuralSystem, values: dict[str, float] | None, record: Record) -> float:
+    """Mean NRMSE of the record's accelerations simulated from rest (inf: no fit, or it blew up)."""
+    if values is None:
+        return float("inf")
+    with np.errstate(all="ignore"):
+        mean = score(system, values, record)["mean_nrmse_a"]
+    return float(mean) if mean is not None and np.isfinite(mean) else float("inf")
+
+
+def _decide(nonlinear: str, linear: str, rows: list[dict], seconds: float) -> dict[str, Any]:
+    means = {key: float(np.mean([r[key] for r in rows])) for key in (NONLINEAR, LINEAR)}
+    kept = means[NONLINEAR] < means[LINEAR]
+    chosen = NONLINEAR if kept else LINEAR
+    better = sum(r[NONLINEAR] < r[LINEAR] for r in rows)
+    out = {
+        "chosen": chosen,
+        "system": nonlinear if kept else linear,
+        "rule": "the lower mean NRMSE of the accelerations over the run's records, each predicted by "
+        "the model refitted without it (from rest, its own input motions)",
+        "mean_nrmse_a": means,
+        "nonlinear_better": f"{better} of {len(rows)}",
+        "records": rows,
+        "seconds": seconds,
+    }
+    text = (
+        f"the run's records, each left out and predicted: mean NRMSE {means[NONLINEAR]:.3g} with {nonlinear}, "
+        f"{means[LINEAR]:.3g} with {linear} (the nonlinear model better on {better} of {len(rows)})"
+    )
+    if kept:
+        log.info("%s: the nonlinear model is kept", text)
+    else:
+        out["note"] = note(
+            "nonlinear_not_earned",
+            f"{text}: its nonlinear terms do not predict records it was not fitted to better; "
+            f"predictions use {linear}",
+        )
+        log.warning(out["note"])
+    return out
