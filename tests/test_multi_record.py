@@ -415,3 +415,16 @@ def test_a_run_whose_records_chose_the_linear_model_predicts_with_it(tmp_path):
     assert out["mean_nrmse_a"] > own["mean_nrmse_a"] and out["model_choice"] == "linear"
     with pytest.raises(ValueError, match="model_choice: unknown setting"):
         ChoiceSettings.of({"fold": 3})
+
+
+def test_a_prediction_says_when_its_record_shakes_harder_or_more_weakly_than_the_runs_records(tmp_path):
+    from pidyn.runs.prediction import Identified, training_range
+
+    records = [{"name": "a", "pga": 1.0}, {"name": "b", "pga": 3.0}]
+    run = Identified(tmp_path, None, {"record_meta": {"records": records, "pga": 3.0}})
+    assert training_range(run, 4.5) == {"training_pga": [1.0, 3.0], "beyond_training": 1.5}
+    assert training_range(run, 0.5)["beyond_training"] == 0.5
+    assert training_range(run, 2.0)["beyond_training"] is None
+    one = Identified(tmp_path, None, {"record_meta": {"pga": 2.0}})  # one record: its own peak
+    assert training_range(one, 2.0) == {"training_pga": [2.0, 2.0], "beyond_training": None}
+    assert training_range(one, None) == {"training_pga": None, "beyond_training": None}

@@ -208,9 +208,26 @@ def predict_record(
         "record": record.name,
         "seen_by_run": record.name in str(run.metrics.get("record") or "").split("+"),
         "pga": record.meta.pga,
+        **training_range(run, record.meta.pga),
         "simulated": "from rest, the record's own input motions, fixed-step RK4",
     }
     return out, ours["sim"]
+
+
+def training_range(run: Identified, pga: float | None) -> dict[str, Any]:
+    """The peak input accelerations of the records the run was identified on (``training_pga``:
+    [smallest, largest]) and, where the predicted record's lies outside them, by what factor
+    (``beyond_training``: above 1 stronger than any, below 1 weaker): a model whose stiffness
+    follows the amplitude is extrapolated there, and a linear one was never shown that shaking."""
+    meta = run.record_meta
+    pgas = [float(r["pga"]) for r in meta.get("records") or [] if r.get("pga")]
+    if not pgas and meta.get("pga"):
+        pgas = [float(meta["pga"])]
+    if not pgas or not pga:
+        return {"training_pga": None, "beyond_training": None}
+    lo, hi = min(pgas), max(pgas)
+    factor = pga / hi if pga > hi else (pga / lo if pga < lo else None)
+    return {"training_pga": [lo, hi], "beyond_training": factor}
 
 
 def _beats(ours: float | None, theirs: float | None) -> bool | None:

@@ -16,6 +16,7 @@ from typing import Any
 from omegaconf import DictConfig
 
 from pidyn.config import check_settings
+from pidyn.notes import note
 from pidyn.reporting import write_json
 from pidyn.runs.folder import run_folder
 from pidyn.runs.physics_only import physics_only
@@ -77,6 +78,16 @@ def _log(out: dict[str, Any]) -> None:
         log.warning(
             "%s is one of the records the run was identified on: this is a fit, not a prediction",
             out["record"],
+        )
+    if out.get("beyond_training") is not None:
+        lo, hi = out["training_pga"]
+        log.warning(
+            note(
+                "beyond_training_amplitude",
+                f"{out['record']}: its peak input acceleration {out['pga']:.3g} is {out['beyond_training']:.3g} "
+                f"times the {'strongest' if out['beyond_training'] > 1 else 'weakest'} of the run's records "
+                f"({lo:.3g}-{hi:.3g}): the model is extrapolated to this shaking",
+            )
         )
     if out["beats_trivial"] is False:
         log.warning(
