@@ -246,12 +246,16 @@ def table(rows: list[dict], own: dict, systems: list[str]) -> list[dict]:
         ref = list((res.get(systems[0]) or {}).get("nrmse") or {})  # the reference model's channels
         for s in systems:
             line[f"{s}_nrmse_a"] = (res.get(s) or {}).get("mean_nrmse_a")
+            # "linear" where the run's own events chose the linear model beside it (pidyn.runs.model_choice)
+            line[f"{s}_model"] = (res.get(s) or {}).get("model_choice")
             scores = (res.get(s) or {}).get("nrmse") or {}
             line[f"{s}_nrmse_ref"] = median([scores.get(c) for c in ref]) if ref else None
         line["srim_nrmse_a"] = r.get("srim_nrmse_a")
         first = next((v for v in res.values() if v), {})
         line["trivial_nrmse_a"] = first.get("trivial_mean_nrmse_a")
         line["trivial"] = first.get("trivial")
+        # the event's PGA against the training events' range (None: within it)
+        line["beyond_training"] = first.get("beyond_training")
         out.append(line)
     return out
 
