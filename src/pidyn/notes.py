@@ -27,6 +27,7 @@ CODES: dict[str, str] = {
     "latent_start_undetermined": "the latent least-squares start does not determine the latent shape here",
     "on_clamp_bound": "a parameter ended a window on its 3-sigma clamp bound",
     # the refinement and its intervals
+    "polished_from_rest": "a model from several records: the shooting estimate finished by output error from rest, as predictions simulate it",
     "starts_diverge": "no starting estimate simulates the record without blowing up",
     "start_not_preferred": "the preferred start simulates the record worse than another; the other was used",
     "period_scan_moved": "a scan of the period found a lower basin of the cost than the local solve",

@@ -29,6 +29,8 @@ class RefineSettings:
     period_scan: bool = True  # linear models: look for a lower basin of the period (``period_scan``)
     #: one linear mode: the period's profile-likelihood interval (``period_profile``)
     period_profile: bool = True
+    #: several records: output-error evaluations from rest that finish the estimate (``polish``); 0: none
+    polish_several: int = 20
 
     def __post_init__(self) -> None:
         if self.states not in STATE_SOURCES:

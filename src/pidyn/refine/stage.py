@@ -21,6 +21,7 @@ from scipy.stats import chi2
 
 from pidyn.notes import note
 from pidyn.params import to_theta
+from pidyn.refine import polish
 from pidyn.refine.period_profile import profile_period
 from pidyn.refine.period_scan import scan_period
 from pidyn.refine.problem import ShootingProblem
@@ -72,6 +73,8 @@ class RefineResult:
     period_scan: dict = field(default_factory=dict)
     #: the period's adjusted profile likelihood (``pidyn.refine.period_profile.PeriodProfile``); empty: none ran
     period_profile: dict = field(default_factory=dict)
+    #: several records: the output-error finish from rest (``pidyn.refine.polish``); empty: none ran
+    polish: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -107,34 +110,53 @@ def refine(
     test: dict = {}
     if settings.initial_state == "auto":
         problem, u, converged, test = _test_rest(problem, u, converged, settings, rep.history)
-    r, J, c, C = problem.linearize(u)
-    theta, states = problem.unpack(u)
-    ints, corr, cond, cov, lags, notes = _uncertainty(problem, r, J, C, theta)
+    final, theta, (r, J, C), shooting, polished = _finish(record, problem, u, settings)
+    ints, corr, cond, cov, lags, notes = _uncertainty(final, r, J, C, theta)
     return RefineResult(
-        params=problem.values(theta),
+        params=final.values(theta),
         intervals=ints,
         correlation=corr.tolist(),
         names=problem.names,
-        noise_std=estimate_noise(problem, r),
-        notes=starts.notes + test.pop("notes", []) + notes,
+        noise_std=estimate_noise(final, r),
+        notes=starts.notes + test.pop("notes", []) + ([polished["note"]] if polished else []) + notes,
         start=used,
         start_costs=starts.costs,
-        initial_state=states[0].tolist(),
-        cost=float(r @ r),
-        max_defect=float(np.max(np.abs(c))) if c.size else 0.0,
+        initial_state=shooting["initial_state"],
+        cost=shooting["cost"],
+        max_defect=shooting["max_defect"],
         segments=problem.S,
         condition_number=cond,
         converged=bool(converged),
         seconds=time.perf_counter() - t_wall,
         state_source=settings.states,
-        initial_state_mode="free" if problem.free_state0 else "rest",
         rest_test=test,
         history=rep.history,
         covariance=cov.tolist(),
         covariance_lags=lags,
         period_scan=scan.to_dict() if scan is not None else {},
         period_profile=_period_profile(record, problem, theta, settings),
+        polish=polished,
+        initial_state_mode="rest" if polished else ("free" if problem.free_state0 else "rest"),
     )
+
+
+def _finish(record, problem: ShootingProblem, u: np.ndarray, settings: RefineSettings):
+    """The problem whose solution is the estimate, its coordinates and linearization (r, J, C),
+    the shooting solution's cost, largest defect and initial state, and the polish: for several
+    records the output-error finish from rest (``pidyn.refine.polish``), else the shooting problem."""
+    r, J, c, C = problem.linearize(u)
+    theta, states = problem.unpack(u)
+    shooting = {
+        "cost": float(r @ r),
+        "max_defect": float(np.max(np.abs(c))) if c.size else 0.0,
+        "initial_state": states[0].tolist(),
+    }
+    if not polish.applies(record, problem, settings):
+        return problem, theta, (r, J, C), shooting, {}
+    final, theta, polished = polish.polish_from_rest(record, problem, theta, settings)
+    r, J, _, C = final.linearize(theta)
+    shooting["initial_state"] = [0.0] * problem.ns  # the polished model starts each record at rest
+    return final, theta, (r, J, C), shooting, polished
 
 
 def _period_scan(record, problem: ShootingProblem, starts: _Starts, rep, used: str, settings: RefineSettings):

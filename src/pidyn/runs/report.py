@@ -81,12 +81,7 @@ def write_report(
         metrics["baselines"] = {
             b["method"]: {"error_pct": b.get("error_pct"), "seconds": b["seconds"]} for b in baselines
         }
-    if run.linear_model is not None:
-        metrics["linear_model"] = run.linear_model
-    if run.model_choice is not None:
-        metrics["model_choice"] = run.model_choice
-        if run.model_choice.get("note"):
-            metrics["notes"] = list(metrics.get("notes") or []) + [run.model_choice["note"]]
+    _beside(run, metrics)
     write_json(run_dir / "windows.json", {"windows": [r.__dict__ for r in results]})
     adequacy = _adequacy(run, final, sim)
     _assess(run, final, refined, sim, metrics, adequacy["adequate"])
@@ -188,6 +183,17 @@ def _record_adequacy(result: dict[str, Any], metrics: dict) -> None:
         metrics["heldout"]["beats_trivial"] = result["predicts"]
     if not result["adequate"]:
         metrics["notes"].append(note("model_inadequate", describe(result)))
+
+
+def _beside(run: Run, metrics: dict) -> None:
+    """The linear model of the same layout fitted beside the run's, and which of the two the run's
+    own records chose (``pidyn.runs.model_choice``), with its note."""
+    if run.linear_model is not None:
+        metrics["linear_model"] = run.linear_model
+    if run.model_choice is not None:
+        metrics["model_choice"] = run.model_choice
+        if run.model_choice.get("note"):
+            metrics["notes"] = list(metrics.get("notes") or []) + [run.model_choice["note"]]
 
 
 def write_run_report(run_dir: Path, equation: str, metrics: dict) -> None:
