@@ -205,6 +205,13 @@ def test_one_amplitude_dependent_model_from_a_weak_and_a_strong_earthquake():
     res = refine(system, concatenate([weak, strong]), {"guess": guess}, RefineSettings(states="simulated"))
     for name in ("c", "k", "soft", "gain", "tau"):
         assert res.params[name] == pytest.approx(truth[name], rel=1e-4), name
+    # several records: the estimate is finished from rest, as a prediction simulates it
+    assert res.polish["evaluations"] > 0 and res.polish["cost_after"] <= res.polish["cost_before"]
+    assert res.initial_state_mode == "rest" and res.initial_state == [0.0] * system.n_state
+    assert any(n.endswith("[polished_from_rest]") for n in res.notes)
+    assert all(res.intervals[n]["ci95"][0] < res.params[n] < res.intervals[n]["ci95"][1] for n in ("k", "soft"))
+    one = refine(system, strong, {"guess": res.params}, RefineSettings(states="simulated", period_scan=False))
+    assert one.polish == {}  # one record: the shooting estimate, its initial state free where the data say so
 
 
 def test_the_amplitude_models_scale_is_read_from_its_records_and_kept_for_prediction(tmp_path):
