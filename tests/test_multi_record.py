@@ -209,7 +209,9 @@ def test_one_amplitude_dependent_model_from_a_weak_and_a_strong_earthquake():
     assert res.polish["evaluations"] > 0 and res.polish["cost_after"] <= res.polish["cost_before"]
     assert res.initial_state_mode == "rest" and res.initial_state == [0.0] * system.n_state
     assert any(n.endswith("[polished_from_rest]") for n in res.notes)
-    assert all(res.intervals[n]["ci95"][0] < res.params[n] < res.intervals[n]["ci95"][1] for n in ("k", "soft"))
+    assert all(
+        res.intervals[n]["ci95"][0] < res.params[n] < res.intervals[n]["ci95"][1] for n in ("k", "soft")
+    )
     one = refine(system, strong, {"guess": res.params}, RefineSettings(states="simulated", period_scan=False))
     assert one.polish == {}  # one record: the shooting estimate, its initial state free where the data say so
 
