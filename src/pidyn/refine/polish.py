@@ -19,6 +19,7 @@ import numpy as np
 
 from pidyn.integrate import piece_starts
 from pidyn.notes import note
+from pidyn.params import to_theta
 from pidyn.refine.output_error import fit_output_error, output_error_problem
 from pidyn.refine.problem import ShootingProblem
 from pidyn.refine.settings import RefineSettings
@@ -39,19 +40,17 @@ def polish_from_rest(
     t0 = time.perf_counter()
     span = record.segment(None, float(problem.t[problem.bounds[-1]]))
     values = problem.values(theta)
-    start, theta_start = output_error_problem(span, problem.system, values, problem.substeps)
-    before = _cost(start, theta_start)
+    oe, theta_start = output_error_problem(span, problem.system, values, problem.substeps)
+    before = _cost(oe, theta_start)
     fit = fit_output_error(span, problem.system, values, problem.substeps, max_nfev=settings.polish_several)
-    polished = {**values, **fit.params}
-    oe, theta_oe = output_error_problem(span, problem.system, polished, problem.substeps)
-    after = _cost(oe, theta_oe)
-    if not after <= before:  # the solve keeps its best point; a cost that rose is a bug, not data
+    theta_oe, after = to_theta(oe.specs, {**values, **fit.params}), float(fit.cost)
+    if not after <= before:  # the solve ends no higher than it starts; a cost that rose is a bug, not data
         log.warning(
             "the polish from rest did not lower the cost (%.6g -> %.6g); the shooting estimate kept",
             before,
             after,
         )
-        oe, theta_oe, after = start, theta_start, before
+        theta_oe, after = theta_start, before
     out = {
         "evaluations": int(fit.nfev),
         "cost_before": before,

@@ -61,7 +61,7 @@ def write_report(
     names = params.trainable_names
     truths = {n: (record.truth or {}).get(n) for n in names}
     values = dict(refined.params) if refined is not None else dict(pidyn_values)
-    final = {**params.as_floats(), **values}
+    final = final_values(run, refined, pidyn_values)
     notes = [n for r in results for n in (r.notes or [])] + ([] if refined is None else refined.notes)
     units = {n: params.spec(n).unit for n in names}
     # the identified model simulated over the whole record (the physics-only check)
@@ -183,6 +183,12 @@ def _record_adequacy(result: dict[str, Any], metrics: dict) -> None:
         metrics["heldout"]["beats_trivial"] = result["predicts"]
     if not result["adequate"]:
         metrics["notes"].append(note("model_inadequate", describe(result)))
+
+
+def final_values(run: Run, refined: Any, pidyn_values: dict[str, float]) -> dict[str, float]:
+    """Every parameter of the identified model: the refinement's estimate (PIDynNet's where there
+    is none) over the held ones."""
+    return {**run.module.net.params.as_floats(), **(refined.params if refined is not None else pidyn_values)}
 
 
 def _beside(run: Run, metrics: dict) -> None:

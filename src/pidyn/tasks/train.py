@@ -22,7 +22,7 @@ from pidyn.runs.folder import is_complete, run_folder
 from pidyn.runs.linear_beside import fit_linear_beside
 from pidyn.runs.methods import run_baselines, run_refinement, start_baselines
 from pidyn.runs.model_choice import ChoiceSettings, choose_model
-from pidyn.runs.report import write_report
+from pidyn.runs.report import final_values, write_report
 
 log = logging.getLogger(__name__)
 
@@ -76,15 +76,11 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     run.linear_model = fit_linear_beside(cfg, run.record, run.hold_out)
     if run.linear_model is not None:
         t = _lap(stages, "linear_beside", t)
-        final = {
-            **run.module.net.params.as_floats(),
-            **(refined.params if refined is not None else pidyn_values),
-        }
         run.model_choice = choose_model(
             cfg,
             run.system,
             run.record,
-            final,
+            final_values(run, refined, pidyn_values),
             run.linear_model,
             ChoiceSettings.of(cfg.get("model_choice")),
             run.hold_out,
