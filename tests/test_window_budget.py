@@ -35,6 +35,12 @@ def test_a_strong_motion_records_budget_is_two_windows_in_its_identification_and
     # a simulated record keeps train.py's full schedule, and so does a run from several strong-motion
     # records (the leave-events-out studies were made with it)
     assert compose("train").model.schedule.max_iters == 1500
+    # PIDynNet stops where a peer is far ahead on a strong-motion record only (its diagnosis too); a
+    # simulated record and the paper's tables keep its whole budget
+    assert train.stop_behind == diagnose.stop_behind == 2.0
+    assert compose("train").model.schedule.stop_behind is None
+    for exp in ("table1", "table2", "table3"):
+        assert compose("train", overrides=[f"experiment={exp}"]).model.schedule.stop_behind is None, exp
     several = Schedule(**train).for_records(3)
     assert (several.pretrain_iters, several.pretrain_iters_window, several.max_iters) == (1000, 1000, 1500)
     assert Schedule(**train).for_records(1).max_iters == 500

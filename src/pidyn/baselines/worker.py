@@ -68,6 +68,7 @@ class BaselineJob:
     ) -> None:
         self._args = (bcfg, noise, system, record, fit)
         self._proc: subprocess.Popen | None = None
+        self._rows: list[dict] | None = None
         self._dir: tempfile.TemporaryDirectory | None = None
         names = list(bcfg.get("run") or [])
         check_names("baselines.run", names)  # a typo fails now, not after PIDynNet's minutes
@@ -95,6 +96,12 @@ class BaselineJob:
         )
 
     def result(self) -> list[dict]:
+        """The baselines' rows (the worker's, or run here); asked again, the same rows."""
+        if self._rows is None:
+            self._rows = self._result()
+        return self._rows
+
+    def _result(self) -> list[dict]:
         if self._proc is not None:
             try:
                 self._proc.wait()

@@ -129,3 +129,16 @@ class InformationFusion:
         self.info, self.weighted = d(s.get("info")), d(s.get("weighted"))
         self.thetas = [t.double() for t in s.get("thetas") or []]
         self.infos = [J.double() for J in s.get("infos") or []]
+
+
+def posterior_std(info: torch.Tensor | None, names: list[str]) -> dict[str, float] | None:
+    """Marginal posterior std of each unconstrained parameter from an information matrix: a
+    direction the window does not inform comes out large (a pseudo-inverse would hide it)."""
+    if info is None:
+        return None
+    info = info.detach()  # numbers from here on (a learned force's weights leave it in the graph)
+    n = info.shape[0]
+    ridge = 1e-12 * float(torch.trace(info).abs()) / max(n, 1) + 1e-30
+    cov = torch.linalg.inv(info.double() + ridge * torch.eye(n, dtype=torch.float64))
+    d = torch.diagonal(cov).clamp_min(0.0).sqrt()
+    return {nm: float(d[i]) for i, nm in enumerate(names)}

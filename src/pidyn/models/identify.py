@@ -26,7 +26,6 @@ from pathlib import Path
 from typing import Any
 
 import lightning as L
-import numpy as np
 import torch
 
 from pidyn.callbacks.clamp import ParameterClamp
@@ -34,7 +33,7 @@ from pidyn.callbacks.early_stopping import ParameterEarlyStopping
 from pidyn.data.datamodule import SubperiodDataModule
 from pidyn.data.windows import Window
 from pidyn.errors import error_pct
-from pidyn.models.fusion import InformationFusion, residual_information
+from pidyn.models.fusion import InformationFusion, posterior_std, residual_information
 from pidyn.models.latent_start import (
     latent_least_squares_start,
     latent_shape_params,
@@ -160,14 +159,21 @@ class SubperiodIdentifier:
         trainer = self.make_trainer(max_steps=-1, callbacks=callbacks + self.extra_callbacks)
         trainer.fit(self.module, datamodule=self.dm)
 
-    def run(self, resume: bool = True) -> list[WindowResult]:
+    def run(
+        self, resume: bool = True, behind: Callable[[dict[str, float]], str | None] | None = None
+    ) -> list[WindowResult]:
+        """The windows, from where a saved state left off. ``behind``: asked after every window but
+        the last with the estimate so far; a text (a note) ends PIDynNet there, as its last window
+        (``Schedule.stop_behind``: a peer's estimate simulates the record so much better that the
+        refinement will start from it)."""
         start = self.try_resume() if resume else 0
         net = self.module.net
         z_end: torch.Tensor | None = None
         if start > 0 and net.lnn is not None:
             z_end = torch.tensor(self.results[-1].z_end if self.results[-1].z_end is not None else [0.0])
         first_done = start > 0
-        for w in self._todo():
+        todo = self._todo()
+        for w in todo:
             if w.index < start:
                 continue
             t_start = time.perf_counter()
@@ -207,10 +213,20 @@ class SubperiodIdentifier:
             )
             self.results.append(res)
             first_done = True
-            self._report(res)
-            self._log_window(res)
-            self.save_state(next_window=w.index + 1)
+            ahead = behind(fused) if behind is not None and w is not todo[-1] else None
+            self._end_window(res, ahead, next_window=todo[-1].index + 1 if ahead else w.index + 1)
+            if ahead:
+                break
         return self.results
+
+    def _end_window(self, res: WindowResult, ahead: str | None, next_window: int) -> None:
+        """Report the window and save the state; ``ahead``: the note that ends PIDynNet here."""
+        if ahead:
+            res.notes.append(ahead)
+            log.info(ahead)
+        self._report(res)
+        self._log_window(res)
+        self.save_state(next_window=next_window)
 
     def _todo(self) -> list[Window]:
         """The windows to run: the informative ones (unless told otherwise), at most max_windows
@@ -470,26 +486,3 @@ class SubperiodIdentifier:
         tb.add_scalar("subperiod/t_end", r.t1, step)
         for n, v in r.fused.items():
             tb.add_scalar(f"params_fused/{n}", v, step)
-
-
-def posterior_std(info: torch.Tensor | None, names: list[str]) -> dict[str, float] | None:
-    """Marginal posterior std of each unconstrained parameter from an information matrix: a
-    direction the window does not inform comes out large (a pseudo-inverse would hide it)."""
-    if info is None:
-        return None
-    info = info.detach()  # numbers from here on (a learned force's weights leave it in the graph)
-    n = info.shape[0]
-    ridge = 1e-12 * float(torch.trace(info).abs()) / max(n, 1) + 1e-30
-    cov = torch.linalg.inv(info.double() + ridge * torch.eye(n, dtype=torch.float64))
-    d = torch.diagonal(cov).clamp_min(0.0).sqrt()
-    return {nm: float(d[i]) for i, nm in enumerate(names)}
-
-
-def network_states(results: list[WindowResult]) -> np.ndarray | None:
-    """All windows' network states, (K, 1 + n_state) rows [t, x, x', z], in time order; a
-    later window's value wins where two windows share a time (its networks start there)."""
-    rows: dict[float, list[float]] = {}
-    for r in results:
-        for row in r.states or []:
-            rows[round(row[0], 9)] = row
-    return np.array([rows[k] for k in sorted(rows)]) if rows else None

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 #: the iteration counts a schedule sets
 ITERATIONS = ("pretrain_iters", "pretrain_iters_window", "max_iters")
 
@@ -31,6 +33,11 @@ class Schedule:
     # the iterations of a run from several records where they differ from one record's
     # (pretrain_iters, pretrain_iters_window, max_iters); None: the same
     several_records: dict[str, int] | None = None
+    # stop PIDynNet after a window where a peer's estimate (the data's start, a classical method's)
+    # simulates the fitting part from rest with a cost this many times lower than PIDynNet's estimate
+    # so far: the refinement starts from the better simulating estimate, so PIDynNet's later windows
+    # would not change where it starts. None: every window is trained
+    stop_behind: float | None = None
 
     def __post_init__(self) -> None:
         """A misspelled option fails here, naming the valid ones, instead of silently changing behaviour."""
@@ -46,6 +53,8 @@ class Schedule:
             raise ValueError(
                 f"model.schedule.several_records: {sorted(unknown)} not among {', '.join(ITERATIONS)}"
             )
+        if self.stop_behind is not None and not float(self.stop_behind) >= 1.0:
+            raise ValueError(f"model.schedule.stop_behind must be >= 1 or null, got {self.stop_behind}")
         for name in ("max_windows", "windows_per_record"):
             value = getattr(self, name)
             if value is not None and int(value) < 1:
@@ -82,3 +91,13 @@ class WindowResult:
         None  # [t, x, x', z] from the networks every 10th sample (refinement starts)
     )
     notes: list[str] = field(default_factory=list)  # what the data decided that a user should know
+
+
+def network_states(results: list[WindowResult]) -> np.ndarray | None:
+    """All windows' network states, (K, 1 + n_state) rows [t, x, x', z], in time order; a
+    later window's value wins where two windows share a time (its networks start there)."""
+    rows: dict[float, list[float]] = {}
+    for r in results:
+        for row in r.states or []:
+            rows[round(row[0], 9)] = row
+    return np.array([rows[k] for k in sorted(rows)]) if rows else None

@@ -15,7 +15,7 @@ from pidyn import baselines as B
 from pidyn.baselines.registry import STARTS, check_names
 from pidyn.baselines.worker import BaselineJob
 from pidyn.data.sources import Record
-from pidyn.models.identify import network_states
+from pidyn.models.schedule import network_states
 from pidyn.refine import RefineSettings, refine
 from pidyn.reporting import diverged, write_json
 from pidyn.runs.metrics import record_noise, relative_errors
@@ -85,15 +85,7 @@ def run_refinement(
     if plan is None:
         return None
     allowed, compare, settings = plan
-    starts = {"pidynnet": pidyn_values}
-    if start is not None and "data" in allowed:  # the data's values, PIDynNet's where the data give none
-        starts["data"] = {**pidyn_values, **{k: v for k, v in start.values.items() if k in pidyn_values}}
-    for b in baselines:  # PIDynNet's values where an estimate gives none (a peer's c and k only)
-        if b["method"] in allowed and b.get("params"):
-            starts[b["method"]] = {
-                **pidyn_values,
-                **{k: v for k, v in b["params"].items() if k in pidyn_values},
-            }
+    starts = {"pidynnet": pidyn_values, **peer_starts(allowed, pidyn_values, start, baselines)}
     w = cfg.data.windows
     span = {"t_start": w.get("t_start"), "t_end": w.get("t_end")}
     out = refine(system, record, starts, settings, network_states=network_states(results), **span)
@@ -115,6 +107,20 @@ def run_refinement(
         log.info(
             "refinement from %s states: %s", source, ", ".join(f"{k}={v:.5g}" for k, v in alt.params.items())
         )
+    return out
+
+
+def peer_starts(
+    allowed: set[str], pidyn_values: dict[str, float], start: Any, baselines: list[dict]
+) -> dict[str, dict[str, float]]:
+    """The refinement's starts beside PIDynNet's: the data's (``start``) and each classical
+    estimate named in ``allowed``, PIDynNet's values where one gives none (a peer's c and k only)."""
+    out: dict[str, dict[str, float]] = {}
+    if start is not None and "data" in allowed:
+        out["data"] = {**pidyn_values, **{k: v for k, v in start.values.items() if k in pidyn_values}}
+    for b in baselines:
+        if b["method"] in allowed and b.get("params"):
+            out[b["method"]] = {**pidyn_values, **{k: v for k, v in b["params"].items() if k in pidyn_values}}
     return out
 
 

@@ -22,6 +22,7 @@ from pidyn.runs.folder import is_complete, run_folder
 from pidyn.runs.linear_beside import fit_linear_beside
 from pidyn.runs.methods import run_baselines, run_refinement, start_baselines
 from pidyn.runs.model_choice import ChoiceSettings, choose_model
+from pidyn.runs.pidynnet_stop import behind_check
 from pidyn.runs.report import final_values, write_report
 
 log = logging.getLogger(__name__)
@@ -61,7 +62,8 @@ def identify(cfg: DictConfig, record: Record | None = None) -> tuple[dict[str, A
     pending = start_baselines(cfg, run.system, run.record, run.hold_out)
     t = _lap(stages, "build", t_wall)
     try:
-        results = run.ident.run(resume=cfg.get("resume", True))
+        behind = behind_check(cfg, run.system, run.record, pending, run.start)
+        results = run.ident.run(resume=cfg.get("resume", True), behind=behind)
     except BaseException:
         pending.cancel()
         raise
