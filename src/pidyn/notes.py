@@ -30,7 +30,7 @@ CODES: dict[str, str] = {
     "polished_from_rest": "a model from several records: the shooting estimate finished by output error from rest, as predictions simulate it",
     "starts_diverge": "no starting estimate simulates the record without blowing up",
     "start_not_preferred": "the preferred start simulates the record worse than another; the other was used",
-    "pidynnet_behind": "PIDynNet stopped after a window whose estimate a peer's simulated far better (model.schedule.stop_behind)",
+    "pidynnet_behind": "a peer's estimate simulated the record far better than PIDynNet's, which stopped there (model.schedule.stop_behind)",
     "period_scan_moved": "a scan of the period found a lower basin of the cost than the local solve",
     "not_at_rest": "the record does not start at rest: its initial state is estimated",
     "near_singular": "the information matrix is near-singular: some combination of parameters is not determined",
