@@ -95,6 +95,14 @@ def test_the_batched_finite_difference_jacobian_matches_the_exact_one_from_a_fre
     fun, jac = prob.fd_fun_and_jac()
     np.testing.assert_array_equal(fun(u), r_fd)
     np.testing.assert_array_equal(jac(u), J_fd)
+    # some columns only (a profile holds the others), or none (the residuals alone): the same bits
+    cols = np.array([0, 2, 4])
+    fun_c, jac_c = prob.fd_fun_and_jac(columns=cols)
+    np.testing.assert_array_equal(jac_c(u), J_fd[:, cols])
+    np.testing.assert_array_equal(fun_c(u), r_fd)
+    r_only, J_none = prob.residuals_and_fd_jacobian(u, columns=np.array([], int))
+    np.testing.assert_array_equal(r_only, r_fd)
+    assert J_none.shape == (len(r_fd), 0)
 
 
 @pytest.mark.parametrize(

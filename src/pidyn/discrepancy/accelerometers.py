@@ -161,7 +161,7 @@ def _envelope_refit(seg: Record, system, values: dict[str, float], tol: float):
     trainable = {s.name for s in system.param_specs() if s.trainable}
     init = {k: v for k, v in values.items() if k in trainable}
     problem, theta = output_error_problem(seg, system, init, 4)
-    r = problem.fd_fun_and_jac()[0](theta)
+    r = problem.fd_fun_and_jac(columns=np.array([], int))[0](theta)  # the residuals alone
     test = scale_test(r, np.tile(w, len(problem.channel_slices())), window)
     log.info(
         "the supports' fit: residual scale against the response's envelope: gain %.3g over %.0f samples (%s)",

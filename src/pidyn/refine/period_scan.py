@@ -118,7 +118,7 @@ def profile_point(
 ) -> tuple[np.ndarray, float]:
     """The parameters marked ``free`` fitted with the others held at ``theta0``; inf where the
     held point does not simulate."""
-    fun, jac = problem.fd_fun_and_jac()
+    fun, jac = problem.fd_fun_and_jac(columns=np.nonzero(free)[0])  # the held columns are not needed
 
     def full(sub: np.ndarray) -> np.ndarray:
         theta = theta0.copy()
@@ -134,7 +134,7 @@ def profile_point(
         sol = least_squares(
             lambda s: fun(full(s)),
             theta0[free],
-            jac=lambda s: jac(full(s))[:, free],
+            jac=lambda s: jac(full(s)),
             method="trf",
             max_nfev=max_nfev,
         )

@@ -67,7 +67,7 @@ def polish_from_rest(
 
 
 def _cost(problem: ShootingProblem, theta: np.ndarray) -> float:
-    fun, _ = problem.fd_fun_and_jac()
+    fun, _ = problem.fd_fun_and_jac(columns=np.array([], int))  # the residuals alone
     with np.errstate(all="ignore"):
         r = fun(theta)
     return 0.5 * float(r @ r) if np.all(np.isfinite(r)) else float("inf")

@@ -354,18 +354,23 @@ class ShootingProblem:
         C[~(np.abs(C) < BLOWN_UP)] = 0.0
         return C
 
-    def residuals_and_fd_jacobian(self, u: np.ndarray, step: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    def residuals_and_fd_jacobian(
+        self, u: np.ndarray, step: float = 1e-6, columns: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Residuals and their forward-difference Jacobian from one batched plain simulation.
 
         Single shooting only (from a fixed state, or from a free one: a window of the running
         period): the unperturbed and every perturbed unknown are members of one batch, so both
         cost about one simulation (the classical output-error recipe; the refinement uses the
-        exact ``linearize``)."""
-        n_u = self.n_unknowns
-        us = np.repeat(np.asarray(u, float)[:, None], n_u + 1, axis=1)
-        us[np.arange(n_u), np.arange(1, n_u + 1)] += step
+        exact ``linearize``). ``columns``: the unknowns whose columns are wanted (default every
+        one); each trajectory is integrated by itself, so a column is the same either way."""
+        cols = np.arange(self.n_unknowns) if columns is None else np.asarray(columns, int)
+        us = np.repeat(np.asarray(u, float)[:, None], len(cols) + 1, axis=1)
+        us[cols, np.arange(1, len(cols) + 1)] += step
         res = self.batch_residuals(us)
-        return res[0], np.stack([(res[j + 1] - res[0]) / step for j in range(n_u)], axis=1)
+        if not len(cols):
+            return res[0], np.zeros((len(res[0]), 0))
+        return res[0], np.stack([(res[j + 1] - res[0]) / step for j in range(len(cols))], axis=1)
 
     def batch_residuals(self, us: np.ndarray) -> list[np.ndarray]:
         """The residuals of every column of ``us`` (unknowns x batch) from one batched plain
@@ -397,16 +402,17 @@ class ShootingProblem:
             )
         return [self._data_res(Y[:, j : j + 1], A[:, j : j + 1]) for j in range(B)]
 
-    def fd_fun_and_jac(self):
+    def fd_fun_and_jac(self, columns: np.ndarray | None = None):
         """(fun, jac) for ``scipy.optimize.least_squares`` on ``residuals_and_fd_jacobian``: the
-        residuals and the Jacobian at one point come from the same batch, one simulation for both."""
+        residuals and the Jacobian at one point come from the same batch, one simulation for both.
+        ``columns``: only these unknowns' columns (a profile holds the others; none: residuals alone)."""
         cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
         def evaluate(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             key = np.asarray(u, float).tobytes()
             if key not in cache:
                 cache.clear()
-                cache[key] = self.residuals_and_fd_jacobian(u)
+                cache[key] = self.residuals_and_fd_jacobian(u, columns=columns)
             return cache[key]
 
         return (lambda u: evaluate(u)[0]), (lambda u: evaluate(u)[1])
