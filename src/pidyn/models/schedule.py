@@ -35,8 +35,8 @@ class Schedule:
     several_records: dict[str, int] | None = None
     # stop PIDynNet after a window where a peer's estimate (the data's start, a classical method's)
     # simulates the fitting part from rest with a cost this many times lower than PIDynNet's estimate
-    # so far: the refinement starts from the better simulating estimate, so PIDynNet's later windows
-    # would not change where it starts. None: every window is trained
+    # so far: the refinement starts from the estimate that simulates best, which PIDynNet's later
+    # windows would have to lower their cost that many times to be. None: every window is trained
     stop_behind: float | None = None
 
     def __post_init__(self) -> None:
