@@ -20,7 +20,7 @@ import numpy as np
 from pidyn.integrate import piece_starts
 from pidyn.notes import note
 from pidyn.params import to_theta
-from pidyn.refine.output_error import fit_output_error, output_error_problem
+from pidyn.refine.output_error import fit_output_error, output_error_cost, output_error_problem
 from pidyn.refine.problem import ShootingProblem
 from pidyn.refine.settings import RefineSettings
 
@@ -41,7 +41,7 @@ def polish_from_rest(
     span = record.segment(None, float(problem.t[problem.bounds[-1]]))
     values = problem.values(theta)
     oe, theta_start = output_error_problem(span, problem.system, values, problem.substeps)
-    before = _cost(oe, theta_start)
+    before = output_error_cost(span, problem.system, values, problem.substeps)
     fit = fit_output_error(span, problem.system, values, problem.substeps, max_nfev=settings.polish_several)
     theta_oe, after = to_theta(oe.specs, {**values, **fit.params}), float(fit.cost)
     if not after <= before:  # the solve ends no higher than it starts; a cost that rose is a bug, not data
@@ -64,10 +64,3 @@ def polish_from_rest(
     }
     log.info(out["note"])
     return oe, theta_oe, out
-
-
-def _cost(problem: ShootingProblem, theta: np.ndarray) -> float:
-    fun, _ = problem.fd_fun_and_jac(columns=np.array([], int))  # the residuals alone
-    with np.errstate(all="ignore"):
-        r = fun(theta)
-    return 0.5 * float(r @ r) if np.all(np.isfinite(r)) else float("inf")

@@ -39,7 +39,7 @@ NONLINEAR, LINEAR = "nonlinear", "linear"
 
 @dataclass(frozen=True)
 class ChoiceSettings:
-    """``model.choice``: the folds (at most; fewer records: one a fold) and each refit's budget."""
+    """``model_choice``: the folds (at most; fewer records: one a fold) and each refit's budget."""
 
     enabled: bool = True
     folds: int = 5
