@@ -27,31 +27,32 @@ RESULTS = ROOT / "experiments" / "results" / "real"
 STRONG_G = 0.2
 
 
-def run_choice(run_dir: Path) -> tuple[dict, str]:
-    """The run's ``model_choice`` and where it came from (the identification, or computed here)."""
+def run_choice(run_dir: Path, overrides: dict | None = None) -> tuple[dict, str]:
+    """The run's ``model_choice`` and where it came from (the identification, or computed here:
+    always where ``overrides`` change its settings)."""
     metrics = json.loads((run_dir / "metrics.json").read_text())
-    if metrics.get("model_choice"):
+    if metrics.get("model_choice") and not overrides:
         return metrics["model_choice"], "identification"
     from pidyn.runs.model_choice import ChoiceSettings, choose_model  # lazy: torch loads with it
     from pidyn.runs.prediction import Identified
 
     run = Identified.load(run_dir)
     system, record, values = run.for_record()
-    settings = ChoiceSettings.of(run.cfg.get("model_choice"))
+    settings = ChoiceSettings.of({**(run.cfg.get("model_choice") or {}), **(overrides or {})})
     hold_out = bool(run.cfg.data.get("hold_out"))
     return choose_model(
         run.cfg, system, record, values, metrics.get("linear_model"), settings, hold_out
     ), "here"
 
 
-def rows_of(out: Path, station: str) -> list[dict]:
+def rows_of(out: Path, station: str, overrides: dict | None = None) -> list[dict]:
     rows = []
     for run_dir in sorted((out / station).glob("*/fold*/default/run")):
         if not (run_dir / "complete.json").is_file():
             continue
         direction, fold = run_dir.parts[-4], run_dir.parts[-3]
         t0 = time.perf_counter()
-        choice, source = run_choice(run_dir)
+        choice, source = run_choice(run_dir, overrides)
         print(
             f"{direction} {fold}: {choice['chosen']} ({source}, {time.perf_counter() - t0:.0f} s)", flush=True
         )
@@ -73,6 +74,7 @@ def rows_of(out: Path, station: str) -> list[dict]:
                     "chosen": linear if choice["chosen"] == "linear" else amplitude,
                     "knowing_nothing": p.get("trivial_mean_nrmse_a"),
                     "choice_source": source,
+                    "choice_seconds": choice.get("seconds"),
                 }
             )
     return rows
@@ -97,8 +99,9 @@ def summary(rows: list[dict], direction: str) -> list[str]:
     ]
 
 
-def write(rows: list[dict], station: str, out: Path) -> Path:
-    stem = RESULTS / f"model_choice_{station.lower()}"
+def write(rows: list[dict], station: str, out: Path, name: str = "", overrides: dict | None = None) -> Path:
+    stem = RESULTS / f"model_choice_{station.lower()}{'_' + name if name else ''}"
+    sets = "".join(f" --set {k}={v}" for k, v in (overrides or {}).items())
     with stem.with_suffix(".csv").open("w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
@@ -108,7 +111,7 @@ def write(rows: list[dict], station: str, out: Path) -> Path:
         f"# Which model a run from several events stands behind: {station}",
         "",
         f"`python experiments/model_choice_check.py --out {out.relative_to(ROOT) if out.is_relative_to(ROOT) else out.name} "
-        f"--station {station}` over the leave-events-out study's default runs. Each fold's run chose between its "
+        f"--station {station}{sets}{' --name ' + name if name else ''}` over the leave-events-out study's default runs. Each fold's run chose between its "
         "amplitude model and the linear model of the same layout by its own training events, each left out and "
         "predicted by both refitted without it (`pidyn.runs.model_choice`); the fold's test events, which the "
         "choice never saw, are predicted by both. NRMSE: mean over the deck channels, from rest over the event.",
@@ -131,11 +134,23 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=ROOT / "outputs" / "cross_event")
     ap.add_argument("--station", default="CE89324")
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a model_choice setting for every run (the choice is then computed here), e.g. start=run",
+    )
+    ap.add_argument("--name", default="", help="suffix of the result files")
     args = ap.parse_args()
-    rows = rows_of(args.out.resolve(), args.station)
+    overrides = {}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        overrides[key] = int(value) if value.isdigit() else value
+    rows = rows_of(args.out.resolve(), args.station, overrides)
     if not rows:
         raise SystemExit(f"{args.out}/{args.station}: no finished default run with predictions")
-    print(f"wrote {write(rows, args.station, args.out.resolve())}")
+    print(f"wrote {write(rows, args.station, args.out.resolve(), args.name, overrides)}")
 
 
 if __name__ == "__main__":

@@ -396,6 +396,29 @@ def test_the_run_keeps_its_amplitude_model_where_its_left_out_records_say_it_pre
     )  # one record
 
 
+def test_a_left_out_record_enters_no_refit_of_the_choice():
+    """``model_choice.start: data``: a fold's refits start from the other records alone, so the
+    run's fitted values (which saw every record) change nothing in the choice; started from them
+    (``start: run``), the left-out records' predictions move with them."""
+    from pidyn.runs.build import system_and_record
+    from pidyn.runs.model_choice import ChoiceSettings, choose_model
+
+    cfg, joined = _amplitude_runs(soft=0.8, gain=1.5)
+    system, _ = system_and_record(cfg, joined)
+    truth = make_system("amplitude", soft=0.8, gain=1.5, tau=1.0).true_values()
+    other = {**truth, "k": 1.3 * truth["k"], "c": 0.7 * truth["c"], "soft": 0.3, "gain": 0.5}
+    linear = {"params": {"k": 450.0, "c": 4.0}}
+
+    def rows(values, start):
+        out = choose_model(cfg, system, joined, values, linear, ChoiceSettings(folds=5, start=start))
+        return [(r["nonlinear"], r["linear"]) for r in out["records"]]
+
+    assert rows(truth, "data") == rows(other, "data")
+    assert rows(truth, "run") != rows(other, "run")
+    with pytest.raises(ValueError, match="model_choice.start"):
+        ChoiceSettings.of({"start": "fold"})
+
+
 def test_a_run_whose_records_chose_the_linear_model_predicts_with_it(tmp_path):
     """Where ``model_choice`` chose the linear model beside the run's own, ``predict.py`` and
     ``pidyn.predict`` simulate that one: its prediction is the linear model's score."""

@@ -3,9 +3,13 @@ model of the same layout fitted beside it (``linear_beside``), chosen by how eac
 run's records that it was not fitted to.
 
 The records are split into folds (each record by itself where there are few). For each fold both
-models are refitted by output error on the other records, from the run's own values, and each
-fold's records are simulated from rest under their own input motions, as ``predict.py`` does
-with a record the run never saw. The nonlinear model is kept when its mean NRMSE over those
+models are refitted by output error on the other records, and each fold's records are simulated
+from rest under their own input motions, as ``predict.py`` does with a record the run never saw.
+The refits start where nothing of the left-out records has been (``start: data``): the linear
+model from the other records' own data start, the nonlinear model from that linear fit with its
+own terms at the config's start. Started from the run's values (``start: run``), fitted to every
+record, a refit of a few evaluations keeps much of what the left-out records taught it, and the
+model with more terms keeps more. The nonlinear model is kept when its mean NRMSE over those
 predictions is below the linear model's; otherwise the run says its nonlinear terms did not earn
 their place on its own records, and its predictions use the linear model. The mean, not the
 median: a model that fails badly on one unseen record is the one not to hand on. The choice
@@ -30,11 +34,14 @@ from pidyn.refine.output_error import fit_output_error
 from pidyn.runs.build import system_and_record
 from pidyn.runs.linear_beside import linear_config
 from pidyn.runs.prediction import score
+from pidyn.starts.data import start_from_data
 from pidyn.systems.base import StructuralSystem
 
 log = logging.getLogger(__name__)
 
 NONLINEAR, LINEAR = "nonlinear", "linear"
+#: where a fold's refits start (``ChoiceSettings.start``)
+STARTS = ("data", "run")
 
 
 @dataclass(frozen=True)
@@ -44,6 +51,8 @@ class ChoiceSettings:
     enabled: bool = True
     folds: int = 5
     max_nfev: int = 20
+    #: where each refit starts: ``data`` (nothing of the left-out records) or ``run`` (the run's values)
+    start: str = "data"
 
     @classmethod
     def of(cls, node: Any) -> ChoiceSettings:
@@ -51,8 +60,13 @@ class ChoiceSettings:
         values = dict(node or {})
         unknown = sorted(set(values) - {f.name for f in fields(cls)})
         if unknown:
-            raise ValueError(f"model_choice: unknown setting(s) {unknown}; known: enabled, folds, max_nfev")
-        return cls(**values)
+            raise ValueError(
+                f"model_choice: unknown setting(s) {unknown}; known: {', '.join(f.name for f in fields(cls))}"
+            )
+        out = cls(**values)
+        if out.start not in STARTS:
+            raise ValueError(f"model_choice.start: '{out.start}' is not one of {list(STARTS)}")
+        return out
 
 
 def fold_indices(n: int, folds: int) -> list[list[int]]:
@@ -83,10 +97,7 @@ def choose_model(
     rows = []
     for held in fold_indices(len(records), settings.folds):
         train = concatenate([r for i, r in enumerate(records) if i not in held])
-        fits = {
-            NONLINEAR: _refit(train, system, values, settings.max_nfev),
-            LINEAR: _refit(train, lin_system, lin_values, settings.max_nfev),
-        }
+        fits = _fold_fits(train, (system, values), (lin_system, lin_values), settings)
         for i in held:
             row = {"record": records[i].name}
             for key, model in ((NONLINEAR, system), (LINEAR, lin_system)):
@@ -110,6 +121,40 @@ def fitting_records(record: Record, hold_out: bool) -> list[Record]:
     if fit is not None and len(records) > 1:
         records[-1] = records[-1].segment(None, fit[1] - pieces(record)[-1].t_offset)
     return records
+
+
+def _fold_fits(
+    train: Record,
+    nonlinear: tuple[StructuralSystem, dict[str, float]],
+    linear: tuple[StructuralSystem, dict[str, float]],
+    settings: ChoiceSettings,
+) -> dict[str, dict[str, float] | None]:
+    """Both models refitted on a fold's training records. ``start: run``: each from the run's
+    values. ``start: data``: the linear model from these records' data start (its config's
+    where they show no resonance), the nonlinear one from that fit for the names both models
+    share and from its config for its own terms; the values neither fits (a scale, the mass)
+    are the run's."""
+    (system, values), (lin_system, lin_values) = nonlinear, linear
+    if settings.start == "run":
+        return {
+            NONLINEAR: _refit(train, system, values, settings.max_nfev),
+            LINEAR: _refit(train, lin_system, lin_values, settings.max_nfev),
+        }
+    start = start_from_data(train, lin_system)
+    lin_start = {**lin_values, **_spec_starts(lin_system), **({} if start is None else start.values)}
+    lin_fit = _refit(train, lin_system, lin_start, settings.max_nfev)
+    shared = {} if lin_fit is None else {k: v for k, v in lin_fit.items() if k in _trainable(system)}
+    own = {**values, **_spec_starts(system), **shared}
+    return {NONLINEAR: _refit(train, system, own, settings.max_nfev), LINEAR: lin_fit}
+
+
+def _trainable(system: StructuralSystem) -> set[str]:
+    return {s.name for s in system.param_specs() if s.trainable}
+
+
+def _spec_starts(system: StructuralSystem) -> dict[str, float]:
+    """The trainable parameters' starts as the config gives them (no record has informed them)."""
+    return {s.name: float(s.init) for s in system.param_specs() if s.trainable}
 
 
 def _refit(
