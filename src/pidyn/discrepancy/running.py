@@ -72,14 +72,14 @@ def running_modes(
         rho = cov[0, 1] / max(sk * sc, 1e-300)
         period = 2 * np.pi * np.sqrt(m / k)
         rows["period"][i] = period
-        rows["period_lo"][i], rows["period_hi"][i] = (
-            period * np.exp(-0.5 * Z95 * sk),
-            period * np.exp(0.5 * Z95 * sk),
-        )
         zeta = c / (2 * np.sqrt(k * m))
         s_log_zeta = np.sqrt(max(sc**2 + 0.25 * sk**2 - rho * sc * sk, 0.0))
         rows["damping"][i] = zeta
-        with np.errstate(over="ignore"):  # a window that knows nothing of the damping: an open interval
+        with np.errstate(over="ignore"):  # a window that knows nothing of them: an open interval
+            rows["period_lo"][i], rows["period_hi"][i] = (
+                period * np.exp(-0.5 * Z95 * sk),
+                period * np.exp(0.5 * Z95 * sk),
+            )
             rows["damping_lo"][i], rows["damping_hi"][i] = (
                 zeta * np.exp(-Z95 * s_log_zeta),
                 zeta * np.exp(Z95 * s_log_zeta),
