@@ -147,7 +147,10 @@ def test_a_measured_record_starts_pidynnet_from_the_data(tmp_path):
 
     rec = synthetic(LinearSDOF(c=1.0, k=1500.0), "kobe", noise=0.01, channels=("a",), duration=20.0)
     measured = replace(rec, truth=None, clean=None)
-    res = pidyn.identify(measured, "linear", baselines="none", debug="smoke", out_dir=tmp_path / "data")
+    # two workers (pidyn.parallel): the period's scan and profile, and the figures, side by side
+    res = pidyn.identify(
+        measured, "linear", baselines="none", debug="smoke", workers=2, out_dir=tmp_path / "data"
+    )
     import json
 
     start = json.loads((tmp_path / "data" / "data_start.json").read_text())

@@ -24,6 +24,7 @@ from omegaconf.errors import OmegaConfBaseException
 from pidyn import blas_threads  # noqa: F401  (before NumPy loads its BLAS: see the module)
 from pidyn.config import CONF_DIR as _CONF_PATH
 from pidyn.config import check_settings
+from pidyn.parallel import set_workers
 from pidyn.reporting import write_json
 from pidyn.runs.folder import FAILED, RunFolderBusy
 
@@ -55,6 +56,7 @@ def _guarded(task, cfg: DictConfig) -> dict:
     global _STARTED
     _STARTED = True
     try:
+        set_workers(cfg.get("workers"))
         return task(cfg)
     except KeyboardInterrupt:
         log.error("interrupted; run the same command again to resume")

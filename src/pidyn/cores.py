@@ -3,18 +3,41 @@ trajectories), and how many cores it may run on."""
 
 from __future__ import annotations
 
+import contextlib
 import os
+from collections.abc import Iterator
+
+#: how many processes share this one's threads now (``shared_by``)
+_SHARE = 1
 
 
 def threads() -> int:
     """``PIDYN_THREADS`` where it is set, else the cores this process may run on, at most
     ``OMP_NUM_THREADS`` where that is set (a test worker, or one of several jobs sharing the
-    cores, says so by it)."""
+    cores, says so by it); divided among the processes it forked to share them (``shared_by``)."""
+    return max(1, _threads() // _SHARE)
+
+
+def _threads() -> int:
     for name in ("PIDYN_THREADS", "OMP_NUM_THREADS"):
         value = os.environ.get(name, "").strip()
         if value.isdigit() and int(value) > 0:
             return min(int(value), cores()) if name == "OMP_NUM_THREADS" else int(value)
     return cores()
+
+
+@contextlib.contextmanager
+def shared_by(n: int) -> Iterator[None]:
+    """Within the block this process and the ``n - 1`` it forks (which inherit the setting) share
+    its threads: each splits its own work over its part of them, not over all (two processes of two
+    threads each on two cores would spend their time waiting for one another)."""
+    global _SHARE
+    before = _SHARE
+    _SHARE = before * max(1, int(n))
+    try:
+        yield
+    finally:
+        _SHARE = before
 
 
 def cores() -> int:

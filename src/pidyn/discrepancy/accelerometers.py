@@ -32,6 +32,7 @@ import numpy as np
 from pidyn.data.meta import AccelerometerView, Motion
 from pidyn.data.sources import Record
 from pidyn.discrepancy.heteroscedastic import envelope, scale_test
+from pidyn.parallel import map_ordered
 from pidyn.refine.output_error import fit_output_error, output_error_problem
 from pidyn.refine.period_scan import scan_period
 from pidyn.reporting import nrmse
@@ -132,7 +133,10 @@ def _nominal_influence(
     if system.n_inputs == 1:
         best = cheapest(seg, system, options)
         return with_start(system, options[best]), options[best], f"start from {best}", None
-    fits = {k: _influence_fit(seg, system, v, tol) for k, v in options.items()}
+    fitted = map_ordered(
+        lambda v: _influence_fit(seg, system, v, tol), list(options.values())
+    )  # side by side
+    fits = dict(zip(options, fitted))
     best = min(fits, key=lambda k: fits[k][1].cost)
     best = _moved_by_scan(seg, system, fits, options, best, tol)
     if len(fits) > 1:

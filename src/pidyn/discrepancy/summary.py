@@ -26,6 +26,7 @@ from pidyn.discrepancy.result import DiagnosisResult, Finding, HeldoutErrors, tr
 from pidyn.discrepancy.screening import weak_system
 from pidyn.discrepancy.verdicts import Verdict
 from pidyn.notes import note
+from pidyn.parallel import map_ordered
 from pidyn.reporting import nrmse
 from pidyn.signals import band_limited
 from pidyn.systems.sdof import SDOFSystem
@@ -192,51 +193,82 @@ def _with_steps(unearned: dict) -> dict:
 
 
 def write_figures(case: Case, o: Outcome, d: dict) -> list[str]:
-    """The figures of the run folder; their file names."""
-    record, fit, held, nom = case.record, case.fit, case.held, o.nominal
-    period, cause, sc = nom.period, d["cause"], o.screening
+    """The figures of the run folder, drawn side by side on the machine's cores
+    (``pidyn.parallel``; the slowest first); their file names."""
     fig = case.run_dir / "figures"
     fig.mkdir(exist_ok=True)
-    units = record.meta.units or {}
-    plot_response(
-        fig / "simulation_vs_measured.png",
-        record.t,
-        case.x_raw,
-        o.x_nom,
-        o.x_ext,
-        fit,
-        held,
-        units.get("x", "m"),
-        period,
-    )
-    explained = None
-    row = _evidence_row(o, cause)
-    if row is not None:
-        explained = explained_force(nom.system, nom.values, row, nom.s, o.pointwise)
-    pw = o.pointwise
-    plot_residual(
-        fig / "residual.png", record.t, pw["r"], pw["x"], pw["v"], fit, cause, explained, units, period
-    )
-    plot_ranking(fig / "ranking.png", sc.ranking, case.thresholds.min_delta_bic)
-    _running_figures(case, o, fig)
+    draws = [
+        lambda: _residual_figure(case, o, d["cause"], fig),
+        lambda: _running_period_figure(case, o, fig),
+        lambda: _running_estimate_figure(case, o, fig),
+        lambda: _response_figure(case, o, fig),
+        lambda: plot_ranking(fig / "ranking.png", o.screening.ranking, case.thresholds.min_delta_bic),
+    ]
     ext = o.extension
     if d["learned_force"] and ext.system is not None and ext.system.n_latent == 0:
-        plot_learned(
-            fig / "learned_force.png",
-            record.t,
-            nom.system,
-            nom.values,
-            ext.system,
-            ext.values,
-            pw,
-            units,
-        )
+        draws.append(lambda: _learned_figure(case, o, fig))
+    map_ordered(_draw, draws)
     return [p.name for p in sorted(fig.glob("*.png"))]
 
 
-def _running_figures(case: Case, o: Outcome, fig) -> None:
-    """The running estimate over the record and, for accelerometer records, the running period."""
-    record, fit, held, nom = case.record, case.fit, case.held, o.nominal
+def _draw(draw) -> None:
+    """One figure drawn (what it returns stays in the process that drew it)."""
+    draw()
+
+
+def _response_figure(case: Case, o: Outcome, fig: Path) -> None:
+    units = case.record.meta.units or {}
+    plot_response(
+        fig / "simulation_vs_measured.png",
+        case.record.t,
+        case.x_raw,
+        o.x_nom,
+        o.x_ext,
+        case.fit,
+        case.held,
+        units.get("x", "m"),
+        o.nominal.period,
+    )
+
+
+def _residual_figure(case: Case, o: Outcome, cause: str | None, fig: Path) -> None:
+    """The force the nominal model leaves, and the named cause's share of it."""
+    nom, pw = o.nominal, o.pointwise
+    row = _evidence_row(o, cause)
+    explained = None if row is None else explained_force(nom.system, nom.values, row, nom.s, pw)
+    units = case.record.meta.units or {}
+    plot_residual(
+        fig / "residual.png",
+        case.record.t,
+        pw["r"],
+        pw["x"],
+        pw["v"],
+        case.fit,
+        cause,
+        explained,
+        units,
+        nom.period,
+    )
+
+
+def _learned_figure(case: Case, o: Outcome, fig: Path) -> None:
+    nom, ext = o.nominal, o.extension
+    units = case.record.meta.units or {}
+    plot_learned(
+        fig / "learned_force.png",
+        case.record.t,
+        nom.system,
+        nom.values,
+        ext.system,
+        ext.values,
+        o.pointwise,
+        units,
+    )
+
+
+def _running_estimate_figure(case: Case, o: Outcome, fig: Path) -> None:
+    """The weak form's running estimate over the record."""
+    record, nom = case.record, o.nominal
     names, A0, y = weak_system(
         nom.system, nom.values, nom.s, case.weak_f, case.x_raw, nom.weak, case.mass_known
     )
@@ -247,24 +279,30 @@ def _running_figures(case: Case, o: Outcome, fig) -> None:
         fig / "running_estimate.png",
         running,
         nom.values,
-        fit,
-        held,
+        case.fit,
+        case.held,
         None if o.change_row is None else o.change_row.change,
         stiffness=case.stiff,
         signal=(record.t, case.x_raw),
     )
-    if o.running is not None:
-        ground = record.meta.sensor_ground
-        meas = record.a[:, 0] + (0.0 if ground is None else np.asarray(ground))
-        plot_running_period(
-            fig / "running_period.png",
-            o.running,
-            fit,
-            held,
-            signal=(record.t, meas),
-            nominal_period=(o.modal or [{}])[0].get("period_s"),
-            model=amplitude_path(case, o),
-        )
+
+
+def _running_period_figure(case: Case, o: Outcome, fig: Path) -> None:
+    """An accelerometer record's running period, with the amplitude model's own path."""
+    if o.running is None:
+        return
+    record = case.record
+    ground = record.meta.sensor_ground
+    meas = record.a[:, 0] + (0.0 if ground is None else np.asarray(ground))
+    plot_running_period(
+        fig / "running_period.png",
+        o.running,
+        case.fit,
+        case.held,
+        signal=(record.t, meas),
+        nominal_period=(o.modal or [{}])[0].get("period_s"),
+        model=amplitude_path(case, o),
+    )
 
 
 def plot_learned(

@@ -25,6 +25,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from pidyn.compiled.kernel import tapes_kept
+from pidyn.parallel import map_ordered
 from pidyn.params import to_theta, trainable_specs
 from pidyn.refine.output_error import output_error_problem
 from pidyn.refine.period_scan import profile_point, scaled
@@ -86,11 +87,14 @@ def profile_period(
     grid = np.unique(
         np.concatenate([np.linspace(-sds * sd, sds * sd, points), np.log(np.geomspace(0.5, 2.0, 13))])
     )
-    stats = []
-    for u in grid:  # u = log lam: the period over e^u
-        _, cost = profile_point(
+    costs = map_ordered(  # u = log lam: the period over e^u
+        lambda u: profile_point(
             problem, to_theta(specs, scaled(best, powers, float(np.exp(u)))), free, profile_nfev
-        )
+        )[1],
+        list(grid),
+    )
+    stats = []
+    for cost in costs:
         rss = 2.0 * cost
         stats.append(
             adjustment * len(r) * np.log(max(rss, rss_min) / rss_min) if np.isfinite(rss) else np.inf

@@ -25,6 +25,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from pidyn.compiled.kernel import tapes_kept
+from pidyn.parallel import map_ordered
 from pidyn.params import to_theta, trainable_specs
 from pidyn.refine.output_error import output_error_problem
 from pidyn.refine.problem import ShootingProblem
@@ -87,12 +88,14 @@ def scan_period(
     specs = trainable_specs(system)
     free = np.array([s.name not in held for s in specs])
     grid = sorted({1.0, *ratios})
-    costs, thetas = [], []
-    for ratio in grid:
-        theta0 = to_theta(specs, scaled(values, powers, 1.0 / ratio))
-        theta, cost = profile_point(problem, theta0, free, profile_nfev)
-        costs.append(cost)
-        thetas.append(theta)
+    warm(problem, to_theta(specs, values))
+    points = map_ordered(
+        lambda ratio: profile_point(
+            problem, to_theta(specs, scaled(values, powers, 1.0 / ratio)), free, profile_nfev
+        ),
+        grid,
+    )
+    thetas, costs = [p[0] for p in points], [p[1] for p in points]
     i_est, i_best = grid.index(1.0), int(np.argmin(costs))
     out = PeriodScan(grid, costs, costs[i_est], grid[i_best], held=held)
     if np.isfinite(costs[i_best]) and costs[i_best] < costs[i_est] * (1.0 - margin):
@@ -110,6 +113,13 @@ def scan_period(
         out.seconds,
     )
     return out
+
+
+def warm(problem: ShootingProblem, theta: np.ndarray) -> None:
+    """One simulation before the points are shared among processes: the system's tape is then
+    recorded (and its kernel built) once, here, and every worker inherits it."""
+    with np.errstate(all="ignore"):
+        problem.residuals_and_fd_jacobian(theta, columns=np.array([], int))
 
 
 @tapes_kept()  # one system, hundreds of simulations: its tape recorded once

@@ -26,6 +26,7 @@ from pidyn.models.identify import SubperiodIdentifier
 from pidyn.models.lit_module import PIDynNetModule
 from pidyn.models.pidynnet import PIDynNet
 from pidyn.models.schedule import Schedule
+from pidyn.parallel import set_workers
 from pidyn.reporting import write_json
 from pidyn.runs.methods import check_method_names
 from pidyn.runs.runtime import in_multirun, quiet_framework_warnings
@@ -112,6 +113,7 @@ def build_run(cfg: DictConfig, record: Record | None) -> Run:
     run_dir = Path(cfg.paths.output_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(int(cfg.get("num_threads", 1)))
+    set_workers(cfg.get("workers"))
     torch.set_default_dtype(torch.float64 if str(cfg.get("precision", "32")) == "64" else torch.float32)
     L.seed_everything(cfg.seed, workers=True, verbose=False)
 

@@ -41,6 +41,7 @@ VOLATILE = (
     "skip_done",
     "raise_errors",
     "num_threads",
+    "workers",
     "figures",
     "trainer.enable_progress_bar",
     "model.schedule.max_windows",

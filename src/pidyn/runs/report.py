@@ -3,7 +3,6 @@ refinement.json, windows.json, modal.json, the figures, TensorBoard and the log'
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 from pathlib import Path
@@ -19,22 +18,16 @@ from pidyn.notes import note
 from pidyn.reporting import (
     diverged,
     param_table,
-    plot_convergence,
-    plot_response,
     write_json,
     write_text_atomic,
     write_yaml,
 )
-from pidyn.runs.amplitude_figure import amplitude_figure
 from pidyn.runs.build import Run
 from pidyn.runs.building_report import write_building_report
 from pidyn.runs.hparams import log_hparams
-from pidyn.runs.loop_figure import loop_figure, support_loops
-from pidyn.runs.metrics import channel_nrmse, record_noise, reference_channel, relative_errors, sim_nrmse_x
-from pidyn.runs.mode_shape_figure import mode_shape_figure
-from pidyn.runs.stabilization_figure import stabilization_figure
+from pidyn.runs.metrics import channel_nrmse, record_noise, relative_errors, sim_nrmse_x
+from pidyn.runs.run_figures import draw_figures
 from pidyn.runs.tb_images import add_png
-from pidyn.runs.transfer_figure import transfer_figure
 from pidyn.simulate import simulate_response
 from pidyn.starts.data import DATA_SCALES
 from pidyn.supports import support_lines, support_table
@@ -88,12 +81,10 @@ def write_report(
     _record_adequacy(adequacy, metrics)
     if hasattr(system, "storey_equations"):
         _building(run, final, truths, refined, metrics)
-    if hasattr(system, "support_stiffness_params"):  # a bridge on its supports
-        metrics["supports"], support_notes = support_table(system, final, refined)
-        for text in support_notes:
-            log.warning(text)
-        metrics["notes"] = list(metrics.get("notes") or []) + support_notes
-    _figures(run, results, truths, baselines, refined, sim, metrics, final, draw=cfg.get("figures", True))
+    _supports(system, final, refined, metrics)
+    if cfg.get("figures", True):
+        draw_figures(run, results, truths, baselines, refined, sim, metrics, final)
+        tb_figures(run.logger, run.run_dir / "figures", int(run.module.iteration), metrics, refined)
     if stages is not None:
         metrics["stage_seconds"] = {**stages, "report": time.perf_counter() - t_report}
     metrics["wall_seconds"] = time.perf_counter() - t_wall  # the whole run, its report and figures too
@@ -102,6 +93,16 @@ def write_report(
     write_run_report(run_dir, system.describe(final), metrics)
     _log_summary(system.describe(final), errors, pidyn_errors, metrics, run_dir)
     return metrics
+
+
+def _supports(system: StructuralSystem, final: dict[str, float], refined: Any, metrics: dict) -> None:
+    """A bridge on its supports: each support's stiffness and what the data say of it."""
+    if not hasattr(system, "support_stiffness_params"):
+        return
+    metrics["supports"], support_notes = support_table(system, final, refined)
+    for text in support_notes:
+        log.warning(text)
+    metrics["notes"] = list(metrics.get("notes") or []) + support_notes
 
 
 def _write_refined(
@@ -336,94 +337,6 @@ def refined_metrics(refined: Any, names: list[str], truths: dict[str, float | No
     if getattr(refined, "compared", None):
         out["refine_compare"] = refined.compared
     return out
-
-
-def _figures(
-    run: Run,
-    results: list,
-    truths: dict,
-    baselines: list[dict],
-    refined: Any,
-    sim: dict[str, np.ndarray],
-    metrics: dict,
-    final: dict[str, float],
-    draw: bool = True,
-) -> None:
-    """The run's figures and their numbers in metrics (``draw=False``: none of them)."""
-    if not draw:
-        return
-    system, record = run.system, run.record
-    fig_dir = run.run_dir / "figures"
-    fig_dir.mkdir(exist_ok=True)
-    ukf = next((b for b in baselines if b["method"] == "ukf" and b.get("trajectory")), None)
-    plot_convergence(
-        fig_dir / "param_convergence.png",
-        run.ident.trajectory,
-        truths,
-        [r.__dict__ for r in results],
-        title=f"{system.name} under {record.name}",
-        other=None if ukf is None else ("UKF", ukf["trajectory"]),
-        final=None if refined is None else refined.intervals,
-    )
-    kind, floor, label = reference_channel(record, system.n_dof)
-    meas = getattr(record, kind)
-    series = {
-        f"measured {label}": meas[:, floor - 1],
-        "identified model (simulated)": sim[kind][:, floor - 1],
-    }
-    plot_response(
-        fig_dir / "response.png",
-        record.t,
-        series,
-        title=f"{system.name}: NRMSE {metrics['sim_nrmse'][label]:.3g} ({label})",
-    )
-    loop_figure(fig_dir / "restoring_force.png", system, final, record, sim)
-    support_loops(fig_dir / "support_loops.png", system, final, record, sim)
-    spectrum = transfer_figure(fig_dir / "transfer_function.png", record, system, sim)
-    if spectrum is not None:
-        metrics["transfer_function"] = spectrum
-    _modal_figures(run, fig_dir, metrics, baselines, final, sim)
-    tb_figures(run.logger, fig_dir, int(run.module.iteration), metrics, refined)
-
-
-def _modal_figures(
-    run: Run, fig_dir: Path, metrics: dict, baselines: list[dict], final: dict[str, float], sim: dict
-) -> None:
-    """The figures of a measured record's modes, where they apply: the stabilisation diagram, the
-    mode shapes beside the peers' with MAC (several floors), the period and damping against the
-    amplitude (one degree of freedom); their numbers go to metrics.json. A figure that fails is a
-    note, not the loss of the run's results."""
-    system, record = run.system, run.record
-    if record.truth:  # a simulated record: the truth, not a peer, is what its modes are held to
-        return
-    modal = run.run_dir / "modal.json"
-    modes = json.loads(modal.read_text()).get("modes") if modal.exists() else None
-    srim = next((b.get("modes") for b in baselines if b["method"] == "srim"), None)
-    figures = {
-        "stabilization": lambda: stabilization_figure(fig_dir / "stabilization.png", record, system.n_dof),
-        "mode_shapes": lambda: (
-            mode_shape_figure(fig_dir / "mode_shapes.png", record, modes, srim)
-            if modes and system.n_dof > 1
-            else None
-        ),
-        "period_vs_amplitude": lambda: (
-            amplitude_figure(
-                fig_dir / "period_vs_amplitude.png", record, system, final, sim, modes[0]["period_s"]
-            )
-            if modes and system.n_dof == 1
-            else None
-        ),
-    }
-    for key, draw in figures.items():
-        try:
-            out = draw()
-        except Exception as exc:  # noqa: BLE001  (a figure's failure must not cost the run its results)
-            text = note("figure_failed", f"figures/{key}.png was not drawn: {type(exc).__name__}: {exc}")
-            log.warning(text)
-            metrics.setdefault("notes", []).append(text)
-            continue
-        if out is not None:
-            metrics[key] = out
 
 
 def _log_summary(equation: str, errors: dict, pidyn_errors: dict, metrics: dict, run_dir: Path) -> None:
