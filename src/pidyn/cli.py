@@ -24,6 +24,7 @@ from omegaconf.errors import OmegaConfBaseException
 from pidyn import blas_threads  # noqa: F401  (before NumPy loads its BLAS: see the module)
 from pidyn.config import CONF_DIR as _CONF_PATH
 from pidyn.config import check_settings
+from pidyn.cores import cores, share_cores
 from pidyn.parallel import set_workers
 from pidyn.reporting import write_json
 from pidyn.runs.folder import FAILED, RunFolderBusy
@@ -56,6 +57,7 @@ def _guarded(task, cfg: DictConfig) -> dict:
     global _STARTED
     _STARTED = True
     try:
+        _share_cores_with_sweep()
         set_workers(cfg.get("workers"))
         return task(cfg)
     except KeyboardInterrupt:
@@ -116,6 +118,17 @@ def _in_multirun() -> bool:
         return HydraConfig.get().mode == RunMode.MULTIRUN
     except ValueError:
         return False
+
+
+def _share_cores_with_sweep() -> None:
+    """A job of a multirun whose launcher runs several at once (joblib's ``n_jobs``) splits its work
+    over its share of the cores only: its compiled integrations' threads and its workers
+    (``pidyn.cores.share_cores``; a ``PIDYN_THREADS`` the user set is kept)."""
+    if not _in_multirun():
+        return
+    n_jobs = HydraConfig.get().launcher.get("n_jobs")
+    if isinstance(n_jobs, int) and n_jobs != 1:
+        share_cores(cores() if n_jobs < 0 else n_jobs)  # joblib's -1: every core
 
 
 def _write_failure(cfg: DictConfig, exc: BaseException) -> None:
