@@ -27,6 +27,7 @@ from pidyn.baselines.common import BaselineResult, from_theta, starting_point
 from pidyn.baselines.registry import estimator, row
 from pidyn.data.sources import Record
 from pidyn.integrate import input_hold, rk4, stage_excitation
+from pidyn.parallel import map_ordered
 from pidyn.refine.problem import record_channels
 
 #: the q_param grid searched by default (``baselines.ukf.tune`` in the config mirrors it)
@@ -235,7 +236,8 @@ def _tuned(record: Record, system, grid: list[float], kw: dict) -> BaselineResul
     """The filter for each ``q_param`` of the grid; the one with the largest innovation
     log-likelihood wins (the data choose, no truth involved)."""
     t0 = time.perf_counter()
-    runs = [unscented_kalman_filter(record, system, q_param=float(q), **kw) for q in grid]
+    # the grid's filters are independent: shared among the job's workers (pidyn.parallel)
+    runs = map_ordered(lambda q: unscented_kalman_filter(record, system, q_param=float(q), **kw), list(grid))
     finite = [i for i in range(len(runs)) if np.isfinite(runs[i].loglik)]
     if not finite:
         raise RuntimeError(

@@ -22,6 +22,7 @@ from typing import Any
 from pidyn.baselines.registry import ESTIMATORS, PARAMETRIC, check_names
 from pidyn.cores import cores
 from pidyn.errors import errors_pct
+from pidyn.parallel import set_workers
 
 
 def baseline_rows(
@@ -65,8 +66,10 @@ class BaselineJob:
         record: Any,
         fit: tuple[float, float] | None = None,
         parallel: bool = False,
+        workers: int = 1,
     ) -> None:
         self._args = (bcfg, noise, system, record, fit)
+        self._workers = int(workers)
         self._proc: subprocess.Popen | None = None
         self._rows: list[dict] | None = None
         self._dir: tempfile.TemporaryDirectory | None = None
@@ -92,7 +95,8 @@ class BaselineJob:
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
             stderr=self._stderr,
-            env={**os.environ, "PIDYN_THREADS": "1"},  # PIDynNet has the other core
+            # PIDynNet has the other core; where the run waits for these rows, the worker may fork
+            env={**os.environ, "PIDYN_THREADS": "1", "PIDYN_WORKERS": str(self._workers)},
         )
 
     def result(self) -> list[dict]:
@@ -151,6 +155,7 @@ class BaselineJob:
 def main(folder: str) -> None:
     """Worker entry: read the arguments, run the estimators, write (ok, rows or message)."""
     path = Path(folder)
+    set_workers(int(os.environ.get("PIDYN_WORKERS", "1")))
     with open(path / "args.pkl", "rb") as f:
         args = pickle.load(f)
     try:

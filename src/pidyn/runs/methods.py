@@ -16,6 +16,7 @@ from pidyn.baselines.registry import STARTS, check_names
 from pidyn.baselines.worker import BaselineJob
 from pidyn.data.sources import Record
 from pidyn.models.schedule import network_states
+from pidyn.parallel import workers
 from pidyn.refine import RefineSettings, refine
 from pidyn.reporting import diverged, write_json
 from pidyn.runs.metrics import record_noise, relative_errors
@@ -160,8 +161,17 @@ def start_baselines(
     fit = record.meta.split.fit if hold_out and record.meta.split else None
     plain = OmegaConf.to_container(bcfg, resolve=True) if bcfg else {}
     parallel = bool(bcfg.get("parallel", False)) and not in_multirun()
+    # a run that stops PIDynNet where a peer is far ahead waits for these rows after its first
+    # window, its core idle: then the worker may share its work over both (the UKF's grid)
+    waits = cfg.model.get("schedule", {}).get("stop_behind") is not None
     return BaselineJob(
-        plain, record_noise(cfg, record), system, record, None if fit is None else tuple(fit), parallel
+        plain,
+        record_noise(cfg, record),
+        system,
+        record,
+        None if fit is None else tuple(fit),
+        parallel,
+        workers=workers() if waits else 1,
     )
 
 
