@@ -14,9 +14,11 @@ points are computed here, one after the other.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import pickle
+import signal
 import sys
 import warnings
 from collections.abc import Callable, Sequence
@@ -55,25 +57,26 @@ def map_ordered(fn: Callable[[T], R], items: Sequence[T], n: int | None = None) 
     n = min(n or _WORKERS, len(items))
     if n <= 1 or not _can_fork():
         return [fn(x) for x in items]
-    with shared_by(n):  # each process's compiled integrations split over its part of the threads
-        children = [_fork_share(fn, items, w, n) for w in range(1, n)]
-        out: list = [None] * len(items)
-        try:
+    out: list = [None] * len(items)
+    children: list[tuple[int, int]] = []
+    try:
+        with shared_by(n):  # each process's compiled integrations split over its part of the threads
+            children = [_fork_share(fn, items, w, n) for w in range(1, n)]
             for i in range(0, len(items), n):
                 out[i] = fn(items[i])
-        except BaseException:
-            for pid, fd in children:  # no child left behind
-                _collect(pid, fd)
-            raise
-    for w, (pid, fd) in enumerate(children, start=1):
-        share = _collect(pid, fd)
-        if share is None:  # the child failed: its points are computed here
-            log.debug(
-                "a worker failed: its %d points are computed in this process", len(range(w, len(items), n))
-            )
-            share = [(i, fn(items[i])) for i in range(w, len(items), n)]
-        for i, value in share:
-            out[i] = value
+        while children:
+            w = n - len(children)  # the first child left took items w, w + n, ...
+            share = _collect(*children[0])
+            children.pop(0)
+            if share is None:  # the child failed: its points are computed here
+                log.debug("a worker failed: its points are computed in this process")
+                share = [(i, fn(items[i])) for i in range(w, len(items), n)]
+            for i, value in share:
+                out[i] = value
+    except BaseException:  # an error of the points, or an interruption: no child left behind
+        for pid, fd in children:
+            _stop(pid, fd)
+        raise
     return out
 
 
@@ -86,7 +89,8 @@ def _fork_share(fn: Callable, items: Sequence, w: int, n: int) -> tuple[int, int
         warnings.simplefilter("ignore", DeprecationWarning)
         pid = os.fork()
     if pid == 0:  # the child: compute, send, leave without running the parent's exit handlers
-        code = 0
+        global _WORKERS
+        _WORKERS, code = 1, 0  # a point that shares its own work does so in this process
         try:
             os.close(r)
             data = pickle.dumps(("ok", [(i, fn(items[i])) for i in range(w, len(items), n)]))
@@ -99,6 +103,16 @@ def _fork_share(fn: Callable, items: Sequence, w: int, n: int) -> tuple[int, int
             os._exit(code)
     os.close(wfd)
     return pid, r
+
+
+def _stop(pid: int, fd: int) -> None:
+    """A child whose results are no longer wanted: ended and reaped."""
+    with contextlib.suppress(OSError):
+        os.kill(pid, signal.SIGTERM)
+    with contextlib.suppress(OSError):
+        os.close(fd)
+    with contextlib.suppress(OSError):
+        os.waitpid(pid, 0)
 
 
 def _collect(pid: int, fd: int) -> list | None:
