@@ -37,7 +37,7 @@ def test_a_strong_motion_records_budget_is_two_windows_in_its_identification_and
     assert compose("train").model.schedule.max_iters == 1500
     # PIDynNet stops where a peer is far ahead on a strong-motion record only (its diagnosis too); a
     # simulated record and the paper's tables keep its whole budget
-    assert train.stop_behind == diagnose.stop_behind == 2.0
+    assert train.stop_behind == diagnose.stop_behind == 1.5
     assert compose("train").model.schedule.stop_behind is None
     for exp in ("table1", "table2", "table3"):
         assert compose("train", overrides=[f"experiment={exp}"]).model.schedule.stop_behind is None, exp
