@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import logging
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -48,10 +49,8 @@ def draw_figures(
     convergence), so that the workers' interleaved shares come out about even."""
     fig_dir = run.run_dir / "figures"
     fig_dir.mkdir(exist_ok=True)
-    figures = {
-        **_modal(run, fig_dir, baselines, final, sim),
-        **_plain(run, fig_dir, results, truths, baselines, refined, sim, metrics, final),
-    }
+    drawn = _Drawn(run, results, truths, baselines, refined, sim, final)
+    figures = {**_modal(run, fig_dir, baselines, final, sim), **_plain(drawn, fig_dir, metrics)}
     order = ("period_vs_amplitude", "param_convergence", "stabilization", "transfer_function")
     figures = {
         k: figures[k] for k in sorted(figures, key=lambda k: order.index(k) if k in order else len(order))
@@ -78,27 +77,31 @@ def _drawn(item: tuple[str, Figure]) -> tuple[str, Any, str | None]:
         )
 
 
-def _plain(
-    run: Run,
-    fig_dir: Path,
-    results: list,
-    truths: dict,
-    baselines: list[dict],
-    refined: Any,
-    sim: dict[str, np.ndarray],
-    metrics: dict,
-    final: dict[str, float],
-) -> dict[str, Figure]:
+@dataclass
+class _Drawn:
+    """What the plain figures draw: the run, PIDynNet's windows, the truth where known, the
+    peers, the refinement, the simulated response and the final values."""
+
+    run: Run
+    results: list
+    truths: dict
+    baselines: list[dict]
+    refined: Any
+    sim: dict[str, np.ndarray]
+    final: dict[str, float]
+
+
+def _plain(d: _Drawn, fig_dir: Path, metrics: dict) -> dict[str, Figure]:
     """The figures every run draws: the parameters' convergence, the response, the restoring
     force, the supports' loops and the transfer function (whose peak goes to metrics)."""
-    system, record = run.system, run.record
-    ukf = next((b for b in baselines if b["method"] == "ukf" and b.get("trajectory")), None)
+    system, record, sim, final, refined = d.run.system, d.run.record, d.sim, d.final, d.refined
+    ukf = next((b for b in d.baselines if b["method"] == "ukf" and b.get("trajectory")), None)
     kind, floor, label = reference_channel(record, system.n_dof)
     series = {
         f"measured {label}": getattr(record, kind)[:, floor - 1],
         "identified model (simulated)": sim[kind][:, floor - 1],
     }
-    trajectory, rows = run.ident.trajectory, [r.__dict__ for r in results]
+    trajectory, rows, truths = d.run.ident.trajectory, [r.__dict__ for r in d.results], d.truths
     return {
         "param_convergence": lambda: plot_convergence(
             fig_dir / "param_convergence.png",
