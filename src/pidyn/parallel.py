@@ -1,15 +1,17 @@
 """Independent pieces of one computation on the machine's other cores.
 
-A period scan, a period profile and the running-period windows fit dozens of points that do not
-depend on one another, each a few tens of milliseconds of simulation, while the second core of a
-two-core machine waits. ``map_ordered`` forks children that inherit the whole process (the
-problem, its compiled kernels: nothing is pickled but the results) and compute an interleaved
-share each, while the parent computes its own. Every point is computed exactly as one process
-computes it, so the results are the same bits whatever the number of workers.
+A period scan and a period profile fit a few dozen points that do not depend on one another, each
+a few tens of milliseconds of simulation; a UKF tries a grid of process noises; a run draws half
+a dozen figures. Meanwhile the second core of a two-core machine waits. ``map_ordered`` forks
+children that inherit the whole process (the problem, its compiled kernels: nothing is pickled but
+the results) and compute an interleaved share each, while the parent computes its own. Every point
+is computed exactly as one process computes it, so the results are the same bits whatever the
+number of workers. (Work that already splits over the cores, a long output-error fit whose
+compiled integration runs in threads, gains nothing from it.)
 
 The number of workers is a process-wide setting, like torch's threads (``set_workers``; the
-config's ``workers``, by default this process's share of the cores). Forking is used on Linux only; elsewhere, and where a child fails, the
-points are computed here, one after the other.
+config's ``workers``, by default this process's share of the cores). Forking is used on Linux
+only; elsewhere, and where a child fails, the points are computed here, one after the other.
 """
 
 from __future__ import annotations
