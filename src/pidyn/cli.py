@@ -25,7 +25,6 @@ from pidyn import blas_threads  # noqa: F401  (before NumPy loads its BLAS: see 
 from pidyn.config import CONF_DIR as _CONF_PATH
 from pidyn.config import check_settings
 from pidyn.cores import cores, share_cores
-from pidyn.parallel import set_workers
 from pidyn.reporting import write_json
 from pidyn.runs.folder import FAILED, RunFolderBusy
 
@@ -58,7 +57,6 @@ def _guarded(task, cfg: DictConfig) -> dict:
     _STARTED = True
     try:
         _share_cores_with_sweep()
-        set_workers(cfg.get("workers"))
         return task(cfg)
     except KeyboardInterrupt:
         log.error("interrupted; run the same command again to resume")

@@ -23,6 +23,7 @@ from pidyn.discrepancy.loop import Inputs, Subject
 from pidyn.discrepancy.settings import DiagnosisSettings
 from pidyn.discrepancy.subjects import subject_for
 from pidyn.discrepancy.writer import write_diagnosis
+from pidyn.parallel import set_workers
 from pidyn.runs.build import build_record, instantiate
 from pidyn.runs.folder import is_complete, run_folder
 from pidyn.runs.methods import refine_plan
@@ -45,6 +46,7 @@ def diagnose(cfg: DictConfig, record: Record | None = None) -> dict[str, Any]:
 def _diagnose(cfg: DictConfig, record: Record | None) -> dict[str, Any]:
     t_wall = time.perf_counter()
     check_settings(cfg)
+    set_workers(cfg.get("workers"))  # before the subject: its supports' fits share the cores
     subject = compose_subject(cfg, record)
     result = loop.diagnose(subject)
     diagnosis = write_diagnosis(subject, result, time.perf_counter() - t_wall)
