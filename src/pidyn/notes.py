@@ -19,6 +19,8 @@ CODES: dict[str, str] = {
     "cut_to_shortest": "channels of different lengths (two recorders): cut to the shortest",
     "resampled": "the record was resampled to the time step asked (polyphase, zero phase)",
     "outputs_unused": "measured outputs beyond the model's degrees of freedom are not used",
+    "recorders_aligned": "a film record's recorders were put on one clock, read from the supports' ground motions",
+    "recorders_not_aligned": "a film record's recorders could not be put on one clock: each keeps its own",
     "velocity_integrated": "a channel without a velocity block: its velocity integrated from its acceleration",
     "lag_not_trusted": "an IMU floor correlates too weakly with the table to trust its time lag; it is not used",
     # PIDynNet's windows

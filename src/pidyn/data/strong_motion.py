@@ -7,8 +7,12 @@ The channel sets of a station come from ``stations.yaml`` beside the shipped rec
 station is read from the files when not given); ``data.inputs=[...] data.outputs=[...]``
 choose any others. What is done to the data, each step said in the record's ``meta``:
 
-* **channels of different lengths** (film records: two recorders, which start together to
-  within a sample but stop apart) are cut to the shortest; different steps are refused;
+* **two recorders' clocks** (film records): the headers give each recorder's trigger time to
+  0.1 s only, so the further recorders' channels are shifted onto the reference recorder's clock,
+  read from the supports' ground motions (``pidyn.data.clocks``; ``one_clock=False`` keeps each
+  recorder's own);
+* **channels of different lengths** (film records: the recorders stop apart) are cut to the
+  shortest; different steps are refused;
 * **missing channels** end in ``MissingChannelError`` naming them, or with ``on_missing=drop``
   are left out (and said so); an event left without an input or an output is refused;
 * **resampling** to ``dt`` (0.02 s, 50 Hz: ten samples a period up to 5 Hz) by zero-phase
@@ -27,6 +31,7 @@ from __future__ import annotations
 import logging
 import re
 from collections.abc import Sequence
+from dataclasses import replace
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
@@ -34,6 +39,7 @@ from typing import Any
 import numpy as np
 from scipy.signal import resample_poly
 
+from pidyn.data.clocks import recorder_offsets, shifted
 from pidyn.data.csmip import Archive, CsmipFormatError, MissingChannelError, read_archive
 from pidyn.data.layout import end_motions, observation
 from pidyn.data.meta import RecordMeta, Split
@@ -105,19 +111,21 @@ def csmip_record(
     fit_share: float = 0.65,
     system=None,
     input_hold: str = "linear",
+    one_clock: bool = True,
 ) -> Record:
     """The record of one event at one station (see the module's docstring).
 
     ``max_outputs``: keep the first this many outputs (default: the model's degrees of freedom
     when ``system`` is given, which the train task passes). ``fit_share``: the first share is
     fitted, the rest held out (``meta.split``). ``input_hold``: how models read the inputs
-    between samples (``pidyn.integrate``)."""
+    between samples (``pidyn.integrate``). ``one_clock``: the module's docstring."""
     if not 0.1 <= fit_share <= 0.95:
         raise DataError(f"data.fit_share must lie in [0.1, 0.95], got {fit_share}")
     archive, station, ins, outs, notes = _channels_used(
         path, station, direction, inputs, outputs, on_missing, _output_limit(system, max_outputs)
     )
-    acc_in, vel_in, acc_out, step = _aligned_channels(archive, ins, outs, dt, notes)
+    clocks = _clock_groups(station, ins) if one_clock else None  # the supports that read the clocks
+    acc_in, vel_in, acc_out, step = _aligned_channels(archive, ins, outs, dt, notes, clocks)
     i0, i1, pre_rms = shaking_span(acc_in, acc_out, step, span, pre, post)
     t = np.arange(i1 - i0) * step
     a = acc_out[i0:i1]
@@ -129,7 +137,6 @@ def csmip_record(
     a, deck = _read_through(system, outs, a)
     for text in notes:
         log.info("%s: %s", archive.path.name, text)
-    cut = float(t[-1]) * fit_share
     meta = RecordMeta(
         path=str(path),
         station=station,
@@ -145,7 +152,7 @@ def csmip_record(
         units={"a": "m/s^2", "ag": "m/s^2"},
         pga=float(np.max(np.abs(acc_in[i0:i1]))),
         input_hold=checked_hold(input_hold, "data.input_hold"),
-        split=Split.at(cut, float(t[-1])),
+        split=Split.at(float(t[-1]) * fit_share, float(t[-1])),
     )
     name = Path(path).name.split(".")[0]
     return Record(name=name, t=t, f=f, a=a, excitation="ground", meta=meta)
@@ -234,15 +241,23 @@ def _channel_meta(archive, ins: list[int], outs: list[int], several: bool) -> di
 
 
 def _aligned_channels(
-    archive, ins: list[int], outs: list[int], dt: float | None, notes: list[str]
+    archive,
+    ins: list[int],
+    outs: list[int],
+    dt: float | None,
+    notes: list[str],
+    clock_groups: list[list[int]] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """The inputs' accelerations and velocities and the outputs' accelerations on one time grid:
-    one sampling step, cut to the shortest channel, resampled to ``dt``."""
+    one sampling step, the recorders on one clock (``clock_groups``: the supports' channel sets
+    whose ground motions tell the recorders' offsets, ``pidyn.data.clocks``; None leaves each
+    recorder's own), cut to the shortest channel, resampled to ``dt``."""
     chans = [archive.channels[c] for c in ins + outs]
     steps = {round(c.dt, 9) for c in chans}
     if len(steps) > 1:
         raise CsmipFormatError(f"{archive.path.name}: channels sampled at different steps {sorted(steps)} s")
     step = chans[0].dt
+    archive = _on_one_clock(archive, ins + outs, clock_groups, notes)
     n = min(c.n for c in chans)
     if any(c.n != n for c in chans):
         lengths = {c.station_channel: c.n for c in chans}
@@ -258,6 +273,34 @@ def _aligned_channels(
     vel_in = _velocities(archive, ins, n, step, acc_in, notes)
     acc_in, acc_out, step = _resample(np.concatenate([acc_in, vel_in], axis=1), acc_out, step, dt, notes)
     return acc_in[:, : len(ins)], acc_in[:, len(ins) :], acc_out, step
+
+
+def _on_one_clock(archive, used: list[int], groups: list[list[int]] | None, notes: list[str]):
+    """The archive with the used channels of each further recorder shifted onto the reference
+    recorder's clock (``pidyn.data.clocks``); the archive itself where nothing moves."""
+    if not groups:
+        return archive
+    offsets, said = recorder_offsets(archive, groups, used)
+    notes.extend(said)
+    if not offsets:
+        return archive
+    late = {o.recorder: o.seconds for o in offsets}
+    moved = dict(archive.channels)
+    for c in used:
+        ch = archive.channels[c]
+        if ch.recorder in late:
+            back = -late[ch.recorder]
+            vel = None if ch.vel is None else shifted(ch.vel, back, ch.dt)
+            moved[c] = replace(ch, acc=shifted(ch.acc, back, ch.dt), vel=vel)
+    return replace(archive, channels=moved)
+
+
+def _clock_groups(station: str, ins: list[int]) -> list[list[int]]:
+    """The supports' channel sets whose ground motions tell the recorders' clocks apart: every
+    direction's of the station (the clocks are the record's, not a direction's), and the inputs used."""
+    sets = stations().get(station, {}).get("directions", {})
+    groups = [[int(c) for c in s["inputs"]] for s in sets.values()]
+    return groups if ins in groups else [*groups, ins]
 
 
 def _velocities(
