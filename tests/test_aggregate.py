@@ -213,3 +213,6 @@ def test_a_sweep_counts_its_jobs_in_advance():
 
     assert sweep_size(["noise=0,0.025,0.05", "seed=range(3)", "system=duffing"]) == 9
     assert sweep_size(["system=duffing"]) == 1
+    # a command line's sweep of a key replaces the config's (the experiment's events, make real's subset)
+    assert sweep_size(["data.event=a,b,c", "data.direction=x,y", "data.event=a,b"]) == 4
+    assert sweep_size(["noise=0,0.025,0.05", "noise=0.05"]) == 1

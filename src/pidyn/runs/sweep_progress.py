@@ -28,11 +28,16 @@ ENDED = "sweep_progress.log"  # one line per job that ended
 
 
 def sweep_size(overrides: list[str]) -> int | None:
-    """How many jobs the basic sweeper makes of ``overrides`` (the product of every sweep's
-    choices); None where a sweep cannot be counted in advance (an interval of another sweeper)."""
+    """How many jobs the basic sweeper makes of ``overrides`` (the product of every key's choices,
+    the last override of a key replacing the config's sweep of it, as the sweeper does); None
+    where a sweep cannot be counted in advance (an interval of another sweeper)."""
     try:
         parsed = OverridesParser.create().parse_overrides(overrides)
-        return math.prod(len(list(o.sweep_string_iterator())) for o in parsed if o.is_sweep_override())
+        choices = {
+            o.get_key_element(): len(list(o.sweep_string_iterator())) if o.is_sweep_override() else 1
+            for o in parsed
+        }
+        return math.prod(choices.values())
     except Exception:  # noqa: BLE001  (a sweep another sweeper reads: no count, no harm)
         return None
 
