@@ -250,8 +250,11 @@ def identification_table(rows: list[dict], direction: str) -> list[str]:
     ]
     for r in sorted((r for r in rows if r["direction"] == direction), key=lambda r: r.get("pga_g") or 0):
         tag = " *(t)*" if r["role"] == "tuning" else ""
-        if r["status"] != "ok":
+        if not r["status"].startswith("ok"):
             lines.append(f"| {r['event']}{tag} | {r['date']} | - | - | {r['status']} | | | | | | | |")
+            continue
+        if r["status"] != "ok":  # a model the record rejects: its scores, no period or damping
+            lines.append(_rejected_row(r, tag))
             continue
         ci, zc = r["period_ci95"], r["damping_ci95"]
         j = judge(r)
@@ -261,12 +264,28 @@ def identification_table(rows: list[dict], direction: str) -> list[str]:
         lines.append(
             f"| {r['event']}{tag} | {r['date']} | {cell(r['pga_g'])} | {r['inputs']} -> {r['outputs']} | "
             f"{cell(r['period_s'])} [{cell(ci[0])}, {cell(ci[1])}]{inside} | {_profile_cell(r, j)} | "
-            f"{cell(100 * r['damping'], '.1f')} "
-            f"[{cell(100 * zc[0], '.1f')}, {cell(100 * zc[1], '.1f')}] | {cell(r.get('transfer_function_period_s'))} | "
+            f"{_damping_cell(r['damping'], zc, r.get('damping_note'))} | {cell(r.get('transfer_function_period_s'))} | "
             f"{cell(r.get('srim_period_s'))} | {cell(r.get('okid_era_period_s'))} | {cell(r['heldout_nrmse_a'])} / "
             f"{cell(r.get('srim_heldout_nrmse_a'))} / {cell(r.get('okid_era_heldout_nrmse_a'))}{beats} | {cell(r['wall_s'], '.0f')} |"
         )
     return lines + [""]
+
+
+def _rejected_row(r: dict, tag: str) -> str:
+    """An identification table's row for a model the record rejects: its and the peers' scores only."""
+    return (
+        f"| {r['event']}{tag} | {r['date']} | {cell(r['pga_g'])} | {r['inputs']} -> {r['outputs']} | "
+        f"not adequate | | | {cell(r.get('transfer_function_period_s'))} | {cell(r.get('srim_period_s'))} | "
+        f"{cell(r.get('okid_era_period_s'))} | {cell(r['heldout_nrmse_a'])} / {cell(r.get('srim_heldout_nrmse_a'))} "
+        f"/ {cell(r.get('okid_era_heldout_nrmse_a'))} | {cell(r['wall_s'], '.0f')} |"
+    )
+
+
+def _damping_cell(zeta: float | None, ci: list | None, why: str | None) -> str:
+    """A damping ratio with its interval (%), or why it is not the structure's (``pidyn.assessment``)."""
+    if zeta is None:
+        return f"not a property ({why})" if why else "not a property"
+    return f"{cell(100 * zeta, '.1f')} [{cell(100 * ci[0], '.1f')}, {cell(100 * ci[1], '.1f')}]"
 
 
 def _profile_cell(row: dict, j: dict) -> str:
@@ -298,15 +317,24 @@ def summary_lines(rows: list[dict]) -> list[str]:
             wall = max(r["wall_s"] or 0 for r in sel)
             out.append(
                 f"- {direction}, events {'kept out of all tuning' if role == 'untouched' else 'used in tuning'} "
-                f"({len(sel)}): period inside the peers' span on {sum(inside)} of {len(inside)} weak events "
+                f"({len(sel)} with an adequate model): period inside the peers' span on {sum(inside)} of {len(inside)} weak events "
                 f"({sum(own)} of {len(own)} counting the direction's own PGA; by the profile interval "
                 f"{sum(prof)} of {len(prof)}); "
                 f"held-out NRMSE at or below SRIM's on {sum(beats)} of {len(beats)} events where SRIM gives a "
                 f"stable model; at most {wall:.0f} s an event."
             )
-    failed = sorted({r["event"] for r in rows if r["status"] != "ok"})
+    rejected = [r for r in rows if r["status"].startswith("ok (")]
+    if rejected:
+        out.append(
+            f"- models the record rejects ({len(rejected)} event-directions: no period or damping reported, "
+            "their held-out scores in the tables): "
+            + ", ".join(
+                f"{r['event']} ({r['direction']})" for r in sorted(rejected, key=lambda r: r["event"])
+            )
+        )
+    failed = sorted({r["event"] for r in rows if r["status"] != "ok" and r not in rejected})
     for e in failed:
-        msg = next(r["status"] for r in rows if r["event"] == e and r["status"] != "ok")
+        msg = next(r["status"] for r in rows if r["event"] == e and r["status"] != "ok" and r not in rejected)
         out.append(f"- {e}: {msg}")
     return out + [""]
 
@@ -368,9 +396,11 @@ def period_figure(rows: list[dict], path: Path) -> None:
                     ("damping", "damping_ci95", 100.0, "damping [%]"),
                 )
             ):
-                y = scale * np.array([r[key] for r in pts])
-                lo = scale * np.array([r[ci_key][0] if r[ci_key][0] is not None else np.nan for r in pts])
-                hi = scale * np.array([r[ci_key][1] if r[ci_key][1] is not None else np.nan for r in pts])
+                # a damping that is not the structure's (over 30 %, or an interval over a factor 3) is left out
+                y = scale * np.array([np.nan if r[key] is None else r[key] for r in pts], float)
+                ci = [r[ci_key] or [None, None] for r in pts]
+                lo = scale * np.array([np.nan if c[0] is None else c[0] for c in ci], float)
+                hi = scale * np.array([np.nan if c[1] is None else c[1] for c in ci], float)
                 ax = axes[row_i, col]
                 ax.errorbar(
                     x,
@@ -489,6 +519,15 @@ def diagnosis_table(rows: list[dict], pga: dict[str, float]) -> list[str]:
     return lines + [""]
 
 
+def _transverse_pga(rows: list[dict]) -> dict[str, float]:
+    """Each identified event's transverse peak input (g): the diagnosis tables' PGA column."""
+    return {
+        r["event"]: r["pga_g"]
+        for r in rows
+        if r["direction"] == "transverse" and r["status"].startswith("ok")
+    }
+
+
 def aggregate(base: Path) -> None:
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "figures").mkdir(exist_ok=True)
@@ -534,7 +573,7 @@ def aggregate(base: Path) -> None:
     lines += two_modes_lines(rows, two, judge) or kept_section(
         "## Two modes against one", "## Diagnosis of the strong events", "two_modes"
     )
-    pga = {r["event"]: r["pga_g"] for r in rows if r["direction"] == "transverse" and r["status"] == "ok"}
+    pga = _transverse_pga(rows)
     diag = diagnosis_rows(base / "diagnose") if (base / "diagnose").exists() else []
     lines += _diagnosis_lines(diag, pga)
     lines += final_lines(rows, diag, lambda r: " *(t)*" if r["role"] == "tuning" else "")
@@ -714,7 +753,7 @@ def aggregate_diagnosis(folder: Path) -> None:
     diag = diagnosis_rows(folder)
     if not diag:
         raise SystemExit(f"{folder}: no diagnosis run folders to aggregate")
-    pga = {r["event"]: r["pga_g"] for r in rows if r["direction"] == "transverse" and r["status"] == "ok"}
+    pga = _transverse_pga(rows)
     new = _diagnosis_lines(diag, pga) + final_lines(
         rows, diag, lambda r: " *(t)*" if r["role"] == "tuning" else ""
     )

@@ -22,7 +22,8 @@ def final_error(diag: dict) -> float | None:
 
 def final_rows(ident: list[dict], diag: list[dict]) -> list[dict]:
     """One row per event and direction that both sweeps finished."""
-    by_key = {(r["event"], r["direction"]): r for r in ident if r["status"] == "ok"}
+    # a model the record rejects is identified too: its diagnosis says what it misses
+    by_key = {(r["event"], r["direction"]): r for r in ident if r["status"].startswith("ok")}
     out = []
     for d in diag:
         r = by_key.get((d["event"], d.get("direction")))
@@ -57,7 +58,7 @@ def final_lines(ident: list[dict], diag: list[dict], tag: Callable[[dict], str])
     rows = final_rows(ident, diag)
     if not rows:
         return []
-    n_ident = sum(r["status"] == "ok" for r in ident)
+    n_ident = sum(r["status"].startswith("ok") for r in ident)
     lines = [
         "## The final model on every event",
         "",
