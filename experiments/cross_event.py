@@ -250,6 +250,10 @@ def table(rows: list[dict], own: dict, systems: list[str]) -> list[dict]:
             line[f"{s}_model"] = (res.get(s) or {}).get("model_choice")
             scores = (res.get(s) or {}).get("nrmse") or {}
             line[f"{s}_nrmse_ref"] = median([scores.get(c) for c in ref]) if ref else None
+            if (
+                s in LINEAR_OF
+            ):  # the linear model of the same layout, identified on the same events in its run
+                line[f"{s}_linear_nrmse_a"] = (res.get(s) or {}).get("linear_mean_nrmse_a")
         line["srim_nrmse_a"] = r.get("srim_nrmse_a")
         first = next((v for v in res.values() if v), {})
         line["trivial_nrmse_a"] = first.get("trivial_mean_nrmse_a")
@@ -265,6 +269,29 @@ def _num(v):
         return float(v)
     except (TypeError, ValueError):
         return None
+
+
+def own_linear_lines(rows: list[dict], systems: list[str], strong: list[dict]) -> list[str]:
+    """Each nonlinear model against the linear model of its own run: the same layout, identified on
+    the same events from the same data (a column from an earlier study may have read them otherwise)."""
+    out = []
+    for s in systems:
+        key = f"{s}_linear_nrmse_a"
+        if not any(r.get(key) is not None for r in rows):
+            continue
+        pairs = [r for r in strong if r.get(key) is not None]
+        better = [r for r in pairs if _lt(r[f"{s}_nrmse_a"], r[key])]
+        out.append(
+            f"- the {s} model against the linear model of its own run (the same layout and events): median "
+            f"{_f(median([r[key] for r in rows]))} for that linear model; strong events (PGA >= {STRONG_G} g) "
+            f"predicted better by the {s} model: {len(better)} of {len(pairs)}"
+            + (
+                f" (not: {', '.join(r['event'] for r in pairs if r not in better)})"
+                if len(better) < len(pairs)
+                else ""
+            )
+        )
+    return out
 
 
 def summary_lines(lines: list[dict], all_systems: list[str], others: dict[str, list[dict]]) -> list[str]:
@@ -296,6 +323,7 @@ def summary_lines(lines: list[dict], all_systems: list[str], others: dict[str, l
                 f"- strong events (PGA >= {STRONG_G} g): the {nl} model predicts {len(better)} of {len(strong)} "
                 f"better than the {systems[0]} model"
             )
+        out += own_linear_lines(rows, systems, strong)
         for s in systems:
             worse = [r["event"] for r in rows if not _lt(r[f"{s}_nrmse_a"], r["trivial_nrmse_a"])]
             out.append(
@@ -352,10 +380,13 @@ def markdown(lines: list[dict], systems: list[str], others: dict, args, seconds:
         *systems,
         *[f"{s} on {systems[0]}'s channels" for s in other],
     ]
+    mine = [s for s in systems if any(r.get(f"{s}_linear_nrmse_a") is not None for r in lines)]
+    cols += [f"linear of {s}'s run" for s in mine]
     cols += ["SRIM, same events", "knowing nothing", "per-event (own held-out)"]
     head += ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in sorted(lines, key=lambda r: (r["direction"], -r["pga_g"])):
         cells = [_f(r[f"{s}_nrmse_a"]) for s in systems] + [_f(r[f"{s}_nrmse_ref"]) for s in other]
+        cells += [_f(r.get(f"{s}_linear_nrmse_a")) for s in mine]
         cells += [_f(r.get("srim_nrmse_a")), _f(r["trivial_nrmse_a"]), _f(r["per_event_heldout_nrmse_a"])]
         head.append(
             f"| {r['event']} | {r['direction']} | {r['fold']} | {r['pga_g']:.3f} | "
