@@ -8,9 +8,9 @@ station is read from the files when not given); ``data.inputs=[...] data.outputs
 choose any others. What is done to the data, each step said in the record's ``meta``:
 
 * **two recorders' clocks** (film records): the headers give each recorder's trigger time to
-  0.1 s only, so the further recorders' channels are shifted onto the reference recorder's clock,
-  read from the supports' ground motions (``pidyn.data.clocks``; ``one_clock=False`` keeps each
-  recorder's own);
+  0.1 s only, so a further recorder whose offset, read from the supports' ground motions, is at
+  least a sample has its channels shifted onto the reference recorder's clock
+  (``pidyn.data.clocks``; ``one_clock=False`` keeps each recorder's own);
 * **channels of different lengths** (film records: the recorders stop apart) are cut to the
   shortest; different steps are refused;
 * **missing channels** end in ``MissingChannelError`` naming them, or with ``on_missing=drop``
