@@ -250,9 +250,8 @@ def table(rows: list[dict], own: dict, systems: list[str]) -> list[dict]:
             line[f"{s}_model"] = (res.get(s) or {}).get("model_choice")
             scores = (res.get(s) or {}).get("nrmse") or {}
             line[f"{s}_nrmse_ref"] = median([scores.get(c) for c in ref]) if ref else None
-            if (
-                s in LINEAR_OF
-            ):  # the linear model of the same layout, identified on the same events in its run
+            # the linear model of the same layout, identified on the same events in its run
+            if s in LINEAR_OF:
                 line[f"{s}_linear_nrmse_a"] = (res.get(s) or {}).get("linear_mean_nrmse_a")
         line["srim_nrmse_a"] = r.get("srim_nrmse_a")
         first = next((v for v in res.values() if v), {})
