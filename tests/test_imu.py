@@ -37,7 +37,7 @@ def _rotation(yaw_deg: float, tilt_deg: float) -> np.ndarray:
 
 def _same(a: np.ndarray, b: np.ndarray) -> bool:
     """Equal below 10 Hz (where interpolating twice at 120 Hz is exact enough)."""
-    from pidyn.data.imu import band
+    from pidyn.signals import band
 
     return float(np.corrcoef(band(a, 1 / 120, 0.2, 10.0), band(b, 1 / 120, 0.2, 10.0))[0, 1]) > 0.999
 

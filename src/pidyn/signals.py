@@ -1,5 +1,6 @@
 """Signal processing every part shares (NumPy and SciPy only): integrating accelerations to
-velocities and displacements, and the transfer function of a measured structure.
+velocities and displacements, the transfer function of a measured structure, and the low-band
+cross-correlation that times one sensor against another.
 
 Integration is spectral, with one zero-phase high-pass applied to every signal alike. A
 linear equation of motion holds after any linear time-invariant filter applied to all its
@@ -15,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import csd, welch
+from scipy.signal import butter, csd, sosfiltfilt, welch
 
 
 def highpass_gain(freq: np.ndarray, corner: float, order: int = 4) -> np.ndarray:
@@ -204,3 +205,33 @@ def _input_output(record) -> tuple[np.ndarray | None, np.ndarray | None]:
         return u, (y if f.ndim == 2 else y + f)
     kind = next((k for k in ("x", "v", "a") if k in sensors), None)
     return (u, None) if kind is None else (u, getattr(record, kind)[:, max(sensors[kind]) - 1])
+
+
+def band(sig: np.ndarray, dt: float, lo: float, hi: float) -> np.ndarray:
+    """Zero-phase band-pass (4th-order Butterworth, forward and back)."""
+    sos = butter(4, [lo, min(hi, 0.45 / dt)], btype="bandpass", fs=1.0 / dt, output="sos")
+    return sosfiltfilt(sos, sig, axis=0)
+
+
+def lagged_correlation(
+    ref: np.ndarray, sig: np.ndarray, dt: float, max_lag_s: float, band_hz: tuple[float, float]
+) -> np.ndarray:
+    """Normalised cross-correlation of the band-passed signals (cut to the shorter) at lags of
+    -m..m samples, m = max_lag_s / dt: entry m + L compares ``ref`` at t with ``sig`` at t + L
+    (a peak at L > 0: ``sig`` later)."""
+    n = min(len(ref), len(sig))
+    a, b = band(ref[:n], dt, *band_hz), band(sig[:n], dt, *band_hz)
+    m = int(round(max_lag_s / dt))
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    cc = np.fft.irfft(np.conj(np.fft.rfft(a, size)) * np.fft.rfft(b, size), size)
+    cc = np.concatenate([cc[-m:], cc[: m + 1]]) if m else cc[:1]
+    return cc / max(float(np.linalg.norm(a) * np.linalg.norm(b)), 1e-300)
+
+
+def peak_fraction(c: np.ndarray, i: int) -> float:
+    """Where between samples the maximum at ``c[i]`` lies (-0.5..0.5): a parabola through it and its
+    neighbours; 0 at either end or where the three do not bend down."""
+    if not 0 < i < len(c) - 1:
+        return 0.0
+    den = c[i - 1] - 2 * c[i] + c[i + 1]
+    return 0.5 * (c[i - 1] - c[i + 1]) / den if den < 0 else 0.0

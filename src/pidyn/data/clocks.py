@@ -22,9 +22,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
 from pidyn.notes import note
+from pidyn.signals import lagged_correlation, peak_fraction
 
 #: band (Hz) in which the supports' ground motions are compared: long waves, coherent along a
 #: bridge, and below the structure's own frequency even where strong shaking softens it (Painter
@@ -126,35 +126,15 @@ def _pairs_text(pairs: Sequence[tuple[int, int]]) -> str:
 
 def _pair_offset(archive, rec: str, pairs: Sequence[tuple[int, int]]) -> Offset:
     """The lag at which the pairs' summed normalised cross-correlation peaks, to a fraction of a
-    sample (a parabola through the peak and its neighbours)."""
-    dt = archive.channels[pairs[0][0]].dt
-    m = int(round(MAX_LAG_S / dt))
-    total = np.zeros(2 * m + 1)
-    for i, j in pairs:
-        total += _xcorr(archive.channels[i].acc, archive.channels[j].acc, dt, m)
-    total /= len(pairs)
+    sample (``pidyn.signals``: the same low-band correlation that times an IMU floor)."""
+    chans = archive.channels
+    dt = chans[pairs[0][0]].dt
+    total = sum(lagged_correlation(chans[i].acc, chans[j].acc, dt, MAX_LAG_S, BAND_HZ) for i, j in pairs)
+    total = total / len(pairs)
+    m = (len(total) - 1) // 2
     k = int(np.argmax(total))
-    frac = 0.0
-    if 0 < k < 2 * m:
-        y0, y1, y2 = total[k - 1 : k + 2]
-        den = y0 - 2 * y1 + y2
-        frac = 0.5 * (y0 - y2) / den if den < 0 else 0.0
     # peak at lag L > 0: the reference's channel follows this recorder's by L, so this one is early
-    return Offset(rec, -(k - m + frac) * dt, float(total[k]), tuple(pairs))
-
-
-def _xcorr(x: np.ndarray, y: np.ndarray, dt: float, m: int) -> np.ndarray:
-    """Normalised cross-correlation of x and y (band ``BAND_HZ``) at lags -m..m samples:
-    entry m + L compares x(t) with y(t + L)."""
-    n = min(len(x), len(y))
-    hi = min(BAND_HZ[1], 0.45 / dt)
-    sos = butter(4, (BAND_HZ[0], hi), "bandpass", fs=1.0 / dt, output="sos")
-    x = sosfiltfilt(sos, np.asarray(x[:n], float))
-    y = sosfiltfilt(sos, np.asarray(y[:n], float))
-    c = np.array(
-        [np.dot(x[max(0, -k) : n - max(0, k)], y[max(0, k) : n - max(0, -k)]) for k in range(-m, m + 1)]
-    )
-    return c / np.sqrt(np.dot(x, x) * np.dot(y, y))
+    return Offset(rec, -(k - m + peak_fraction(total, k)) * dt, float(total[k]), tuple(pairs))
 
 
 def shifted(y: np.ndarray, seconds: float, dt: float) -> np.ndarray:

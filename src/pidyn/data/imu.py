@@ -34,12 +34,12 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.signal import butter, sosfiltfilt
 
 from pidyn.data.meta import RecordMeta, Split
 from pidyn.data.sources import READERS, DataError, Record, checked_hold
 from pidyn.data.strong_motion import _resample, shaking_span
 from pidyn.notes import note
+from pidyn.signals import lagged_correlation, peak_fraction
 
 NOMINAL_STEP_US = 1e6 / 120.0
 COLUMNS = (
@@ -254,12 +254,6 @@ def start_seconds(start_time: str) -> float | None:
     return _dt.datetime(y, mo, d, h, mi, sec, ms * 1000).timestamp()
 
 
-def band(sig: np.ndarray, dt: float, lo: float, hi: float) -> np.ndarray:
-    """Zero-phase band-pass (4th-order Butterworth, forward and back)."""
-    sos = butter(4, [lo, min(hi, 0.45 / dt)], btype="bandpass", fs=1.0 / dt, output="sos")
-    return sosfiltfilt(sos, sig, axis=0)
-
-
 def low_band_lag(
     ref: np.ndarray, sig: np.ndarray, dt: float, max_lag_s: float, band_hz: tuple[float, float] = (0.2, 2.0)
 ) -> tuple[float, float, float]:
@@ -269,22 +263,12 @@ def low_band_lag(
     of the fundamental), so the lag of the cross-correlation of the band-passed signals is the
     sensors' timing offset, not the structure's response. Positive: ``sig`` later. Sub-sample by a
     parabola through the top three lags."""
-    n = min(len(ref), len(sig))
-    a, b = band(ref[:n], dt, *band_hz), band(sig[:n], dt, *band_hz)
-    m = int(round(max_lag_s / dt))
-    size = 1 << int(np.ceil(np.log2(2 * n)))
-    cc_full = np.fft.irfft(np.conj(np.fft.rfft(a, size)) * np.fft.rfft(b, size), size)
-    cc = np.concatenate([cc_full[-m:], cc_full[: m + 1]]) if m else cc_full[:1]
+    cc = lagged_correlation(ref, sig, dt, max_lag_s, band_hz)
+    m = (len(cc) - 1) // 2
     i = int(np.argmax(np.abs(cc)))
     sign = float(np.sign(cc[i])) or 1.0
     c = sign * cc
-    shift = 0.0
-    if 0 < i < len(c) - 1:
-        den = c[i - 1] - 2 * c[i] + c[i + 1]
-        if den < 0:
-            shift = 0.5 * (c[i - 1] - c[i + 1]) / den
-    corr = float(c[i] / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-300))
-    return float((i - m + shift) * dt), sign, corr
+    return float((i - m + peak_fraction(c, i)) * dt), sign, float(c[i])
 
 
 @dataclass
