@@ -42,6 +42,16 @@ def test_sweep_knobs_reach_the_nested_nodes(tmp_path):
     assert cfg.data.source.eq_scale == 3 and cfg.data.source.data_seed == 7
 
 
+def test_a_storey_term_is_given_on_the_command_line_as_the_readme_writes_it(tmp_path):
+    """A plain ``system.storey_terms={1: [...]}`` (README, docs/buildings.md), not ``++``: the
+    default must not be a dict that refuses new keys."""
+    over = "system.storey_terms={2: [{term: hysteresis, beta: 400, gamma: 800, n: 2, shape_scale: 100}]}"
+    cfg = make_cfg(["system=shear_building", over], tmp_path)
+    s = hydra.utils.instantiate(cfg.system)
+    assert {"beta2", "gamma2"} <= {sp.name for sp in s.param_specs()}
+    assert make_cfg(["system=shear_building"], tmp_path).system.storey_terms is None
+
+
 @pytest.mark.parametrize("bad", ["nosie=0.05", "system=dufing", "model.rpn.widht=3"])
 def test_config_typos_fail_loudly(bad, tmp_path):
     with pytest.raises((ConfigCompositionException, ConfigAttributeError)):
