@@ -460,3 +460,27 @@ def test_a_prediction_says_when_its_record_shakes_harder_or_more_weakly_than_the
     one = Identified(tmp_path, None, {"record_meta": {"pga": 2.0}})  # one record: its own peak
     assert training_range(one, 2.0) == {"training_pga": [2.0, 2.0], "beyond_training": None}
     assert training_range(one, None) == {"training_pga": None, "beyond_training": None}
+
+
+def test_a_prediction_carries_the_runs_verdict_on_the_model_that_predicts(tmp_path):
+    """A model its own records reject (here: one RK4 cannot simulate at the record's step) is
+    said so in prediction.json, however it scores on the new record; the linear model beside it
+    was not what the run's adequacy test judged, so its verdict is unknown, not borrowed."""
+    from pidyn.config import compose
+    from pidyn.runs.prediction import Identified, run_verdict
+
+    why = "the identified model cannot be simulated stably at the record's step"
+    rejected = {"adequacy": {"adequate": False, "reasons": [why]}, "params": {"k": 1.0}}
+    assert run_verdict(Identified(tmp_path, None, rejected)) == {
+        "model_adequate": False,
+        "model_rejected_because": [why],
+    }
+    kept = {"adequacy": {"adequate": True, "reasons": []}, "params": {"k": 1.0}}
+    assert run_verdict(Identified(tmp_path, None, kept)) == {"model_adequate": True, "model_rejected_because": []}
+    assert run_verdict(Identified(tmp_path, None, {"params": {}}))["model_adequate"] is None
+
+    over = ["data.paths=[a.zip,b.zip]", "data.station=CE89324"]
+    cfg = compose("train", groups={"data": "csmip"}, overrides=over)
+    linear = {"system": "linear_sdof", "params": {"c": 1.0, "k": 600.0}}
+    beside = Identified(tmp_path, cfg, {**rejected, "linear_model": linear}).linear_beside()
+    assert beside is not None and run_verdict(beside)["model_adequate"] is None

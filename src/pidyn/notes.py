@@ -43,6 +43,7 @@ CODES: dict[str, str] = {
     # what the run reports
     "model_diverges": "the identified model blows up when simulated over the record",
     "model_inadequate": "the identified model does not describe the record: its estimates are not properties",
+    "model_rejected_by_its_records": "the model that predicts does not describe the records it was identified on (its run's adequacy test)",
     "beyond_training_amplitude": "a predicted record shakes the structure harder or more weakly than any record the model was identified on",
     "nonlinear_not_earned": "a model from several records: its nonlinear terms do not predict its own records better, each left out and predicted by the models refitted without it; the linear model of the same layout is used",
     "damping_not_a_property": "a mode's damping is the fit's, not reported as the structure's",

@@ -86,7 +86,10 @@ class Identified:
         cfg, values = found
         system = (self.metrics.get("linear_model") or {}).get("system")
         return Identified(
-            self.run_dir, cfg, {**self.metrics, "params": values, "scale": {}, "system": system}
+            self.run_dir,
+            cfg,
+            # the run's adequacy test judged its own model, not this one
+            {**self.metrics, "params": values, "scale": {}, "system": system, "adequacy": None},
         )
 
     def chosen(self) -> Identified:
@@ -204,6 +207,7 @@ def predict_record(
         "run": str(run.run_dir),
         "system": run.metrics.get("system"),
         "model_choice": (run.metrics.get("model_choice") or {}).get("chosen"),
+        **run_verdict(run),
         "identified_on": run.metrics.get("record"),
         "record": record.name,
         "seen_by_run": record.name in str(run.metrics.get("record") or "").split("+"),
@@ -212,6 +216,20 @@ def predict_record(
         "simulated": "from rest, the record's own input motions, fixed-step RK4",
     }
     return out, ours["sim"]
+
+
+def run_verdict(run: Identified) -> dict[str, Any]:
+    """The run's own verdict on the model that predicts (``metrics.json``'s ``adequacy``):
+    ``model_adequate`` (None where the run gives none, as for the linear model beside it) and
+    ``model_rejected_because``. A model its own records reject (one that cannot be simulated
+    stably, or misses them worse than knowing nothing) can still score on another record by
+    chance; its prediction is not a property of the structure."""
+    adequacy = run.metrics.get("adequacy") or {}
+    verdict = adequacy.get("adequate")
+    return {
+        "model_adequate": None if verdict is None else bool(verdict),
+        "model_rejected_because": list(adequacy.get("reasons") or []) if verdict is False else [],
+    }
 
 
 def training_range(run: Identified, pga: float | None) -> dict[str, Any]:

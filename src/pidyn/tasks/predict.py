@@ -79,6 +79,15 @@ def _log(out: dict[str, Any]) -> None:
             "%s is one of the records the run was identified on: this is a fit, not a prediction",
             out["record"],
         )
+    if out.get("model_adequate") is False:
+        log.warning(
+            note(
+                "model_rejected_by_its_records",
+                f"THE MODEL THAT PREDICTS DOES NOT DESCRIBE THE RECORDS IT WAS IDENTIFIED ON "
+                f"({'; '.join(out['model_rejected_because']) or 'its run says so'}): this prediction is of a "
+                "model the data reject, whatever it scores here",
+            )
+        )
     if out.get("beyond_training") is not None:
         lo, hi = out["training_pga"]
         log.warning(
