@@ -476,7 +476,10 @@ def test_a_prediction_carries_the_runs_verdict_on_the_model_that_predicts(tmp_pa
         "model_rejected_because": [why],
     }
     kept = {"adequacy": {"adequate": True, "reasons": []}, "params": {"k": 1.0}}
-    assert run_verdict(Identified(tmp_path, None, kept)) == {"model_adequate": True, "model_rejected_because": []}
+    assert run_verdict(Identified(tmp_path, None, kept)) == {
+        "model_adequate": True,
+        "model_rejected_because": [],
+    }
     assert run_verdict(Identified(tmp_path, None, {"params": {}}))["model_adequate"] is None
 
     over = ["data.paths=[a.zip,b.zip]", "data.station=CE89324"]

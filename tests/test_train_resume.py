@@ -155,3 +155,15 @@ def test_a_config_with_integer_keys_compares_equal_to_itself_as_the_folder_keeps
     cfg = make_cfg(["system=rigid_deck", "+system.layout.positions={1: 0.0, 2: 45.0}"])
     now = comparable_config(cfg)
     assert config_differences(json.loads(json.dumps(now)), now) == []
+
+
+def test_an_empty_mapping_and_null_are_the_same_setting_for_a_resumed_run():
+    """``system.storey_terms`` was ``{}`` and is now null: a run folder kept from before resumes."""
+    from pidyn.runs.folder import config_differences
+
+    saved = {"system": {"storey_terms": {}, "n_storeys": 3}}
+    assert config_differences(saved, {"system": {"storey_terms": None, "n_storeys": 3}}) == []
+    assert config_differences(saved, {"system": {"storey_terms": {1: "x"}, "n_storeys": 3}}) != []
+    assert config_differences(saved, {"system": {"storey_terms": None, "n_storeys": 4}}) == [
+        "system.n_storeys: 3 -> 4"
+    ]

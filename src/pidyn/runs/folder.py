@@ -80,7 +80,10 @@ def comparable_config(cfg: DictConfig) -> dict[str, Any]:
 
 
 def config_differences(saved: Any, now: Any, prefix: str = "") -> list[str]:
-    """Dotted keys whose values differ between two configurations, ``key: saved -> now``."""
+    """Dotted keys whose values differ between two configurations, ``key: saved -> now``. An empty
+    mapping and null say the same (no terms, no overrides): a default written either way is one run."""
+    if saved in ({}, None) and now in ({}, None):
+        return []
     if isinstance(saved, dict) and isinstance(now, dict):
         out: list[str] = []
         for k in sorted(set(saved) | set(now), key=str):
