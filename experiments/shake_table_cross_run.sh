@@ -22,6 +22,7 @@ pred() { # name path run
 }
 F="data/mini_shake_table/Flexible 3 story"
 S="data/mini_shake_table/Stiff 1 story"
+S3="data/mini_shake_table/Stiff 3 story"
 ident s1_nr "$S" "[Northridge Trial 1]" 1
 ident s1_nr_ec "$S" "[Northridge Trial 1,El Centro Trial 1]" 1
 for r in "El Centro Trial 1" "El Centro Trial 2" "Sine Wave Trial 1" "Sine Wave Trial 2"; do pred s1_nr "$S" "$r"; done
@@ -32,4 +33,6 @@ ident f3_nr_s10 "$F" "[Northridge,Sine 1.0]" 3
 pred f3_nr_s10 "$F" "Sine 1.5"
 ident f3_nr_s15 "$F" "[Northridge,Sine 1.5]" 3
 pred f3_nr_s15 "$F" "Sine 1.0"
+ident s3_nr "$S3" "[Northridge]" 3
+pred s3_nr "$S3" "Sine 1.5"
 echo all done
