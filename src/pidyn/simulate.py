@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.integrate import odeint, solve_ivp
@@ -17,6 +17,7 @@ from pidyn.compiled import kernel
 from pidyn.excitation.ground_motion import GroundMotion, SupportMotions
 from pidyn.integrate import input_hold, piece_starts, rk4, stage_excitation
 from pidyn.systems.base import StructuralSystem
+from pidyn.systems.modal import linear_matrices
 
 if TYPE_CHECKING:
     from pidyn.data.sources import Record
@@ -195,6 +196,72 @@ def simulate_states(
     return Y[:, 0], R[:, 0]
 
 
+#: at most this many RK4 steps per sample: a model faster still is refused, not simulated (a
+#: storey of a hundredth of a gram under a large dashpot: its rate is no structure's)
+MAX_SUBSTEPS = 32
+
+
+def _rates(system, values: dict[str, float]) -> np.ndarray | None:
+    """The eigenvalues of the model's linear part about rest; None for a model without one."""
+    try:
+        M, C, K = (np.atleast_2d(np.asarray(a, float)) for a in linear_matrices(system, values))
+        Minv = np.linalg.inv(M)
+    except (ValueError, KeyError, np.linalg.LinAlgError):
+        return None
+    n = M.shape[0]
+    return np.linalg.eigvals(np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ K, -Minv @ C]]))
+
+
+def _stability(lam: np.ndarray, h: float, substeps: int) -> dict:
+    if not np.all(np.isfinite(lam)):
+        return {"stable": False, "max_abs_lambda_h": float("inf"), "max_amplification": float("inf")}
+    z = lam * h
+    amp = np.abs(1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24)
+    return {
+        "stable": bool(np.max(amp) <= 1.0 + 1e-9),
+        "max_abs_lambda_h": float(np.max(np.abs(z))),
+        "max_amplification": float(np.max(amp)),
+        "step_s": h,
+        "substeps": int(substeps),
+    }
+
+
+def rk4_stability(
+    system, values: dict[str, float], dt: float, substeps: int | None = 4
+) -> dict[str, Any] | None:
+    """Whether the fixed-step RK4 (``substeps`` steps per sample; None: as many as
+    ``stable_substeps`` gives) is stable for the model's linear part about rest: every
+    eigenvalue's ``|R(lambda h)|`` at most 1, R the RK4 amplification ``1 + z + z^2/2 + z^3/6 +
+    z^4/24``. A storey of tiny mass and large damping has a rate far beyond the step; its
+    simulation blows up whatever the data say. None for a model without a linear part about rest."""
+    lam = _rates(system, values)
+    if lam is None:
+        return None
+    if substeps is None:  # the simulator's own choice; where none is stable, its limit reported
+        found = stable_substeps(system, values, dt, lam=lam)
+        out = _stability(lam, float(dt) / found, found)
+        return out if out["stable"] else _stability(lam, float(dt) / MAX_SUBSTEPS, MAX_SUBSTEPS)
+    return _stability(lam, float(dt) / substeps, substeps)
+
+
+def stable_substeps(system, values: dict[str, float], dt: float, substeps: int = 4, lam=None) -> int:
+    """The fewest RK4 steps per sample, at least ``substeps`` and at most ``MAX_SUBSTEPS``, at which
+    the scheme is stable for the model's linear part about rest; ``substeps`` where none is (the
+    model is refused as it stands) or the model has no linear part. A storey whose dashpot is
+    overdamped on its own has a real rate of a thousand per second: four steps per sample at
+    120 Hz cannot follow it, five can, and the model is then judged by its fit, not by the
+    integrator's step (the same model by exact exponentials fits its record as well)."""
+    lam = _rates(system, values) if lam is None else lam
+    if lam is None:
+        return substeps
+    s = int(substeps)
+    while s <= MAX_SUBSTEPS:
+        if _stability(lam, float(dt) / s, s)["stable"]:
+            return s
+        s += max(1, s // 4)
+    return int(substeps)
+
+
 def simulate_response(
     system: StructuralSystem,
     values: dict[str, float],
@@ -207,8 +274,11 @@ def simulate_response(
     one ground; absolute for several inputs) by the fixed-step batched RK4 (bounded cost: a
     model that blows up gives NaNs rather than an adaptive integrator crawling) from
     ``state0`` (the full state, default rest), the excitation read between samples as the
-    record says (``meta.input_hold``, default linear)."""
+    record says (``meta.input_hold``, default linear). A model whose linear part needs more
+    steps per sample than ``substeps`` to be simulated stably gets them (``stable_substeps``)."""
     n = system.n_dof
+    if len(record.t) > 1:
+        substeps = stable_substeps(system, values, record.dt, substeps)
     Y, R = simulate_states(
         system, values, record.t, record.f, state0, substeps, input_hold(record), piece_starts(record)
     )

@@ -165,7 +165,7 @@ def _adequacy(run: Run, final: dict[str, float], sim: dict[str, np.ndarray]) -> 
     record = run.record
     split = record.meta.split if run.hold_out else None
     fit = split.fit if split else (float(record.t[0]), float(record.t[-1]))
-    stability = rk4_stability(run.system, final, record.dt)
+    stability = rk4_stability(run.system, final, record.dt, substeps=None)  # the simulator's own steps
     return check_adequacy(sim, record, fit, split.heldout if split else None, stability=stability)
 
 
