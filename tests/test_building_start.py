@@ -80,3 +80,26 @@ def test_the_equation_error_start_is_checked_against_the_frequency_scan():
     assert start is not None and start.method == "frequency_scan", start
     values = {**{s.name: float(s.init) for s in nominal.param_specs()}, **start.values}
     assert f1(nominal, values) == pytest.approx(f1(true, true.true_values()), rel=0.1)
+
+
+def test_an_extended_model_starts_from_the_nominal_run_and_its_new_terms_from_the_user(tmp_path):
+    """model.start=RUN for a building with a storey term the run did not have: the run's masses,
+    dampers and springs, the term's parameters where system.params.<name>.init put them; without
+    them the run is another model and is refused by name."""
+    import json
+
+    from pidyn.starts.policy import start_policy
+
+    nominal = ShearBuilding(2, masses="unknown", stiffnesses=STIFF[:2])
+    run = {s.name: float(s.init) * 1.1 for s in nominal.param_specs() if s.trainable}
+    (tmp_path / "metrics.json").write_text(json.dumps({"params": run}))
+    term = {"term": "cubic_stiffness", "k3": 0.0, "signed": True}
+    extended = ShearBuilding(2, masses="unknown", stiffnesses=STIFF[:2], storey_terms={1: [term]})
+    extra = sorted({s.name for s in extended.param_specs() if s.trainable} - set(run))
+    assert extra == ["k3_1"]
+    with pytest.raises(ValueError, match=r"no estimate of \['k3_1'\]"):
+        start_policy(str(tmp_path), extended, None, [])
+    system, start, used = start_policy(str(tmp_path), extended, None, ["system.params.k3_1.init"])
+    inits = {s.name: s.init for s in system.param_specs()}
+    assert used and all(inits[n] == pytest.approx(v) for n, v in run.items())
+    assert inits["k3_1"] == 0.0

@@ -44,11 +44,13 @@ def user_started(system, settings: list[str]) -> set[str]:
     return out
 
 
-def start_from_run(folder: str, system) -> DataStart:
+def start_from_run(folder: str, system, own: set[str] | frozenset = frozenset()) -> DataStart:
     """The estimate of an earlier run (its folder's ``metrics.json``) as the start: another record of
     the same structure whose input does not show its resonance (a sine below it) starts from a
     broadband record's estimate; the record at hand then decides. A pattern (``*``) must match one
-    folder. A single mode's run starts a modes model (``from_single_mode``)."""
+    folder. A single mode's run starts a modes model (``from_single_mode``). Parameters the run
+    has no estimate of may start where the user set them (``own``: ``system.params.<name>.init``):
+    a model extended by a term starts from the nominal run, its new term from the user's values."""
     if any(ch in folder for ch in "*?["):  # a pattern (a sweep names each job's earlier run by its options)
         found = sorted(glob.glob(folder))
         if len(found) != 1:
@@ -63,7 +65,7 @@ def start_from_run(folder: str, system) -> DataStart:
     params = json.loads(path.read_text()).get("params") or {}
     trainable = {s.name for s in system.param_specs() if s.trainable}
     values = {n: float(v) for n, v in params.items() if n in trainable}
-    missing = sorted(trainable - set(values))
+    missing = sorted(trainable - set(values) - set(own))
     nested = getattr(system, "from_single_mode", lambda _: None)(params) if missing else None
     if nested is not None:  # a single mode's run starts a modes model (pidyn.systems.modes)
         values, missing = {n: v for n, v in nested.items() if n in trainable}, []
@@ -84,8 +86,8 @@ def start_policy(method: str, system, record, user_keys: list[str]):
     A start the user gave (``system.params.<name>.init=...``, in ``user_keys``) is always kept.
     Unless ``config``, the start is returned to be offered to the refinement as well."""
     if method not in START_METHODS:
-        start = start_from_run(method, system)
         kept = user_started(system, user_keys)
+        start = start_from_run(method, system, kept)
         return with_start(system, start.values, kept), start, True
     if method == "config":
         return system, None, False
