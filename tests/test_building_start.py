@@ -102,4 +102,4 @@ def test_an_extended_model_starts_from_the_nominal_run_and_its_new_terms_from_th
     system, start, used = start_policy(str(tmp_path), extended, None, ["system.params.k3_1.init"])
     inits = {s.name: s.init for s in system.param_specs()}
     assert used and all(inits[n] == pytest.approx(v) for n, v in run.items())
-    assert inits["k3_1"] == 0.0
+    assert inits["k3_1"] == 0.0 and start.values["k3_1"] == 0.0  # offered to the refinement whole

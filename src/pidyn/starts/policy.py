@@ -65,7 +65,9 @@ def start_from_run(folder: str, system, own: set[str] | frozenset = frozenset())
     params = json.loads(path.read_text()).get("params") or {}
     trainable = {s.name for s in system.param_specs() if s.trainable}
     values = {n: float(v) for n, v in params.items() if n in trainable}
-    missing = sorted(trainable - set(values) - set(own))
+    inits = {s.name: float(s.init) for s in system.param_specs()}
+    values.update({n: inits[n] for n in sorted(trainable & set(own)) if n not in values})  # the user's
+    missing = sorted(trainable - set(values))
     nested = getattr(system, "from_single_mode", lambda _: None)(params) if missing else None
     if nested is not None:  # a single mode's run starts a modes model (pidyn.systems.modes)
         values, missing = {n: v for n, v in nested.items() if n in trainable}, []
