@@ -17,7 +17,7 @@ from pidyn.compiled import kernel
 from pidyn.excitation.ground_motion import GroundMotion, SupportMotions
 from pidyn.integrate import input_hold, piece_starts, rk4, stage_excitation
 from pidyn.systems.base import StructuralSystem
-from pidyn.systems.modal import linear_matrices
+from pidyn.systems.modal import linear_matrices, state_matrix
 
 if TYPE_CHECKING:
     from pidyn.data.sources import Record
@@ -205,11 +205,9 @@ def _rates(system, values: dict[str, float]) -> np.ndarray | None:
     """The eigenvalues of the model's linear part about rest; None for a model without one."""
     try:
         M, C, K = (np.atleast_2d(np.asarray(a, float)) for a in linear_matrices(system, values))
-        Minv = np.linalg.inv(M)
+        return np.linalg.eigvals(state_matrix(M, C, K))
     except (ValueError, KeyError, np.linalg.LinAlgError):
         return None
-    n = M.shape[0]
-    return np.linalg.eigvals(np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ K, -Minv @ C]]))
 
 
 def _stability(lam: np.ndarray, h: float, substeps: int) -> dict:

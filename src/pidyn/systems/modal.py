@@ -35,7 +35,7 @@ def modal_properties(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> dict:
     if _classical(M, C, K):
         return _undamped_modes(M, C, K)
     try:
-        lam, vec = np.linalg.eig(_state_matrix(M, C, K))
+        lam, vec = np.linalg.eig(state_matrix(M, C, K))
     except np.linalg.LinAlgError:
         return _undamped_modes(M, C, K)
     if not np.all(np.isfinite(lam)):
@@ -59,7 +59,8 @@ def modal_properties(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> dict:
     return _modal_dict(omega, np.array([m[1] for m in modes]), shapes)
 
 
-def _state_matrix(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> np.ndarray:
+def state_matrix(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """A in y' = A y for y = (x, x'): the linear part's rates are its eigenvalues."""
     n = M.shape[0]
     Minv = np.linalg.inv(M)
     return np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ K, -Minv @ C]])
