@@ -1,10 +1,11 @@
 """What an engineer reads first from an identified building: natural frequencies, damping
 ratios and mode shapes of its linear part (about rest).
 
-The undamped problem K phi = omega^2 M phi gives frequencies and mode shapes; each mode's
-damping ratio is zeta_r = phi_r^T C phi_r / (2 omega_r phi_r^T M phi_r), exact for classically
-damped structures and the usual modal estimate otherwise. Mode shapes are scaled to a unit
-roof component and signed so that it is positive.
+For classically damped structures the undamped problem K phi = omega^2 M phi gives frequencies
+and mode shapes, and each mode's damping ratio is zeta_r = phi_r^T C phi_r / (2 omega_r phi_r^T
+M phi_r). Otherwise that projection can misreport a mode badly (a storey dashpot overdamped on
+its own), and the state-space poles give them, as the model responds (``modal_properties``).
+Mode shapes are scaled to a unit roof component.
 """
 
 from __future__ import annotations
