@@ -10,7 +10,8 @@ Three numbers per floor of a predicted run:
 - ``gain-matched floor``: the least NRMSE of any prediction whose spectrum magnitude at every
   frequency is the identification run's measured floor/table gain (Welch H1) times the run's
   own table spectrum, phases chosen best. A linear model that reproduces the identification
-  run's gain cannot do better;
+  run's gain cannot do better. Where the identification run's coherence is low (a resonance
+  whose frequency moves with the amplitude), its measured gain is smeared and the floor is weak;
 - ``own linear``: a causal FIR filter (``--taps`` samples) from the run's own table to the floor,
   fitted by ridge least squares on the run's first ``--fit-share`` and scored on the rest: what
   the run's own linear content allows, with no other run involved.
