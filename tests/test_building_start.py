@@ -103,3 +103,16 @@ def test_an_extended_model_starts_from_the_nominal_run_and_its_new_terms_from_th
     inits = {s.name: s.init for s in system.param_specs()}
     assert used and all(inits[n] == pytest.approx(v) for n, v in run.items())
     assert inits["k3_1"] == 0.0 and start.values["k3_1"] == 0.0  # offered to the refinement whole
+
+
+def test_system_params_given_whole_keep_the_data_start_of_the_parameters_it_does_not_name():
+    """``system.params={gain1: {trainable: false}}`` on the command line set every parameter's start
+    (the data start was skipped for all); it sets the ones it names."""
+    from pidyn.runs.build import named_params
+    from pidyn.starts.policy import user_started
+
+    system = ShearBuilding(2, masses="unknown", stiffnesses=STIFF[:2])
+    keys = named_params(["system.params", "data.run"], {"c2": {"trainable": False}})
+    assert keys == ["data.run", "system.params.c2"]
+    assert user_started(system, keys) == {"c2"}
+    assert named_params(["system.params"], None) == ["system.params"]

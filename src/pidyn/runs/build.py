@@ -222,10 +222,19 @@ def data_start(
     cfg: DictConfig, system: StructuralSystem, record: Record, run_dir: Path
 ) -> tuple[StructuralSystem, Any]:
     """``model.start`` (see ``pidyn.starts.policy.start_policy``); the start goes to data_start.json."""
-    system, start, used = start_policy(str(cfg.model.get("start", "auto")), system, record, user_settings())
+    keys = named_params(user_settings(), cfg.system.get("params"))
+    system, start, used = start_policy(str(cfg.model.get("start", "auto")), system, record, keys)
     if start is not None:
         write_json(run_dir / "data_start.json", {**start.to_dict(), "used_by_pidynnet": used})
     return system, start
+
+
+def named_params(keys: list[str], params: Any) -> list[str]:
+    """``system.params={gain1: {trainable: false}}`` given whole sets the parameters it names, not
+    every parameter's start: the key becomes ``system.params.<name>`` for each."""
+    if "system.params" not in keys or not params:
+        return keys
+    return [k for k in keys if k != "system.params"] + [f"system.params.{n}" for n in params]
 
 
 def check_inputs(system: StructuralSystem, record: Record) -> None:
