@@ -27,9 +27,9 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import csd, welch
 
 from pidyn.data.imu import run_labels, xsens_record
+from pidyn.signals import transfer_function
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"
@@ -49,10 +49,9 @@ def absolute(path: Path, run: str) -> tuple[np.ndarray, np.ndarray, float]:
 
 
 def gain(table: np.ndarray, floor: np.ndarray, step: float, nperseg: int) -> tuple[np.ndarray, np.ndarray]:
-    """The floor/table gain |H1| = |S_gf| / S_gg over frequency (Welch)."""
-    f, sgg = welch(table, fs=1 / step, nperseg=nperseg)
-    _, sgf = csd(table, floor, fs=1 / step, nperseg=nperseg)
-    return f, np.abs(sgf) / np.maximum(sgg, 1e-30)
+    """The floor/table gain |H1| over frequency (``pidyn.signals.transfer_function``, Welch)."""
+    tf = transfer_function(table, floor, step, nperseg)
+    return tf.freq, np.abs(tf.h)
 
 
 def gain_matched_floor(h_f, h, table, floor, step) -> float:
