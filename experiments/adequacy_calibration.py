@@ -55,9 +55,9 @@ def shaking_start(record: str, lead: float = 2.0) -> float:
 def judge(model, values: dict[str, float], target, cut: float) -> tuple[dict, float]:
     """``model`` fitted by output error on ``target`` up to ``cut`` from ``values``, and the
     adequacy test of its simulation with the rest held out; the seconds it took."""
-    from pidyn.adequacy import check_adequacy, rk4_stability
+    from pidyn.adequacy import check_adequacy
     from pidyn.refine.output_error import fit_output_error
-    from pidyn.simulate import simulate_response
+    from pidyn.simulate import rk4_stability, simulate_response
 
     t0 = time.perf_counter()
     est = fit_output_error(target.segment(None, cut), model, values, max_nfev=40)

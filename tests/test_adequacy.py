@@ -16,11 +16,10 @@ from pidyn.adequacy import (
     check_adequacy,
     describe,
     ljung_box,
-    rk4_stability,
     trivial_predictions,
 )
 from pidyn.config import make_system
-from pidyn.simulate import simulate_response
+from pidyn.simulate import rk4_stability, simulate_response
 
 
 def _record(noise: float = 0.02, channels=("x", "v")) -> Record:

@@ -32,7 +32,6 @@ from scipy import stats
 
 from pidyn.assessment import ground_acceleration, measured_convention
 from pidyn.reporting import nrmse
-from pidyn.simulate import rk4_stability  # noqa: F401  (where the adequacy test reads it)
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ import numpy as np
 import torch
 from omegaconf import DictConfig
 
-from pidyn.adequacy import check_adequacy, describe, rk4_stability
+from pidyn.adequacy import check_adequacy, describe
 from pidyn.assessment import assess
 from pidyn.notes import note
 from pidyn.reporting import (
@@ -28,7 +28,7 @@ from pidyn.runs.hparams import log_hparams
 from pidyn.runs.metrics import channel_nrmse, record_noise, relative_errors, sim_nrmse_x
 from pidyn.runs.run_figures import draw_figures
 from pidyn.runs.tb_images import add_png
-from pidyn.simulate import simulate_response
+from pidyn.simulate import rk4_stability, simulate_response
 from pidyn.starts.data import DATA_SCALES
 from pidyn.supports import support_lines, support_table
 from pidyn.systems.base import StructuralSystem
