@@ -86,6 +86,40 @@ def test_shooting_segments_end_where_a_record_begins_and_no_defect_joins_records
     assert C.shape == (len(c), prob.n_unknowns) and J.shape[1] == prob.n_unknowns
 
 
+def test_several_records_cost_the_sum_of_their_squared_nrmse():
+    """Joined records of different amplitudes count alike: each record's residuals are in units of
+    its own spread, so a wrong model's free-run cost is the records' squared NRMSE summed (times
+    their lengths), the weaker record's as heavy as the stronger's, and one record is unweighted."""
+    system = make_system("duffing")
+    r1, r2 = _records()
+    both = concatenate([r1, r2])
+    start = pieces(both)[1].i0
+    chans = record_channels(both, 1)
+    assert record_channels(r1, 1)[0].weight is None
+    prob = ShootingProblem(
+        system,
+        both.t,
+        both.f,
+        chans,
+        np.array([0, len(both.t) - 1]),
+        restarts=[start],
+        fixed_state0=np.zeros(2),
+    )
+    wrong = {s.name: 1.15 * s.true for s in system.param_specs() if s.trainable}
+    theta = prob.pack(wrong, np.zeros((1, 2)))[: prob.n_theta]
+    Y, _ = prob.free_run(theta, np.zeros(2))
+    expected, per_record = 0.0, []
+    for ch, sim in zip(chans, (Y[:, 0], Y[:, 1])):
+        whole = np.std(ch.data)
+        for i0, i1 in ((0, start), (start, len(both.t))):
+            d = ch.data[i0:i1]
+            nrmse = np.sqrt(np.mean((sim[i0:i1] - d) ** 2)) / np.std(d)
+            per_record.append(nrmse)
+            expected += (i1 - i0) * (whole / ch.sigma) ** 2 * nrmse**2
+    assert prob.free_run_cost(theta, np.zeros(2)) == pytest.approx(expected, rel=1e-9)
+    assert min(per_record) > 0.01  # the wrong model misses both records
+
+
 def test_windows_take_turns_between_records_and_never_span_two():
     r1, r2 = _records()
     both = concatenate([r1, r2])

@@ -38,10 +38,32 @@ class Channel:
     dof: int
     data: np.ndarray
     sigma: float  # noise std used as the residual's unit (refined from the residuals)
+    weight: np.ndarray | None = None  # several records: each sample's record's weight (record_weights)
 
     @property
     def name(self) -> str:
         return self.kind if self.dof == 0 else f"{self.kind}{self.dof + 1}"
+
+    def unit(self, rows) -> float | np.ndarray:
+        """The residual's unit at samples ``rows``: the noise std over the record's weight."""
+        return self.sigma if self.weight is None else self.sigma / self.weight[rows]
+
+
+def record_weights(record, data: np.ndarray) -> np.ndarray | None:
+    """Several records joined: each record's weight, the joined spread over its own, so the cost
+    sums the records' squared NRMSE, the measure a prediction of the next record is scored by.
+    Over the joined spread the strongest events outweigh the rest by their amplitude squared, and
+    the models so fitted predicted Painter Street's moderate events worse than a linear model
+    (``experiments/results/real/README.md``). None for one record."""
+    starts = piece_starts(record)
+    if not starts:
+        return None
+    edges, whole, w = [0, *starts, len(data)], max(float(np.nanstd(data)), 1e-300), np.ones(len(data))
+    for i0, i1 in zip(edges[:-1], edges[1:]):
+        piece = data[i0:i1][np.isfinite(data[i0:i1])]
+        own = float(np.std(piece)) if piece.size else 0.0
+        w[i0:i1] = whole / own if own > 0 else 1.0
+    return w
 
 
 def record_channels(record, n_dof: int) -> list[Channel]:
@@ -61,10 +83,14 @@ def record_channels(record, n_dof: int) -> list[Channel]:
             col = arr[:, j]
             if np.all(np.isnan(col)):
                 continue
-            out.append(Channel(kind, j, col, max(float(np.nanstd(col)), 1e-300)))
+            out.append(Channel(kind, j, col, max(float(np.nanstd(col)), 1e-300), record_weights(record, col)))
     if not out:
         raise ValueError(f"record '{record.name}' has no measured response channel")
     return out
+
+
+def _column(unit: float | np.ndarray) -> float | np.ndarray:
+    return unit if np.ndim(unit) == 0 else np.asarray(unit)[:, None]  # to divide a Jacobian's rows
 
 
 def segment_bounds(
@@ -278,11 +304,11 @@ class ShootingProblem:
 
     def _data_res(self, Y, A) -> np.ndarray:
         out = []
-        rows = self.idx[self.sel_s, self.sel_j]
+        rows = self.rows
         for ch in self.channels:
             sim = self._channel_sim(Y, A, ch)
             v = sim.v if isinstance(sim, Dual) else sim
-            out.append((v[self.sel_j, self.sel_s] - ch.data[rows]) / ch.sigma)
+            out.append((v[self.sel_j, self.sel_s] - ch.data[rows]) / ch.unit(rows))
         return _bounded(np.concatenate(out))
 
     def _defects(self, u: np.ndarray, Y) -> np.ndarray:
@@ -307,8 +333,12 @@ class ShootingProblem:
         Y, _, A = self.simulate(u, dual=True)
         r = self._data_res(Y, A)
         nt, n_u = self.n_theta, self.n_unknowns
+        rows = self.rows
         G = np.concatenate(
-            [self._channel_sim(Y, A, ch).d[self.sel_j, self.sel_s] / ch.sigma for ch in self.channels]
+            [
+                self._channel_sim(Y, A, ch).d[self.sel_j, self.sel_s] / _column(ch.unit(rows))
+                for ch in self.channels
+            ]
         )  # (M, D): d r / d (theta, own segment's state)
         G[np.abs(r) >= RESIDUAL_CAP] = 0.0  # a capped (blown-up) residual is flat in u
         G[~(np.abs(G) < BLOWN_UP)] = 0.0
@@ -418,6 +448,11 @@ class ShootingProblem:
         return (lambda u: evaluate(u)[0]), (lambda u: evaluate(u)[1])
 
     # ------------------------------------------------------------------ helpers
+    @property
+    def rows(self) -> np.ndarray:
+        """The record's sample behind each residual of a channel (``channel_slices`` order)."""
+        return self.idx[self.sel_s, self.sel_j]
+
     def channel_slices(self) -> list[slice]:
         m = len(self.sel_s)
         return [slice(i * m, (i + 1) * m) for i in range(len(self.channels))]
@@ -460,6 +495,6 @@ class ShootingProblem:
         for ch in self.channels:
             sim = {"x": Y[:, ch.dof], "v": Y[:, n + ch.dof], "a": A[:, ch.dof]}[ch.kind]
             with np.errstate(all="ignore"):
-                e = (sim - ch.data[i0 : i1 + 1]) / ch.sigma
+                e = (sim - ch.data[i0 : i1 + 1]) / ch.unit(slice(i0, i1 + 1))
             total += float(np.sum(_bounded(e) ** 2))
         return total, diverged(Y)
