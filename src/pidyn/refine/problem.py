@@ -52,8 +52,8 @@ class Channel:
 def record_weights(record, data: np.ndarray) -> np.ndarray | None:
     """Several records joined: each record's weight, the joined spread over its own, so the cost
     sums the records' squared NRMSE, the measure a prediction of the next record is scored by.
-    Over the joined spread the strongest events outweigh the rest by their amplitude squared, and
-    the models so fitted predicted Painter Street's moderate events worse than a linear model
+    Over the joined spread the strongest events outweigh the rest by their amplitude squared; in
+    its own units Painter Street's unseen events are predicted better, the strongest one worse
     (``experiments/results/real/README.md``). None for one record."""
     starts = piece_starts(record)
     if not starts:
