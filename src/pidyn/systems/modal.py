@@ -78,8 +78,11 @@ def _classical(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> bool:
 
 
 def _top_scaled(phi: np.ndarray) -> np.ndarray:
-    top = phi[-1] if abs(phi[-1]) > 1e-12 else phi[np.argmax(np.abs(phi))]
-    return np.real(phi / top)
+    """Scaled to 1 on the top floor, exactly: complex division leaves 1 - 1e-16 there on some CPUs."""
+    ref = -1 if abs(phi[-1]) > 1e-12 else int(np.argmax(np.abs(phi)))
+    out = np.real(phi / phi[ref])
+    out[ref] = 1.0
+    return out
 
 
 def _undamped_modes(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> dict:
