@@ -57,7 +57,7 @@ def test_weights_scale_the_cost_and_leave_an_unweighted_optimum_where_they_are_e
     assert even.cost == pytest.approx(4.0 * plain.cost, rel=1e-6)
     for k in init:
         assert even.params[k] == pytest.approx(plain.params[k], rel=1e-6)
-    with pytest.raises(ValueError, match="weights for channels"):
+    with pytest.raises(ValueError, match="10 weights for a record of 1001 samples"):
         fit_output_error(rec, system, init, weights=np.ones(10))
 
 

@@ -57,9 +57,9 @@ def fit_output_error(
     times it (``pidyn.discrepancy.heteroscedastic``); the cost is then the weighted one."""
     t0 = time.perf_counter()
     problem, th0 = output_error_problem(record, system, init, substeps)
-    fun, jac = problem.fd_fun_and_jac()
     if weights is not None:
-        fun, jac = _weighted(problem, fun, jac, np.asarray(weights, float))
+        _weigh(problem, np.asarray(weights, float))
+    fun, jac = problem.fd_fun_and_jac()
     sol = least_squares(
         _with_progress(fun, system, t0),
         th0,
@@ -73,14 +73,14 @@ def fit_output_error(
     return OutputErrorFit(problem.values(sol.x), time.perf_counter() - t0, int(sol.nfev), float(sol.cost))
 
 
-def _weighted(problem: ShootingProblem, fun, jac, weights: np.ndarray):
-    """``fun`` and ``jac`` with each channel's residual at sample i times ``weights[i]``."""
-    slices = problem.channel_slices()
-    if any(sl.stop - sl.start != len(weights) for sl in slices):
-        sizes = [sl.stop - sl.start for sl in slices]
-        raise ValueError(f"output error: {len(weights)} weights for channels of {sizes} samples")
-    W = np.concatenate([weights] * len(slices))
-    return (lambda th: fun(th) * W), (lambda th: jac(th) * W[:, None])
+def _weigh(problem: ShootingProblem, weights: np.ndarray) -> None:
+    """Each channel's residual at sample i times ``weights[i]``, on top of the record's own weight
+    where several records are joined (``Channel.weight``: one weighting, read by every residual)."""
+    n = len(problem.t)
+    if len(weights) != n:
+        raise ValueError(f"output error: {len(weights)} weights for a record of {n} samples")
+    for ch in problem.channels:
+        ch.weight = weights if ch.weight is None else ch.weight * weights
 
 
 def _with_progress(fun, system, t0: float):
