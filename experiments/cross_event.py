@@ -21,14 +21,13 @@ import argparse
 import csv
 import json
 import shutil
-import subprocess
 import sys
-import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
+from pidyn.bench.folds import event_name, folds, identify_several, run_logged_to, station_events
 from pidyn.bench.tables import median
 from pidyn.cores import share_cores
 
@@ -50,83 +49,9 @@ LINEAR_OF = {"duffing": "linear", "amplitude": "linear", "default": "linear"}
 STRONG_G = 0.2
 
 
-def events(records: Path, station: str, direction: str) -> tuple[list[dict], list[dict]]:
-    """(events with the direction's most common channel set, the others) with their PGA."""
-    from pidyn.data.strong_motion import csmip_record
-
-    rows = []
-    for path in sorted(records.glob("*.zip")):
-        try:
-            rec = csmip_record(path, station=station, direction=direction, on_missing="drop", max_outputs=1)
-        except (ValueError, FileNotFoundError) as exc:
-            rows.append({"event": _event(path), "path": str(path), "error": str(exc).splitlines()[0]})
-            continue
-        meta = rec.meta
-        rows.append(
-            {
-                "event": _event(path),
-                "path": str(path),
-                "inputs": list(meta.input_channels),
-                "outputs": list(meta.output_channels),
-                "pga_g": float(meta.pga) / 9.80665,
-            }
-        )
-    sets = [json.dumps([r["inputs"], r["outputs"]]) for r in rows if "inputs" in r]
-    if not sets:
-        raise SystemExit(f"{records}: no readable event in direction {direction}")
-    common = max(set(sets), key=sets.count)
-    keep = [r for r in rows if "inputs" in r and json.dumps([r["inputs"], r["outputs"]]) == common]
-    other = [r for r in rows if r not in keep]
-    return keep, other
-
-
-def _event(path: Path) -> str:
-    name = path.name.split(".")[0]
-    return name.rsplit("_ce", 1)[0] if "_ce" in name else name
-
-
-def folds(rows: list[dict], k: int, seed: int) -> list[list[dict]]:
-    """``k`` folds of the events, drawn with ``seed`` (each event predicted once)."""
-    order = np.random.default_rng(seed).permutation(len(rows))
-    return [[rows[i] for i in order[j::k]] for j in range(k)]
-
-
-def _run(cmd: list[str], log: Path) -> int:
-    log.parent.mkdir(parents=True, exist_ok=True)
-    with log.open("a") as fh:
-        fh.write("+ " + " ".join(cmd) + "\n")
-        fh.flush()
-        return subprocess.run(cmd, cwd=ROOT, stdout=fh, stderr=subprocess.STDOUT).returncode
-
-
 def identify(out: Path, station: str, direction: str, system: str, train: list[dict]) -> Path:
     """One model from the training events at once (a finished run is kept)."""
-    run = out / system / "run"
-    if (run / "complete.json").is_file():
-        return run
-    paths = ",".join(r["path"] for r in train)
-    cmd = [
-        sys.executable,
-        "train.py",
-        "data=csmip",
-        f"data.paths=[{paths}]",
-        f"data.station={station}",
-        f"data.direction={direction}",
-        "data.hold_out=false",
-        *SYSTEMS[system],
-        "baselines.run=[output_error]",
-        "baselines.cramer_rao=false",
-        "trainer.enable_progress_bar=false",
-        f"hydra.run.dir={run}",
-    ]
-    t0 = time.perf_counter()
-    rc = _run(cmd, out / system / "train.log")
-    print(
-        f"  {direction} {system} {out.name}: identified on {len(train)} events, exit {rc}, "
-        f"{time.perf_counter() - t0:.0f} s",
-        flush=True,
-    )
-    return run
+    return identify_several(out, station, direction, system, SYSTEMS[system], train, ROOT)
 
 
 def predict(run: Path, linear: Path | None, row: dict, station: str, direction: str, out: Path) -> dict:
@@ -144,7 +69,7 @@ def predict(run: Path, linear: Path | None, row: dict, station: str, direction: 
         ]
         if linear is not None and linear != run:
             cmd.append(f"linear_run={linear}")
-        _run(cmd, out / "predict.log")
+        run_logged_to(cmd, out / "predict.log", ROOT)
     saved = folder / "prediction.json"
     return json.loads(saved.read_text()) if saved.is_file() else {}
 
@@ -217,7 +142,7 @@ def per_event(csv_path: Path) -> dict[tuple[str, str], dict]:
         rows = list(csv.DictReader(fh))
     for r in rows:
         r.setdefault("heldout_nrmse_a", r.get("heldout_nrmse"))
-    return {(_event(Path(r["event"])), r["direction"]): r for r in rows}
+    return {(event_name(Path(r["event"])), r["direction"]): r for r in rows}
 
 
 def _f(v, fmt=".3f") -> str:
@@ -524,7 +449,7 @@ def main() -> None:
     out = args.out / args.station
     jobs, others = [], {}
     for direction in args.directions.split(","):
-        keep, other = events(args.records, args.station, direction)
+        keep, other = station_events(args.records, args.station, direction)
         others[direction] = other
         parts = folds(keep, args.folds, args.seed)
         print(f"{direction}: {len(keep)} events in {args.folds} folds; {len(other)} with another channel set")

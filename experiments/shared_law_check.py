@@ -21,7 +21,6 @@ experiments/results/real/shared_law_<station>[_<name>].md.
 from __future__ import annotations
 
 import argparse
-import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -29,14 +28,13 @@ import numpy as np
 import torch
 from omegaconf import OmegaConf
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import cross_event as ce  # noqa: E402  (the study's events, folds and identification)
+from pidyn.bench.folds import folds, identify_several, station_events
+from pidyn.data.layout import sensor_view
+from pidyn.runs.prediction import Identified
+from pidyn.simulate import simulate_response
 
-from pidyn.data.layout import sensor_view  # noqa: E402
-from pidyn.runs.prediction import Identified  # noqa: E402
-from pidyn.simulate import simulate_response  # noqa: E402
-
-RESULTS = ce.RESULTS
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "experiments" / "results" / "real"
 
 
 def _args() -> argparse.Namespace:
@@ -79,14 +77,16 @@ def score_event(run: Identified, path: str) -> dict:
 
 def main() -> None:
     args = _args()
-    rows, _ = ce.events(Path(args.records), args.station, args.direction)
-    folds = ce.folds(rows, args.folds, args.seed)
+    rows, _ = station_events(Path(args.records), args.station, args.direction)
+    parts = folds(rows, args.folds, args.seed)
     name = args.name or "all"
     out = Path("outputs") / "shared_law" / args.station.lower() / name
-    trains = {k: [r for r in rows if r not in folds[k] and r["event"] not in args.drop] for k in args.fold}
+    trains = {k: [r for r in rows if r not in parts[k] and r["event"] not in args.drop] for k in args.fold}
 
     def identify(k: int) -> Path:
-        return ce.identify(out / f"fold{k}", args.station, args.direction, "default", trains[k])
+        return identify_several(
+            out / f"fold{k}", args.station, args.direction, "default", [], trains[k], ROOT
+        )
 
     with ThreadPoolExecutor(args.jobs) as pool:
         runs = dict(zip(args.fold, pool.map(identify, args.fold)))
@@ -95,7 +95,7 @@ def main() -> None:
         cells = [row["event"], f"{row['pga_g']:.3f}"]
         for k in args.fold:
             run = Identified.load(runs[k])
-            seen = "test" if row in folds[k] else ("dropped" if row["event"] in args.drop else "fitted")
+            seen = "test" if row in parts[k] else ("dropped" if row["event"] in args.drop else "fitted")
             s = score_event(run, row["path"])
             mark = "**" if s.get("model", 0) > s.get("linear", np.inf) else ""
             cells += [
