@@ -521,3 +521,42 @@ def test_a_prediction_carries_the_runs_verdict_on_the_model_that_predicts(tmp_pa
     linear = {"system": "linear_sdof", "params": {"c": 1.0, "k": 600.0}}
     beside = Identified(tmp_path, cfg, {**rejected, "linear_model": linear}).linear_beside()
     assert beside is not None and run_verdict(beside)["model_adequate"] is None
+
+
+def test_the_records_weighting_runs_from_the_joined_spread_to_each_records_own():
+    """``data.record_weighting`` p: each record's weight is (joined spread / own) ** p; 0 leaves the
+    joined spread (no weights), 1 each record's own, and a value outside [0, 1] is a named error."""
+    from pidyn.data.errors import DataError
+    from pidyn.refine.problem import record_weights
+
+    r1, r2 = _records()
+    own = record_channels(concatenate([r1, r2]), 1)[0]
+    assert record_channels(concatenate([r1, r2], weighting=0.0), 1)[0].weight is None
+    half = record_channels(concatenate([r1, r2], weighting=0.5), 1)[0]
+    np.testing.assert_allclose(half.weight**2, own.weight, rtol=1e-12)
+    assert own.weight.min() < 1.0 < own.weight.max()  # the stronger record weighs less, the weaker more
+    joined = concatenate([r1, r2], weighting=0.5)
+    assert concatenate(split(joined)).meta.record_weighting == 0.5  # a model choice's refits keep it
+    assert record_weights(r1, r1.x) is None
+    with pytest.raises(DataError, match="data.record_weighting must be a number from 0 to 1"):
+        concatenate([r1, r2], weighting=2)
+
+
+def test_data_record_weighting_reaches_the_joined_record(tmp_path):
+    """``data.record_weighting`` from the config to the joined record a run fits."""
+    from pidyn.config import compose
+    from pidyn.runs.build import build_record
+
+    paths = []
+    for i, r in enumerate(_records()):
+        path = tmp_path / f"r{i}.csv"
+        pd.DataFrame({"t": r.t, "x": r.x[:, 0], "v": r.v[:, 0], "ag": r.f}).to_csv(path, index=False)
+        paths.append(str(path))
+    cfg = compose(
+        "train", groups={"data": "csv"}, values={"data.paths": paths, "data.record_weighting": 0.25}
+    )
+    record = build_record(cfg, make_system("duffing"))
+    assert len(pieces(record)) == 2 and record.meta.record_weighting == 0.25
+    cfg.data.record_weighting = "half"
+    with pytest.raises(DataError, match="data.record_weighting .* got 'half'"):
+        build_record(cfg, make_system("duffing"))

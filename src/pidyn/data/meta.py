@@ -154,6 +154,9 @@ class RecordMeta:
     # the record's own parts
     split: Split | None = None
     pieces: list[Piece] | None = None
+    # several records joined: each record's weight in a fit is (the joined spread over its own) to
+    # this power (pidyn.refine.problem.record_weights); None: 1, every record by its own spread
+    record_weighting: float | None = None
     notes: list[str] = field(default_factory=list)
     # a simulated case with a hidden effect
     hidden_effect: str | None = None

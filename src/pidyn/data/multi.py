@@ -39,9 +39,12 @@ def pieces(record) -> list[Piece]:
     return list(record.meta.pieces or [Piece(record.name, 0, len(record.t))])
 
 
-def concatenate(records: Sequence, name: str | None = None):
-    """One record from several of one structure (same step, channels, inputs and units)."""
+def concatenate(records: Sequence, name: str | None = None, weighting: float | None = None):
+    """One record from several of one structure (same step, channels, inputs and units).
+    ``weighting``: how a fit weighs the records (``RecordMeta.record_weighting``; None keeps the
+    first record's, by default every record by its own spread)."""
     records = list(records)
+    weighting = check_weighting(weighting)
     if not records:
         raise DataError("no record to identify from (data.paths or data.runs is empty)")
     if len(records) == 1:
@@ -70,21 +73,10 @@ def concatenate(records: Sequence, name: str | None = None):
         notes=[f"{r.name}: {text}" for r in records for text in r.meta.notes],
         pga=None if first.meta.pga is None else max(float(r.meta.pga or 0.0) for r in records),
         split=_joined_split(records, out_pieces[-1], t),
+        record_weighting=first.meta.record_weighting if weighting is None else weighting,
         path=None,
         span=None,
     )
-    clean = None
-    if all(r.clean is not None for r in records):
-        c = [r.clean for r in records]
-        z = None if c[0].z is None else np.concatenate([ci.z for ci in c])
-        clean = Trajectory(
-            t=t,
-            x=np.concatenate([ci.x for ci in c]),
-            v=np.concatenate([ci.v for ci in c]),
-            a=np.concatenate([ci.a for ci in c]),
-            f=np.concatenate([ci.f for ci in c]),
-            z=z,
-        )
     return replace(
         first,
         name=name or "+".join(r.name for r in records),
@@ -93,9 +85,41 @@ def concatenate(records: Sequence, name: str | None = None):
         x=cat("x"),
         v=cat("v"),
         a=cat("a"),
-        clean=clean,
+        clean=_joined_clean(records, t),
         meta=meta,
     )
+
+
+def _joined_clean(records: list, t: np.ndarray) -> Trajectory | None:
+    """The records' noise-free trajectories laid end to end (a simulation's truth), if all have one."""
+    if not all(r.clean is not None for r in records):
+        return None
+    c = [r.clean for r in records]
+    return Trajectory(
+        t=t,
+        x=np.concatenate([ci.x for ci in c]),
+        v=np.concatenate([ci.v for ci in c]),
+        a=np.concatenate([ci.a for ci in c]),
+        f=np.concatenate([ci.f for ci in c]),
+        z=None if c[0].z is None else np.concatenate([ci.z for ci in c]),
+    )
+
+
+def check_weighting(weighting: float | None) -> float | None:
+    """``data.record_weighting``: a number from 0 (the joined spread, the strongest record weighs
+    most) to 1 (each record its own spread), or None."""
+    if weighting is None:
+        return None
+    try:
+        value = float(weighting)
+    except (TypeError, ValueError):
+        value = float("nan")
+    if not (0.0 <= value <= 1.0):
+        raise DataError(
+            f"data.record_weighting must be a number from 0 to 1 (1: every record by its own spread, "
+            f"0: by the records' joined spread), got {weighting!r}"
+        )
+    return value
 
 
 def split(record) -> list:

@@ -50,19 +50,19 @@ class Channel:
 
 
 def record_weights(record, data: np.ndarray) -> np.ndarray | None:
-    """Several records joined: each record's weight, the joined spread over its own, so the cost
-    sums the records' squared NRMSE, the measure a prediction of the next record is scored by.
-    Over the joined spread the strongest events outweigh the rest by their amplitude squared; in
-    its own units Painter Street's unseen events are predicted better, the strongest one worse
-    (``experiments/results/real/README.md``). None for one record."""
-    starts = piece_starts(record)
-    if not starts:
+    """Several records joined: each record's weight, the joined spread over its own to the power
+    ``meta.record_weighting`` (None: 1), so the cost sums the records' squared NRMSE, the measure a
+    prediction of the next record is scored by. At 0 (unweighted) the strongest events outweigh the
+    rest by their amplitude squared; at 1 Painter Street's unseen events are predicted better, the
+    strongest one worse (``experiments/results/real/README.md``). None for one record."""
+    starts, power = piece_starts(record), getattr(record.meta, "record_weighting", None)
+    if not starts or power == 0.0:
         return None
     edges, whole, w = [0, *starts, len(data)], max(float(np.nanstd(data)), 1e-300), np.ones(len(data))
     for i0, i1 in zip(edges[:-1], edges[1:]):
         piece = data[i0:i1][np.isfinite(data[i0:i1])]
         own = float(np.std(piece)) if piece.size else 0.0
-        w[i0:i1] = whole / own if own > 0 else 1.0
+        w[i0:i1] = (whole / own) ** (1.0 if power is None else power) if own > 0 else 1.0
     return w
 
 

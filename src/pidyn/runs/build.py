@@ -71,7 +71,7 @@ def build_record(cfg: DictConfig, system: StructuralSystem) -> Record:
             node[one] = value
             records.append(_one_record(node, system))
         log.info("identifying from %d records: %s", len(records), ", ".join(r.name for r in records))
-        return concatenate(records)
+        return concatenate(records, weighting=OmegaConf.select(cfg, "data.record_weighting", default=None))
     return _one_record(cfg.data.source, system)
 
 
