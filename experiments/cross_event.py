@@ -49,9 +49,12 @@ LINEAR_OF = {"duffing": "linear", "amplitude": "linear", "default": "linear"}
 STRONG_G = 0.2
 
 
-def identify(out: Path, station: str, direction: str, system: str, train: list[dict]) -> Path:
-    """One model from the training events at once (a finished run is kept)."""
-    return identify_several(out, station, direction, system, SYSTEMS[system], train, ROOT)
+def identify(
+    out: Path, station: str, direction: str, system: str, train: list[dict], extra: list[str] = ()
+) -> Path:
+    """One model from the training events at once (a finished run is kept); ``extra``: further
+    overrides of every identification (``--set``)."""
+    return identify_several(out, station, direction, system, [*SYSTEMS[system], *extra], train, ROOT)
 
 
 def predict(run: Path, linear: Path | None, row: dict, station: str, direction: str, out: Path) -> dict:
@@ -77,7 +80,7 @@ def predict(run: Path, linear: Path | None, row: dict, station: str, direction: 
 def fold_job(args, out: Path, direction: str, k: int, train: list[dict], test: list[dict]) -> list[dict]:
     fold_dir = out / direction / f"fold{k}"
     systems = [s for s in args.systems if direction == "transverse" or s not in ACROSS_ONLY]
-    runs = {s: identify(fold_dir, args.station, direction, s, train) for s in systems}
+    runs = {s: identify(fold_dir, args.station, direction, s, train, args.set) for s in systems}
     rows = []
     for row in test:
         res = {}
@@ -378,6 +381,12 @@ def _args() -> argparse.Namespace:
         default=None,
         help="an earlier study's CSV: its models' columns shown beside this run's (nothing of it run again)",
     )
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        help="an override of every identification, e.g. --set data.record_weighting=0.5 (with its own --out)",
+    )
     args = ap.parse_args()
     args.systems = [s for s in args.systems.split(",") if s]
     unknown = set(args.systems) - set(SYSTEMS)
@@ -417,6 +426,7 @@ def write_results(args, out: Path, rows: list[dict], others: dict) -> Path:
 def _extra(args) -> str:
     """The command line's options that name a second study beside an earlier one."""
     out = f" --name {args.name}" if args.name else ""
+    out += "".join(f" --set {o}" for o in args.set)
     if args.beside is not None:
         path = args.beside.resolve()
         out += f" --beside {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path.name}"
