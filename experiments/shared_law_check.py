@@ -40,7 +40,7 @@ RESULTS = ROOT / "experiments" / "results" / "real"
 def _args() -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--station", default="CE89324")
-    p.add_argument("--records", default="data/painter_street/records")
+    p.add_argument("--records", type=Path, default=ROOT / "data" / "painter_street" / "records")
     p.add_argument("--direction", default="transverse")
     p.add_argument("--folds", type=int, default=5)
     p.add_argument("--seed", type=int, default=0)
@@ -77,10 +77,10 @@ def score_event(run: Identified, path: str) -> dict:
 
 def main() -> None:
     args = _args()
-    rows, _ = station_events(Path(args.records), args.station, args.direction)
+    rows, _ = station_events(args.records, args.station, args.direction)
     parts = folds(rows, args.folds, args.seed)
     name = args.name or "all"
-    out = Path("outputs") / "shared_law" / args.station.lower() / name
+    out = ROOT / "outputs" / "shared_law" / args.station.lower() / name
     trains = {k: [r for r in rows if r not in parts[k] and r["event"] not in args.drop] for k in args.fold}
 
     def identify(k: int) -> Path:
