@@ -29,9 +29,7 @@ import torch
 from omegaconf import OmegaConf
 
 from pidyn.bench.folds import folds, identify_several, station_events
-from pidyn.data.layout import sensor_view
-from pidyn.runs.prediction import Identified
-from pidyn.simulate import simulate_response
+from pidyn.runs.prediction import Identified, score
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "experiments" / "results" / "real"
@@ -62,13 +60,11 @@ def score_event(run: Identified, path: str) -> dict:
         if model is None:
             continue
         system, record, values = model.for_record(data)
-        sim = simulate_response(system, values, record)
-        seen, channels = sensor_view(record, sim)
-        meas, pred = np.asarray(seen.a), np.asarray(channels["a"])
-        out[label] = float(np.mean(np.sqrt(np.mean((pred - meas) ** 2, axis=0)) / meas.std(axis=0)))
+        scored = score(system, values, record)  # what predict.py scores: every deck channel's NRMSE
+        out[label] = scored["mean_nrmse_a"]
         term = next((t for t in system.terms if t.name == "amplitude_softening"), None)
         if label == "model" and term is not None:
-            e95 = float(np.quantile(np.asarray(sim["z"])[:, 0], 0.95))
+            e95 = float(np.quantile(np.asarray(scored["sim"]["z"])[:, 0], 0.95))
             stiff, _ = term.factors({k: torch.tensor(v) for k, v in values.items()}, torch.tensor(e95))
             out["e95"] = e95
             out["period_at_e95"] = float(2 * np.pi / np.sqrt(values[term.stiffness] * float(stiff)))

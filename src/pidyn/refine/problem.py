@@ -55,7 +55,7 @@ def record_weights(record, data: np.ndarray) -> np.ndarray | None:
     prediction of the next record is scored by. At 0 (unweighted) the strongest events outweigh the
     rest by their amplitude squared; at 1 Painter Street's unseen events are predicted better, the
     strongest one worse (``experiments/results/real/README.md``). None for one record."""
-    starts, power = piece_starts(record), getattr(record.meta, "record_weighting", None)
+    starts, power = piece_starts(record), record.meta.record_weighting
     if not starts or power == 0.0:
         return None
     edges, whole, w = [0, *starts, len(data)], max(float(np.nanstd(data)), 1e-300), np.ones(len(data))
