@@ -46,6 +46,9 @@ def _args() -> argparse.Namespace:
     p.add_argument(
         "--drop", action="append", default=[], help="an event left out of every fold's training too"
     )
+    p.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="an override of every identification"
+    )
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--name", default="")
     return p.parse_args()
@@ -81,7 +84,7 @@ def main() -> None:
 
     def identify(k: int) -> Path:
         return identify_several(
-            out / f"fold{k}", args.station, args.direction, "default", [], trains[k], ROOT
+            out / f"fold{k}", args.station, args.direction, "default", args.set, trains[k], ROOT
         )
 
     with ThreadPoolExecutor(args.jobs) as pool:
@@ -110,6 +113,7 @@ def main() -> None:
         "",
         f"`python experiments/shared_law_check.py {' '.join(f'--fold {k}' for k in args.fold)}"
         + "".join(f" --drop {d}" for d in args.drop)
+        + "".join(f" --set {o}" for o in args.set)
         + (f" --name {args.name}" if args.name else "")
         + f"` (seed {args.seed}, {args.folds} folds, the default model of several records). NRMSE of the"
         " deck acceleration over each event's shaking span, simulated from rest; **bold**: the"

@@ -322,6 +322,7 @@ def AmplitudeDependent(
     a_ref: float = 0.005,
     w0: float = 25.0,
     law: str = "bounded",
+    shape: float = 1.0,
     **kw,
 ) -> SDOFSystem:
     """m x'' + c (1 + gain e) x' + k (1 - soft e) x = -m ag, e' = (A / a_ref - e) / tau: a stiffness
@@ -329,8 +330,9 @@ def AmplitudeDependent(
     one model for a structure's weak and strong earthquakes. ``a_ref`` (m) and ``w0`` (rad/s) are the
     structure's scale (a typical response amplitude, the nominal circular frequency), not identified.
     The default ``law="bounded"`` softens as k / (1 + soft e): never a negative stiffness on a record
-    stronger than those it was fitted on (``law="linear"``: k (1 - soft e))."""
-    term = AmplitudeSoftening(soft, gain, tau, a_ref=a_ref, w0=w0, law=law)
+    stronger than those it was fitted on (``law="linear"``: k (1 - soft e); ``law="curved"``: the
+    bounded law in e ** shape, ``shape`` identified)."""
+    term = AmplitudeSoftening(soft, gain, tau, a_ref=a_ref, w0=w0, law=law, shape=shape)
     return SDOFSystem(
         [ViscousDamping(c), LinearStiffness(k), term],
         name=kw.pop("name", "amplitude"),

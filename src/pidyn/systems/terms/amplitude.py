@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 from pidyn.params import ParamSpec
-from pidyn.systems.terms.base import Array, ForceTerm, _relu
+from pidyn.systems.terms.base import Array, ForceTerm, _clamp_min, _relu
 
 #: how the stiffness and damping factors follow the envelope e
-LAWS = ("linear", "bounded")
+LAWS = ("linear", "bounded", "curved")
+#: the curved law's exponent: 1 is the bounded law; above, the structure holds its small-amplitude
+#: stiffness longer and softens faster in strong shaking
+SHAPE_RANGE = (0.5, 4.0)
 
 
 def _inside(value: float, lo: float, hi: float) -> float:
@@ -31,7 +34,10 @@ class AmplitudeSoftening(ForceTerm):
     damping, however far an earthquake drives e beyond the records the law was fitted on: a
     softening k / (1 + soft e) (the hyperbolic law of soil's modulus reduction, Hardin and
     Drnevich 1972), a stiffening k (1 + |soft| e); a damping c (1 + gain e) that rises, c / (1 +
-    |gain| e) that falls."""
+    |gain| e) that falls. ``law="curved"``: the bounded law in e ** shape, the exponent identified
+    (the modified hyperbolic law, Darendeli 2001): one law can then hold a structure stiff through
+    moderate shaking and still soften it in the strongest, which the bounded law's fixed slope at
+    small e cannot."""
 
     name = "amplitude_softening"
     n_latent = 1
@@ -47,6 +53,7 @@ class AmplitudeSoftening(ForceTerm):
         damping: str = "c",
         tau_range: tuple[float, float] = (0.05, 60.0),
         law: str = "linear",
+        shape: float = 1.0,
     ) -> None:
         if a_ref is None or w0 is None:  # a config's null: the run reads them from its records
             raise ValueError(
@@ -61,29 +68,42 @@ class AmplitudeSoftening(ForceTerm):
         # linear in soft and gain (regression columns) only under the linear law
         self.linear = ("soft", "gain") if law == "linear" else ()
         # the linear law's stiffness turns negative at soft e = 1; the bounded one never does
-        self.soft_range = (-0.5, 0.95) if law == "linear" else (-0.5, 20.0)
+        self.soft_range = (-0.5, 0.95) if law == "linear" else (-0.5, 20.0 if law == "bounded" else 50.0)
         self.tau_range = (float(tau_range[0]), float(tau_range[1]))
         # a fit that ended on a bound starts the next one just inside it (a box needs init inside)
         self.soft = _inside(soft, *self.soft_range)
         self.gain = _inside(gain, -0.9, 10.0)
         self.tau = _inside(tau, *self.tau_range)
+        self.shape = _inside(shape, *SHAPE_RANGE)
         self.a_ref, self.w0 = float(a_ref), float(w0)
         self.stiffness, self.damping = stiffness, damping
 
     def specs(self):
         lo, hi = self.tau_range
         s_lo, s_hi = self.soft_range
-        return [  # the bounds here are _inside's in __init__
+        specs = [  # the bounds here are _inside's in __init__
             ParamSpec("soft", init=self.soft, true=self.soft, transform="box", lower=s_lo, upper=s_hi),
             ParamSpec("gain", init=self.gain, true=self.gain, transform="box", lower=-0.9, upper=10.0),
             ParamSpec("tau", init=self.tau, true=self.tau, transform="box", lower=lo, upper=hi, unit="s"),
         ]
+        if self.law == "curved":
+            a_lo, a_hi = SHAPE_RANGE
+            specs.append(ParamSpec("shape", init=self.shape, true=self.shape, transform="box", lower=a_lo, upper=a_hi))
+        return specs
+
+    def _measure(self, p: dict, e: Array) -> Array:
+        """What the law reads of the envelope: e, or e ** shape under the curved law (e never
+        below 0 from rest; the floor keeps the power's gradient finite there)."""
+        if self.law != "curved":
+            return e
+        return _clamp_min(e, 1e-12) ** p["shape"]
 
     def factors(self, p: dict, e: Array) -> tuple[Array, Array]:
         """The factors on k and on c where the envelope is ``e``, by the term's law."""
         if self.law == "linear":
             return 1 - p["soft"] * e, 1 + p["gain"] * e
         soft, gain = p["soft"], p["gain"]
+        e = self._measure(p, e)
         stiff = (1 + _relu(-soft) * e) / (1 + _relu(soft) * e)
         damp = (1 + _relu(gain) * e) / (1 + _relu(-gain) * e)
         return stiff, damp
@@ -106,13 +126,14 @@ class AmplitudeSoftening(ForceTerm):
         return ((amp / self.a_ref - z[..., 0]) / p["tau"])[..., None]
 
     def formula(self, p):
-        if self.law == "bounded":  # the same force, written as what it adds to k x and c x'
+        if self.law in ("bounded", "curved"):  # the same force, written as what it adds to k x and c x'
             k, c, soft, gain = p[self.stiffness], p[self.damping], p["soft"], p["gain"]
-            sk = f"- {soft:.4g} {k:.5g} e/(1 + {soft:.4g} e) x" if soft >= 0 else f"+ {-soft:.4g} {k:.5g} e x"
+            e = f"e^{p['shape']:.3g}" if self.law == "curved" else "e"
+            sk = f"- {soft:.4g} {k:.5g} {e}/(1 + {soft:.4g} {e}) x" if soft >= 0 else f"+ {-soft:.4g} {k:.5g} {e} x"
             sc = (
-                f"+ {gain:.4g} {c:.5g} e x'"
+                f"+ {gain:.4g} {c:.5g} {e} x'"
                 if gain >= 0
-                else f"- {-gain:.4g} {c:.5g} e/(1 + {-gain:.4g} e) x'"
+                else f"- {-gain:.4g} {c:.5g} {e}/(1 + {-gain:.4g} {e}) x'"
             )
             return f"{sk} {sc} (e' = (A/{self.a_ref:.3g} - e)/{p['tau']:.3g})"
         return (
