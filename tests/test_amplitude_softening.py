@@ -77,6 +77,30 @@ def test_the_bounded_law_has_the_linear_slopes_and_never_a_negative_stiffness(so
         AmplitudeSoftening(law="cubic")
 
 
+def test_the_curved_law_is_the_bounded_one_at_shape_one_and_holds_moderate_shaking_stiffer_above():
+    """At shape 1 the curved law is the bounded law; at shape 2 the same softening at e = 1 comes
+    with less softening below it and more above it (what the exponent is for), and its
+    derivative by the exponent is finite from rest, where e is 0."""
+    torch = pytest.importorskip("torch")
+    p = {"k": 100.0, "c": 1.0, "soft": 2.0, "gain": 1.0, "tau": 2.0, "shape": 1.0}
+    e = np.array([0.0, 0.2, 0.5, 1.0, 2.0])
+    bounded = AmplitudeSoftening(2.0, 1.0, 2.0, law="bounded")
+    curved = AmplitudeSoftening(2.0, 1.0, 2.0, law="curved", shape=1.0)
+    for a, b in zip(bounded.at_envelope(p, e), curved.at_envelope(p, e)):
+        np.testing.assert_allclose(b, a, rtol=1e-9)
+    assert [s.name for s in curved.specs()] == ["soft", "gain", "tau", "shape"]
+    assert "shape" not in [s.name for s in bounded.specs()]
+    k1, _ = bounded.at_envelope(p, e)
+    k2, _ = curved.at_envelope({**p, "shape": 2.0}, e)
+    assert k2[3] == pytest.approx(k1[3])  # the same at e = 1
+    assert np.all(k2[1:3] > k1[1:3]) and k2[4] < k1[4]  # stiffer below, softer above
+    pt = {k: torch.tensor(v, dtype=torch.float64, requires_grad=True) for k, v in {**p, "shape": 2.0}.items()}
+    k_t, c_t = curved.at_envelope(pt, torch.tensor([0.0, 0.3], dtype=torch.float64))
+    (k_t.sum() + c_t.sum()).backward()
+    assert torch.isfinite(pt["shape"].grad) and float(pt["shape"].grad) != 0.0
+    assert "e^2" in curved.formula({**p, "shape": 2.0})
+
+
 def test_a_moving_period_adds_the_amplitude_dependent_structure_to_the_check(monkeypatch):
     """On an accelerometer record whose running period moves beyond its windows' intervals, the
     output-error check also fits the amplitude-dependent structure; where the period holds, or

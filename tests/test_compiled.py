@@ -54,6 +54,9 @@ def _systems() -> dict[str, object]:
     # the bounded amplitude law, a softening stiffness and a damping that falls: both branches
     bounded = AmplitudeSoftening(0.6, -0.4, 0.5, a_ref=0.5, w0=5.0, law="bounded")
     out["amplitude_bounded"] = LinearSDOF(c=0.4, k=30.0).with_term(bounded)
+    # the curved law: a power whose exponent is a parameter, of an envelope that starts at 0
+    curved = AmplitudeSoftening(0.6, 0.4, 0.5, a_ref=0.5, w0=5.0, law="curved", shape=1.7)
+    out["amplitude_curved"] = LinearSDOF(c=0.4, k=30.0).with_term(curved)
     out["two_supports_sdof"] = SDOFSystem([ViscousDamping(0.4), LinearStiffness(30.0)], inputs=["a", "b"])
     out["building"] = ShearBuilding(
         n_storeys=3,

@@ -88,7 +88,9 @@ class AmplitudeSoftening(ForceTerm):
         ]
         if self.law == "curved":
             a_lo, a_hi = SHAPE_RANGE
-            specs.append(ParamSpec("shape", init=self.shape, true=self.shape, transform="box", lower=a_lo, upper=a_hi))
+            specs.append(
+                ParamSpec("shape", init=self.shape, true=self.shape, transform="box", lower=a_lo, upper=a_hi)
+            )
         return specs
 
     def _measure(self, p: dict, e: Array) -> Array:
@@ -129,7 +131,11 @@ class AmplitudeSoftening(ForceTerm):
         if self.law in ("bounded", "curved"):  # the same force, written as what it adds to k x and c x'
             k, c, soft, gain = p[self.stiffness], p[self.damping], p["soft"], p["gain"]
             e = f"e^{p['shape']:.3g}" if self.law == "curved" else "e"
-            sk = f"- {soft:.4g} {k:.5g} {e}/(1 + {soft:.4g} {e}) x" if soft >= 0 else f"+ {-soft:.4g} {k:.5g} {e} x"
+            sk = (
+                f"- {soft:.4g} {k:.5g} {e}/(1 + {soft:.4g} {e}) x"
+                if soft >= 0
+                else f"+ {-soft:.4g} {k:.5g} {e} x"
+            )
             sc = (
                 f"+ {gain:.4g} {c:.5g} {e} x'"
                 if gain >= 0
