@@ -10,7 +10,7 @@ import pytest
 from pidyn.data.sources import synthetic
 from pidyn.refine.output_error import fit_output_error
 from pidyn.simulate import simulate_response
-from pidyn.systems import LinearSDOF, SDOFSystem
+from pidyn.systems import AmplitudeDependent, LinearSDOF, SDOFSystem
 from pidyn.systems.terms import AmplitudeSoftening, LinearStiffness, ViscousDamping
 
 
@@ -243,3 +243,14 @@ def test_the_extension_draws_its_own_period_through_the_record(tmp_path):
     }
     plot_running_period(tmp_path / "running_period.png", running, (0, 13), (13, 20), model=(t, period, zeta))
     assert (tmp_path / "running_period.png").stat().st_size > 0
+
+
+def test_the_identified_equation_reads_as_written_by_hand_whatever_the_signs():
+    """A softening share below zero (a stiffening) and a support dashpot below zero are joined by
+    their own sign: no "+ +" or "+ -" in the equation a run reports."""
+    system = AmplitudeDependent(soft=-0.3, inputs=["a", "b"])
+    p = {s.name: float(s.init) for s in system.param_specs()}
+    p.update({"g_a": 2.0, "g_b": -2.4, "e_b": -1.5})
+    text = system.describe(p)
+    assert "+ +" not in text and "+ -" not in text, text
+    assert "+ 0.3 600 e x" in text and "- 2.4 vg_b(t)" in text

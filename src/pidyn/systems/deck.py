@@ -41,7 +41,7 @@ import torch
 from pidyn.params import ParamSpec
 from pidyn.systems.base import Kinematics, StructuralSystem, merge_specs, stack_last
 from pidyn.systems.places import OnStorey, PlacedTerms, latent_slices, place_terms
-from pidyn.systems.terms import TERMS, ForceTerm, LinearStiffness, ViscousDamping
+from pidyn.systems.terms import TERMS, ForceTerm, LinearStiffness, ViscousDamping, signed_sum
 
 
 def sensor_row(position: float, length: float) -> np.ndarray:
@@ -268,7 +268,8 @@ class RigidDeck(PlacedTerms, StructuralSystem):
 
     def support_equations(self, p: Mapping[str, float]) -> list[str]:
         return [
-            f"support {j + 1} ({name}, at {s:.4g} m): F{j + 1} = " + " + ".join(t.formula(p) for t in support)
+            f"support {j + 1} ({name}, at {s:.4g} m): F{j + 1} = "
+            + signed_sum([t.formula(p) for t in support])
             for j, (name, s, support) in enumerate(zip(self.inputs, self.positions, self.supports))
         ]
 

@@ -33,6 +33,7 @@ import torch
 
 from pidyn.params import ParamSpec
 from pidyn.systems.base import ExcitationKind, Kinematics, StructuralSystem, merge_specs, stack_last
+from pidyn.systems.terms import signed_sum
 
 
 class ModesOnSupports(StructuralSystem):
@@ -268,16 +269,18 @@ class ModesOnSupports(StructuralSystem):
         lines = []
         for r in range(1, self.n_dof + 1):
             if self.inputs:
-                drive = " + ".join(
-                    f"{p[f'r{r}_{i}']:.4g} ag_{i} - {p[f'g{r}_{i}']:.4g} vg_{i}" for i in self.inputs
+                drive = signed_sum(
+                    [f"{p[f'r{r}_{i}']:.4g} ag_{i}" for i in self.inputs]
+                    + [f"{-p[f'g{r}_{i}']:.4g} vg_{i}" for i in self.inputs]
                 )
             else:
                 drive = f"{p[f'r{r}']:.4g} ag"
             lines.append(f"q{r}'' + {p[f'c{r}']:.5g} q{r}' + {p[f'k{r}']:.5g} q{r} = -({drive})")
-        sensor = " + ".join(f"q{r}''" for r in range(1, self.n_dof + 1))
+        parts = [f"q{r}''" for r in range(1, self.n_dof + 1)]
         if self.inputs:
-            sensor += " + " + " + ".join(
+            parts += [
                 f"{sum(p[f'r{r}_{i}'] for r in range(1, self.n_dof + 1)) + p[self.feedthrough(1, i)]:.4g} ag_{i}"
                 for i in self.inputs
-            )
+            ]
+        sensor = signed_sum(parts)
         return "; ".join(lines) + f"; sensor: {sensor}"

@@ -41,6 +41,7 @@ from pidyn.systems.terms import (
     ForceTerm,
     LinearStiffness,
     ViscousDamping,
+    signed_sum,
 )
 
 
@@ -269,18 +270,16 @@ class SDOFSystem(StructuralSystem):
         return self.state_rate(t, np.asarray(y, dtype=float), p, f(t))
 
     def describe(self, p: dict[str, float]) -> str:
-        lhs = f"{p['m']:.5g} x'' + " + " + ".join(t.formula(p) for t in self.terms)
+        lhs = signed_sum([f"{p['m']:.5g} x''", *(t.formula(p) for t in self.terms)])
         rhs = f"-{p['m']:.5g} ag(t)" if self.excitation == "ground" else "u(t)"
         if self.inputs:
+            drive = signed_sum([f"{p[influence_name(i)]:.4g} ag_{i}(t)" for i in self.inputs])
+            dashpots = [f"{p[support_damping_name(i)]:.4g} vg_{i}(t)" for i in self.inputs]
+            sensor = [f"{p[influence_name(i)] + p[feedthrough_name(i)]:.4g} ag_{i}(t)" for i in self.inputs]
             rhs = (
-                f"-{p['m']:.5g} ("
-                + " + ".join(f"{p[influence_name(i)]:.4g} ag_{i}(t)" for i in self.inputs)
-                + ") + "
-                + " + ".join(f"{p[support_damping_name(i)]:.4g} vg_{i}(t)" for i in self.inputs)
-                + "; sensor: x'' + "
-                + " + ".join(
-                    f"{p[influence_name(i)] + p[feedthrough_name(i)]:.4g} ag_{i}(t)" for i in self.inputs
-                )
+                signed_sum([f"-{p['m']:.5g} ({drive})", *dashpots])
+                + "; sensor: "
+                + signed_sum(["x''", *sensor])
             )
         eqs = [f"{lhs} = {rhs}"]
         for t in self.terms:

@@ -37,7 +37,7 @@ import pidyn.systems.shear_rate as shear_rate
 from pidyn.params import ParamSpec, positive
 from pidyn.systems.base import ExcitationKind, Kinematics, StructuralSystem, merge_specs, stack_last
 from pidyn.systems.places import OnStorey, PlacedTerms, latent_slices, place_terms
-from pidyn.systems.terms import BoucWenHysteresis, ForceTerm, LinearStiffness, ViscousDamping
+from pidyn.systems.terms import BoucWenHysteresis, ForceTerm, LinearStiffness, ViscousDamping, signed_sum
 
 
 def _per_unit_m1(spec: ParamSpec) -> ParamSpec:
@@ -312,7 +312,7 @@ class ShearBuilding(PlacedTerms, StructuralSystem):
         """One line per storey: its restoring force on the drift d_i (and its latent rate)."""
         lines = []
         for i, storey in enumerate(self.storeys, 1):
-            lines.append(f"storey {i}: F{i} = " + " + ".join(t.formula(p) for t in storey))
+            lines.append(f"storey {i}: F{i} = " + signed_sum([t.formula(p) for t in storey]))
             for t in storey:
                 if isinstance(t.term, BoucWenHysteresis):
                     q = t._local(p)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from pidyn.discovery import defined_in
 from pidyn.systems.terms.amplitude import AmplitudeSoftening
-from pidyn.systems.terms.base import Array, ForceTerm, heun_along, latent_path
+from pidyn.systems.terms.base import Array, ForceTerm, heun_along, latent_path, signed_sum
 from pidyn.systems.terms.bouc_wen import BoucWenHysteresis
 from pidyn.systems.terms.coulomb_friction import CoulombFriction
 from pidyn.systems.terms.cubic_stiffness import CubicStiffness
@@ -51,6 +51,7 @@ __all__ = [
     "StiffnessLoss",
     "StribeckFriction",
     "TrilinearSpring",
+    "signed_sum",
     "ViscousDamping",
     "heun_along",
     "latent_path",

@@ -16,6 +16,24 @@ from pidyn.params import ParamSpec
 Array = Any  # torch.Tensor or np.ndarray: the formulas below work on both
 
 
+def signed_sum(parts: list[str]) -> str:
+    """Written terms joined into one sum that reads as written by hand: a term that carries its
+    own sign ("- 0.5 k e x", "-2.4 vg") is joined by that sign, not by "+ -"."""
+    out = ""
+    for part in parts:
+        part = part.strip()
+        sign, body = "+", part
+        if part[:2] in ("- ", "+ "):
+            sign, body = part[0], part[2:]
+        elif part[:1] == "-" and part[1:2].isdigit():
+            sign, body = "-", part[1:]
+        if not out:
+            out = body if sign == "+" else f"-{body}"
+        else:
+            out += f" {sign} {body}"
+    return out
+
+
 def _abs(x: Array) -> Array:
     return x.abs() if isinstance(x, torch.Tensor) else np.abs(x)
 
