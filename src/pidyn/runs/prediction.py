@@ -212,6 +212,7 @@ def predict_record(
         "record": record.name,
         "seen_by_run": record.name in str(run.metrics.get("record") or "").split("+"),
         "pga": record.meta.pga,
+        "pga_unit": "m/s^2",  # the record's largest input acceleration, as every record's meta keeps it
         **training_range(run, record.meta.pga),
         "simulated": "from rest, the record's own input motions, fixed-step RK4",
     }

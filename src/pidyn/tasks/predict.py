@@ -93,9 +93,9 @@ def _log(out: dict[str, Any]) -> None:
         log.warning(
             note(
                 "beyond_training_amplitude",
-                f"{out['record']}: its peak input acceleration {out['pga']:.3g} is {out['beyond_training']:.3g} "
+                f"{out['record']}: its peak input acceleration {out['pga']:.3g} m/s^2 is {out['beyond_training']:.3g} "
                 f"times the {'strongest' if out['beyond_training'] > 1 else 'weakest'} of the run's records "
-                f"({lo:.3g}-{hi:.3g}): the model is extrapolated to this shaking",
+                f"({lo:.3g}-{hi:.3g} m/s^2): the model is extrapolated to this shaking",
             )
         )
     if out["beats_trivial"] is False:
