@@ -13,6 +13,7 @@ event, and how soft it makes the structure there.
 
     python experiments/shared_law_check.py --fold 3 --fold 4
     python experiments/shared_law_check.py --fold 3 --fold 4 --drop petroliaaftershock2_26apr1992 --name no_as2
+    python experiments/shared_law_check.py --fold 3 --fold 4 --set system.several_records.law=curved --name curved
 
 Run folders go to outputs/shared_law/<station>/<name>/ (a finished run is reused); the table to
 experiments/results/real/shared_law_<station>[_<name>].md.

@@ -67,7 +67,8 @@ class AmplitudeSoftening(ForceTerm):
         self.law = law
         # linear in soft and gain (regression columns) only under the linear law
         self.linear = ("soft", "gain") if law == "linear" else ()
-        # the linear law's stiffness turns negative at soft e = 1; the bounded one never does
+        # the linear law's stiffness turns negative at soft e = 1; the bounded one never does; the
+        # curved one, at e ** shape < e below e = 1, needs a larger share for the same softening there
         self.soft_range = (-0.5, 0.95) if law == "linear" else (-0.5, 20.0 if law == "bounded" else 50.0)
         self.tau_range = (float(tau_range[0]), float(tau_range[1]))
         # a fit that ended on a bound starts the next one just inside it (a box needs init inside)
