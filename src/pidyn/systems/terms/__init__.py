@@ -51,8 +51,8 @@ __all__ = [
     "StiffnessLoss",
     "StribeckFriction",
     "TrilinearSpring",
-    "signed_sum",
     "ViscousDamping",
     "heun_along",
     "latent_path",
+    "signed_sum",
 ]
