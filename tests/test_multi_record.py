@@ -143,6 +143,33 @@ def test_predict_refuses_a_record_of_other_channels():
     check_channels(run, rec)
 
 
+def test_a_record_of_another_direction_is_refused_by_its_channels_not_by_missing_values(tmp_path):
+    """A run of the longitudinal supports asked to predict a transverse record: the model would take
+    the record's supports (ch3, ch17, ch20) and find no value for them; the error names the
+    direction and channels that differ, which is what the user has to change."""
+    from omegaconf import OmegaConf
+
+    from pidyn.config import compose
+    from pidyn.runs.build import system_and_record
+    from pidyn.runs.prediction import CHANNEL_KEYS, Identified
+
+    path = ROOT / "data" / "painter_street" / "records" / "capemendocino_31jul1987_ce89324p.zip"
+    over = [f"data.path={path}", "data.station=CE89324", "data.direction=longitudinal"]
+    cfg = compose("train", groups={"data": "csmip", "system": "linear"}, overrides=over)
+    system, record = system_and_record(cfg, None)
+    metrics = {
+        "params": {s.name: float(s.init) for s in system.param_specs()},
+        "record_meta": {**record.meta.to_dict(CHANNEL_KEYS), "inputs": record.inputs},
+    }
+    run = Identified(tmp_path, cfg, metrics)
+    run.for_record(cfg.data)  # its own channels: read
+    other = OmegaConf.merge(cfg.data, {"direction": "transverse"})
+    with pytest.raises(
+        ValueError, match="does not match run .*direction 'transverse' .*the run: 'longitudinal'"
+    ):
+        run.for_record(other)
+
+
 def test_predict_needs_a_finished_run(tmp_path):
     from pidyn.runs.prediction import Identified
 

@@ -74,6 +74,7 @@ class Identified:
         values = {**fixed_values(system), **{k: float(v) for k, v in self.metrics["params"].items()}}
         missing = sorted(s.name for s in system.param_specs() if s.name not in values)
         if missing:
+            check_channels(self, record)  # another channel set: say so, not which values are missing
             raise ValueError(f"{self.run_dir}: the run's metrics.json gives no value of {', '.join(missing)}")
         return system, record, values
 
