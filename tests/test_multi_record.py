@@ -506,8 +506,36 @@ def test_a_run_whose_records_chose_the_linear_model_predicts_with_it(tmp_path):
     out, _ = predict_record(chosen, split(joined)[2])
     assert out["mean_nrmse_a"] == pytest.approx(out["linear_mean_nrmse_a"], rel=1e-9)
     assert out["mean_nrmse_a"] > own["mean_nrmse_a"] and out["model_choice"] == "linear"
+    assert out["model_choice_decisive"] is False  # two records cannot tell the models apart
+    assert own["model_choice_decisive"] is None  # a run that did not choose
     with pytest.raises(ValueError, match="model_choice: unknown setting"):
         ChoiceSettings.of({"fold": 3})
+
+
+def test_the_choice_says_when_its_records_cannot_tell_the_two_models_apart():
+    """``decisive``: the paired log ratio of the left-out records' NRMSEs more than two standard
+    errors from 0. A consistent 20 % gain on eight records decides; a gain on most records and one
+    record lost badly (the mean ratio near 1) does not, and says so in a note; a model that could
+    not predict a record at all is decided against."""
+    from pidyn.runs.model_choice import _decide, paired_ratio
+    from pidyn.runs.report import _choice_lines
+
+    steady = [{"record": f"r{i}", "nonlinear": 0.4 * (1 + 0.02 * i), "linear": 0.5} for i in range(8)]
+    out = _decide("amplitude", "linear_sdof", steady, 1.0)
+    assert out["chosen"] == "nonlinear" and out["decisive"] and "undecided" not in out
+    assert out["log_ratio"] == pytest.approx(np.mean([np.log(r["nonlinear"] / 0.5) for r in steady]))
+    mixed = [{"record": f"r{i}", "nonlinear": 0.45, "linear": 0.5} for i in range(7)]
+    mixed.append({"record": "bad", "nonlinear": 1.0, "linear": 0.5})
+    out = _decide("amplitude", "linear_sdof", mixed, 1.0)
+    assert out["chosen"] == "linear" and out["nonlinear_better"] == "7 of 8"  # the mean's choice stands
+    assert out["decisive"] is False and out["undecided"].endswith("[model_choice_undecided]")
+    assert "cannot tell amplitude from linear_sdof" in out["undecided"]
+    assert _choice_lines(out, "amplitude")[-1] == f"Undecided: {out['undecided']}."
+    failed = [
+        {"record": "a", "nonlinear": float("inf"), "linear": 0.5},
+        {"record": "b", "nonlinear": 0.4, "linear": 0.5},
+    ]
+    assert paired_ratio(failed)["decisive"] is True
 
 
 def test_a_prediction_says_when_its_record_shakes_harder_or_more_weakly_than_the_runs_records(tmp_path):

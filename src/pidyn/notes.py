@@ -46,6 +46,7 @@ CODES: dict[str, str] = {
     "model_rejected_by_its_records": "the model that predicts does not describe the records it was identified on (its run's adequacy test)",
     "beyond_training_amplitude": "a predicted record shakes the structure harder or more weakly than any record the model was identified on",
     "nonlinear_not_earned": "a model from several records: its nonlinear terms do not predict its own records better, each left out and predicted by the models refitted without it; the linear model of the same layout is used",
+    "model_choice_undecided": "a model from several records: its own records, each left out, cannot tell its nonlinear model from the linear one (the mean log ratio of their errors within two standard errors of 0); the choice between them is a coin",
     "damping_not_a_property": "a mode's damping is the fit's, not reported as the structure's",
     "figure_failed": "a figure could not be drawn; the run's results stand",
     "not_applicable": "a baseline does not apply to this record or system",

@@ -14,6 +14,12 @@ predictions is below the linear model's; otherwise the run says its nonlinear te
 their place on its own records, and its predictions use the linear model. The mean, not the
 median: a model that fails badly on one unseen record is the one not to hand on. The choice
 looks at the run's own records only; nothing of a record to be predicted enters it.
+
+Whether the records can tell the two models apart at all is said beside the choice: the mean of
+the paired log ratios ln(NRMSE_nonlinear / NRMSE_linear) over the left-out records and its
+standard error. Within two standard errors of 0 the choice is ``decisive: false`` (a note says
+so): a run of four records, or of a direction where both models predict alike, chooses by a coin,
+and a prediction with the other model would do as well.
 """
 
 from __future__ import annotations
@@ -178,6 +184,23 @@ def _scored(system: StructuralSystem, values: dict[str, float] | None, record: R
     return float(mean) if mean is not None and np.isfinite(mean) else float("inf")
 
 
+def paired_ratio(rows: list[dict]) -> dict[str, Any]:
+    """The mean paired log ratio ln(NRMSE_nonlinear / NRMSE_linear) over the left-out records, its
+    standard error, and whether it lies more than two standard errors from 0 (``decisive``). A
+    record one model could not predict at all (inf) decides against that model."""
+    nl = np.array([r[NONLINEAR] for r in rows], dtype=float)
+    li = np.array([r[LINEAR] for r in rows], dtype=float)
+    one_failed = np.isinf(nl) != np.isinf(li)
+    if one_failed.any():
+        return {"log_ratio": None, "log_ratio_se": None, "decisive": True}
+    ok = np.isfinite(nl) & np.isfinite(li) & (nl > 0) & (li > 0)
+    d = np.log(nl[ok] / li[ok])
+    if d.size < 2:
+        return {"log_ratio": None, "log_ratio_se": None, "decisive": False}
+    mean, se = float(d.mean()), float(d.std(ddof=1) / np.sqrt(d.size))
+    return {"log_ratio": mean, "log_ratio_se": se, "decisive": bool(abs(mean) > 2 * se)}
+
+
 def _decide(nonlinear: str, linear: str, rows: list[dict], seconds: float) -> dict[str, Any]:
     means = {key: float(np.mean([r[key] for r in rows])) for key in (NONLINEAR, LINEAR)}
     kept = means[NONLINEAR] < means[LINEAR]
@@ -190,6 +213,7 @@ def _decide(nonlinear: str, linear: str, rows: list[dict], seconds: float) -> di
         "the model refitted without it (from rest, its own input motions)",
         "mean_nrmse_a": means,
         "nonlinear_better": f"{better} of {len(rows)}",
+        **paired_ratio(rows),
         "records": rows,
         "seconds": seconds,
     }
@@ -206,4 +230,19 @@ def _decide(nonlinear: str, linear: str, rows: list[dict], seconds: float) -> di
             f"predictions use {linear}",
         )
         log.warning(out["note"])
+    if not out["decisive"]:
+        out["undecided"] = note("model_choice_undecided", _undecided_text(out, nonlinear, linear, len(rows)))
+        log.warning(out["undecided"])
     return out
+
+
+def _undecided_text(out: dict[str, Any], nonlinear: str, linear: str, n: int) -> str:
+    ratio = out["log_ratio"]
+    if ratio is None:
+        return f"{n} record(s) left out cannot tell {nonlinear} from {linear}: the choice is a coin"
+    lo, hi = np.exp(ratio - 2 * out["log_ratio_se"]), np.exp(ratio + 2 * out["log_ratio_se"])
+    return (
+        f"the {n} left-out records cannot tell {nonlinear} from {linear}: its NRMSE is {np.exp(ratio):.3g} "
+        f"times the linear model's ({lo:.3g}-{hi:.3g} at two standard errors); the choice of "
+        f"{out['system']} is a coin, and the other model would predict as well"
+    )

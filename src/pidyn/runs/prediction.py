@@ -208,6 +208,8 @@ def predict_record(
         "run": str(run.run_dir),
         "system": run.metrics.get("system"),
         "model_choice": (run.metrics.get("model_choice") or {}).get("chosen"),
+        # False: the run's own records could not tell its two models apart (model_choice.decisive)
+        "model_choice_decisive": (run.metrics.get("model_choice") or {}).get("decisive"),
         **run_verdict(run),
         "identified_on": run.metrics.get("record"),
         "record": record.name,

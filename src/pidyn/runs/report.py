@@ -199,8 +199,8 @@ def _beside(run: Run, metrics: dict) -> None:
         metrics["linear_model"] = run.linear_model
     if run.model_choice is not None:
         metrics["model_choice"] = run.model_choice
-        if run.model_choice.get("note"):
-            metrics["notes"] = list(metrics.get("notes") or []) + [run.model_choice["note"]]
+        said = [run.model_choice.get(k) for k in ("note", "undecided")]
+        metrics["notes"] = list(metrics.get("notes") or []) + [n for n in said if n]
 
 
 def write_run_report(run_dir: Path, equation: str, metrics: dict) -> None:
@@ -248,6 +248,8 @@ def _choice_lines(choice: dict, system: str) -> list[str]:
         lines.append(f"| {r['record']} | {r['nonlinear']:.3g} | {r['linear']:.3g} |")
     means = choice["mean_nrmse_a"]
     lines.append(f"| mean | {means['nonlinear']:.3g} | {means['linear']:.3g} |")
+    if choice.get("undecided"):  # the records cannot tell the two apart: the reader should know
+        lines += ["", f"Undecided: {choice['undecided']}."]
     return lines
 
 

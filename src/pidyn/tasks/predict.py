@@ -57,6 +57,13 @@ def predict_in(cfg: DictConfig, folder: Path) -> dict[str, Any]:
             run.metrics.get("system"),
             _fmt(out["nonlinear_mean_nrmse_a"]),
         )
+    if out.get("model_choice_decisive") is False:
+        log.warning(
+            "the run's own records could not tell its two models apart (model_choice: %s); "
+            "%s predicts, and the other would have done as well on them",
+            (own.metrics.get("model_choice") or {}).get("undecided", "undecided"),
+            run.metrics.get("system"),
+        )
     if cfg.get("physics_only"):
         entry = physics_only(run.cfg, system, values, record, sim, cfg.physics)
         out["physics_only"] = {k: v for k, v in entry.items() if k != "response"}
