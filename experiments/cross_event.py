@@ -176,6 +176,8 @@ def table(rows: list[dict], own: dict, systems: list[str]) -> list[dict]:
             line[f"{s}_nrmse_a"] = (res.get(s) or {}).get("mean_nrmse_a")
             # "linear" where the run's own events chose the linear model beside it (pidyn.runs.model_choice)
             line[f"{s}_model"] = (res.get(s) or {}).get("model_choice")
+            # False where the run's events could not tell its two models apart
+            line[f"{s}_decisive"] = (res.get(s) or {}).get("model_choice_decisive")
             scores = (res.get(s) or {}).get("nrmse") or {}
             line[f"{s}_nrmse_ref"] = median([scores.get(c) for c in ref]) if ref else None
             # the linear model of the same layout, identified on the same events in its run
@@ -218,7 +220,27 @@ def own_linear_lines(rows: list[dict], systems: list[str], strong: list[dict]) -
                 else ""
             )
         )
+        out += _choice_line(rows, s)
     return out
+
+
+def _choice_line(rows: list[dict], s: str) -> list[str]:
+    """Which folds' runs chose the linear model beside their own, and on which the choice was a coin."""
+    folds = sorted({r["fold"] for r in rows})
+    linear = sorted({r["fold"] for r in rows if r.get(f"{s}_model") == "linear"})
+    undecided = sorted({r["fold"] for r in rows if r.get(f"{s}_decisive") is False})
+    if not any(r.get(f"{s}_model") for r in rows):
+        return []
+    text = (
+        f"- the {s} model's runs chose the linear model beside them on {len(linear)} of {len(folds)} folds"
+        f"{f' ({linear})' if linear else ''}"
+    )
+    if any(r.get(f"{s}_decisive") is not None for r in rows):  # studies before it was recorded: not said
+        text += (
+            f"; their own events could not tell the two apart on {len(undecided)} of {len(folds)}"
+            f"{f' ({undecided})' if undecided else ''}"
+        )
+    return [text]
 
 
 def summary_lines(lines: list[dict], all_systems: list[str], others: dict[str, list[dict]]) -> list[str]:
