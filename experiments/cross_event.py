@@ -226,18 +226,18 @@ def own_linear_lines(rows: list[dict], systems: list[str], strong: list[dict]) -
 
 def _choice_line(rows: list[dict], s: str) -> list[str]:
     """Which folds' runs chose the linear model beside their own, and on which the choice was a coin."""
-    folds = sorted({r["fold"] for r in rows})
-    linear = sorted({r["fold"] for r in rows if r.get(f"{s}_model") == "linear"})
-    undecided = sorted({r["fold"] for r in rows if r.get(f"{s}_decisive") is False})
     if not any(r.get(f"{s}_model") for r in rows):
         return []
+    n = len({r["fold"] for r in rows})
+    linear = sorted({r["fold"] for r in rows if r.get(f"{s}_model") == "linear"})
+    undecided = sorted({r["fold"] for r in rows if r.get(f"{s}_decisive") is False})
     text = (
-        f"- the {s} model's runs chose the linear model beside them on {len(linear)} of {len(folds)} folds"
+        f"- the {s} model's runs chose the linear model beside them on {len(linear)} of {n} folds"
         f"{f' ({linear})' if linear else ''}"
     )
     if any(r.get(f"{s}_decisive") is not None for r in rows):  # studies before it was recorded: not said
         text += (
-            f"; their own events could not tell the two apart on {len(undecided)} of {len(folds)}"
+            f"; their own events could not tell the two apart on {len(undecided)} of {n}"
             f"{f' ({undecided})' if undecided else ''}"
         )
     return [text]

@@ -42,7 +42,7 @@ def station_events(records: Path, station: str, direction: str) -> tuple[list[di
         )
     sets = [json.dumps([r["inputs"], r["outputs"]]) for r in rows if "inputs" in r]
     if not sets:
-        raise SystemExit(f"{records}: no readable event in direction {direction}")
+        raise ValueError(f"{records}: no readable event of station {station} in direction {direction}")
     common = max(set(sets), key=sets.count)
     keep = [r for r in rows if "inputs" in r and json.dumps([r["inputs"], r["outputs"]]) == common]
     other = [r for r in rows if r not in keep]

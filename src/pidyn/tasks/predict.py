@@ -57,13 +57,6 @@ def predict_in(cfg: DictConfig, folder: Path) -> dict[str, Any]:
             run.metrics.get("system"),
             _fmt(out["nonlinear_mean_nrmse_a"]),
         )
-    if out.get("model_choice_decisive") is False:
-        log.warning(
-            "the run's own records could not tell its two models apart (model_choice: %s); "
-            "%s predicts, and the other would have done as well on them",
-            (own.metrics.get("model_choice") or {}).get("undecided", "undecided"),
-            run.metrics.get("system"),
-        )
     if cfg.get("physics_only"):
         entry = physics_only(run.cfg, system, values, record, sim, cfg.physics)
         out["physics_only"] = {k: v for k, v in entry.items() if k != "response"}
@@ -103,6 +96,14 @@ def _log(out: dict[str, Any]) -> None:
                 f"{out['record']}: its peak input acceleration {out['pga']:.3g} m/s^2 is {out['beyond_training']:.3g} "
                 f"times the {'strongest' if out['beyond_training'] > 1 else 'weakest'} of the run's records "
                 f"({lo:.3g}-{hi:.3g} m/s^2): the model is extrapolated to this shaking",
+            )
+        )
+    if out.get("model_choice_decisive") is False:
+        log.warning(
+            note(
+                "model_choice_undecided",
+                f"{out['system']} predicts, but the run's own records, each left out, could not tell it "
+                "from its other model (metrics.json model_choice): the other would have done about as well",
             )
         )
     if out["beats_trivial"] is False:
